@@ -1,0 +1,485 @@
+"""Patches: polygon meshes cut into radiosity patches, stored as plain arrays.
+
+Contract
+--------
+A :class:`PatchSet` holds N patches, each a triangle or a quad, whose corners index a shared
+vertex array. Two patches share a vertex exactly when their source faces share that source
+vertex (and the source edge between them is cut into the same points), so vertex radiosities
+can be formed by averaging over the patches around a vertex. Callers that want a hard edge
+(different materials, sharp edges) split the source vertices there before calling
+:func:`build_patches`.
+
+Everything is world space, right-handed, counter-clockwise winding seen from the front.
+Radiosity quantities (``emission``) are in Blender's radiance units: an emission strength of
+1 in white is 1.0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["MeshInput", "PatchSet", "build_patches", "PatchError"]
+
+
+class PatchError(ValueError):
+    """Bad mesh input; the message names the object and the problem."""
+
+
+@dataclass
+class MeshInput:
+    """One source mesh in world space.
+
+    verts:        (V, 3) float positions.
+    face_offsets: (F + 1,) int, face f uses ``face_indices[face_offsets[f]:face_offsets[f+1]]``.
+    face_indices: (L,) int vertex indices, counter-clockwise seen from the front.
+    face_rho:     (F, 3) diffuse reflectivity per face, each in [0, 1).
+    face_emission:(F, 3) emitted radiance per face, >= 0.
+    name:         object name, used in error messages and reports.
+    """
+
+    verts: np.ndarray
+    face_offsets: np.ndarray
+    face_indices: np.ndarray
+    face_rho: np.ndarray
+    face_emission: np.ndarray
+    name: str = "mesh"
+
+    @classmethod
+    def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):
+        """Convenience: ``faces`` is a list of index sequences; rho/emission per face or one for all."""
+        faces = [np.asarray(f, dtype=np.int64) for f in faces]
+        offsets = np.zeros(len(faces) + 1, dtype=np.int64)
+        offsets[1:] = np.cumsum([len(f) for f in faces])
+        idx = np.concatenate(faces) if faces else np.zeros(0, np.int64)
+        F = len(faces)
+        rho = np.broadcast_to(np.asarray(rho, float), (F, 3)).copy()
+        emission = np.broadcast_to(np.asarray(emission, float), (F, 3)).copy()
+        return cls(np.asarray(verts, float), offsets, idx, rho, emission, name)
+
+
+@dataclass
+class PatchSet:
+    """N patches (triangles or quads) as a structure of arrays.
+
+    verts:       (V, 3) float64 patch corner positions.
+    polys:       (N, 4) int64 indices into ``verts``; a triangle has -1 in column 3.
+    centers:     (N, 3) float64 patch centres (mean of the corners).
+    normals:     (N, 3) float64 unit normals (right-hand rule on the corner order).
+    areas:       (N,)   float64 areas.
+    rho:         (N, 3) float64 diffuse reflectivity, in [0, 1).
+    emission:    (N, 3) float64 emitted radiance.
+    owner:       (N,)   int32 index into ``object_names``.
+    source_face: (N,)   int32 face index in the owner's source mesh.
+    object_names: list of the source object names.
+    """
+
+    verts: np.ndarray
+    polys: np.ndarray
+    centers: np.ndarray
+    normals: np.ndarray
+    areas: np.ndarray
+    rho: np.ndarray
+    emission: np.ndarray
+    owner: np.ndarray
+    source_face: np.ndarray
+    object_names: list = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return int(self.polys.shape[0])
+
+    @property
+    def nsides(self) -> np.ndarray:
+        """(N,) 3 or 4."""
+        return np.where(self.polys[:, 3] < 0, 3, 4)
+
+    def corners(self) -> np.ndarray:
+        """(N, 4, 3) corner positions; a triangle repeats its last corner (a degenerate quad)."""
+        p = self.polys.copy()
+        tri = p[:, 3] < 0
+        p[tri, 3] = p[tri, 2]
+        return self.verts[p]
+
+    def geometry_key(self) -> bytes:
+        """Bytes that change exactly when the geometry (not materials) changes; for caching."""
+        import hashlib
+
+        h = hashlib.sha256()
+        for a in (self.verts, self.polys):
+            a = np.ascontiguousarray(a)
+            h.update(str(a.dtype).encode() + str(a.shape).encode())
+            h.update(a.tobytes())
+        return h.digest()
+
+    def with_materials(self, rho=None, emission=None) -> "PatchSet":
+        """A copy with new reflectivity/emission and the same geometry (arrays shared)."""
+        return PatchSet(
+            self.verts, self.polys, self.centers, self.normals, self.areas,
+            self.rho if rho is None else np.asarray(rho, float),
+            self.emission if emission is None else np.asarray(emission, float),
+            self.owner, self.source_face, list(self.object_names),
+        )
+
+
+def _poly_geometry(verts, polys):
+    """Centres, unit normals and areas of triangles/quads (quads may be slightly non-planar)."""
+    c = verts[np.where(polys < 0, polys[:, 2:3], polys)]  # (N,4,3), triangle repeats corner 2
+    tri = polys[:, 3] < 0
+    centers = np.where(tri[:, None], c[:, :3].mean(axis=1), c.mean(axis=1))
+    # Quad: half the cross product of the diagonals; triangle: same formula with d = c2 - c0.
+    cross = np.cross(c[:, 2] - c[:, 0], c[:, 3] - c[:, 1])
+    cross_tri = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    cross = np.where(tri[:, None], cross_tri, cross)
+    norm = np.linalg.norm(cross, axis=1)
+    areas = 0.5 * norm
+    with np.errstate(invalid="ignore", divide="ignore"):
+        normals = cross / norm[:, None]
+    return centers, normals, areas
+
+
+def _is_convex(p: np.ndarray) -> bool:
+    """True when polygon p (k,3) is convex and planar enough to fan from its centre."""
+    n = np.zeros(3)
+    for i in range(len(p)):  # Newell normal
+        a, b = p[i], p[(i + 1) % len(p)]
+        n += np.array([(a[1] - b[1]) * (a[2] + b[2]), (a[2] - b[2]) * (a[0] + b[0]), (a[0] - b[0]) * (a[1] + b[1])])
+    e = np.roll(p, -1, axis=0) - p
+    turn = np.cross(e, np.roll(e, -1, axis=0)) @ n
+    return bool(np.all(turn >= -1e-12 * max(1.0, float(np.abs(turn).max(initial=0)))))
+
+
+def _ear_clip(p: np.ndarray) -> list:
+    """Triangulate a simple (possibly concave) polygon p (k,3); returns local index triples."""
+    n = np.zeros(3)
+    for i in range(len(p)):
+        a, b = p[i], p[(i + 1) % len(p)]
+        n += np.cross(a, b)
+    idx = list(range(len(p)))
+    tris = []
+    guard = 0
+    while len(idx) > 3 and guard < 10 * len(p) ** 2:
+        guard += 1
+        for k in range(len(idx)):
+            i0, i1, i2 = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = p[i0], p[i1], p[i2]
+            if np.dot(np.cross(b - a, c - b), n) <= 0:
+                continue  # reflex corner
+            inside = False
+            for j in idx:
+                if j in (i0, i1, i2):
+                    continue
+                q = p[j]
+                if (np.dot(np.cross(b - a, q - a), n) >= 0 and np.dot(np.cross(c - b, q - b), n) >= 0
+                        and np.dot(np.cross(a - c, q - c), n) >= 0):
+                    inside = True
+                    break
+            if not inside:
+                tris.append((i0, i1, i2))
+                idx.pop(k)
+                break
+        else:
+            break
+    if len(idx) == 3:
+        tris.append(tuple(idx))
+    return tris
+
+
+def _to_tris_and_quads(mesh: MeshInput):
+    """Split n-gons: convex ones into n quads around their centre, concave ones by ear clipping.
+
+    Returns verts (V', 3), polys (F', 4) with -1 for triangles, and the source face per poly.
+    New vertices on a source edge (edge midpoints) are shared by the faces on both sides.
+    """
+    verts = np.asarray(mesh.verts, dtype=np.float64)
+    off = np.asarray(mesh.face_offsets, dtype=np.int64)
+    idx = np.asarray(mesh.face_indices, dtype=np.int64)
+    sizes = np.diff(off)
+    F = len(sizes)
+    if F == 0:
+        raise PatchError(f"{mesh.name!r}: the mesh has no faces")
+    if np.any(sizes < 3):
+        f = int(np.flatnonzero(sizes < 3)[0])
+        raise PatchError(f"{mesh.name!r}: face {f} has fewer than 3 vertices")
+    if idx.size and (idx.min() < 0 or idx.max() >= len(verts)):
+        raise PatchError(f"{mesh.name!r}: a face refers to a vertex that does not exist")
+    if not np.all(np.isfinite(verts)):
+        raise PatchError(f"{mesh.name!r}: vertex positions are not finite (NaN or infinity)")
+
+    polys = np.full((F, 4), -1, dtype=np.int64)
+    small = sizes <= 4
+    for k in (3, 4):
+        sel = np.flatnonzero(sizes == k)
+        if sel.size:
+            polys[sel, :k] = idx[off[sel][:, None] + np.arange(k)]
+    out_polys = [polys[small]]
+    out_src = [np.flatnonzero(small)]
+    big = np.flatnonzero(~small)
+    if big.size == 0:
+        return verts, out_polys[0], out_src[0]
+
+    new_verts = []
+    next_v = len(verts)
+    midpoint = {}
+    extra_polys, extra_src = [], []
+    for f in big:
+        ring = idx[off[f]:off[f + 1]]
+        p = verts[ring]
+        if _is_convex(p):
+            c = next_v
+            new_verts.append(p.mean(axis=0))
+            next_v += 1
+            mids = []
+            for i in range(len(ring)):
+                a, b = int(ring[i]), int(ring[(i + 1) % len(ring)])
+                key = (min(a, b), max(a, b))
+                if key not in midpoint:
+                    midpoint[key] = next_v
+                    new_verts.append(0.5 * (verts[a] + verts[b]))
+                    next_v += 1
+                mids.append(midpoint[key])
+            for i in range(len(ring)):
+                extra_polys.append((c, mids[i - 1], int(ring[i]), mids[i]))
+                extra_src.append(f)
+        else:
+            for t in _ear_clip(p):
+                extra_polys.append((int(ring[t[0]]), int(ring[t[1]]), int(ring[t[2]]), -1))
+                extra_src.append(f)
+    # A convex n-gon's edge midpoint splits the edge for a neighbour that is a triangle or quad too:
+    # re-express such neighbours so that no T-junction remains.
+    if midpoint:
+        fixed = []
+        for poly, src in zip(out_polys[0], out_src[0]):
+            k = 3 if poly[3] < 0 else 4
+            ring = [int(v) for v in poly[:k]]
+            split = [midpoint.get((min(ring[i], ring[(i + 1) % k]), max(ring[i], ring[(i + 1) % k])))
+                     for i in range(k)]
+            if any(s is not None for s in split):
+                ring2 = []
+                for i in range(k):
+                    ring2.append(ring[i])
+                    if split[i] is not None:
+                        ring2.append(split[i])
+                rp = np.concatenate([verts, np.array(new_verts)])[ring2]
+                if _is_convex(rp):
+                    # fan around the centre as quads again
+                    c = next_v
+                    new_verts.append(rp.mean(axis=0))
+                    next_v += 1
+                    m = len(ring2)
+                    # pair consecutive ring vertices into quads with the centre where possible
+                    for i in range(0, m - 1, 2):
+                        extra_polys.append((c, ring2[i], ring2[i + 1], ring2[(i + 2) % m]))
+                        extra_src.append(src)
+                    if m % 2:
+                        extra_polys.append((c, ring2[m - 1], ring2[0], -1))
+                        extra_src.append(src)
+                else:
+                    for t in _ear_clip(rp):
+                        extra_polys.append((ring2[t[0]], ring2[t[1]], ring2[t[2]], -1))
+                        extra_src.append(src)
+            else:
+                fixed.append((poly, src))
+        out_polys = [np.array([p for p, _ in fixed], dtype=np.int64).reshape(-1, 4)]
+        out_src = [np.array([s for _, s in fixed], dtype=np.int64)]
+    verts = np.concatenate([verts, np.array(new_verts).reshape(-1, 3)])
+    polys = np.concatenate(out_polys + [np.array(extra_polys, dtype=np.int64).reshape(-1, 4)])
+    src = np.concatenate(out_src + [np.array(extra_src, dtype=np.int64)])
+    return verts, polys, src
+
+
+def _edge_segments(verts, polys, patch_size):
+    """Number of segments per unique edge, equalised so every face can be cut as a regular grid.
+
+    Quads need equal counts on opposite edges, triangles on all three edges; the maximum is
+    propagated until it is stable, so neighbouring faces cut their shared edge at the same points.
+    Returns (edges (E,2) sorted pairs, face_edges (F,4) edge ids with -1, flipped (F,4) bool, n (E,)).
+    """
+    F = len(polys)
+    tri = polys[:, 3] < 0
+    a = polys
+    b = np.where(tri[:, None], polys[:, [1, 2, 0, 0]], polys[:, [1, 2, 3, 0]])
+    valid = np.ones((F, 4), bool)
+    valid[tri, 3] = False
+    ea = np.minimum(a, b)[valid]
+    eb = np.maximum(a, b)[valid]
+    key = np.stack([ea, eb], axis=1)
+    edges, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    face_edges = np.full((F, 4), -1, dtype=np.int64)
+    face_edges[valid] = inv
+    flipped = np.zeros((F, 4), bool)
+    flipped[valid] = (a > b)[valid]
+    length = np.linalg.norm(verts[edges[:, 1]] - verts[edges[:, 0]], axis=1)
+    if patch_size is None or patch_size <= 0:
+        n = np.ones(len(edges), dtype=np.int64)
+    else:
+        n = np.maximum(1, np.ceil(length / patch_size - 1e-9)).astype(np.int64)
+    q = np.flatnonzero(~tri)
+    t = np.flatnonzero(tri)
+    for _ in range(len(edges) + 1):
+        before = n.copy()
+        if q.size:
+            for i, j in ((0, 2), (1, 3)):
+                m = np.maximum(n[face_edges[q, i]], n[face_edges[q, j]])
+                np.maximum.at(n, face_edges[q, i], m)
+                np.maximum.at(n, face_edges[q, j], m)
+        if t.size:
+            m = n[face_edges[t, :3]].max(axis=1)
+            for i in range(3):
+                np.maximum.at(n, face_edges[t, i], m)
+        if np.array_equal(before, n):
+            break
+    return edges, face_edges, flipped, n
+
+
+def _subdivide(verts, polys, patch_size):
+    """Cut triangles/quads into regular grids of patches with shared vertices.
+
+    Returns new verts, patch polys (P,4), and the parent poly index per patch.
+    """
+    edges, face_edges, flipped, n = _edge_segments(verts, polys, patch_size)
+    V = len(verts)
+    # vertices inside edges: edge e owns n[e]-1 vertices at t = k/n[e], k = 1..n-1 from edges[e,0]
+    e_off = V + np.concatenate([[0], np.cumsum(n - 1)])
+    ev_t = np.concatenate([np.arange(1, k) / k for k in np.unique(n)]) if False else None  # noqa
+    # positions of edge vertices
+    e_rep = np.repeat(np.arange(len(edges)), n - 1)
+    k_in = np.arange(e_rep.size) - (e_off[e_rep] - V) + 1
+    t = (k_in / n[e_rep])[:, None]
+    edge_pos = (1 - t) * verts[edges[e_rep, 0]] + t * verts[edges[e_rep, 1]]
+    next_v = int(e_off[-1])
+    all_pos = [verts, edge_pos]
+    out_polys, out_parent = [], []
+
+    def edge_vertex(face_ids, side, k):
+        """Global index of the k-th vertex (k in 0..n) walking along face edge `side` in face order."""
+        e = face_edges[face_ids, side]
+        m = n[e]
+        kk = np.where(flipped[face_ids, side], m - k, k)
+        first = np.where(flipped[face_ids, side], edges[e, 1], edges[e, 0])
+        last = np.where(flipped[face_ids, side], edges[e, 0], edges[e, 1])
+        inner = e_off[e] + np.where(flipped[face_ids, side], m - k, k) - 1
+        del kk
+        return np.where(k == 0, first, np.where(k == m, last, inner))
+
+    tri = polys[:, 3] < 0
+    # ---- quads: grid (nu+1) x (nv+1); u along edge 0 (c0->c1), v along edge 3 reversed (c0->c3)
+    q = np.flatnonzero(~tri)
+    if q.size:
+        nu = n[face_edges[q, 0]]
+        nv = n[face_edges[q, 1]]
+        for (gu, gv) in np.unique(np.stack([nu, nv], 1), axis=0):
+            fid = q[(nu == gu) & (nv == gv)]
+            G = fid.size
+            grid = np.empty((G, gu + 1, gv + 1), dtype=np.int64)
+            for i in range(gu + 1):
+                grid[:, i, 0] = edge_vertex(fid, 0, np.full(G, i))          # c0 -> c1
+                grid[:, i, gv] = edge_vertex(fid, 2, np.full(G, gu - i))    # c2 -> c3 reversed
+            for j in range(gv + 1):
+                grid[:, gu, j] = edge_vertex(fid, 1, np.full(G, j))         # c1 -> c2
+                grid[:, 0, j] = edge_vertex(fid, 3, np.full(G, gv - j))     # c3 -> c0 reversed
+            ni = (gu - 1) * (gv - 1)
+            if ni > 0:
+                c = verts[polys[fid]]  # (G,4,3)
+                uu, vv = np.meshgrid(np.arange(1, gu) / gu, np.arange(1, gv) / gv, indexing="ij")
+                uu = uu.reshape(-1)[None, :, None]
+                vv = vv.reshape(-1)[None, :, None]
+                pos = ((1 - uu) * (1 - vv) * c[:, None, 0] + uu * (1 - vv) * c[:, None, 1]
+                       + uu * vv * c[:, None, 2] + (1 - uu) * vv * c[:, None, 3])
+                ids = next_v + np.arange(G * ni).reshape(G, gu - 1, gv - 1)
+                next_v += G * ni
+                all_pos.append(pos.reshape(-1, 3))
+                grid[:, 1:gu, 1:gv] = ids
+            p = np.stack([grid[:, :-1, :-1], grid[:, 1:, :-1], grid[:, 1:, 1:], grid[:, :-1, 1:]], axis=-1)
+            out_polys.append(p.reshape(-1, 4))
+            out_parent.append(np.repeat(fid, gu * gv))
+    # ---- triangles: barycentric grid with n segments; vertex (i, j): c0 + i/n (c1-c0) + j/n (c2-c0)
+    t_ids = np.flatnonzero(tri)
+    if t_ids.size:
+        nt = n[face_edges[t_ids, 0]]
+        for g in np.unique(nt):
+            fid = t_ids[nt == g]
+            G = fid.size
+            grid = np.full((G, g + 1, g + 1), -1, dtype=np.int64)
+            for i in range(g + 1):
+                grid[:, i, 0] = edge_vertex(fid, 0, np.full(G, i))              # c0 -> c1
+            for j in range(g + 1):
+                grid[:, g - j, j] = edge_vertex(fid, 1, np.full(G, j))          # c1 -> c2
+                grid[:, 0, j] = edge_vertex(fid, 2, np.full(G, g - j))          # c2 -> c0 reversed
+            ii, jj = np.nonzero((np.add.outer(np.arange(g + 1), np.arange(g + 1)) < g)
+                                & (np.arange(g + 1)[:, None] > 0) & (np.arange(g + 1)[None, :] > 0))
+            if ii.size:
+                c = verts[polys[fid, :3]]
+                a = (ii / g)[None, :, None]
+                b = (jj / g)[None, :, None]
+                pos = c[:, None, 0] + a * (c[:, None, 1] - c[:, None, 0]) + b * (c[:, None, 2] - c[:, None, 0])
+                ids = next_v + np.arange(G * ii.size).reshape(G, ii.size)
+                next_v += G * ii.size
+                all_pos.append(pos.reshape(-1, 3))
+                grid[:, ii, jj] = ids
+            tris = []
+            for i in range(g):
+                for j in range(g - i):
+                    tris.append(np.stack([grid[:, i, j], grid[:, i + 1, j], grid[:, i, j + 1],
+                                          np.full(G, -1)], axis=1))
+                    if i + j < g - 1:
+                        tris.append(np.stack([grid[:, i + 1, j], grid[:, i + 1, j + 1], grid[:, i, j + 1],
+                                              np.full(G, -1)], axis=1))
+            tp = np.stack(tris, axis=1)  # (G, g*g, 4)
+            out_polys.append(tp.reshape(-1, 4))
+            out_parent.append(np.repeat(fid, g * g))
+    return np.concatenate(all_pos), np.concatenate(out_polys), np.concatenate(out_parent)
+
+
+def _compact(verts, polys):
+    """Drop vertices no poly uses; renumber."""
+    used = np.unique(polys[polys >= 0])
+    remap = np.full(len(verts), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return verts[used], np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
+
+
+def build_patches(meshes, patch_size=None, min_area=1e-12) -> PatchSet:
+    """Cut source meshes into patches of edge length about ``patch_size`` (world units).
+
+    ``patch_size`` None or <= 0 keeps every triangle/quad as one patch (n-gons are still split).
+    Triangles become n*n triangles, quads an nu*nv grid; n-gons are split first (convex: quads
+    around the centre; concave: ear clipping). Faces with area below ``min_area`` are dropped.
+    Raises :class:`PatchError` naming the object when the input is unusable.
+    """
+    if isinstance(meshes, MeshInput):
+        meshes = [meshes]
+    if not meshes:
+        raise PatchError("no meshes were given")
+    parts = []
+    v_base = 0
+    for oi, mesh in enumerate(meshes):
+        rho = np.asarray(mesh.face_rho, float)
+        em = np.asarray(mesh.face_emission, float)
+        F = len(mesh.face_offsets) - 1
+        if rho.shape != (F, 3) or em.shape != (F, 3):
+            raise PatchError(f"{mesh.name!r}: face_rho and face_emission must have shape ({F}, 3)")
+        if not (np.all(np.isfinite(rho)) and np.all(np.isfinite(em))):
+            raise PatchError(f"{mesh.name!r}: reflectivity or emission is not finite")
+        if np.any(rho < 0) or np.any(rho >= 1):
+            f = int(np.flatnonzero(np.any((rho < 0) | (rho >= 1), axis=1))[0])
+            raise PatchError(f"{mesh.name!r}: face {f} has reflectivity {tuple(rho[f])}; "
+                             "each band must be in [0, 1)")
+        if np.any(em < 0):
+            f = int(np.flatnonzero(np.any(em < 0, axis=1))[0])
+            raise PatchError(f"{mesh.name!r}: face {f} has negative emission {tuple(em[f])}")
+        v, p, src = _to_tris_and_quads(mesh)
+        v, p, parent = _subdivide(v, p, patch_size)
+        src = src[parent]
+        v, p = _compact(v, p)
+        c, nrm, a = _poly_geometry(v, p)
+        keep = a > min_area
+        if not np.any(keep):
+            raise PatchError(f"{mesh.name!r}: every face has zero area")
+        p, c, nrm, a, src = p[keep], c[keep], nrm[keep], a[keep], src[keep]
+        v, p = _compact(v, p)
+        parts.append((v, p + v_base * (p >= 0), c, nrm, a, rho[src], em[src],
+                      np.full(len(p), oi, np.int32), src.astype(np.int32)))
+        v_base += len(v)
+    cat = [np.concatenate([part[i] for part in parts]) for i in range(9)]
+    return PatchSet(*cat, object_names=[m.name for m in meshes])

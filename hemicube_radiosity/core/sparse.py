@@ -1,0 +1,117 @@
+"""Compressed sparse rows in plain NumPy (SciPy is not inside Blender).
+
+A form-factor matrix F is stored as CSR: row i holds the patches j that receiver i sees,
+``F[i, indices[indptr[i]:indptr[i+1]]] = data[indptr[i]:indptr[i+1]]``. Zero entries
+(occluded, facing away, the patch itself) are never stored.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["CSR"]
+
+
+@dataclass
+class CSR:
+    indptr: np.ndarray   # (N+1,) int64
+    indices: np.ndarray  # (nnz,) int32 column ids, sorted within a row
+    data: np.ndarray     # (nnz,) float32 values
+    shape: tuple
+    meta: dict = field(default_factory=dict)  # settings that made it (method, resolution, ...)
+    # Form factors only: (N,) fraction of each receiver's hemisphere that sees no surface at all
+    # (the world/sky). Back faces block the view but are not sky. None when not known.
+    sky: np.ndarray | None = None
+
+    @property
+    def nnz(self) -> int:
+        return int(self.indices.size)
+
+    @property
+    def nbytes(self) -> int:
+        return int(self.indptr.nbytes + self.indices.nbytes + self.data.nbytes)
+
+    @classmethod
+    def from_rows(cls, rows, ncols, meta=None) -> "CSR":
+        """From a list of (cols, vals) pairs, one per row; zero values are dropped."""
+        counts = np.zeros(len(rows) + 1, dtype=np.int64)
+        cols_l, vals_l = [], []
+        for i, (c, v) in enumerate(rows):
+            c = np.asarray(c, dtype=np.int64)
+            v = np.asarray(v, dtype=np.float64)
+            nz = v != 0
+            c, v = c[nz], v[nz]
+            order = np.argsort(c, kind="stable")
+            cols_l.append(c[order])
+            vals_l.append(v[order])
+            counts[i + 1] = c.size
+        indices = np.concatenate(cols_l).astype(np.int32) if cols_l else np.zeros(0, np.int32)
+        data = np.concatenate(vals_l).astype(np.float32) if vals_l else np.zeros(0, np.float32)
+        return cls(np.cumsum(counts), indices, data, (len(rows), int(ncols)), dict(meta or {}))
+
+    @classmethod
+    def from_coo(cls, rows, cols, vals, shape, meta=None) -> "CSR":
+        """From triplets; duplicates are summed, zeros dropped."""
+        rows = np.asarray(rows, dtype=np.int64)
+        cols = np.asarray(cols, dtype=np.int64)
+        vals = np.asarray(vals, dtype=np.float64)
+        key = rows * shape[1] + cols
+        uk, inv = np.unique(key, return_inverse=True)
+        summed = np.bincount(inv.reshape(-1), weights=vals, minlength=uk.size)
+        keep = summed != 0
+        uk, summed = uk[keep], summed[keep]
+        r = uk // shape[1]
+        indptr = np.zeros(shape[0] + 1, dtype=np.int64)
+        np.cumsum(np.bincount(r, minlength=shape[0]), out=indptr[1:])
+        return cls(indptr, (uk % shape[1]).astype(np.int32), summed.astype(np.float32),
+                   (int(shape[0]), int(shape[1])), dict(meta or {}))
+
+    @classmethod
+    def from_dense(cls, a, meta=None) -> "CSR":
+        a = np.asarray(a)
+        r, c = np.nonzero(a)
+        return cls.from_coo(r, c, a[r, c], a.shape, meta)
+
+    def row_ids(self) -> np.ndarray:
+        """(nnz,) the row of every stored entry."""
+        return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr))
+
+    def row(self, i):
+        s, e = self.indptr[i], self.indptr[i + 1]
+        return self.indices[s:e], self.data[s:e]
+
+    def row_sums(self) -> np.ndarray:
+        return np.bincount(self.row_ids(), weights=self.data.astype(np.float64), minlength=self.shape[0])
+
+    def matvec(self, x: np.ndarray, row_ids: np.ndarray | None = None) -> np.ndarray:
+        """F @ x for x of shape (N,) or (N, k), in float64."""
+        rid = self.row_ids() if row_ids is None else row_ids
+        x = np.asarray(x, dtype=np.float64)
+        w = self.data.astype(np.float64)
+        if x.ndim == 1:
+            return np.bincount(rid, weights=w * x[self.indices], minlength=self.shape[0])
+        xs = x[self.indices]
+        return np.stack([np.bincount(rid, weights=w * xs[:, k], minlength=self.shape[0])
+                         for k in range(x.shape[1])], axis=1)
+
+    def transpose(self) -> "CSR":
+        return CSR.from_coo(self.indices, self.row_ids(), self.data, (self.shape[1], self.shape[0]), self.meta)
+
+    def to_dense(self) -> np.ndarray:
+        a = np.zeros(self.shape, dtype=np.float64)
+        a[self.row_ids(), self.indices] = self.data
+        return a
+
+    def save(self, path) -> None:
+        extra = {} if self.sky is None else {"sky": self.sky}
+        np.savez_compressed(path, indptr=self.indptr, indices=self.indices, data=self.data,
+                            shape=np.array(self.shape), meta=np.array(repr(self.meta)), **extra)
+
+    @classmethod
+    def load(cls, path) -> "CSR":
+        import ast
+
+        with np.load(path, allow_pickle=False) as z:
+            return cls(z["indptr"], z["indices"], z["data"], tuple(int(s) for s in z["shape"]),
+                       ast.literal_eval(str(z["meta"])), z["sky"] if "sky" in z.files else None)
