@@ -1,0 +1,194 @@
+"""The whole bake in plain arrays: meshes -> patches -> form factors -> radiosities -> vertices.
+
+This is what the Blender operator and the CLI call; it never touches Blender.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .cache import FormFactorCache, cache_key
+from .patches import PatchSet, build_patches
+from .progress import Cancelled
+from .solve import SOLVERS, Solution, solve
+from .sparse import CSR
+from .vertex import vertex_radiosity
+
+__all__ = ["BakeSettings", "BakeResult", "bake", "compute_form_factors", "source_term", "METHODS"]
+
+METHODS = ("hemicube", "embree", "embree_stochastic")
+
+
+@dataclass
+class BakeSettings:
+    """patch_size: target patch edge length in world units (None/0: one patch per face).
+    resolution: hemi-cube top-face pixels per side (hemicube and embree methods).
+    method: 'hemicube' (NumPy rasteriser), 'embree' (rays through the same hemi-cube pixels),
+    'embree_stochastic' (cosine-weighted random rays, ``rays_per_patch`` each).
+    solver: one of core.solve.SOLVERS; tolerance/max_iterations as in :func:`core.solve.solve`.
+    rotate_seed: random rotation of each hemi-cube about its normal (None: no rotation).
+    """
+
+    patch_size: float | None = 0.25
+    resolution: int = 64
+    method: str = "hemicube"
+    rays_per_patch: int = 512
+    solver: str = "gauss_seidel"
+    tolerance: float = 1e-4
+    max_iterations: int = 200
+    rotate_seed: int | None = None
+
+    def validate(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"unknown method {self.method!r}; choose one of {', '.join(METHODS)}")
+        if self.solver not in SOLVERS:
+            raise ValueError(f"unknown solver {self.solver!r}; choose one of {', '.join(SOLVERS)}")
+        if self.method != "embree_stochastic" and (self.resolution < 2 or self.resolution % 2):
+            raise ValueError(f"hemi-cube resolution must be an even number >= 2, got {self.resolution}")
+        if self.method == "embree_stochastic" and self.rays_per_patch < 1:
+            raise ValueError(f"rays per patch must be >= 1, got {self.rays_per_patch}")
+        if self.patch_size is not None and self.patch_size < 0:
+            raise ValueError(f"patch size must be >= 0, got {self.patch_size}")
+        if not self.tolerance > 0 or self.max_iterations < 1:
+            raise ValueError("tolerance must be > 0 and max_iterations >= 1")
+
+    def form_factor_key(self) -> tuple:
+        """What shapes F (besides geometry): a change here recomputes, anything else re-solves."""
+        if self.method == "embree_stochastic":
+            return (self.method, int(self.rays_per_patch), self.rotate_seed)
+        return (self.method, int(self.resolution), self.rotate_seed)
+
+
+@dataclass
+class BakeResult:
+    patches: PatchSet
+    form_factors: CSR
+    solution: Solution
+    vertex_radiosity: np.ndarray
+    timings: dict
+    form_factor_source: str
+    source: np.ndarray
+    direct_irradiance: np.ndarray | None = None
+    notes: list = field(default_factory=list)
+
+
+def receivers_needed(patches: PatchSet) -> np.ndarray:
+    """Patches whose rows of F matter: a patch that reflects nothing (rho = 0 in every band,
+    e.g. a pure emitter) has B = S whatever it sees, so its hemi-cube is never drawn."""
+    return np.flatnonzero(patches.rho.max(axis=1) > 0)
+
+
+def compute_form_factors(patches: PatchSet, settings: BakeSettings, *, receivers=None,
+                         progress=None, cancelled=None) -> CSR:
+    """F for ``patches`` by ``settings.method`` (rows only for ``receivers``, default all)."""
+    if settings.method == "hemicube":
+        from .hemicube import hemicube_form_factors
+
+        return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed,
+                                     receivers=receivers, progress=progress, cancelled=cancelled)
+    from . import embree_ff
+
+    if settings.method == "embree":
+        return embree_ff.embree_hemicube_form_factors(
+            patches, settings.resolution, rotate_seed=settings.rotate_seed, receivers=receivers,
+            progress=progress, cancelled=cancelled)
+    return embree_ff.embree_stochastic_form_factors(
+        patches, settings.rays_per_patch, seed=settings.rotate_seed or 0, receivers=receivers,
+        progress=progress, cancelled=cancelled)
+
+
+def source_term(patches: PatchSet, F: CSR, *, direct_irradiance=None, world=None) -> np.ndarray:
+    """S = emission + rho * H_direct / pi + rho * sky * L_world  (radiance units, (N, 3)).
+
+    ``direct_irradiance`` (N,3) W/m^2 from lamps; ``world`` (3,) constant world radiance seen by
+    the part of each hemisphere that sees no surface (``F.sky``).
+    """
+    S = np.array(patches.emission, dtype=np.float64)
+    if direct_irradiance is not None:
+        S += patches.rho * np.asarray(direct_irradiance, float) / np.pi
+    if world is not None and np.any(np.asarray(world) > 0):
+        if F.sky is None:
+            raise ValueError("these form factors carry no sky fractions; the world cannot be lit")
+        S += patches.rho * F.sky[:, None] * np.asarray(world, float)[None, :]
+    return S
+
+
+def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancelled=None,
+         lights=(), world=None, cache: FormFactorCache | None = None, patches: PatchSet | None = None,
+         light_options=None) -> BakeResult:
+    """Run every stage. ``progress(stage, fraction, message)``; ``cancelled() -> bool`` (raises
+    :class:`Cancelled`). ``lights``: core.lights light objects; ``world``: (3,) radiance.
+    ``cache``: a :class:`FormFactorCache`; a hit skips the form-factor stage.
+    ``patches``: a ready PatchSet (then ``meshes`` is not cut again).
+    """
+    settings = settings or BakeSettings()
+    settings.validate()
+    say = progress or (lambda stage, fraction, message="": None)
+    t0 = time.perf_counter()
+    timings = {}
+
+    def check():
+        if cancelled is not None and cancelled():
+            raise Cancelled("cancelled")
+
+    say("patches", 0.0, "cutting meshes into patches")
+    if patches is None:
+        patches = build_patches(meshes, settings.patch_size)
+    timings["patches"] = time.perf_counter() - t0
+    say("patches", 1.0, f"{len(patches)} patches")
+    check()
+
+    t = time.perf_counter()
+    key = cache_key(patches.geometry_key(), settings.form_factor_key()) if cache is not None else None
+    F = cache.get(key) if cache is not None else None
+    source = "cached" if F is not None else "computed"
+    if F is None:
+        recv = receivers_needed(patches)
+        started = time.perf_counter()
+
+        def ff_progress(fr):
+            el = time.perf_counter() - started
+            eta = el * (1 - fr) / fr if fr > 0 else float("nan")
+            say("form_factors", fr, f"{100 * fr:.0f}%  ETA {eta:.1f} s")
+
+        F = compute_form_factors(patches, settings, receivers=recv, progress=ff_progress,
+                                 cancelled=cancelled)
+        F.meta.setdefault("receivers", int(recv.size))
+        if cache is not None:
+            cache.put(key, F)
+    timings["form_factors"] = time.perf_counter() - t
+    say("form_factors", 1.0, f"{source}: {F.nnz} nonzeros, {F.nbytes / 1e6:.1f} MB")
+    check()
+
+    t = time.perf_counter()
+    H = None
+    if lights:
+        from .lights import direct_irradiance
+
+        say("direct", 0.0, f"{len(lights)} lights")
+        H = direct_irradiance(patches, lights, **(light_options or {}))
+    timings["direct"] = time.perf_counter() - t
+    S = source_term(patches, F, direct_irradiance=H, world=world)
+    check()
+
+    t = time.perf_counter()
+    computed = np.zeros(len(patches), bool)
+    computed[receivers_needed(patches)] = True
+    say("solve", 0.0, settings.solver)
+    sol = solve(F, patches.rho, S, settings.solver, settings.tolerance, settings.max_iterations,
+                areas=patches.areas, cancelled=cancelled, computed=computed,
+                progress=lambda fr: say("solve", fr, ""))
+    timings["solve"] = time.perf_counter() - t
+    say("solve", 1.0, f"{sol.iterations} iterations, residual {sol.residual:.2e}"
+        + ("" if sol.converged else " (NOT converged: raise max iterations)"))
+    check()
+
+    t = time.perf_counter()
+    Bv = vertex_radiosity(patches, sol.B)
+    timings["vertices"] = time.perf_counter() - t
+    timings["total"] = time.perf_counter() - t0
+    notes = [] if sol.converged else [f"solver stopped after {sol.iterations} iterations without "
+                                      f"reaching tolerance {settings.tolerance:g}"]
+    return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes)

@@ -1,0 +1,128 @@
+"""Patch builder: areas, normals, shared vertices, n-gons, errors."""
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches
+from hemicube_radiosity.core.scenes import box, cornell_box
+
+
+def edge_use(ps):
+    c = Counter()
+    for p in ps.polys:
+        k = 4 if p[3] >= 0 else 3
+        for i in range(k):
+            c[tuple(sorted((int(p[i]), int(p[(i + 1) % k]))))] += 1
+    return c
+
+
+def test_unit_quad_grid():
+    m = MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]])
+    ps = build_patches(m, 0.25)
+    assert len(ps) == 16 and len(ps.verts) == 25
+    np.testing.assert_allclose(ps.areas, 1 / 16)
+    np.testing.assert_allclose(ps.normals, [[0, 0, 1]] * 16, atol=1e-12)
+    # centres on the 1/8 lattice
+    np.testing.assert_allclose(np.sort(np.unique(ps.centers[:, 0].round(12))), [0.125, 0.375, 0.625, 0.875])
+
+
+def test_rectangle_gets_square_patches():
+    m = MeshInput.from_faces([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]])
+    ps = build_patches(m, 0.5)
+    assert len(ps) == 4 * 2
+    np.testing.assert_allclose(ps.areas, 0.25)
+
+
+def test_triangle_subdivision_conserves_area_and_normal():
+    m = MeshInput.from_faces([[0, 0, 0], [3, 0, 0], [0, 4, 0]], [[0, 1, 2]])
+    ps = build_patches(m, 1.0)
+    n = 5  # longest edge 5 -> 5 segments on every edge
+    assert len(ps) == n * n
+    np.testing.assert_allclose(ps.areas, 6.0 / (n * n))
+    assert np.all(ps.nsides == 3)
+    np.testing.assert_allclose(ps.normals[:, 2], 1.0)
+
+
+def test_closed_box_stays_watertight_with_uneven_edges():
+    ps = build_patches(box((0, 0, 0), (2.0, 1.0, 0.7)), 0.3)
+    # box faces have their own vertices, so each face is a separate grid: every interior edge used twice
+    np.testing.assert_allclose(ps.areas.sum(), 2 * (2 * 1 + 2 * 0.7 + 1 * 0.7))
+    # outward normals
+    assert np.all(np.einsum("ij,ij->i", ps.normals, ps.centers - [1.0, 0.5, 0.35]) > 0)
+
+
+def test_shared_mesh_edges_are_cut_at_the_same_points():
+    # a cube whose 8 vertices are shared by its 6 faces, stretched so edges differ in length
+    V = np.array([[x, y, z] for x in (0, 2) for y in (0, 1) for z in (0, 0.7)], float)
+
+    def i(x, y, z):
+        return x * 4 + y * 2 + z
+
+    faces = [[i(0, 0, 0), i(0, 1, 0), i(1, 1, 0), i(1, 0, 0)], [i(0, 0, 1), i(1, 0, 1), i(1, 1, 1), i(0, 1, 1)],
+             [i(0, 0, 0), i(1, 0, 0), i(1, 0, 1), i(0, 0, 1)], [i(0, 1, 0), i(0, 1, 1), i(1, 1, 1), i(1, 1, 0)],
+             [i(0, 0, 0), i(0, 0, 1), i(0, 1, 1), i(0, 1, 0)], [i(1, 0, 0), i(1, 1, 0), i(1, 1, 1), i(1, 0, 1)]]
+    ps = build_patches(MeshInput.from_faces(V, faces), 0.3)
+    uses = edge_use(ps)
+    assert set(uses.values()) == {2}, "a closed mesh must stay closed: every patch edge shared by two patches"
+    # Euler characteristic of a sphere-like surface
+    assert len(ps.verts) - len(uses) + len(ps) == 2
+
+
+def test_mixed_triangles_and_quads_conform():
+    V = [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0.5, 0]]
+    ps = build_patches(MeshInput.from_faces(V, [[0, 1, 2, 3], [1, 4, 2]]), 0.2)
+    uses = edge_use(ps)
+    interior = [k for k, v in uses.items() if v == 2]
+    boundary = [k for k, v in uses.items() if v == 1]
+    assert all(v in (1, 2) for v in uses.values())
+    # boundary length equals the outline's perimeter: no cracks (T-junctions would add boundary edges)
+    L = sum(np.linalg.norm(ps.verts[a] - ps.verts[b]) for a, b in boundary)
+    perim = 1 + 1 + 1 + 2 * np.hypot(1, 0.5)
+    assert L == pytest.approx(perim, rel=1e-12)
+    assert interior
+    np.testing.assert_allclose(ps.areas.sum(), 1.5, rtol=1e-12)
+
+
+def test_convex_ngon_and_concave_ngon():
+    pent = [[0, 0, 0], [2, 0, 0], [2.5, 1, 0], [1, 2, 0], [-0.5, 1, 0]]
+    ps = build_patches(MeshInput.from_faces(pent, [[0, 1, 2, 3, 4]]), None)
+    assert len(ps) == 5 and np.all(ps.nsides == 4)
+    x, y = np.array(pent)[:, 0], np.array(pent)[:, 1]
+    shoelace = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    assert ps.areas.sum() == pytest.approx(shoelace, rel=1e-12)
+    L = [[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]]
+    ps = build_patches(MeshInput.from_faces(L, [[0, 1, 2, 3, 4, 5]]), 0.5)
+    assert ps.areas.sum() == pytest.approx(3.0, rel=1e-12)
+    assert np.all(ps.normals[:, 2] > 0.999)
+    # no patch centre falls in the notch of the L
+    assert not np.any((ps.centers[:, 0] > 1) & (ps.centers[:, 1] > 1))
+
+
+def test_owner_and_source_face_and_materials():
+    meshes = cornell_box()
+    ps = build_patches(meshes, 0.5)
+    assert ps.object_names == [m.name for m in meshes]
+    red = ps.owner == ps.object_names.index("RedWall")
+    np.testing.assert_allclose(ps.rho[red], [[0.63, 0.065, 0.05]] * int(red.sum()))
+    light = ps.owner == ps.object_names.index("Light")
+    assert np.all(ps.emission[light] > 0) and np.all(ps.emission[~light] == 0)
+    for oi, m in enumerate(meshes):
+        assert ps.source_face[ps.owner == oi].max() < len(m.face_offsets) - 1
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(faces=[[0, 1]]), "fewer than 3"),
+    (dict(faces=[[0, 1, 7]]), "does not exist"),
+    (dict(rho=(1.0, 0.5, 0.5)), "reflectivity"),
+    (dict(emission=(-1, 0, 0)), "negative emission"),
+    (dict(verts=[[0, 0, 0], [1, 0, 0], [np.nan, 1, 0]]), "not finite"),
+    (dict(verts=[[0, 0, 0], [1, 0, 0], [2, 0, 0]]), "zero area"),
+])
+def test_bad_input_names_object_and_problem(bad, message):
+    args = dict(verts=[[0, 0, 0], [1, 0, 0], [0, 1, 0]], faces=[[0, 1, 2]], rho=(0.5,) * 3, emission=(0,) * 3)
+    args.update(bad)
+    m = MeshInput.from_faces(args["verts"], args["faces"], args["rho"], args["emission"], name="Wall.001")
+    with pytest.raises(PatchError, match=message) as e:
+        build_patches(m, 0.5)
+    assert "Wall.001" in str(e.value)

@@ -1,0 +1,109 @@
+"""Solvers against a direct dense solve, the furnace closed form, and their error handling."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.solve import energy_balance, solve
+from hemicube_radiosity.core.sparse import CSR
+
+
+def random_reciprocal_system(n=60, seed=1, leak=0.1):
+    """A random enclosure-like F with reciprocity A_i F_ij = A_j F_ji and row sums 1 - leak."""
+    rng = np.random.default_rng(seed)
+    A = rng.uniform(0.5, 2.0, n)
+    G = rng.uniform(0, 1, (n, n)) * (rng.uniform(0, 1, (n, n)) < 0.3)
+    G = G + G.T
+    np.fill_diagonal(G, 0)
+    # symmetric G = A_i F_ij; scale rows via Sinkhorn-like iterations to row sums of F = 1 - leak
+    for _ in range(200):
+        F = G / A[:, None]
+        s = F.sum(1) / (1 - leak)
+        d = 1 / np.sqrt(s)
+        G = G * d[:, None] * d[None, :]
+    F = G / A[:, None]
+    rho = rng.uniform(0.1, 0.9, (n, 3))
+    S = rng.uniform(0, 1, (n, 3)) * (rng.uniform(0, 1, (n, 1)) < 0.2)
+    return F, A, rho, S
+
+
+@pytest.mark.parametrize("method", ["gauss_seidel", "jacobi", "progressive"])
+def test_solvers_match_dense_direct_solve(method):
+    F, A, rho, S = random_reciprocal_system()
+    exact = np.stack([np.linalg.solve(np.eye(len(A)) - rho[:, k:k + 1] * F, S[:, k]) for k in range(3)], 1)
+    sol = solve(CSR.from_dense(F), rho, S, method, tol=1e-9, max_iterations=2000, areas=A)
+    assert sol.converged
+    np.testing.assert_allclose(sol.B, exact, rtol=1e-5, atol=1e-7 * exact.max())
+    assert sol.residual < 1e-6
+    # float32 storage of F limits how exactly energy balances
+    assert sol.energy["imbalance"] < 1e-5
+
+
+def test_gauss_seidel_needs_fewer_sweeps_than_jacobi():
+    F, A, rho, S = random_reciprocal_system()
+    Fc = CSR.from_dense(F)
+    gs = solve(Fc, rho, S, "gauss_seidel", tol=1e-6)
+    ja = solve(Fc, rho, S, "jacobi", tol=1e-6)
+    assert gs.iterations < ja.iterations
+
+
+def test_furnace_closed_form_any_matrix():
+    # closed enclosure (rows sum to 1, reciprocal), uniform E and rho: B = E/(1-rho) exactly
+    F, A, _, _ = random_reciprocal_system(leak=0.0)
+    for r in (0.5, 0.9):
+        rho = np.full((len(A), 3), r)
+        S = np.ones((len(A), 3))
+        sol = solve(CSR.from_dense(F), rho, S, tol=1e-8, max_iterations=5000, areas=A)
+        np.testing.assert_allclose(sol.B, 1 / (1 - r), rtol=1e-5)
+        assert sum(sol.energy["escaped"]) == pytest.approx(0, abs=1e-3 * sum(sol.energy["emitted"]))
+
+
+def test_energy_balance_with_rows_left_out_uses_reciprocity():
+    F, A, rho, S = random_reciprocal_system()
+    rho[:5] = 0.0  # emitters that reflect nothing: their rows are not needed for B
+    Fc = CSR.from_dense(F)
+    full = solve(Fc, rho, S, tol=1e-9, max_iterations=2000, areas=A)
+    Fcut = F.copy()
+    Fcut[:5] = 0
+    part = solve(CSR.from_dense(Fcut), rho, S, tol=1e-9, max_iterations=2000, areas=A,
+                 computed=np.arange(len(A)) >= 5)
+    np.testing.assert_allclose(part.B, full.B, rtol=1e-6)
+    assert part.energy["imbalance"] < 1e-5
+    # without telling the balance which rows were left out it would be badly off
+    wrong = energy_balance(CSR.from_dense(Fcut), rho, S, part.B, A)
+    assert wrong["imbalance"] > 1e-2
+
+
+@pytest.mark.parametrize("rho_value, message", [(1.0, r"\[0, 1\)"), (-0.1, r"\[0, 1\)")])
+def test_rejects_reflectivity_outside_unit_interval(rho_value, message):
+    F, A, rho, S = random_reciprocal_system(n=10)
+    rho[3, 1] = rho_value
+    with pytest.raises(ValueError, match=message) as e:
+        solve(CSR.from_dense(F), rho, S)
+    assert "patch 3 band G" in str(e.value)
+
+
+def test_rejects_rows_that_would_diverge_and_negative_source():
+    F, A, rho, S = random_reciprocal_system(n=10)
+    F2 = F.copy()
+    F2[2] *= 1.5 / F2[2].sum()
+    rho[:] = 0.8
+    with pytest.raises(ValueError, match="patch 2.*diverge"):
+        solve(CSR.from_dense(F2), rho, S)
+    S[4, 0] = -1
+    with pytest.raises(ValueError, match="negative"):
+        solve(CSR.from_dense(F), rho, S)
+    with pytest.raises(ValueError, match="unknown solver"):
+        solve(CSR.from_dense(F), rho, np.abs(S), method="newton")
+
+
+def test_not_converged_is_reported_not_hidden():
+    F, A, rho, S = random_reciprocal_system()
+    sol = solve(CSR.from_dense(F), rho, S, "jacobi", tol=1e-12, max_iterations=2)
+    assert not sol.converged and sol.iterations == 2 and sol.residual > 1e-6
+
+
+def test_cancel_stops_the_solve():
+    from hemicube_radiosity.core.progress import Cancelled
+
+    F, A, rho, S = random_reciprocal_system()
+    with pytest.raises(Cancelled):
+        solve(CSR.from_dense(F), rho, S, tol=1e-12, cancelled=lambda: True)

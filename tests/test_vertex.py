@@ -1,0 +1,48 @@
+"""Vertex radiosities: the paper's averaging and boundary extrapolation."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core.vertex import vertex_radiosity
+
+
+def grid(nx=4, ny=3, size=(4.0, 3.0)):
+    m = MeshInput.from_faces([[0, 0, 0], [size[0], 0, 0], [size[0], size[1], 0], [0, size[1], 0]], [[0, 1, 2, 3]])
+    return build_patches(m, 1.0)
+
+
+def test_linear_field_is_reproduced_exactly_at_every_vertex():
+    # patch values from a linear function: averaging is exact inside, extrapolation exact on the boundary
+    ps = grid()
+    f = lambda p: 1.0 + 0.5 * p[:, 0] + 0.25 * p[:, 1]  # noqa: E731
+    B = np.repeat(f(ps.centers)[:, None], 3, 1)
+    Bv = vertex_radiosity(ps, B)
+    np.testing.assert_allclose(Bv[:, 0], f(ps.verts), rtol=1e-7)
+    # plain averaging is wrong on the boundary for the same field
+    avg = vertex_radiosity(ps, B, extrapolate=False)
+    assert np.abs(avg[:, 0] - f(ps.verts)).max() > 0.2
+
+
+def test_constant_field_everywhere_and_clamped_at_zero():
+    ps = grid()
+    Bv = vertex_radiosity(ps, np.full((len(ps), 3), 2.5))
+    np.testing.assert_allclose(Bv, 2.5)
+    # a steep drop toward the boundary would extrapolate below zero: clamped
+    B = np.where(ps.centers[:, :1] < 1, 0.0, 10.0).repeat(3, 1)
+    assert vertex_radiosity(ps, B).min() >= 0
+
+
+def test_surfaces_that_share_no_vertex_do_not_mix():
+    a = MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], [[0, 1, 2, 3]], name="a")
+    b = MeshInput.from_faces([[1, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0]], [[0, 1, 2, 3]], name="b")
+    ps = build_patches([a, b], 0.5)
+    B = np.where(ps.owner[:, None] == 0, 1.0, 3.0).repeat(3, 1)
+    Bv = vertex_radiosity(ps, B)
+    on_a = np.isin(np.arange(len(ps.verts)), ps.polys[ps.owner == 0])
+    np.testing.assert_allclose(Bv[on_a], 1.0)
+    np.testing.assert_allclose(Bv[~on_a], 3.0)
+
+
+def test_single_patch_takes_its_own_value():
+    ps = build_patches(MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), None)
+    np.testing.assert_allclose(vertex_radiosity(ps, [[0.3, 0.2, 0.1]]), [[0.3, 0.2, 0.1]] * 3)
