@@ -1,0 +1,335 @@
+"""Form factors by ray casting with Embree (through the optional ``embreex`` package).
+
+Two methods, both returning the same :class:`~.sparse.CSR` as the NumPy rasteriser
+(``core/hemicube.py``): F_ii = 0, float32 data, ``meta`` and ``sky`` filled.
+
+* :func:`embree_hemicube_form_factors` casts one ray from each receiver's centre through the
+  centre of every hemi-cube pixel and gives it that pixel's delta form factor. The item buffer
+  of the rasteriser holds, per pixel, the nearest patch seen through the pixel centre, so the
+  two methods produce the same rows up to ties at patch edges: this is the cross-check of the
+  rasteriser (and of the ray caster).
+* :func:`embree_stochastic_form_factors` casts ``rays_per_patch`` cosine-distributed rays
+  (stratified in the unit square, a random rotation per receiver), each worth 1/rays.
+
+Rules shared with the rasteriser: a ray that hits the back of a patch is blocked and counts
+for nothing (neither F nor sky); a ray that hits nothing adds its weight to ``sky[i]``; a ray
+that hits its own receiver is dropped (F_ii = 0). Rays leave from the receiver centre moved a
+tiny distance along its normal, so a planar patch never sees itself and a neighbour sharing an
+edge is seen as the rasteriser sees it.
+
+All rays of a batch of receivers go to Embree in one ``scene.run`` call.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .patches import PatchSet
+from .progress import Ticker
+from .sparse import CSR
+
+__all__ = ["embree_available", "EmbreeUnavailable", "embree_hemicube_form_factors",
+           "embree_stochastic_form_factors", "EmbreeScene", "embree_scene"]
+
+#: Rays per ``scene.run`` call (memory: ~60 bytes per ray for inputs and outputs).
+RAYS_PER_BATCH = 1 << 20
+
+
+class EmbreeUnavailable(RuntimeError):
+    """``embreex`` cannot be imported (not installed, or its binary does not load here)."""
+
+    def __init__(self, detail: str = ""):
+        msg = "embreex is not installed; use method='hemicube' or install embreex"
+        if detail:
+            msg += f" ({detail})"
+        super().__init__(msg)
+
+
+def _import_embreex():
+    """(rtcore_scene, TriangleMesh) or raise :class:`EmbreeUnavailable`."""
+    try:
+        from embreex import rtcore_scene
+        from embreex.mesh_construction import TriangleMesh
+    except Exception as exc:  # ImportError, or OSError from a missing shared library
+        raise EmbreeUnavailable(f"{type(exc).__name__}: {exc}") from exc
+    return rtcore_scene, TriangleMesh
+
+
+def embree_available() -> bool:
+    """True when ``embreex`` imports and can build a scene."""
+    try:
+        _import_embreex()
+    except EmbreeUnavailable:
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------------------------
+# Scene: patches -> triangles, with the patch id of every triangle
+
+
+class EmbreeScene:
+    """An Embree scene of a PatchSet's patches (each quad as 2 triangles).
+
+    ``tri_patch[prim_id]`` is the patch a triangle belongs to. Degenerate triangles (the second
+    half of a triangle patch, or zero-area halves of a quad) are left out of the scene.
+    ``scale`` is the length of the scene's bounding-box diagonal (for ray offsets).
+    """
+
+    def __init__(self, patches: PatchSet):
+        rtcs, TriangleMesh = _import_embreex()
+        c = patches.corners()  # (N,4,3), triangles repeat corner 2
+        tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]], axis=0)  # (2N,3,3)
+        owner = np.concatenate([np.arange(len(patches)), np.arange(len(patches))])
+        quad = np.concatenate([np.ones(len(patches), bool), patches.polys[:, 3] >= 0])
+        area2 = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
+        lo, hi = patches.verts.min(axis=0), patches.verts.max(axis=0)
+        self.scale = float(np.linalg.norm(hi - lo)) or 1.0
+        keep = quad & (area2 > (1e-12 * self.scale) ** 2)
+        self.tri_patch = owner[keep].astype(np.int64)
+        self.n_patches = len(patches)
+        self._scene = rtcs.EmbreeScene()
+        self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris[keep], dtype=np.float32))
+
+    def intersect(self, origins, directions, tfar=None):
+        """Nearest hit per ray: (patch id or -1, distance along the direction's length units)."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
+        res = self._scene.run(o, d, output=1, **kw)
+        prim = res["primID"].astype(np.int64)
+        pid = np.where(prim >= 0, self.tri_patch[np.maximum(prim, 0)], -1)
+        return pid, res["tfar"]
+
+    def occluded(self, origins, directions, tfar=None):
+        """(M,) bool: something lies on the ray between 0 and ``tfar`` (default: infinity)."""
+        o = np.ascontiguousarray(origins, dtype=np.float32)
+        d = np.ascontiguousarray(directions, dtype=np.float32)
+        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
+        return np.asarray(self._scene.run(o, d, query="OCCLUDED", **kw)) >= 0
+
+
+_SCENE_CACHE: dict = {}
+
+
+def embree_scene(patches: PatchSet) -> EmbreeScene:
+    """The Embree scene for ``patches``, built once per geometry (the two most recent are kept)."""
+    key = patches.geometry_key()
+    sc = _SCENE_CACHE.get(key)
+    if sc is None:
+        sc = EmbreeScene(patches)
+        while len(_SCENE_CACHE) >= 2:
+            _SCENE_CACHE.pop(next(iter(_SCENE_CACHE)))
+        _SCENE_CACHE[key] = sc
+    return sc
+
+
+# --------------------------------------------------------------------------------------------
+# Hemi-cube pixel directions (local frame: +Z is the normal)
+
+
+def _delta_tables(resolution):
+    from .deltaff import delta_form_factors
+
+    return delta_form_factors(resolution)
+
+
+def hemicube_directions(resolution: int):
+    """Unnormalised local directions through every hemi-cube pixel centre, and their weights.
+
+    Returns (dirs (3R^2, 3), weights (3R^2,)): the R*R top-face pixels, then the four side
+    faces +X, -X, +Y, -Y with R/2 * R pixels each. Pixel centres: top face (x, y, 1) with
+    x, y = -1 + (k + 1/2) * 2/R; a side face at unit distance, height z = (r + 1/2) * 2/R for
+    table row r, and along-face coordinate -1 + (c + 1/2) * 2/R for table column c. Weights come
+    from ``deltaff.delta_form_factors`` (the rasteriser's own table), so the two methods weigh
+    the same pixels alike.
+    """
+    R = int(resolution)
+    if R < 2 or R % 2:
+        raise ValueError(f"hemi-cube resolution must be an even number >= 2, got {resolution}")
+    top, side = _delta_tables(R)
+    t = -1.0 + (np.arange(R) + 0.5) * (2.0 / R)        # along a face
+    h = (np.arange(R // 2) + 0.5) * (2.0 / R)           # height above the horizon
+    Y, X = np.meshgrid(t, t, indexing="ij")              # top[i, j] at (x=t[j], y=t[i])
+    dirs = [np.stack([X, Y, np.ones_like(X)], -1).reshape(-1, 3)]
+    wts = [np.asarray(top, float).reshape(-1)]
+    Hh, A = np.meshgrid(h, t, indexing="ij")             # side[r, c] at height h[r], along t[c]
+    one = np.ones_like(A)
+    for face in (np.stack([one, A, Hh], -1), np.stack([-one, A, Hh], -1),
+                 np.stack([A, one, Hh], -1), np.stack([A, -one, Hh], -1)):
+        dirs.append(face.reshape(-1, 3))
+        wts.append(np.asarray(side, float).reshape(-1))
+    return np.concatenate(dirs), np.concatenate(wts)
+
+
+def tangent_frames(normals, angles=None):
+    """(N,3,3) rows (u, v, n): a right-handed orthonormal frame around each unit normal.
+
+    u is the normal crossed into the world axis least aligned with it, then turned by
+    ``angles`` (N,) radians about n when given.
+    """
+    n = np.asarray(normals, float)
+    helper = np.zeros_like(n)
+    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(n, u)
+    if angles is not None:
+        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        u, v = ca * u + sa * v, -sa * u + ca * v
+    return np.stack([u, v, n], axis=1)
+
+
+def _rotation_angles(n, rotate_seed):
+    """Per-patch rotation about the normal (radians), drawn for all patches so a receiver's
+    angle does not depend on which receivers are asked for."""
+    if rotate_seed is None:
+        return None
+    return np.random.default_rng(rotate_seed).uniform(0.0, 2.0 * np.pi, n)
+
+
+# --------------------------------------------------------------------------------------------
+# Shared driver
+
+
+def _receivers(patches, receivers):
+    n = len(patches)
+    if receivers is None:
+        return np.arange(n, dtype=np.int64)
+    r = np.unique(np.asarray(receivers, dtype=np.int64).reshape(-1))
+    if r.size and (r[0] < 0 or r[-1] >= n):
+        raise ValueError(f"receiver ids must be in [0, {n}), got {r[0]}..{r[-1]}")
+    return r
+
+
+def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled):
+    """Cast every receiver's rays (built by ``local_dirs_fn(batch) -> (B, K, 3) world dirs,
+    (B, K) weights``) and accumulate F rows and sky. Returns (rows, cols, vals, sky)."""
+    scene = embree_scene(patches)
+    n = len(patches)
+    eps = 1e-5 * scene.scale
+    per_batch = max(1, RAYS_PER_BATCH // max(1, rays_per_receiver))
+    ticker = Ticker(progress, cancelled)
+    sky = np.zeros(n, dtype=np.float64)
+    rows_l, cols_l, vals_l = [], [], []
+    ticker.tick(0, len(recv), force=True)
+    for start in range(0, len(recv), per_batch):
+        batch = recv[start:start + per_batch]
+        B = len(batch)
+        dirs, w = local_dirs_fn(batch)                                   # (B,K,3), (B,K)
+        K = dirs.shape[1]
+        origin = patches.centers[batch] + eps * patches.normals[batch]
+        o = np.repeat(origin, K, axis=0)
+        pid, _ = scene.intersect(o, dirs.reshape(-1, 3))
+        w = w.reshape(-1)
+        rid = np.repeat(np.arange(B), K)
+        miss = pid < 0
+        sky[batch] += np.bincount(rid[miss], weights=w[miss], minlength=B)
+        hit = ~miss
+        pid_h, rid_h, w_h = pid[hit], rid[hit], w[hit]
+        front = np.einsum("ij,ij->i", dirs.reshape(-1, 3)[hit], patches.normals[pid_h]) < 0
+        ok = front & (pid_h != batch[rid_h])
+        key = rid_h[ok] * n + pid_h[ok]
+        uk, inv = np.unique(key, return_inverse=True)
+        vals = np.bincount(inv.reshape(-1), weights=w_h[ok], minlength=uk.size)
+        rows_l.append(batch[uk // n])
+        cols_l.append(uk % n)
+        vals_l.append(vals)
+        ticker.tick(start + B, len(recv))
+    cat = (lambda l, dt: np.concatenate(l).astype(dt) if l else np.zeros(0, dt))
+    return cat(rows_l, np.int64), cat(cols_l, np.int64), cat(vals_l, np.float64), sky
+
+
+# --------------------------------------------------------------------------------------------
+# (a) rays through the hemi-cube pixels
+
+
+def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
+                                 receivers=None, progress=None, cancelled=None) -> CSR:
+    """Form factors from rays through the hemi-cube pixel centres, weighted by the same delta
+    form factors as the rasteriser (``core/hemicube.py``), in the same hemi-cube orientation
+    (``rotate_seed``: None keeps the fixed frame, an int turns each receiver's hemi-cube about
+    its normal by a random angle drawn for all patches).
+
+    ``receivers``: patch ids whose rows are computed (others stay empty). ``progress(f)`` is
+    called now and then; ``cancelled()`` is polled between batches (raises ``Cancelled``).
+    Raises :class:`EmbreeUnavailable` when embreex cannot be imported.
+    """
+    _import_embreex()
+    n = len(patches)
+    recv = _receivers(patches, receivers)
+    local, weights = hemicube_directions(resolution)
+    frames = tangent_frames(patches.normals, _rotation_angles(n, rotate_seed))
+
+    def dirs_fn(batch):
+        d = np.einsum("kc,bcj->bkj", local, frames[batch])  # local (x,y,z) -> x u + y v + z n
+        return d, np.broadcast_to(weights, (len(batch), weights.size))
+
+    rows, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled)
+    meta = {"method": "embree", "resolution": int(resolution), "rotate_seed": rotate_seed,
+            "n_patches": n, "n_receivers": int(recv.size), "rays_per_receiver": int(weights.size)}
+    F = CSR.from_coo(rows, cols, vals, (n, n), meta)
+    F.sky = sky.astype(np.float32)
+    return F
+
+
+# --------------------------------------------------------------------------------------------
+# (b) stochastic cosine-weighted rays
+
+
+def _stratified_unit_square(rng, count, k):
+    """(count, k, 2) points in [0,1)^2: a jittered m x (k // m) grid (m = floor(sqrt k)), the
+    k - m * (k // m) left over drawn uniformly; a fresh jitter per row."""
+    m = max(1, int(np.floor(np.sqrt(k))))
+    c = k // m
+    gi, gj = np.meshgrid(np.arange(m), np.arange(c), indexing="ij")
+    base = np.stack([gi.reshape(-1) / m, gj.reshape(-1) / c], -1)          # (m*c, 2)
+    jit = rng.random((count, m * c, 2)) * np.array([1.0 / m, 1.0 / c])
+    pts = base[None] + jit
+    rest = k - m * c
+    if rest:
+        pts = np.concatenate([pts, rng.random((count, rest, 2))], axis=1)
+    return pts
+
+
+def cosine_directions(u):
+    """Map (..., 2) points of the unit square to cosine-distributed local directions (..., 3)
+    (Malley: uniform on the disk by area, lifted to the hemisphere)."""
+    r = np.sqrt(u[..., 0])
+    phi = 2.0 * np.pi * u[..., 1]
+    z = np.sqrt(np.maximum(0.0, 1.0 - u[..., 0]))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+
+
+def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, seed=0,
+                                   receivers=None, progress=None, cancelled=None) -> CSR:
+    """Form factors from ``rays_per_patch`` cosine-distributed rays per receiver, each worth
+    1/rays_per_patch (F_ij is the fraction of them whose first hit is the front of patch j).
+
+    Stratified: a jittered grid on the unit square mapped by Malley's method, in a frame turned
+    by a random angle per receiver. The standard error of one entry is at most
+    sqrt(F (1 - F) / rays_per_patch) (less with stratification). Deterministic for a ``seed``
+    whatever ``receivers`` is (each receiver has its own random stream).
+    """
+    _import_embreex()
+    k = int(rays_per_patch)
+    if k < 1:
+        raise ValueError(f"rays_per_patch must be >= 1, got {rays_per_patch}")
+    n = len(patches)
+    recv = _receivers(patches, receivers)
+    angles = np.random.default_rng([seed, 0x5eed]).uniform(0, 2 * np.pi, n)
+    frames = tangent_frames(patches.normals, angles)
+
+    def dirs_fn(batch):
+        # one stream per receiver id, so rows do not depend on the batch or receiver set
+        u = np.concatenate([_stratified_unit_square(np.random.default_rng([seed, int(i)]), 1, k)
+                            for i in batch])
+        local = cosine_directions(u)                                        # (B,k,3)
+        d = np.einsum("bkc,bcj->bkj", local, frames[batch])
+        return d, np.full((len(batch), k), 1.0 / k)
+
+    rows, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled)
+    meta = {"method": "embree_stochastic", "rays_per_patch": k, "seed": seed,
+            "n_patches": n, "n_receivers": int(recv.size)}
+    F = CSR.from_coo(rows, cols, vals, (n, n), meta)
+    F.sky = sky.astype(np.float32)
+    return F
