@@ -1,0 +1,104 @@
+"""Evaluate a bake anywhere on its surfaces: the paper's rendering step, bilinear inside a patch.
+
+Given vertex radiosities on the patch mesh, a point on a surface takes the bilinear interpolation
+of its patch's four corner values (a triangle patch is a quad with its last two corners equal,
+which makes the same formula barycentric). Used to put a coarse patch solution on a finer mesh
+(another mesh's vertices, a reference bake's vertices) without cutting more patches.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .patches import PatchSet
+
+__all__ = ["locate", "interpolate_at"]
+
+
+def _bilinear(c, u, v):
+    """c (..., 4, k) corner values; u, v (...,) -> (..., k)."""
+    u = u[..., None]
+    v = v[..., None]
+    return ((1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :]
+            + u * v * c[..., 2, :] + (1 - u) * v * c[..., 3, :])
+
+
+def _inverse_bilinear(c, p, iterations=8):
+    """(u, v) with bilinear(c, u, v) closest to p (Gauss-Newton from the centre); c (..., 4, 3)."""
+    shape = p.shape[:-1]
+    u = np.full(shape, 0.5)
+    v = np.full(shape, 0.5)
+    for _ in range(iterations):
+        r = _bilinear(c, u, v) - p
+        du = (1 - v)[..., None] * (c[..., 1, :] - c[..., 0, :]) + v[..., None] * (c[..., 2, :] - c[..., 3, :])
+        dv = (1 - u)[..., None] * (c[..., 3, :] - c[..., 0, :]) + u[..., None] * (c[..., 2, :] - c[..., 1, :])
+        a = np.einsum("...i,...i", du, du)
+        b = np.einsum("...i,...i", du, dv)
+        d = np.einsum("...i,...i", dv, dv)
+        gu = np.einsum("...i,...i", du, r)
+        gv = np.einsum("...i,...i", dv, r)
+        det = a * d - b * b
+        tiny = det <= 1e-30 * np.maximum(a * d, 1e-300)
+        det = np.where(tiny, 1.0, det)
+        step_u = np.where(tiny, 0.0, (d * gu - b * gv) / det)
+        step_v = np.where(tiny, 0.0, (a * gv - b * gu) / det)
+        u = np.clip(u - step_u, -0.5, 1.5)
+        v = np.clip(v - step_v, -0.5, 1.5)
+    return u, v
+
+
+def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, chunk=2048):
+    """Patch index (P,) and bilinear (u, v) (P, 2) in [0, 1] for points on the patch surfaces.
+
+    ``owner`` (P,) restricts each point to patches of that object; ``normals`` (P, 3) rejects
+    patches facing another way (for corners shared by differently oriented faces). Each point is
+    tried against its ``candidates`` nearest patch centres; the one it lies in (or is closest to
+    lying in) wins. Points off every surface get the nearest patch, clamped.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    P = len(points)
+    by_owner = owner is not None
+    owner = np.asarray(owner, np.int64) if by_owner else np.zeros(P, np.int64)
+    powner = patches.owner if by_owner else np.zeros(len(patches), np.int64)
+    corners = patches.corners()
+    size = np.sqrt(patches.areas)
+    out_idx = np.full(P, -1, np.int64)
+    out_uv = np.zeros((P, 2))
+    for o in np.unique(owner):
+        pts_ids = np.flatnonzero(owner == o)
+        cand_all = np.flatnonzero(powner == o)
+        if cand_all.size == 0:
+            raise ValueError(f"no patches belong to object {int(o)}")
+        k = min(candidates, cand_all.size)
+        cc = patches.centers[cand_all]
+        for s in range(0, pts_ids.size, chunk):
+            ids = pts_ids[s:s + chunk]
+            p = points[ids]
+            d2 = ((p[:, None, :] - cc[None, :, :]) ** 2).sum(-1)
+            near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < cand_all.size else np.broadcast_to(
+                np.arange(k), (ids.size, k))
+            cand = cand_all[near]                                    # (m, k)
+            c = corners[cand]                                        # (m, k, 4, 3)
+            pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
+            u, v = _inverse_bilinear(c, pp)
+            outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
+            uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
+            gap = np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
+            score = outside + gap
+            if normals is not None:
+                facing = np.einsum("mkj,mj->mk", patches.normals[cand], np.asarray(normals, float)[ids])
+                score = score + 10.0 * (facing < 0.5)
+            best = np.argmin(score, axis=1)
+            r = np.arange(ids.size)
+            out_idx[ids] = cand[r, best]
+            out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
+    return out_idx, out_uv
+
+
+def interpolate_at(patches: PatchSet, vertex_values, points, owner=None, normals=None) -> np.ndarray:
+    """Bilinear interpolation of per-vertex values (V, k) at points on the surfaces -> (P, k)."""
+    vals = np.asarray(vertex_values, dtype=np.float64)
+    idx, uv = locate(patches, points, owner, normals)
+    polys = patches.polys[idx].copy()
+    tri = polys[:, 3] < 0
+    polys[tri, 3] = polys[tri, 2]
+    return _bilinear(vals[polys], uv[:, 0], uv[:, 1])
