@@ -1,0 +1,127 @@
+"""The whole core bake on closed-form and measured cases (furnace, Cornell box)."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.cache import FormFactorCache
+from hemicube_radiosity.core.pipeline import BakeSettings, bake
+from hemicube_radiosity.core.scenes import CORNELL_WHITE, closed_box, cornell_box
+
+METHODS = ["hemicube", "embree"]
+
+
+@pytest.mark.parametrize("method", METHODS)
+@pytest.mark.parametrize("rho", [0.5, 0.9])
+def test_furnace_every_patch_is_e_over_one_minus_rho(method, rho):
+    """Closed room, E = 1 and the same rho everywhere: B = E / (1 - rho) exactly (paper-notes)."""
+    r = bake(closed_box(size=(1.0, 1.3, 0.8), rho=(rho,) * 3, emission=(1.0,) * 3),
+             BakeSettings(patch_size=0.2, resolution=128, method=method, tolerance=1e-7, max_iterations=2000))
+    assert r.solution.converged
+    np.testing.assert_allclose(r.solution.B, 1 / (1 - rho), rtol=5e-3)
+    np.testing.assert_allclose(r.vertex_radiosity, 1 / (1 - rho), rtol=5e-3)
+    assert r.solution.energy["imbalance"] < 5e-3
+
+
+def _block_hit(origins, targets, block):
+    """True where the segment origin->target passes through a (z-rotated) box block."""
+    lo, hi, ang = block
+    c = 0.5 * (np.asarray(lo) + np.asarray(hi))
+    ca, sa = np.cos(-ang), np.sin(-ang)
+
+    def local(p):
+        q = p - c
+        return np.stack([ca * q[..., 0] - sa * q[..., 1], sa * q[..., 0] + ca * q[..., 1], q[..., 2]], -1) + c
+
+    o, t = local(origins), local(targets)
+    d = t - o
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t0 = (np.asarray(lo) - o) / d
+        t1 = (np.asarray(hi) - o) / d
+    tmin = np.nanmax(np.minimum(t0, t1), axis=-1)
+    tmax = np.nanmin(np.maximum(t0, t1), axis=-1)
+    return (tmax >= np.maximum(tmin, 1e-9)) & (tmin < 1 - 1e-9)
+
+
+def light_visibility(points, s=2.0, light=0.5, n=16):
+    """Fraction of the ceiling light visible from each point, by exact segment-box tests."""
+    g = (np.arange(n) + 0.5) / n * light + (s - light) / 2
+    lp = np.stack(np.meshgrid(g, g, indexing="ij"), -1).reshape(-1, 2)
+    lp = np.concatenate([lp, np.full((len(lp), 1), s * (1 - 1e-3))], 1)
+    blocks = [((0.27 * s, 0.17 * s, 0), (0.57 * s, 0.47 * s, 0.3 * s), np.radians(-17)),
+              ((0.53 * s, 0.5 * s, 0), (0.83 * s, 0.8 * s, 0.6 * s), np.radians(17))]
+    o = np.repeat(points[:, None, :], len(lp), 1)
+    t = np.broadcast_to(lp[None], o.shape)
+    blocked = np.zeros(o.shape[:2], bool)
+    for b in blocks:
+        blocked |= _block_hit(o, t, b)
+    return 1 - blocked.mean(axis=1)
+
+
+@pytest.fixture(scope="module")
+def cornell():
+    settings = BakeSettings(patch_size=0.125, resolution=64, method="hemicube")
+    with_blocks = bake(cornell_box(), settings)
+    no_blocks = bake(cornell_box()[:6], settings)
+    white = [m for m in cornell_box()]
+    white[3].face_rho[:] = CORNELL_WHITE  # the red wall painted white
+    all_white = bake(white, settings)
+    return with_blocks, no_blocks, all_white
+
+
+def floor(r):
+    ps = r.patches
+    sel = ps.owner == ps.object_names.index("Floor")
+    return ps.centers[sel], r.solution.B[sel]
+
+
+def test_cornell_blocks_cast_shadows(cornell):
+    """Floor patches the light cannot see (umbra, by exact segment tests) keep only indirect light."""
+    wb, nb, _ = cornell
+    c, B = floor(wb)
+    c0, B0 = floor(nb)
+    np.testing.assert_allclose(c, c0)  # same floor patches in both bakes
+    vis = light_visibility(c + [0, 0, 1e-6])
+    # patches under a block's footprint see nothing; exclude them (they are covered, not shadowed)
+    umbra = (vis == 0) & (B.sum(1) > 0) & (B0.sum(1) > 0)
+    lit = vis == 1
+    assert umbra.sum() >= 8 and lit.sum() >= 50
+    ratio = B.sum(1) / B0.sum(1)
+    # in the umbra only indirect light remains: far below the unshadowed floor
+    assert np.median(ratio[umbra]) < 0.35
+    assert np.median(ratio[lit]) > 0.85
+    # and shadowing grows monotonically with how much of the light is hidden (coarse bins)
+    part = (vis > 0.3) & (vis < 0.7)
+    assert np.median(ratio[umbra]) < np.median(ratio[part]) < np.median(ratio[lit])
+
+
+def test_cornell_red_bleeds_onto_the_floor_near_the_red_wall(cornell):
+    wb, _, aw = cornell
+    c, B = floor(wb)
+    c2, B2 = floor(aw)
+    near_red = (c[:, 0] < 0.25) & (c[:, 1] > 0.5) & (c[:, 1] < 1.5)
+    near_green = (c[:, 0] > 1.75) & (c[:, 1] > 0.5) & (c[:, 1] < 1.5)
+    rg = B[:, 0] / B[:, 1]
+    rg_white = B2[:, 0] / B2[:, 1]
+    # with a white wall the floor keeps the white paint's own tint (0.725/0.71) ...
+    assert np.median(rg_white[near_red]) == pytest.approx(0.725 / 0.71, rel=0.03)
+    # ... with the red wall the floor near it turns measurably red, near the green wall it does not
+    assert np.median(rg[near_red]) > 1.15 * np.median(rg_white[near_red])
+    assert np.median(rg[near_red]) > 1.3 * np.median(rg[near_green])
+
+
+def test_relight_reuses_form_factors_and_equals_a_cold_bake():
+    meshes = cornell_box()
+    cache = FormFactorCache()
+    s = BakeSettings(patch_size=0.25, resolution=32, method="hemicube", tolerance=1e-8)
+    first = bake(meshes, s, cache=cache)
+    assert first.form_factor_source == "computed"
+    relit = cornell_box(light_radiance=20.0)
+    relit[4].face_rho[:] = (0.2, 0.2, 0.8)  # green wall painted blue
+    warm = bake(relit, s, cache=cache)
+    assert warm.form_factor_source == "cached" and warm.form_factors is first.form_factors
+    cold = bake(relit, s)
+    assert cold.form_factor_source == "computed"
+    np.testing.assert_allclose(warm.solution.B, cold.solution.B, rtol=1e-6, atol=1e-9)
+    assert not np.allclose(warm.solution.B, first.solution.B, rtol=0.05)
+    # geometry change -> recomputed
+    moved = cornell_box(light_size=0.6)
+    assert bake(moved, s, cache=cache).form_factor_source == "computed"
