@@ -20,8 +20,14 @@ test: $(STAMP)
 demo: $(STAMP)
 	$(PY) -m hemicube_radiosity demo --output-dir demo/out
 
-bench: $(STAMP)
-	$(PY) bench/run_all.py
+BENCH_STAMP := $(VENV)/.bench-$(shell cksum requirements-bench.txt 2>/dev/null | cut -d' ' -f1)
+
+$(BENCH_STAMP): $(STAMP) requirements-bench.txt
+	$(PY) -m pip install -q --disable-pip-version-check -r requirements-bench.txt
+	rm -f $(VENV)/.bench-* && touch $@
+
+bench: $(BENCH_STAMP)
+	$(PY) bench/run_all.py $(BENCH_ARGS)
 
 package: $(STAMP)
 	mkdir -p dist
