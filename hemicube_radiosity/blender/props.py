@@ -1,0 +1,60 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Bake settings: one definition used by the scene's property group (the panel) and the operator."""
+from __future__ import annotations
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+
+from .bake import METHOD_ITEMS, OUTPUT_ITEMS, SOLVER_ITEMS
+
+__all__ = ["setting_annotations", "SETTING_NAMES", "RadiositySettings", "register", "unregister"]
+
+
+def setting_annotations():
+    """Fresh property definitions (Blender needs one set per class)."""
+    return {
+        "patch_size": FloatProperty(
+            name="Patch Size", default=0.25, min=0.0, soft_max=10.0, precision=3, unit="LENGTH",
+            description="Target edge length of a radiosity patch; 0 keeps every face as one patch"),
+        "resolution": IntProperty(
+            name="Hemi-cube Resolution", default=64, min=2, soft_min=8, max=2048, soft_max=512, step=2,
+            description="Pixels along a side of the hemi-cube's top face (even)"),
+        "method": EnumProperty(name="Method", items=METHOD_ITEMS, default="HEMICUBE",
+                               description="How form factors are computed"),
+        "rays_per_patch": IntProperty(name="Rays per Patch", default=512, min=1, soft_max=65536,
+                                      description="Rays per patch for the stochastic Embree method"),
+        "solver": EnumProperty(name="Solver", items=SOLVER_ITEMS, default="GAUSS_SEIDEL",
+                               description="Iterative solver for the radiosity equation"),
+        "tolerance": FloatProperty(name="Tolerance", default=1e-4, min=1e-10, max=1.0, precision=6,
+                                   description="Stop when the relative residual falls below this"),
+        "max_iterations": IntProperty(name="Max Iterations", default=200, min=1, soft_max=10000,
+                                      description="Give up after this many sweeps (or shots)"),
+        "output_mode": EnumProperty(name="Output", items=OUTPUT_ITEMS, default="COPY",
+                                    description="Where the result goes"),
+        "attribute_name": StringProperty(name="Attribute", default="Radiosity", maxlen=63,
+                                         description="Name of the FLOAT_COLOR corner attribute"),
+        "exposure": FloatProperty(name="Exposure", default=0.0, soft_min=-10.0, soft_max=10.0,
+                                  description="Stops: written values are radiance x 2^exposure "
+                                              "(0 keeps radiance units, nothing is clamped)"),
+        "include_others": BoolProperty(
+            name="Other Visible Meshes", default=True,
+            description="Visible meshes that are not selected take part as occluders and emitters "
+                        "(they get no result)"),
+    }
+
+
+SETTING_NAMES = tuple(setting_annotations())
+
+
+class RadiositySettings(bpy.types.PropertyGroup):
+    __annotations__ = setting_annotations()
+
+
+def register():
+    bpy.utils.register_class(RadiositySettings)
+    bpy.types.Scene.hemicube_radiosity = PointerProperty(type=RadiositySettings)
+
+
+def unregister():
+    del bpy.types.Scene.hemicube_radiosity
+    bpy.utils.unregister_class(RadiositySettings)

@@ -1,0 +1,338 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender scene -> core input: depsgraph-evaluated meshes in world space, materials -> rho/emission.
+
+Nothing here modifies the scene: meshes are evaluated with ``evaluated_get(depsgraph).to_mesh()``
+and freed again.
+
+Vertex welding rule (the core shares a patch vertex exactly where two faces share a source
+vertex, and averages radiosity there). Every face corner starts as its own vertex; corners of two
+faces that share an edge are welded at both ends of that edge when the faces use the same
+material and either
+
+* both faces are smooth-shaded and the edge is not marked sharp, or
+* the faces are coplanar (normals within 1e-3 rad), so a wall cut into several faces stays one
+  surface even when it is flat-shaded or its edges are marked sharp.
+
+Everything else (flat-shaded corners of a box, sharp edges between smooth faces, material
+borders) is a hard edge: each side gets its own vertex copies and colours do not bleed across.
+Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
+seen from the front in world space.
+
+Seam for lamps and world (issue 4): :class:`SceneInput` carries ``lights`` and ``world`` that a
+later ``read_lights`` fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..core.patches import MeshInput
+
+__all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
+           "read_scene", "weld_corners", "RHO_MAX"]
+
+RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
+COPLANAR_COS = float(np.cos(1e-3))
+DEFAULT_RHO = (0.8, 0.8, 0.8)
+
+
+class ReadError(ValueError):
+    """The scene cannot be baked; the message names the object."""
+
+
+@dataclass
+class ObjectSource:
+    """One object as the core sees it, plus what the writer needs to map results back."""
+
+    name: str                 # object name (unique in the file)
+    mesh: MeshInput           # world space, split at hard edges
+    corner_loop: np.ndarray   # (L,) evaluated-mesh loop index of every mesh.face_indices entry
+    matrix_world: np.ndarray  # (4, 4)
+    flipped: bool             # negative determinant: face rings were reversed
+    bake: bool                # False: occluder/emitter only, nothing is written for it
+    eval_counts: tuple        # (vertices, loops, polygons) of the evaluated mesh
+    notes: list = field(default_factory=list)   # what was approximated, one short line each
+
+
+@dataclass
+class SceneInput:
+    objects: list
+    lights: tuple = ()        # filled by issue 4's read_lights
+    world: object = None
+
+    @property
+    def meshes(self):
+        return [o.mesh for o in self.objects]
+
+    def notes(self):
+        return [f"{o.name}: {n}" for o in self.objects for n in o.notes]
+
+
+# ----------------------------------------------------------------------------- materials
+def _rgb(socket):
+    v = socket.default_value
+    try:
+        return np.array([float(v[0]), float(v[1]), float(v[2])])
+    except TypeError:  # a float socket
+        return np.array([float(v)] * 3)
+
+
+def _input(node, *names):
+    for n in names:
+        s = node.inputs.get(n)
+        if s is not None:
+            return s
+    return None
+
+
+def _value(node, notes, *names, default=0.0, color=True):
+    s = _input(node, *names)
+    if s is None:
+        return np.full(3, default) if color else default
+    if s.is_linked:
+        notes.append(f"{node.name} '{s.name}' is linked (texture/nodes); used its unlinked value")
+    if color:
+        return _rgb(s)
+    return float(s.default_value)
+
+
+def _follow(socket):
+    """The node and output socket feeding ``socket``, skipping reroutes; (None, None) if unlinked."""
+    while socket is not None and socket.is_linked:
+        link = socket.links[0]
+        if not link.is_valid or link.is_muted:
+            return None, None
+        node = link.from_node
+        if node.type == "REROUTE":
+            socket = node.inputs[0]
+            continue
+        return node, link.from_socket
+    return None, None
+
+
+def _shader(node, out_socket, mat, notes, depth=0):
+    """(rho, emission) of the shader that ``node`` outputs."""
+    zero = np.zeros(3)
+    if depth > 16:
+        notes.append("shader tree too deep; treated as black")
+        return zero, zero
+    t = node.type
+    if t == "BSDF_PRINCIPLED":
+        rho = _value(node, notes, "Base Color")
+        for name in ("Metallic", "Transmission Weight", "Transmission"):
+            s = node.inputs.get(name)
+            if s is not None and (s.is_linked or float(s.default_value) > 0):
+                notes.append(f"{node.name} '{name}' ignored (diffuse only)")
+                break
+        em = _value(node, notes, "Emission Color", "Emission")
+        strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
+        return rho, em * strength
+    if t == "BSDF_DIFFUSE":
+        return _value(node, notes, "Color"), zero
+    if t == "EMISSION":
+        return zero, _value(node, notes, "Color") * _value(node, notes, "Strength", default=1.0, color=False)
+    if t in ("MIX_SHADER", "ADD_SHADER"):
+        shaders = [s for s in node.inputs if s.type == "SHADER"]
+        parts = []
+        for s in shaders[:2]:
+            n2, o2 = _follow(s)
+            parts.append(_shader(n2, o2, mat, notes, depth + 1) if n2 is not None else (zero, zero))
+        while len(parts) < 2:
+            parts.append((zero, zero))
+        if t == "ADD_SHADER":
+            return parts[0][0] + parts[1][0], parts[0][1] + parts[1][1]
+        fac = float(np.clip(_value(node, notes, "Fac", "Factor", color=False), 0.0, 1.0))
+        return ((1 - fac) * parts[0][0] + fac * parts[1][0], (1 - fac) * parts[0][1] + fac * parts[1][1])
+    if out_socket is not None and out_socket.type in ("RGBA", "VECTOR", "VALUE") and t in ("RGB", "VALUE"):
+        # A colour wired straight into the output renders as emission of that colour.
+        v = out_socket.default_value
+        c = np.array([float(v[0]), float(v[1]), float(v[2])]) if out_socket.type != "VALUE" else np.full(3, float(v))
+        return zero, c
+    notes.append(f"shader '{node.name}' ({node.bl_idname}) approximated by the viewport colour")
+    return np.array(mat.diffuse_color[:3], float), zero
+
+
+def material_rho_emission(mat):
+    """(rho (3,), emission (3,), notes) of a material, in scene-linear radiance units.
+
+    Principled BSDF: Base Color; Emission Color x Emission Strength. Diffuse BSDF: Color.
+    Emission: Color x Strength. Mix/Add shader: mixed/added. Unlinked inputs only (a linked
+    input contributes its unlinked value, noted). No material: grey 0.8. Material without a node
+    tree: its viewport colour. Reflectivity is clipped to [0, 0.999] (noted).
+    """
+    notes = []
+    zero = np.zeros(3)
+    if mat is None:
+        notes.append("no material; grey 0.8")
+        rho, em = np.array(DEFAULT_RHO), zero
+    else:
+        nt = mat.node_tree if getattr(mat, "use_nodes", True) else None
+        if nt is None:
+            notes.append(f"material '{mat.name}' has no nodes; used its viewport colour")
+            rho, em = np.array(mat.diffuse_color[:3], float), zero
+        else:
+            outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.target in ("ALL", "CYCLES")]
+            out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+            if out is None:
+                notes.append(f"material '{mat.name}' has no output node; used its viewport colour")
+                rho, em = np.array(mat.diffuse_color[:3], float), zero
+            else:
+                node, sock = _follow(out.inputs["Surface"])
+                if node is None:
+                    notes.append(f"material '{mat.name}' has nothing connected to Surface; black")
+                    rho, em = zero, zero
+                else:
+                    sub = []
+                    rho, em = _shader(node, sock, mat, sub)
+                    notes += [f"material '{mat.name}': {s}" for s in sub]
+    rho = np.asarray(rho, float)
+    em = np.maximum(np.asarray(em, float), 0.0)
+    if np.any(rho > RHO_MAX) or np.any(rho < 0):
+        notes.append(f"reflectivity {tuple(np.round(rho, 3))} clipped to [0, {RHO_MAX}]"
+                     + (f" in '{mat.name}'" if mat is not None else ""))
+        rho = np.clip(rho, 0.0, RHO_MAX)
+    return rho, em, notes
+
+
+# ----------------------------------------------------------------------------- welding
+def _union(n, i, j):
+    """Connected-component labels of n nodes joined by pairs (i, j): hook + pointer jumping."""
+    lab = np.arange(n)
+    if i.size == 0:
+        return lab
+    while True:
+        li, lj = lab[i], lab[j]
+        if np.array_equal(li, lj):
+            return lab
+        m = np.minimum(li, lj)
+        np.minimum.at(lab, li, m)
+        np.minimum.at(lab, lj, m)
+        while True:
+            nl = lab[lab]
+            if np.array_equal(nl, lab):
+                break
+            lab = nl
+
+
+def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, face_smooth,
+                 edge_sharp, face_normal):
+    """Vertex id per loop (corner) following the welding rule in the module docstring.
+
+    Returns (corner_vertex (L,), source_vertex (V',)): new vertex ids and the original vertex each
+    one copies.
+    """
+    L = loop_vert.size
+    F = poly_start.size
+    loop_face = np.repeat(np.arange(F), poly_total)
+    pos = np.arange(L) - poly_start[loop_face]
+    nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
+    order = np.argsort(loop_edge, kind="stable")
+    es = loop_edge[order]
+    first = order[np.searchsorted(es, es, side="left")]
+    l1, l2 = first, order
+    keep = l1 != l2
+    l1, l2 = l1[keep], l2[keep]
+    f1, f2 = loop_face[l1], loop_face[l2]
+    e = loop_edge[l2]
+    coplanar = np.einsum("ij,ij->i", face_normal[f1], face_normal[f2]) > COPLANAR_COS
+    smooth = face_smooth[f1] & face_smooth[f2] & ~edge_sharp[e]
+    weld = (face_material[f1] == face_material[f2]) & (smooth | coplanar)
+    l1, l2 = l1[weld], l2[weld]
+    same = loop_vert[l1] == loop_vert[l2]
+    i = np.concatenate([l1, nxt[l1]])
+    j = np.concatenate([np.where(same, l2, nxt[l2]), np.where(same, nxt[l2], l2)])
+    ok = loop_vert[i] == loop_vert[j]          # guards degenerate faces
+    lab = _union(L, i[ok], j[ok])
+    uniq, first_loop, corner_vertex = np.unique(lab, return_index=True, return_inverse=True)
+    return corner_vertex.reshape(-1), loop_vert[first_loop]
+
+
+# ----------------------------------------------------------------------------- objects
+def _mesh_arrays(me):
+    nv, nl, nf, ne = len(me.vertices), len(me.loops), len(me.polygons), len(me.edges)
+    co = np.empty(nv * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    lv = np.empty(nl, np.int32)
+    me.loops.foreach_get("vertex_index", lv)
+    le = np.empty(nl, np.int32)
+    me.loops.foreach_get("edge_index", le)
+    ps = np.empty(nf, np.int32)
+    me.polygons.foreach_get("loop_start", ps)
+    pt = np.empty(nf, np.int32)
+    me.polygons.foreach_get("loop_total", pt)
+    mi = np.empty(nf, np.int32)
+    me.polygons.foreach_get("material_index", mi)
+    sm = np.empty(nf, bool)
+    me.polygons.foreach_get("use_smooth", sm)
+    sh = np.zeros(ne, bool)
+    if ne:
+        me.edges.foreach_get("use_edge_sharp", sh)
+    return (co.reshape(-1, 3).astype(np.float64), lv.astype(np.int64), le.astype(np.int64),
+            ps.astype(np.int64), pt.astype(np.int64), mi.astype(np.int64), sm, sh)
+
+
+def _newell(verts, corner_vertex, poly_start, poly_total):
+    """Unit face normals (F,3) from world-space corners."""
+    L = corner_vertex.size
+    loop_face = np.repeat(np.arange(poly_start.size), poly_total)
+    pos = np.arange(L) - poly_start[loop_face]
+    nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
+    a, b = verts[corner_vertex], verts[corner_vertex[nxt]]
+    n = np.zeros((poly_start.size, 3))
+    np.add.at(n, loop_face, np.cross(a, b))
+    ln = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+
+
+def read_object(obj, depsgraph, bake=True) -> ObjectSource:
+    """One mesh object, evaluated (modifiers applied), in world space."""
+    if obj.type != "MESH":
+        raise ReadError(f"'{obj.name}' is not a mesh object")
+    ob_eval = obj.evaluated_get(depsgraph)
+    me = ob_eval.to_mesh()
+    try:
+        co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
+        counts = (len(me.vertices), len(me.loops), len(me.polygons))
+        mats = [s.material for s in ob_eval.material_slots] or [None]
+    finally:
+        ob_eval.to_mesh_clear()
+    if ps.size == 0:
+        raise ReadError(f"'{obj.name}' has no faces")
+    M = np.array(ob_eval.matrix_world, dtype=np.float64)
+    verts_w = co @ M[:3, :3].T + M[:3, 3]
+    det = float(np.linalg.det(M[:3, :3]))
+    if abs(det) < 1e-300:
+        raise ReadError(f"'{obj.name}' has a zero scale; nothing to bake")
+    flipped = det < 0
+    mi = np.clip(mi, 0, len(mats) - 1)
+    normals = _newell(verts_w, lv, ps, pt) * (-1.0 if flipped else 1.0)
+    corner_vertex, src_vertex = weld_corners(lv, le, ps, pt, mi, sm, sh, normals)
+    # face rings in face order; reversed per face when the matrix mirrors
+    F = ps.size
+    loop_face = np.repeat(np.arange(F), pt)
+    pos = np.arange(lv.size) - ps[loop_face]
+    corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
+    offsets = np.concatenate([[0], np.cumsum(pt)])
+    used = set(np.unique(mi).tolist())
+    table, notes = [], []
+    for k, m in enumerate(mats):
+        rho, em, n = material_rho_emission(m)
+        table.append((rho, em))
+        if k in used:
+            notes += [s for s in n if s not in notes]
+    rho = np.array([table[k][0] for k in mi]).reshape(F, 3)
+    em = np.array([table[k][1] for k in mi]).reshape(F, 3)
+    mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name)
+    return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes)
+
+
+def read_scene(depsgraph, objects, others=()) -> SceneInput:
+    """``objects`` are baked; ``others`` take part as occluders/emitters only."""
+    out = [read_object(o, depsgraph, True) for o in objects]
+    for o in others:
+        try:
+            out.append(read_object(o, depsgraph, False))
+        except ReadError:
+            continue  # an occluder without faces simply does not occlude
+    return SceneInput(out)

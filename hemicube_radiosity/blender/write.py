@@ -1,0 +1,243 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Core result -> Blender data: baked copies, or the attribute written in place.
+
+Copy mode (default, non-destructive): one new object per baked object, holding the patch mesh
+(the object's patches in its own local space, same world matrix), a FLOAT_COLOR corner attribute
+(set as active and render colour) with the vertex radiosities, and a material that shows that
+attribute (the colour wired straight into the output: Cycles/EEVEE render it as emission, the glTF
+exporter writes KHR_materials_unlit). Copies live in the "Radiosity" collection; each remembers
+its source in ``obj["radiosity_source"]``. The originals are hidden (viewport and render), never
+deleted or edited. Re-baking an object removes its previous copy first.
+
+In-place mode: the attribute goes on the original mesh, one value per face corner: the vertex
+radiosity at that corner (where patches are finer than faces, the detail inside a face is lost;
+a bake report line says so). Needs modifiers that keep the topology. A mesh shared by several
+baked objects (linked duplicates) is made single-user first so each object keeps its own result.
+
+Values are radiance (an emission strength of 1 in white is 1.0) times ``2**exposure``; no
+clamping or tone mapping.
+"""
+from __future__ import annotations
+
+import bpy
+import numpy as np
+
+__all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
+           "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays"]
+
+COLLECTION_NAME = "Radiosity"
+SOURCE_KEY = "radiosity_source"
+MATERIAL_PREFIX = "Radiosity Bake"
+
+
+class WriteError(RuntimeError):
+    pass
+
+
+def baked_material(attribute_name: str):
+    """A material that shows colour attribute ``attribute_name`` as emitted light (shared)."""
+    name = f"{MATERIAL_PREFIX} ({attribute_name})"
+    mat = bpy.data.materials.get(name)
+    if mat is not None and mat.node_tree is not None:
+        return mat
+    mat = mat or bpy.data.materials.new(name)
+    if not getattr(mat, "use_nodes", True) or mat.node_tree is None:
+        mat.use_nodes = True  # Blender < 5 only; 5.x materials always have nodes
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (300, 0)
+    col = nt.nodes.new("ShaderNodeVertexColor")
+    col.layer_name = attribute_name
+    col.location = (0, 0)
+    nt.links.new(col.outputs["Color"], out.inputs["Surface"])
+    mat.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    return mat
+
+
+def _collection(scene):
+    coll = bpy.data.collections.get(COLLECTION_NAME)
+    if coll is None:
+        coll = bpy.data.collections.new(COLLECTION_NAME)
+    if scene.collection.children.get(coll.name) is None and coll not in scene.collection.children_recursive:
+        scene.collection.children.link(coll)
+    return coll
+
+
+def copies_of(names):
+    """Baked copies whose source is one of ``names``."""
+    names = set(names)
+    return [o for o in bpy.data.objects if o.get(SOURCE_KEY) in names]
+
+
+def remove_bakes(names, unhide=False):
+    """Delete the baked copies of objects ``names`` (and their meshes); optionally unhide sources."""
+    for ob in copies_of(names):
+        me = ob.data
+        bpy.data.objects.remove(ob, do_unlink=True)
+        if me is not None and me.users == 0:
+            bpy.data.meshes.remove(me)
+    if unhide:
+        for n in names:
+            src = bpy.data.objects.get(n)
+            if src is not None:
+                src.hide_render = False
+                try:
+                    src.hide_set(False)
+                except RuntimeError:
+                    pass
+
+
+def patch_mesh_arrays(patches, owner, vertex_radiosity, matrix_world, flipped):
+    """Local-space verts, loop vertex ids, loop starts and corner colours of one owner's patches."""
+    sel = np.flatnonzero(patches.owner == owner)
+    polys = patches.polys[sel]
+    used = np.unique(polys[polys >= 0])
+    remap = np.full(len(patches.verts), -1, np.int64)
+    remap[used] = np.arange(used.size)
+    M = np.asarray(matrix_world, float)
+    Minv = np.linalg.inv(M)
+    local = patches.verts[used] @ Minv[:3, :3].T + Minv[:3, 3]
+    nside = np.where(polys[:, 3] < 0, 3, 4)
+    if flipped:  # the reader reversed the rings to keep world-space fronts; undo for local space
+        rev = polys.copy()
+        rev[nside == 4] = polys[nside == 4][:, ::-1]
+        rev[nside == 3, :3] = polys[nside == 3][:, 2::-1]
+        polys = rev
+    mask = np.arange(4)[None, :] < nside[:, None]
+    loop_global = polys[mask]                       # row-major: face by face
+    loop_vert = remap[loop_global]
+    starts = np.concatenate([[0], np.cumsum(nside)[:-1]])
+    colors = vertex_radiosity[loop_global]
+    return local, loop_vert, starts, colors, sel
+
+
+def _set_color_attribute(me, name, rgb):
+    old = me.color_attributes.get(name)
+    if old is not None:
+        me.color_attributes.remove(old)
+    if name in me.attributes:
+        raise WriteError(f"mesh '{me.name}' already has a non-colour attribute named '{name}'")
+    attr = me.color_attributes.new(name, "FLOAT_COLOR", "CORNER")
+    rgba = np.ones((len(rgb), 4), np.float32)
+    rgba[:, :3] = rgb
+    attr.data.foreach_set("color", rgba.ravel())
+    me.color_attributes.active_color = attr
+    idx = me.color_attributes.find(name)
+    me.color_attributes.render_color_index = idx
+    try:
+        me.color_attributes.active_color_index = idx
+    except AttributeError:
+        pass
+    return attr
+
+
+def write_copies(context, scene_input, result, attribute_name="Radiosity", exposure=0.0):
+    """Create the baked copies; returns them (one per baked object, in order)."""
+    scene = context.scene
+    baked = [s for s in scene_input.objects if s.bake]
+    remove_bakes([s.name for s in baked])
+    coll = _collection(scene)
+    mat = baked_material(attribute_name)
+    scale = 2.0 ** float(exposure)
+    out = []
+    for oi, src in enumerate(scene_input.objects):
+        if not src.bake:
+            continue
+        local, loop_vert, starts, colors, _ = patch_mesh_arrays(
+            result.patches, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
+        me = bpy.data.meshes.new(f"{src.name}.radiosity")
+        me.vertices.add(len(local))
+        me.vertices.foreach_set("co", local.astype(np.float32).ravel())
+        me.loops.add(len(loop_vert))
+        me.loops.foreach_set("vertex_index", loop_vert.astype(np.int32))
+        me.polygons.add(len(starts))
+        me.polygons.foreach_set("loop_start", starts.astype(np.int32))
+        me.update(calc_edges=True)
+        _set_color_attribute(me, attribute_name, colors * scale)
+        me.materials.append(mat)
+        me[SOURCE_KEY] = src.name
+        ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
+        ob.matrix_world = _matrix(src.matrix_world)
+        ob[SOURCE_KEY] = src.name
+        coll.objects.link(ob)
+        orig = bpy.data.objects.get(src.name)
+        if orig is not None:
+            orig.hide_render = True
+            try:
+                orig.hide_set(True)
+            except RuntimeError:  # not in the current view layer
+                pass
+        out.append(ob)
+    # the copies take over the selection, so a re-bake of the selection re-bakes their sources
+    vl = context.view_layer
+    for ob in out:
+        if vl.objects.get(ob.name) is not None:
+            ob.select_set(True)
+    if out and vl.objects.get(out[0].name) is not None:
+        active = vl.objects.active
+        src_active = active.name if active is not None else None
+        vl.objects.active = next((o for o in out if o[SOURCE_KEY] == src_active), out[0])
+    return out
+
+
+def _matrix(m):
+    from mathutils import Matrix
+
+    return Matrix([list(map(float, row)) for row in np.asarray(m)])
+
+
+def write_in_place(context, scene_input, result, attribute_name="Radiosity", exposure=0.0):
+    """Write the attribute on the original meshes; returns (objects, notes)."""
+    scale = 2.0 ** float(exposure)
+    notes = []
+    written = []
+    P = result.patches
+    for oi, src in enumerate(scene_input.objects):
+        if not src.bake:
+            continue
+        ob = bpy.data.objects[src.name]
+        me = ob.data
+        if (len(me.vertices), len(me.loops), len(me.polygons)) != src.eval_counts or \
+                len(me.loops) != src.corner_loop.size:
+            raise WriteError(f"'{src.name}': its modifiers change the topology, so the result "
+                             "cannot be written in place; use the baked-copy output")
+        values = _corner_values(P, oi, src, result.vertex_radiosity)
+        if me.users > 1:
+            ob.data = me.copy()
+            notes.append(f"{src.name}: mesh '{me.name}' was shared; gave it its own copy "
+                         f"'{ob.data.name}'")
+            me = ob.data
+        loop_rgb = np.zeros((len(me.loops), 3))
+        loop_rgb[src.corner_loop] = values
+        _set_color_attribute(me, attribute_name, loop_rgb * scale)
+        n_src = len(src.mesh.face_offsets) - 1
+        if np.count_nonzero(P.owner == oi) > n_src:
+            notes.append(f"{src.name}: in place keeps one value per face corner; "
+                         "the finer patch detail inside faces is averaged away")
+        written.append(ob)
+    return written, notes
+
+
+def _corner_values(P, oi, src, vertex_radiosity):
+    """Vertex radiosity at every source-face corner (order of src.mesh.face_indices)."""
+    sel = np.flatnonzero(P.owner == oi)
+    polys = P.polys[sel]
+    faces = np.repeat(P.source_face[sel].astype(np.int64), 4)
+    vids = polys.reshape(-1)
+    ok = vids >= 0
+    faces, vids = faces[ok], vids[ok]
+    pos = P.verts[vids]
+    table = {}
+    for f, v, p in zip(faces.tolist(), vids.tolist(), map(bytes, pos)):
+        table[(f, p)] = v
+    m = src.mesh
+    sizes = np.diff(m.face_offsets)
+    cf = np.repeat(np.arange(sizes.size), sizes)
+    cpos = np.asarray(m.verts, float)[m.face_indices]
+    out = np.zeros((cf.size, 3))
+    for k, (f, p) in enumerate(zip(cf.tolist(), map(bytes, cpos))):
+        v = table.get((f, p))
+        if v is not None:
+            out[k] = vertex_radiosity[v]
+    return out
