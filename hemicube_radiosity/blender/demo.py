@@ -25,7 +25,7 @@ def _material(rho, emission):
     if mat is not None:
         return mat
     mat = bpy.data.materials.new(name)
-    if mat.node_tree is None:
+    if bpy.app.version < (5, 0, 0) or mat.node_tree is None:
         mat.use_nodes = True  # Blender < 5
     bsdf = next(n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED")
     bsdf.inputs["Base Color"].default_value = (*rho, 1.0)

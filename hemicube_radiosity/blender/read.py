@@ -153,6 +153,15 @@ def _shader(node, out_socket, mat, notes, depth=0):
     return np.array(mat.diffuse_color[:3], float), zero
 
 
+def _uses_nodes(mat):
+    """Blender 5 materials always use their node tree (``use_nodes`` is deprecated there)."""
+    import bpy
+
+    if bpy.app.version >= (5, 0, 0):
+        return mat.node_tree is not None
+    return bool(mat.use_nodes) and mat.node_tree is not None
+
+
 def material_rho_emission(mat):
     """(rho (3,), emission (3,), notes) of a material, in scene-linear radiance units.
 
@@ -167,7 +176,7 @@ def material_rho_emission(mat):
         notes.append("no material; grey 0.8")
         rho, em = np.array(DEFAULT_RHO), zero
     else:
-        nt = mat.node_tree if getattr(mat, "use_nodes", True) else None
+        nt = mat.node_tree if _uses_nodes(mat) else None
         if nt is None:
             notes.append(f"material '{mat.name}' has no nodes; used its viewport colour")
             rho, em = np.array(mat.diffuse_color[:3], float), zero

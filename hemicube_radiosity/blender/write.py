@@ -38,10 +38,10 @@ def baked_material(attribute_name: str):
     """A material that shows colour attribute ``attribute_name`` as emitted light (shared)."""
     name = f"{MATERIAL_PREFIX} ({attribute_name})"
     mat = bpy.data.materials.get(name)
-    if mat is not None and mat.node_tree is not None:
+    if mat is not None and mat.node_tree is not None and mat.get("radiosity_attribute") == attribute_name:
         return mat
     mat = mat or bpy.data.materials.new(name)
-    if not getattr(mat, "use_nodes", True) or mat.node_tree is None:
+    if bpy.app.version < (5, 0, 0) or mat.node_tree is None:
         mat.use_nodes = True  # Blender < 5 only; 5.x materials always have nodes
     nt = mat.node_tree
     nt.nodes.clear()
@@ -52,6 +52,7 @@ def baked_material(attribute_name: str):
     col.location = (0, 0)
     nt.links.new(col.outputs["Color"], out.inputs["Surface"])
     mat.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    mat["radiosity_attribute"] = attribute_name
     return mat
 
 

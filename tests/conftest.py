@@ -1,0 +1,121 @@
+"""Shared fixtures.
+
+Blender reads its user configuration when bpy is first imported, so BLENDER_USER_RESOURCES is
+pointed at a fresh temp dir here, at conftest import, before any test module can import bpy:
+tests never see (or write) the developer's own preferences and extensions.
+
+* ``bpy_module``: the bpy module (session).
+* ``addon``: the extension installed the way Blender does it: a local extension repository
+  whose directory holds a ``hemicube_radiosity`` link to the repository root (the extension's
+  source folder), enabled with ``addon_utils.enable(..., handle_error=<raise>)``. Returns the
+  add-on's package module (``bl_ext.<repo>.hemicube_radiosity.hemicube_radiosity``).
+* ``empty_scene``: ``bpy.ops.wm.read_homefile(use_empty=True)`` before the test; returns bpy.
+"""
+from __future__ import annotations
+
+import importlib
+import os
+import tempfile
+
+import pytest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+_USER_RESOURCES = tempfile.mkdtemp(prefix="hr_blender_user_")
+os.environ["BLENDER_USER_RESOURCES"] = _USER_RESOURCES
+
+REPO_MODULE = "hr_test_repo"
+ADDON_MODULE = f"bl_ext.{REPO_MODULE}.hemicube_radiosity"
+
+
+@pytest.fixture(scope="session")
+def bpy_module():
+    import bpy
+
+    return bpy
+
+
+def _raise(ex):
+    raise ex
+
+
+def install_extension_repo(bpy):
+    """A USER extension repository whose only extension is this source folder."""
+    prefs = bpy.context.preferences.extensions
+    if prefs.repos.get(REPO_MODULE) is None and all(r.module != REPO_MODULE for r in prefs.repos):
+        repo_dir = os.path.join(_USER_RESOURCES, "dev_repo")
+        os.makedirs(repo_dir, exist_ok=True)
+        link = os.path.join(repo_dir, "hemicube_radiosity")
+        if not os.path.exists(link):
+            os.symlink(ROOT, link, target_is_directory=True)
+        prefs.repos.new(name=REPO_MODULE, module=REPO_MODULE, custom_directory=repo_dir, source="USER")
+
+
+def enable_addon():
+    import addon_utils
+
+    return addon_utils.enable(ADDON_MODULE, default_set=True, handle_error=_raise)
+
+
+def disable_addon():
+    import addon_utils
+
+    addon_utils.disable(ADDON_MODULE, default_set=True, handle_error=_raise)
+
+
+@pytest.fixture(scope="session")
+def addon(bpy_module):
+    install_extension_repo(bpy_module)
+    enable_addon()
+    yield importlib.import_module(ADDON_MODULE + ".hemicube_radiosity")
+
+
+@pytest.fixture
+def empty_scene(bpy_module):
+    bpy_module.ops.wm.read_homefile(use_empty=True)
+    return bpy_module
+
+
+def read_gltf(path):
+    """(json dict, accessor reader) of a .glb or .gltf (+ .bin) file, with struct + json only.
+
+    ``accessor(i)`` returns accessor ``i`` as a float64/int64 array of shape (count, components).
+    """
+    import json
+    import struct
+
+    import numpy as np
+
+    with open(path, "rb") as f:
+        data = f.read()
+    if data[:4] == b"glTF":
+        _, _, length = struct.unpack_from("<III", data, 0)
+        jlen, jtype = struct.unpack_from("<II", data, 12)
+        assert jtype == 0x4E4F534A  # JSON
+        doc = json.loads(data[20:20 + jlen])
+        blen, btype = struct.unpack_from("<II", data, 20 + jlen)
+        assert btype == 0x004E4942  # BIN
+        buffers = [data[28 + jlen:28 + jlen + blen]]
+    else:
+        doc = json.loads(data)
+        base = os.path.dirname(path)
+        buffers = []
+        for b in doc["buffers"]:
+            with open(os.path.join(base, b["uri"]), "rb") as f:
+                buffers.append(f.read())
+    ncomp = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
+    dtypes = {5126: np.float32, 5125: np.uint32, 5123: np.uint16, 5121: np.uint8}
+
+    def accessor(i):
+        acc = doc["accessors"][i]
+        bv = doc["bufferViews"][acc["bufferView"]]
+        k = ncomp[acc["type"]]
+        dt = np.dtype(dtypes[acc["componentType"]])
+        off = bv.get("byteOffset", 0) + acc.get("byteOffset", 0)
+        stride = bv.get("byteStride", k * dt.itemsize)
+        buf = buffers[bv["buffer"]]
+        raw = np.frombuffer(buf, np.uint8, count=stride * (acc["count"] - 1) + k * dt.itemsize, offset=off)
+        rows = np.lib.stride_tricks.as_strided(raw, (acc["count"], k * dt.itemsize), (stride, 1))
+        out = np.ascontiguousarray(rows).view(dt).reshape(acc["count"], k)
+        return out.astype(np.float64 if dt.kind == "f" else np.int64)
+
+    return doc, accessor
