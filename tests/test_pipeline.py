@@ -59,11 +59,13 @@ def light_visibility(points, s=2.0, light=0.5, n=16):
 @pytest.fixture(scope="module")
 def cornell():
     settings = BakeSettings(patch_size=0.125, resolution=64, method="hemicube")
-    with_blocks = bake(cornell_box(), settings)
+    cache = FormFactorCache()
+    with_blocks = bake(cornell_box(), settings, cache=cache)
     no_blocks = bake(cornell_box()[:6], settings)
     white = [m for m in cornell_box()]
-    white[3].face_rho[:] = CORNELL_WHITE  # the red wall painted white
-    all_white = bake(white, settings)
+    white[3].face_rho[:] = CORNELL_WHITE  # the red wall painted white (same geometry: F reused)
+    all_white = bake(white, settings, cache=cache)
+    assert all_white.form_factor_source == "cached"
     return with_blocks, no_blocks, all_white
 
 

@@ -14,11 +14,13 @@ from .patches import PatchSet, build_patches
 from .progress import Cancelled
 from .solve import SOLVERS, Solution, solve
 from .sparse import CSR
+from .direct import vertex_frames
 from .vertex import vertex_radiosity
 
 __all__ = ["BakeSettings", "BakeResult", "bake", "compute_form_factors", "source_term", "METHODS"]
 
 METHODS = ("hemicube", "embree", "embree_stochastic")
+DIRECT_MODES = ("auto", "exact", "hemicube")
 
 
 @dataclass
@@ -29,6 +31,11 @@ class BakeSettings:
     'embree_stochastic' (cosine-weighted random rays, ``rays_per_patch`` each).
     solver: one of core.solve.SOLVERS; tolerance/max_iterations as in :func:`core.solve.solve`.
     rotate_seed: random rotation of each hemi-cube about its normal (None: no rotation).
+    direct: how light from emissive patches reaches the rest. 'exact': Lambert's point-to-polygon
+    form factor with ``direct_samples`` Embree shadow rays per point and emitting face, evaluated
+    at patch centres for the solve and again at every vertex for the output (sharp shadows and
+    exact falloff without finer patches); F then carries only reflected light. 'hemicube': the
+    paper's way, everything through F. 'auto': 'exact' when Embree is available.
     """
 
     patch_size: float | None = 0.25
@@ -39,6 +46,8 @@ class BakeSettings:
     tolerance: float = 1e-4
     max_iterations: int = 200
     rotate_seed: int | None = None
+    direct: str = "auto"
+    direct_samples: int = 16
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -51,6 +60,8 @@ class BakeSettings:
             raise ValueError(f"rays per patch must be >= 1, got {self.rays_per_patch}")
         if self.patch_size is not None and self.patch_size < 0:
             raise ValueError(f"patch size must be >= 0, got {self.patch_size}")
+        if self.direct not in DIRECT_MODES:
+            raise ValueError(f"unknown direct-light mode {self.direct!r}; choose one of {', '.join(DIRECT_MODES)}")
         if not self.tolerance > 0 or self.max_iterations < 1:
             raise ValueError("tolerance must be > 0 and max_iterations >= 1")
 
@@ -97,6 +108,31 @@ def compute_form_factors(patches: PatchSet, settings: BakeSettings, *, receivers
     return embree_ff.embree_stochastic_form_factors(
         patches, settings.rays_per_patch, seed=settings.rotate_seed or 0, receivers=receivers,
         progress=progress, cancelled=cancelled)
+
+
+def _exact_direct_plan(patches: PatchSet, settings: BakeSettings):
+    """What the exact direct path needs, or None when it is off or not possible."""
+    emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
+    if settings.direct == "hemicube" or emitters.size == 0:
+        return None
+    from . import embree_ff
+
+    if settings.direct == "auto" and not embree_ff.embree_available():
+        return None
+    scene = embree_ff.embree_scene(patches)  # raises EmbreeUnavailable for direct='exact'
+    # shadow rays per emitting *face*: split between the patches it was cut into
+    face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
+    per_face = np.unique(face, return_counts=True)[1].max()
+    samples = max(1, int(settings.direct_samples) // int(per_face))
+    return {"emitters": emitters, "scene": scene, "samples": samples}
+
+
+def _emitter_direct(patches, points, normals, plan, cancelled):
+    from .direct import emitter_direct
+    from .progress import Ticker
+
+    return emitter_direct(patches, points, normals, scene=plan["scene"], samples=plan["samples"],
+                          emitters=plan["emitters"], ticker=Ticker(None, cancelled))
 
 
 def source_term(patches: PatchSet, F: CSR, *, direct_irradiance=None, world=None) -> np.ndarray:
@@ -169,8 +205,19 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
 
         say("direct", 0.0, f"{len(lights)} lights")
         H = direct_irradiance(patches, lights, **(light_options or {}))
-    timings["direct"] = time.perf_counter() - t
     S = source_term(patches, F, direct_irradiance=H, world=world)
+    exact = _exact_direct_plan(patches, settings)
+    notes = []
+    if exact is not None:
+        # emitted light arrives by the exact path; the solve carries only reflected light R,
+        # and B = E + R. (Without this F would carry E a second time.)
+        say("direct", 0.0, f"exact direct light from {exact['emitters'].size} emitting patches")
+        D_patch = _emitter_direct(patches, patches.centers, patches.normals, exact, cancelled)
+        S = S - patches.emission + patches.rho * D_patch
+    elif settings.direct == "auto" and np.any(patches.emission > 0):
+        notes.append("Embree is not available: direct light from emitters goes through the "
+                     "hemi-cube form factors (install embreex for exact direct light)")
+    timings["direct"] = time.perf_counter() - t
     check()
 
     t = time.perf_counter()
@@ -186,9 +233,20 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     check()
 
     t = time.perf_counter()
-    Bv = vertex_radiosity(patches, sol.B)
+    if exact is None:
+        Bv = vertex_radiosity(patches, sol.B)
+    else:
+        # direct light again at every vertex (sharp shadows, exact falloff); the smoother
+        # reflected-reflected part is interpolated from the patches as in the paper
+        xv, nv, rho_v = vertex_frames(patches)
+        D_vert = _emitter_direct(patches, xv, nv, exact, cancelled)
+        rest = sol.B - patches.rho * D_patch
+        Bv = vertex_radiosity(patches, patches.emission) + rho_v * D_vert + vertex_radiosity(patches, rest)
+        sol.extra["reflected_only"] = True
+        sol.B = sol.B + patches.emission
     timings["vertices"] = time.perf_counter() - t
     timings["total"] = time.perf_counter() - t0
-    notes = [] if sol.converged else [f"solver stopped after {sol.iterations} iterations without "
-                                      f"reaching tolerance {settings.tolerance:g}"]
+    if not sol.converged:
+        notes.append(f"solver stopped after {sol.iterations} iterations without reaching "
+                     f"tolerance {settings.tolerance:g}")
     return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes)

@@ -1,0 +1,155 @@
+"""Direct light from emissive patches, exact in geometry, at any points (patch centres, vertices).
+
+The hemi-cube samples a small bright emitter with a handful of pixels (the paper's own
+aliasing warning), and the patch-centre approximation blurs shadows to the patch size. Direct
+light is most of the detail in a bake, so it is computed apart:
+
+    D(x) = sum_e L_e * F(x -> e) * V(x, e)
+
+with F the exact unoccluded point-to-polygon form factor (Lambert's contour formula, after
+clipping the emitter to the receiver's horizon) and V the fraction of stratified sample points
+on the emitter that are visible from x (Embree shadow rays). D is the radiance arriving from
+the emitters, so a receiver with reflectivity rho reflects ``rho * D`` of it; the radiosity
+solve then carries only the reflected light (see :mod:`.pipeline`), never the emitters' E.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .patches import PatchSet
+
+__all__ = ["polygon_form_factors", "emitter_direct", "vertex_frames"]
+
+
+def _clip_to_horizon(polys, points, normals, eps):
+    """Clip polygons (P, M, K, 3) to the half-space n.(y - x) >= eps of each point.
+
+    Returns (P, M, 2K, 3): the clipped polygon, padded by repeating its first vertex (zero-length
+    edges add nothing to the contour integral); all-zero where nothing is left.
+    """
+    K = polys.shape[2]
+    d = np.einsum("pmkj,pj->pmk", polys - points[:, None, None, :], normals) - eps
+    a, b = polys, np.roll(polys, -1, axis=2)
+    da, db = d, np.roll(d, -1, axis=2)
+    keep_a = da >= 0
+    cross = (da >= 0) != (db >= 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, da / (da - db), 0.0)
+    inter = a + t[..., None] * (b - a)
+    out = np.stack([a, inter], axis=3).reshape(polys.shape[:2] + (2 * K, 3))
+    valid = np.stack([keep_a, cross], axis=3).reshape(polys.shape[:2] + (2 * K,))
+    order = np.argsort(~valid, axis=-1, kind="stable")
+    out = np.take_along_axis(out, order[..., None], axis=2)
+    valid = np.take_along_axis(valid, order, axis=-1)
+    first = out[:, :, :1, :]
+    out = np.where(valid[..., None], out, first)
+    return np.where(valid.any(-1)[..., None, None], out, 0.0)
+
+
+def polygon_form_factors(points, normals, polys, poly_normals=None, eps=0.0):
+    """(P, M) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
+    ``normals`` to polygons ``polys`` (M, K, 3) (any winding; a triangle may repeat a corner).
+
+    Lambert: F = 1/(2 pi) * sum_k theta_k n.(u_k x u_k+1)/|u_k x u_k+1|, over the polygon clipped
+    to the point's horizon. With ``poly_normals`` (M, 3) an emitter only shines from its front:
+    F = 0 for points behind its plane.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    polys = np.asarray(polys, dtype=np.float64)
+    P, M = len(points), len(polys)
+    q = _clip_to_horizon(np.broadcast_to(polys[None], (P,) + polys.shape), points, normals, eps)
+    u = q - points[:, None, None, :]
+    n = np.linalg.norm(u, axis=-1, keepdims=True)
+    u = u / np.maximum(n, 1e-300)
+    v = np.roll(u, -1, axis=2)
+    c = np.cross(u, v)
+    sin = np.linalg.norm(c, axis=-1)
+    cos = np.einsum("pmkj,pmkj->pmk", u, v)
+    theta = np.arctan2(sin, cos)
+    w = np.where(sin > 1e-15, theta / np.maximum(sin, 1e-300), 0.0)
+    F = np.abs(np.einsum("pmk,pmkj,pj->pm", w, c, normals)) / (2 * np.pi)
+    if poly_normals is not None:
+        centre = polys.mean(axis=1)
+        front = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float)) > 0
+        F = np.where(front, F, 0.0)
+    return F
+
+
+def vertex_frames(patches: PatchSet, inset=1e-3):
+    """Per patch vertex: an evaluation point, unit normal and reflectivity.
+
+    Normal and reflectivity are the means over the patches around the vertex. The point is the
+    vertex moved ``inset`` of the way toward the mean of those patches' centres: exactly at a
+    corner the walls that meet there pass through the point and Lambert's formula cannot see
+    them, while the radiosity on a wall is continuous up to the corner; the inset point gives
+    that limit.
+    """
+    V = len(patches.verts)
+    p, c = np.nonzero(patches.polys >= 0)
+    v = patches.polys[p, c]
+    cnt = np.maximum(np.bincount(v, minlength=V), 1)[:, None]
+
+    def mean(a):
+        return np.stack([np.bincount(v, weights=a[p, k], minlength=V) for k in range(a.shape[1])], 1) / cnt
+
+    n = mean(patches.normals)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    x = patches.verts + inset * (mean(patches.centers) - patches.verts)
+    return x, n, mean(patches.rho)
+
+
+def _emitter_samples(corners, samples, rng):
+    """(M, S, 3) stratified points on each emitter patch (bilinear map of jittered grid cells)."""
+    g = int(np.ceil(np.sqrt(samples)))
+    i, j = np.meshgrid(np.arange(g), np.arange(g), indexing="ij")
+    M = len(corners)
+    u = (i.ravel()[None] + rng.uniform(0, 1, (M, g * g))) / g
+    v = (j.ravel()[None] + rng.uniform(0, 1, (M, g * g))) / g
+    u, v = u[..., None], v[..., None]
+    c = corners[:, None]
+    return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
+
+
+def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16, seed=0,
+                   emitters=None, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
+    """(P, 3) radiance arriving directly from the emissive patches at ``points`` with ``normals``.
+
+    ``scene``: an :class:`.embree_ff.EmbreeScene` of the same patches for shadow rays (None: no
+    shadows — only for scenes without occluders). ``samples`` shadow rays per point and emitter
+    patch. ``emitters``: patch ids to use (default: every patch with emission > 0).
+    """
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    em = np.flatnonzero(patches.emission.max(axis=1) > 0) if emitters is None else np.asarray(emitters)
+    out = np.zeros((len(points), 3))
+    if em.size == 0 or len(points) == 0:
+        return out
+    corners = patches.corners()[em]
+    L = patches.emission[em]
+    scale = float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0
+    eps = 1e-5 * scale
+    rng = np.random.default_rng(seed)
+    ys = _emitter_samples(corners, samples, rng)                       # (M, S, 3)
+    S = ys.shape[1]
+    per_point = em.size * S
+    step = max(1, min(len(points), chunk_rays // max(per_point, 1), 4096))
+    for s in range(0, len(points), step):
+        x = points[s:s + step]
+        nx = normals[s:s + step]
+        F = polygon_form_factors(x, nx, corners, patches.normals[em], eps=0.0)  # (p, M)
+        if scene is not None:
+            live = F > 0
+            vis = np.zeros(F.shape)
+            pi, mi = np.nonzero(live)
+            if pi.size:
+                o = x[pi] + eps * nx[pi]                                  # (r, 3)
+                d = ys[mi] - o[:, None, :]                                 # (r, S, 3)
+                blocked = scene.occluded(np.repeat(o, S, axis=0), d.reshape(-1, 3),
+                                         np.full(pi.size * S, 1 - 1e-4))
+                vis[pi, mi] = 1 - blocked.reshape(-1, S).mean(axis=1)
+            F = F * vis
+        out[s:s + step] = F @ L
+        if ticker is not None:
+            ticker.tick(s + len(x), len(points))
+    return out

@@ -1,0 +1,60 @@
+"""Exact direct light from emissive patches: Lambert's formula, horizon clipping, shadow rays."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.direct import emitter_direct, polygon_form_factors
+from hemicube_radiosity.core.embree_ff import embree_scene
+from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.scenes import quad
+
+
+def corner_rect(a, b, c):
+    """Siegel & Howell: point under a corner of an a x b rectangle in a parallel plane c away."""
+    A, B = a / c, b / c
+    return (A / np.hypot(1, A) * np.arctan(B / np.hypot(1, A)) + B / np.hypot(1, B) * np.arctan(A / np.hypot(1, B))) / (2 * np.pi)
+
+
+SQ = np.array([[[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]], float)
+
+
+def test_parallel_rectangle_matches_closed_form():
+    pts = [[0.5, 0.5, 0], [0, 0, 0], [0.25, 0.5, 0]]
+    F = polygon_form_factors(pts, [[0, 0, 1]] * 3, SQ, poly_normals=[[0, 0, -1]])[:, 0]
+    expect = [4 * corner_rect(0.5, 0.5, 1), corner_rect(1, 1, 1),
+              2 * corner_rect(0.25, 0.5, 1) + 2 * corner_rect(0.75, 0.5, 1)]
+    np.testing.assert_allclose(F, expect, rtol=1e-12)
+
+
+def test_polygon_across_the_horizon_is_clipped():
+    wall = np.array([[[0, 1, -1], [1, 1, -1], [1, 1, 1], [0, 1, 1]]], float)
+    F = polygon_form_factors([[0, 0, 0]], [[0, 0, 1]], wall)[0, 0]
+    g = (np.arange(2000) + 0.5) / 2000
+    x, z = np.meshgrid(g, g)
+    quadrature = (z / (x * x + 1 + z * z) ** 2).mean() / np.pi  # only the half above the horizon
+    assert F == pytest.approx(quadrature, rel=1e-6)
+
+
+def test_emitter_shines_only_from_its_front_and_winding_does_not_matter():
+    pts = [[0.5, 0.5, 0], [0.5, 0.5, 2]]
+    F = polygon_form_factors(pts, [[0, 0, 1], [0, 0, -1]], SQ, poly_normals=[[0, 0, -1]])[:, 0]
+    assert F[0] > 0.2 and F[1] == 0
+    F2 = polygon_form_factors(pts[:1], [[0, 0, 1]], SQ[:, ::-1])[0, 0]
+    assert F2 == pytest.approx(F[0], rel=1e-12)
+
+
+def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
+    light = quad([(0, 0, 1), (0, 1, 1), (1, 1, 1), (1, 0, 1)], (0, 0, 0), (2.0, 1.0, 0.5), name="light")
+    # a blocker at z = 0.5 covering x < 0.5 under the light: from (0.5,0.5,0) it hides x < 0.5 of the light
+    blocker = quad([(-2, -2, 0.5), (0.5, -2, 0.5), (0.5, 3, 0.5), (-2, 3, 0.5)], name="blocker")
+    floor = quad([(-1, -1, 0), (2, -1, 0), (2, 2, 0), (-1, 2, 0)], name="floor")
+    ps = build_patches([light, blocker, floor], None)
+    sc = embree_scene(ps)
+    pts = np.array([[0.5, 0.5, 0.0], [1.5, 0.5, 0.0], [-1.0 + 1e-3, 0.5, 0.0]])
+    D = emitter_direct(ps, pts, [[0, 0, 1]] * 3, scene=sc, samples=256)
+    open_half = 2 * corner_rect(0.5, 0.5, 1)          # the x > 0.5 half of the light, seen from its edge
+    np.testing.assert_allclose(D[0], open_half * np.array([2.0, 1.0, 0.5]), rtol=0.02)
+    # (1.5,.5,0): the ray to the light's far corner (0,*,1) crosses z=.5 at x=.75 > .5: fully lit
+    full = polygon_form_factors(pts[1:2], [[0, 0, 1]], SQ)[0, 0]
+    np.testing.assert_allclose(D[1], full * np.array([2.0, 1.0, 0.5]), rtol=1e-9)
+    # far left under the blocker: fully shadowed
+    np.testing.assert_allclose(D[2], 0.0, atol=1e-12)
