@@ -7,6 +7,10 @@
   ``export_all_vertex_colors`` (on by default) would add a white COLOR_0 for materials that don't.
 * The baked-copy material (colour attribute wired into the output) exports as
   ``KHR_materials_unlit`` with a white base colour, so viewers show the baked lighting as is.
+* Objects baked in place keep their own materials, which do not read the attribute: the exporter
+  would then write COLOR_0 as clamped 16-bit RGBA, and a lit material would be multiplied by
+  the baked light a second time. Such objects are exported through a temporary stand-in (a copy
+  of the mesh with the bake material, under the object's name), removed again afterwards.
 Options missing from an older exporter are skipped.
 """
 from __future__ import annotations
@@ -34,6 +38,29 @@ EXPORT_OPTIONS = dict(
 )
 
 
+def _shows_bake(ob):
+    """True when every material of ``ob`` is the bake material for its render colour attribute."""
+    ca = ob.data.color_attributes
+    if ca.render_color_index < 0:
+        return True  # nothing baked here; exported as it is
+    name = ca[ca.render_color_index].name
+    mats = [s.material for s in ob.material_slots]
+    return bool(mats) and all(m is not None and m.get("radiosity_attribute") == name for m in mats)
+
+
+def _stand_in(ob):
+    from .write import baked_material
+
+    ca = ob.data.color_attributes
+    me = ob.data.copy()
+    me.materials.clear()
+    me.materials.append(baked_material(ca[ca.render_color_index].name))
+    tmp = bpy.data.objects.new(ob.name + ".gltf", me)
+    tmp.matrix_world = ob.matrix_world.copy()
+    bpy.context.scene.collection.objects.link(tmp)
+    return tmp
+
+
 def export_gltf(filepath, objects, **overrides):
     """Write ``objects`` (and nothing else) to ``filepath`` (.glb binary, .gltf separate)."""
     filepath = os.path.abspath(os.fspath(filepath))
@@ -44,13 +71,30 @@ def export_gltf(filepath, objects, **overrides):
     view_layer = bpy.context.view_layer
     before = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
+    swaps = []   # (original, stand-in, original name)
     try:
+        export = []
+        for o in objects:
+            if o.type == "MESH" and not _shows_bake(o):
+                tmp = _stand_in(o)
+                name = o.name
+                o.name = name + ".exporting"
+                tmp.name = name
+                swaps.append((o, tmp, name))
+                export.append(tmp)
+            else:
+                export.append(o)
         for o in before:
             o.select_set(False)
-        for o in objects:
+        for o in export:
             o.select_set(True)
         bpy.ops.export_scene.gltf(filepath=filepath, export_format=fmt, **opts)
     finally:
+        for o, tmp, name in swaps:
+            me = tmp.data
+            bpy.data.objects.remove(tmp, do_unlink=True)
+            bpy.data.meshes.remove(me)
+            o.name = name
         for o in view_layer.objects:
             o.select_set(o in before)
         view_layer.objects.active = active

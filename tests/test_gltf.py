@@ -1,0 +1,129 @@
+"""Baked glTF: COLOR_0 parsed back from the file (struct + json) equals the baked attribute."""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+
+from conftest import read_gltf
+
+
+def sub(addon, name):
+    return importlib.import_module(f"{addon.__name__}.{name}")
+
+
+def corners(ob, attr="Radiosity"):
+    """World positions (glTF is Y-up: x, z, -y) and RGB of every corner."""
+    me = ob.data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    lv = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", lv)
+    col = np.empty(len(me.loops) * 4, np.float32)
+    me.color_attributes[attr].data.foreach_get("color", col)
+    M = np.array(ob.matrix_world)
+    p = co.reshape(-1, 3)[lv] @ M[:3, :3].T + M[:3, 3]
+    return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1), col.reshape(-1, 4)[:, :3].astype(np.float64)
+
+
+def gltf_vertices(doc, accessor, object_name):
+    """World positions and COLOR_0 of every vertex of node ``object_name``."""
+    node = next(n for n in doc["nodes"] if n.get("name") == object_name)
+    mesh_index = node["mesh"]
+    pos, col = [], []
+    for prim in doc["meshes"][mesh_index]["primitives"]:
+        acc = doc["accessors"][prim["attributes"]["COLOR_0"]]
+        assert acc["componentType"] == 5126 and not acc.get("normalized", False)   # float, not clamped
+        pos.append(accessor(prim["attributes"]["POSITION"]))
+        col.append(accessor(prim["attributes"]["COLOR_0"])[:, :3])
+    pos = np.concatenate(pos)
+    # node transform (translation/rotation/scale) to world
+    if "matrix" in node:
+        M = np.array(node["matrix"]).reshape(4, 4).T
+    else:
+        t = np.array(node.get("translation", [0, 0, 0]))
+        x, y, z, w = node.get("rotation", [0, 0, 0, 1])
+        R = np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                      [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+        S = np.diag(node.get("scale", [1, 1, 1]))
+        M = np.eye(4)
+        M[:3, :3] = R @ S
+        M[:3, 3] = t
+    return pos @ M[:3, :3].T + M[:3, 3], np.concatenate(col)
+
+
+def assert_colors_match(gpos, gcol, bpos, bcol, tol=1e-5):
+    """Every glTF vertex carries the colour of a Blender corner at its position, and every Blender
+    corner's colour is found on a glTF vertex there (hard edges: several colours per position)."""
+    d = np.linalg.norm(gpos[:, None, :] - bpos[None, :, :], axis=2) < 1e-4      # (G, B) same place
+    assert d.any(axis=1).all() and d.any(axis=0).all()
+    cd = np.abs(gcol[:, None, :] - bcol[None, :, :]).max(axis=2)
+    scale = np.maximum(1.0, np.abs(bcol).max(axis=1))[None, :]
+    match = d & (cd <= tol * scale)
+    assert match.any(axis=1).all(), "a glTF colour matches no Blender corner at its position"
+    assert match.any(axis=0).all(), "a Blender corner colour is missing from the glTF"
+
+
+@pytest.fixture(scope="module")
+def baked_cornell(addon):
+    import bpy
+
+    bpy.ops.wm.read_homefile(use_empty=True)
+    objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
+    for o in objs:
+        o.select_set(True)
+    assert bpy.ops.object.radiosity_bake(patch_size=0.5, resolution=16) == {"FINISHED"}
+    return sub(addon, "blender.write").copies_of([o.name for o in objs])
+
+
+@pytest.mark.parametrize("ext", [".glb", ".gltf"])
+def test_color0_equals_baked_attribute(addon, baked_cornell, tmp_path, ext):
+    path = sub(addon, "blender.gltf").export_gltf(tmp_path / f"cornell{ext}", baked_cornell)
+    doc, accessor = read_gltf(path)
+    assert "KHR_materials_unlit" in doc.get("extensionsUsed", [])
+    for mat in doc["materials"]:
+        assert "KHR_materials_unlit" in mat.get("extensions", {})
+        assert mat.get("pbrMetallicRoughness", {}).get("baseColorFactor", [1, 1, 1, 1]) == [1, 1, 1, 1]
+    assert sorted(n["name"] for n in doc["nodes"]) == sorted(o.name for o in baked_cornell)
+    for ob in baked_cornell:
+        gpos, gcol = gltf_vertices(doc, accessor, ob.name)
+        bpos, bcol = corners(ob)
+        assert_colors_match(gpos, gcol, bpos, bcol)
+    # HDR: the light's radiance 12 is written as is
+    light = next(o for o in baked_cornell if o.name.startswith("Light"))
+    _, lcol = gltf_vertices(doc, accessor, light.name)
+    np.testing.assert_allclose(lcol, 12.0, rtol=1e-6)
+
+
+def test_in_place_bake_exports_its_attribute_not_white(addon, empty_scene, tmp_path):
+    """The original's material does not read the attribute: COLOR_0 must still be the bake."""
+    bpy = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=2)
+    floor = bpy.context.active_object
+    bpy.ops.mesh.primitive_plane_add(size=1, location=(0.8, 0, 1), rotation=(np.pi, 0, 0))
+    lamp = bpy.context.active_object
+    m = bpy.data.materials.new("Glow")
+    if bpy.app.version < (5, 0, 0):
+        m.use_nodes = True
+    b = m.node_tree.nodes["Principled BSDF"]
+    b.inputs["Emission Color"].default_value = (1, 1, 1, 1)
+    b.inputs["Emission Strength"].default_value = 3.0
+    b.inputs["Base Color"].default_value = (0, 0, 0, 1)
+    lamp.data.materials.append(m)
+    floor.data.materials.append(bpy.data.materials.new("Plain"))
+    for o in bpy.context.view_layer.objects:
+        o.select_set(o == floor)
+    assert bpy.ops.object.radiosity_bake(patch_size=0, resolution=16, output_mode="IN_PLACE") == {"FINISHED"}
+    path = sub(addon, "blender.gltf").export_gltf(tmp_path / "floor.glb", [floor])
+    doc, accessor = read_gltf(path)
+    assert [n["name"] for n in doc["nodes"]] == [floor.name]
+    assert all("KHR_materials_unlit" in m.get("extensions", {}) for m in doc["materials"])
+    gpos, gcol = gltf_vertices(doc, accessor, floor.name)
+    bpos, bcol = corners(floor)
+    # the stand-in is gone, the original keeps its name and material
+    assert [o.name for o in bpy.data.objects] == ["Plane", "Plane.001"]
+    assert floor.data.materials[0].name == "Plain" and len(bpy.data.meshes) == 2
+    assert bcol.max() > 0.05 and np.ptp(bcol) > 0.01
+    assert_colors_match(gpos, gcol, bpos, bcol)
