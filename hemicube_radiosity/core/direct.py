@@ -16,59 +16,26 @@ from __future__ import annotations
 
 import numpy as np
 
+from .lights import polygon_form_factor
 from .patches import PatchSet
 
 __all__ = ["polygon_form_factors", "emitter_direct", "vertex_frames"]
 
 
-def _clip_to_horizon(polys, points, normals, eps):
-    """Clip polygons (P, M, K, 3) to the half-space n.(y - x) >= eps of each point.
-
-    Returns (P, M, 2K, 3): the clipped polygon, padded by repeating its first vertex (zero-length
-    edges add nothing to the contour integral); all-zero where nothing is left.
-    """
-    K = polys.shape[2]
-    d = np.einsum("pmkj,pj->pmk", polys - points[:, None, None, :], normals) - eps
-    a, b = polys, np.roll(polys, -1, axis=2)
-    da, db = d, np.roll(d, -1, axis=2)
-    keep_a = da >= 0
-    cross = (da >= 0) != (db >= 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(cross, da / (da - db), 0.0)
-    inter = a + t[..., None] * (b - a)
-    out = np.stack([a, inter], axis=3).reshape(polys.shape[:2] + (2 * K, 3))
-    valid = np.stack([keep_a, cross], axis=3).reshape(polys.shape[:2] + (2 * K,))
-    order = np.argsort(~valid, axis=-1, kind="stable")
-    out = np.take_along_axis(out, order[..., None], axis=2)
-    valid = np.take_along_axis(valid, order, axis=-1)
-    first = out[:, :, :1, :]
-    out = np.where(valid[..., None], out, first)
-    return np.where(valid.any(-1)[..., None, None], out, 0.0)
-
-
-def polygon_form_factors(points, normals, polys, poly_normals=None, eps=0.0):
+def polygon_form_factors(points, normals, polys, poly_normals=None):
     """(P, M) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
-    ``normals`` to polygons ``polys`` (M, K, 3) (any winding; a triangle may repeat a corner).
-
-    Lambert: F = 1/(2 pi) * sum_k theta_k n.(u_k x u_k+1)/|u_k x u_k+1|, over the polygon clipped
-    to the point's horizon. With ``poly_normals`` (M, 3) an emitter only shines from its front:
-    F = 0 for points behind its plane.
+    ``normals`` to every polygon of ``polys`` (M, K, 3) (any winding; a triangle may repeat a
+    corner), over the part of each polygon above the point's horizon (Lambert's contour
+    integral, :func:`.lights.polygon_form_factor`). With ``poly_normals`` (M, 3) an emitter only
+    shines from its front: F = 0 for points behind or in its plane.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     polys = np.asarray(polys, dtype=np.float64)
     P, M = len(points), len(polys)
-    q = _clip_to_horizon(np.broadcast_to(polys[None], (P,) + polys.shape), points, normals, eps)
-    u = q - points[:, None, None, :]
-    n = np.linalg.norm(u, axis=-1, keepdims=True)
-    u = u / np.maximum(n, 1e-300)
-    v = np.roll(u, -1, axis=2)
-    c = np.cross(u, v)
-    sin = np.linalg.norm(c, axis=-1)
-    cos = np.einsum("pmkj,pmkj->pmk", u, v)
-    theta = np.arctan2(sin, cos)
-    w = np.where(sin > 1e-15, theta / np.maximum(sin, 1e-300), 0.0)
-    F = np.abs(np.einsum("pmk,pmkj,pj->pm", w, c, normals)) / (2 * np.pi)
+    F = polygon_form_factor(np.repeat(points, M, axis=0), np.repeat(normals, M, axis=0),
+                            np.broadcast_to(polys[None], (P,) + polys.shape).reshape((P * M,) + polys.shape[1:]))
+    F = F.reshape(P, M)
     if poly_normals is not None:
         centre = polys.mean(axis=1)
         front = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float)) > 0
@@ -137,7 +104,7 @@ def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16
     for s in range(0, len(points), step):
         x = points[s:s + step]
         nx = normals[s:s + step]
-        F = polygon_form_factors(x, nx, corners, patches.normals[em], eps=0.0)  # (p, M)
+        F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
         if scene is not None:
             live = F > 0
             vis = np.zeros(F.shape)

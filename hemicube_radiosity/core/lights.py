@@ -64,7 +64,7 @@ from .patches import PatchSet
 from .progress import Ticker
 
 __all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "direct_irradiance",
-           "light_irradiance", "polygon_form_factor", "spot_attenuation", "NumpyOccluder",
+           "light_irradiance", "polygon_form_factor", "spot_attenuation", "NumpyOccluder", "occluder",
            "AREA_SHAPES"]
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
@@ -444,7 +444,9 @@ class NumpyOccluder:
         return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < tf)
 
 
-def _occluder(patches, shadows):
+def occluder(patches, shadows="auto"):
+    """Something with ``occluded(origins, directions, tfar)`` for shadow rays: Embree's scene
+    ('embree', or 'auto' when embreex is there), the NumPy BVH ('numpy'), or None ('none')."""
     if shadows == "none":
         return None
     if shadows not in ("auto", "embree", "numpy"):
@@ -575,10 +577,16 @@ def _area(light, x, n, rng, samples, occ, eps):
 
 
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
-                     receivers=None, _occ=None, _index=0):
-    """Irradiance (N,) W/m^2 per unit of the light's colour (multiply by ``light.color``)."""
-    occ = _occluder(patches, shadows) if _occ is None else _occ
-    N = len(patches)
+                     receivers=None, points=None, normals=None, _occ=None, _index=0):
+    """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``).
+
+    At the patch centres by default, or at ``points`` (P, 3) with unit ``normals`` (P, 3) on the
+    patches' surfaces (e.g. the patch vertices); ``receivers`` indexes into those points.
+    """
+    occ = occluder(patches, shadows) if _occ is None else _occ
+    x_all = patches.centers if points is None else np.asarray(points, np.float64)
+    n_all = patches.normals if points is None else np.asarray(normals, np.float64)
+    N = len(x_all)
     recv = np.arange(N) if receivers is None else np.asarray(receivers, np.int64)
     out = np.zeros(N)
     scale = float(np.linalg.norm(np.ptp(patches.verts, axis=0))) or 1.0
@@ -592,13 +600,15 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         ids = recv[s:s + RECEIVERS_PER_CHUNK]
         # one random stream per (seed, light, chunk start): reproducible for a given receiver set
         rng = np.random.default_rng([seed, _index, s])
-        out[ids] = fn(light, patches.centers[ids], patches.normals[ids], rng, samples, occ, eps)
+        out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples, occ, eps)
     return out
 
 
 def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, seed=0,
-                      receivers=None, progress=None, cancelled=None) -> np.ndarray:
-    """Incident irradiance H_direct (N, 3) in W/m^2 from ``lights`` at every patch centre.
+                      receivers=None, points=None, normals=None, progress=None,
+                      cancelled=None) -> np.ndarray:
+    """Incident irradiance H_direct (N, 3) in W/m^2 from ``lights`` at every patch centre
+    (or at ``points`` with ``normals``, see :func:`light_irradiance`).
 
     The radiosity source term is ``emission + rho * H_direct / pi`` (radiance units).
     ``shadows``: 'auto' | 'embree' | 'numpy' | 'none'. ``samples``: shadow samples per light per
@@ -606,15 +616,15 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     ``receivers``: patch ids to compute (others 0). ``progress(f)``/``cancelled()`` as elsewhere.
     """
     lights = list(lights)
-    H = np.zeros((len(patches), 3))
+    H = np.zeros((len(patches) if points is None else len(points), 3))
     if not lights:
         return H
-    occ = _occluder(patches, shadows)
+    occ = occluder(patches, shadows)
     ticker = Ticker(progress, cancelled)
     for i, light in enumerate(lights):
         ticker.tick(i, len(lights), force=True)
         E = light_irradiance(patches, light, shadows=shadows, samples=samples, seed=seed,
-                             receivers=receivers, _occ=occ, _index=i)
+                             receivers=receivers, points=points, normals=normals, _occ=occ, _index=i)
         H += E[:, None] * light.color[None, :]
     ticker.tick(len(lights), len(lights), force=True)
     return H

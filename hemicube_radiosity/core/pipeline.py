@@ -20,7 +20,7 @@ from .vertex import vertex_radiosity
 __all__ = ["BakeSettings", "BakeResult", "bake", "compute_form_factors", "source_term", "METHODS"]
 
 METHODS = ("hemicube", "embree", "embree_stochastic")
-DIRECT_MODES = ("auto", "exact", "hemicube")
+DIRECT_MODES = ("exact", "hemicube")
 
 
 @dataclass
@@ -31,11 +31,12 @@ class BakeSettings:
     'embree_stochastic' (cosine-weighted random rays, ``rays_per_patch`` each).
     solver: one of core.solve.SOLVERS; tolerance/max_iterations as in :func:`core.solve.solve`.
     rotate_seed: random rotation of each hemi-cube about its normal (None: no rotation).
-    direct: how light from emissive patches reaches the rest. 'exact': Lambert's point-to-polygon
-    form factor with ``direct_samples`` Embree shadow rays per point and emitting face, evaluated
-    at patch centres for the solve and again at every vertex for the output (sharp shadows and
-    exact falloff without finer patches); F then carries only reflected light. 'hemicube': the
-    paper's way, everything through F. 'auto': 'exact' when Embree is available.
+    direct: how light from emitters (emissive patches, lamps) reaches the surfaces. 'exact':
+    closed-form unshadowed irradiance (Lambert's point-to-polygon formula) times the visible
+    fraction from ``direct_samples`` shadow rays per point and emitting face (Embree, or a NumPy
+    BVH without it), at patch centres for the solve and again at every vertex for the output
+    (sharp shadows and exact falloff without finer patches); F then carries only reflected
+    light. 'hemicube': the paper's way, emitted light through F too (lamps at patch centres).
     """
 
     patch_size: float | None = 0.25
@@ -46,7 +47,7 @@ class BakeSettings:
     tolerance: float = 1e-4
     max_iterations: int = 200
     rotate_seed: int | None = None
-    direct: str = "auto"
+    direct: str = "exact"
     direct_samples: int = 16
 
     def validate(self) -> None:
@@ -110,29 +111,38 @@ def compute_form_factors(patches: PatchSet, settings: BakeSettings, *, receivers
         progress=progress, cancelled=cancelled)
 
 
-def _exact_direct_plan(patches: PatchSet, settings: BakeSettings):
-    """What the exact direct path needs, or None when it is off or not possible."""
+def _exact_direct_plan(patches: PatchSet, settings: BakeSettings, lights):
+    """What the exact direct path needs, or None when it is off or there is no direct light."""
     emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
-    if settings.direct == "hemicube" or emitters.size == 0:
+    if settings.direct == "hemicube" or (emitters.size == 0 and not lights):
         return None
-    from . import embree_ff
+    from .lights import occluder
 
-    if settings.direct == "auto" and not embree_ff.embree_available():
-        return None
-    scene = embree_ff.embree_scene(patches)  # raises EmbreeUnavailable for direct='exact'
+    occ = occluder(patches, "auto")
     # shadow rays per emitting *face*: split between the patches it was cut into
-    face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
-    per_face = np.unique(face, return_counts=True)[1].max()
-    samples = max(1, int(settings.direct_samples) // int(per_face))
-    return {"emitters": emitters, "scene": scene, "samples": samples}
+    samples = settings.direct_samples
+    if emitters.size:
+        face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
+        per_face = np.unique(face, return_counts=True)[1].max()
+        samples = max(1, int(settings.direct_samples) // int(per_face))
+    return {"emitters": emitters, "scene": occ, "samples": samples}
 
 
-def _emitter_direct(patches, points, normals, plan, cancelled):
+def _direct_at(patches, points, normals, plan, lights, light_options, cancelled):
+    """Radiance arriving directly (emitters and lamps) at points: (P, 3)."""
     from .direct import emitter_direct
     from .progress import Ticker
 
-    return emitter_direct(patches, points, normals, scene=plan["scene"], samples=plan["samples"],
-                          emitters=plan["emitters"], ticker=Ticker(None, cancelled))
+    D = np.zeros((len(points), 3))
+    if plan["emitters"].size:
+        D += emitter_direct(patches, points, normals, scene=plan["scene"], samples=plan["samples"],
+                            emitters=plan["emitters"], ticker=Ticker(None, cancelled))
+    if lights:
+        from .lights import direct_irradiance
+
+        D += direct_irradiance(patches, lights, points=points, normals=normals, cancelled=cancelled,
+                               **(light_options or {})) / np.pi
+    return D
 
 
 def source_term(patches: PatchSet, F: CSR, *, direct_irradiance=None, world=None) -> np.ndarray:
@@ -199,24 +209,26 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     check()
 
     t = time.perf_counter()
-    H = None
-    if lights:
-        from .lights import direct_irradiance
-
-        say("direct", 0.0, f"{len(lights)} lights")
-        H = direct_irradiance(patches, lights, **(light_options or {}))
-    S = source_term(patches, F, direct_irradiance=H, world=world)
-    exact = _exact_direct_plan(patches, settings)
+    lights = list(lights or ())
+    exact = _exact_direct_plan(patches, settings, lights)
     notes = []
-    if exact is not None:
-        # emitted light arrives by the exact path; the solve carries only reflected light R,
-        # and B = E + R. (Without this F would carry E a second time.)
-        say("direct", 0.0, f"exact direct light from {exact['emitters'].size} emitting patches")
-        D_patch = _emitter_direct(patches, patches.centers, patches.normals, exact, cancelled)
-        S = S - patches.emission + patches.rho * D_patch
-    elif settings.direct == "auto" and np.any(patches.emission > 0):
-        notes.append("Embree is not available: direct light from emitters goes through the "
-                     "hemi-cube form factors (install embreex for exact direct light)")
+    H = None
+    if exact is None:
+        if lights:
+            from .lights import direct_irradiance
+
+            say("direct", 0.0, f"{len(lights)} lights")
+            H = direct_irradiance(patches, lights, cancelled=cancelled, **(light_options or {}))
+        S = source_term(patches, F, direct_irradiance=H, world=world)
+    else:
+        # direct light (emitters and lamps) arrives by the exact path; the solve carries only
+        # reflected light R, and B = E + R (F would otherwise carry E a second time)
+        say("direct", 0.0, f"exact direct light: {exact['emitters'].size} emitting patches, {len(lights)} lamps")
+        D_patch = _direct_at(patches, patches.centers, patches.normals, exact, lights, light_options, cancelled)
+        H = np.pi * D_patch
+        S = source_term(patches, F, world=world) - patches.emission + patches.rho * D_patch
+        if type(exact["scene"]).__name__ == "NumpyOccluder":
+            notes.append("Embree is not available: shadow rays use the slower NumPy BVH")
     timings["direct"] = time.perf_counter() - t
     check()
 
@@ -236,10 +248,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     if exact is None:
         Bv = vertex_radiosity(patches, sol.B)
     else:
-        # direct light again at every vertex (sharp shadows, exact falloff); the smoother
-        # reflected-reflected part is interpolated from the patches as in the paper
+        # direct light again at every vertex (sharp shadows, exact falloff); only the smoother
+        # light reflected more than once is interpolated from the patches, as in the paper
         xv, nv, rho_v = vertex_frames(patches)
-        D_vert = _emitter_direct(patches, xv, nv, exact, cancelled)
+        D_vert = _direct_at(patches, xv, nv, exact, lights, light_options, cancelled)
         rest = sol.B - patches.rho * D_patch
         Bv = vertex_radiosity(patches, patches.emission) + rho_v * D_vert + vertex_radiosity(patches, rest)
         sol.extra["reflected_only"] = True
