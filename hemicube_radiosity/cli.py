@@ -266,8 +266,8 @@ def cmd_bake(args, out):
     if not args.quiet:
         for line in job.notes:
             print(f"radiosity: note: {line}", file=out)
-        for k, v in outputs.items():
-            print(f"radiosity: {k}: {v}", file=out)
+        for v in outputs.values():
+            print(f"radiosity: wrote {v}", file=out)
         print(f"radiosity: done in {t_end - t_start:.2f} s", file=out, flush=True)
     return job
 

@@ -447,8 +447,3 @@ def test_cancel_leaves_scene_unchanged_and_stages_are_printed(addon, empty_scene
     assert "residual" in lines[stages.index("solve")]
     assert "nonzeros" in lines[stages.index("form factors")]
 
-
-def test_manifest_paths_exist():
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    assert os.path.isfile(os.path.join(root, "__init__.py"))
-    assert os.path.isfile(os.path.join(root, "blender_manifest.toml"))

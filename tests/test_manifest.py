@@ -1,0 +1,59 @@
+"""The extension manifest passes Blender's own validator; the built zip holds the add-on only."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tomllib
+import zipfile
+
+from conftest import ROOT
+
+
+def _bpy_scripts():
+    import importlib.util
+
+    spec = importlib.util.find_spec("bpy")
+    base = os.path.dirname(spec.origin)
+    version = next(d for d in os.listdir(base) if d[:1].isdigit() and os.path.isdir(os.path.join(base, d, "scripts")))
+    return os.path.join(base, version, "scripts")
+
+
+def _blender_ext(*args):
+    tool = os.path.join(_bpy_scripts(), "addons_core", "bl_pkg", "cli", "blender_ext.py")
+    return subprocess.run([sys.executable, tool, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+
+
+def test_manifest_fields():
+    with open(os.path.join(ROOT, "blender_manifest.toml"), "rb") as f:
+        m = tomllib.load(f)
+    assert m["schema_version"] == "1.0.0" and m["id"] == "hemicube_radiosity" and m["type"] == "add-on"
+    assert m["blender_version_min"] == "4.2.0"
+    assert m["license"] == ["SPDX:GPL-3.0-or-later"]
+    major, minor, patch = (int(x) for x in m["version"].split("."))
+    import hemicube_radiosity
+
+    assert hemicube_radiosity.__version__ == m["version"]
+    assert set(m["tags"]) <= {"Lighting", "Render", "Bake"} and m["tags"]
+
+
+def test_blender_validator_accepts_manifest():
+    tags = os.path.join(_bpy_scripts(), "modules", "_bpy_internal", "extensions", "tags.py")
+    p = _blender_ext("validate", "--valid-tags", tags, ".")
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert "Success" in p.stdout
+
+
+def test_build_zip_contains_the_addon_only(tmp_path):
+    p = _blender_ext("build", "--source-dir", ".", "--output-dir", str(tmp_path))
+    assert p.returncode == 0, p.stdout + p.stderr
+    (zpath,) = [os.path.join(tmp_path, f) for f in os.listdir(tmp_path) if f.endswith(".zip")]
+    names = zipfile.ZipFile(zpath).namelist()
+    allowed_top = {"blender_manifest.toml", "__init__.py", "LICENSE"}
+    stray = [n for n in names if n not in allowed_top and not n.startswith("hemicube_radiosity/")]
+    assert stray == [], stray
+    assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
+    for needed in ("blender_manifest.toml", "__init__.py", "hemicube_radiosity/__init__.py",
+                   "hemicube_radiosity/blender/operators.py", "hemicube_radiosity/core/pipeline.py",
+                   "hemicube_radiosity/cli.py"):
+        assert needed in names, needed
