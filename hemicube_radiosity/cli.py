@@ -86,7 +86,7 @@ def build_parser():
     m = sub.add_parser("demo", help="bake the Cornell box demo and render a preview",
                        description="Build the Cornell box, bake it, write cornell.glb and cornell.png.")
     m.add_argument("--output-dir", default=os.path.join("demo", "out"), metavar="DIR")
-    m.add_argument("--render-size", type=int, default=400, metavar="PX", help="PNG size (default %(default)s)")
+    m.add_argument("--render-size", type=int, default=512, metavar="PX", help="PNG size (default %(default)s)")
     m.add_argument("--samples", type=int, default=16, help="Cycles samples for the PNG (default %(default)s)")
     m.add_argument("--no-render", action="store_true", help="skip the PNG")
     _add_bake_settings(m, d)

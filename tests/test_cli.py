@@ -208,3 +208,19 @@ def test_registered_command_and_python_m(addon, tmp_path):
                        cwd=str(tmp_path), env=env, capture_output=True, text=True, timeout=120)
     assert p.returncode == 1
     assert p.stderr.strip().splitlines()[-1].startswith("hemicube_radiosity: error: input file not found")
+
+
+def test_demo_command_writes_glb_and_png(addon, tmp_path):
+    import struct
+
+    rc, out, err = run(addon, ["demo", "--output-dir", str(tmp_path), "--patch-size", "0.5", "--resolution", "16",
+                               "--render-size", "48", "--samples", "1"])
+    assert rc == 0, err
+    glb, png = tmp_path / "cornell.glb", tmp_path / "cornell.png"
+    assert f"wrote {glb}" in out and f"wrote {png}" in out
+    doc, accessor = read_gltf(str(glb))
+    assert len(doc["nodes"]) == 8 and "KHR_materials_unlit" in doc["extensionsUsed"]
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (48, 48)
+    rep = json.load(open(tmp_path / "cornell_report.json"))
+    assert rep["timings"]["render"] > 0 and rep["patches"] > 50
