@@ -51,6 +51,11 @@ def _add_bake_settings(p, defaults):
                    default=defaults.method, help="form-factor method (default %(default)s)")
     p.add_argument("--rays-per-patch", type=int, default=defaults.rays_per_patch, metavar="N",
                    help="rays per patch for embree_stochastic (default %(default)s)")
+    p.add_argument("--direct", choices=("exact", "hemicube"), default=getattr(defaults, "direct", "exact"),
+                   help="direct light from emitters: exact (shadow rays) or through the hemi-cube "
+                        "form factors as in the paper (default %(default)s)")
+    p.add_argument("--direct-samples", type=int, default=getattr(defaults, "direct_samples", 16),
+                   metavar="N", help="shadow rays per point and emitting face (default %(default)s)")
     p.add_argument("--solver", choices=("gauss_seidel", "jacobi", "progressive"),
                    default=defaults.solver, help="(default %(default)s)")
     p.add_argument("--tolerance", type=float, default=defaults.tolerance,
@@ -60,6 +65,8 @@ def _add_bake_settings(p, defaults):
     p.add_argument("--attribute", default="Radiosity", help="colour attribute name (default %(default)s)")
     p.add_argument("--exposure", type=float, default=0.0,
                    help="stops; written colours are radiance x 2^exposure (default 0: radiance)")
+    p.add_argument("--no-lights", action="store_true",
+                   help="ignore light objects and the world (only emissive surfaces light the scene)")
     p.add_argument("--cache", metavar="DIR", help="form-factor cache directory (reused across runs)")
     p.add_argument("--report", metavar="REPORT.json", help="write timings, counts and energy balance")
     p.add_argument("--patches", metavar="PATCHES.npz", help="write per-patch arrays")
@@ -102,13 +109,16 @@ def _settings(args):
                      resolution=args.resolution, method=args.method,
                      rays_per_patch=args.rays_per_patch, solver=args.solver,
                      tolerance=args.tolerance, max_iterations=args.max_iterations)
+    if hasattr(s, "direct"):
+        s.direct, s.direct_samples = args.direct, args.direct_samples
     try:
         s.validate()
     except ValueError as ex:
         raise CLIError(str(ex), status=2) from None
     mode = "IN_PLACE" if getattr(args, "in_place", False) else "COPY"
     return BakeOptions(s, mode, args.attribute, args.exposure,
-                       include_others=not getattr(args, "no_others", False))
+                       include_others=not getattr(args, "no_others", False),
+                       use_lights=not args.no_lights)
 
 
 def _cache(args):
@@ -199,6 +209,8 @@ def make_report(job, timings, extra=None):
         "settings": {"patch_size": s.patch_size, "resolution": s.resolution, "method": s.method,
                      "rays_per_patch": s.rays_per_patch, "solver": s.solver,
                      "tolerance": s.tolerance, "max_iterations": s.max_iterations,
+                     "direct": getattr(s, "direct", None),
+                     "direct_samples": getattr(s, "direct_samples", None),
                      "output_mode": job.options.output_mode,
                      "attribute": job.options.attribute_name, "exposure": job.options.exposure},
         "objects": [o.name for o in job.scene_input.objects if o.bake],

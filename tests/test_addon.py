@@ -355,6 +355,26 @@ def test_material_reading(addon, empty_scene):
     assert "Approximated:" in sub(addon, "blender.operators")._notes_line(job.notes)
 
 
+def test_lamps_light_the_bake_in_cycles_units(addon, empty_scene):
+    """A 1000 W point lamp 2 m above a small grey (0.8) plane: B = rho I / (pi h^2), I = P / 4 pi."""
+    bpy = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=0.01)
+    plane = bpy.context.active_object
+    bpy.ops.object.light_add(type="POINT", location=(0, 0, 2))
+    lamp = bpy.context.active_object
+    lamp.data.energy = 1000.0
+    lamp.data.shadow_soft_size = 0.0
+    select(bpy, [plane])
+    expected = 0.8 * 1000.0 / (4 * np.pi) / 2.0 ** 2 / np.pi
+    assert bpy.ops.object.radiosity_bake(patch_size=0, resolution=8) == {"FINISHED"}
+    _, col = corner_data(sub(addon, "blender.write").copies_of([plane.name])[0])
+    np.testing.assert_allclose(col, expected, rtol=1e-4)
+    select(bpy, sub(addon, "blender.write").copies_of([plane.name]))
+    assert bpy.ops.object.radiosity_bake(patch_size=0, resolution=8, use_lights=False) == {"FINISHED"}
+    _, col = corner_data(sub(addon, "blender.write").copies_of([plane.name])[0])
+    np.testing.assert_allclose(col, 0.0, atol=0)
+
+
 # ----------------------------------------------------------------------------- output modes
 def _lit_pair(bpy, linked=True):
     """Two planes facing an emitter; the second is a linked duplicate of the first (shared mesh)."""

@@ -26,6 +26,11 @@ METHOD_ITEMS = (
     ("EMBREE", "Embree", "Cast rays through the hemi-cube pixel centres with Embree (needs embreex)"),
     ("EMBREE_STOCHASTIC", "Embree (stochastic)", "Cosine-weighted random rays with Embree"),
 )
+DIRECT_ITEMS = (
+    ("EXACT", "Exact", "Closed-form irradiance from each emitter times the visible fraction from "
+     "shadow rays, at patch centres and again at every vertex (sharp shadows)"),
+    ("HEMICUBE", "Hemi-cube", "The paper's way: emitted light goes through the form factors too"),
+)
 SOLVER_ITEMS = (
     ("GAUSS_SEIDEL", "Gauss-Seidel", "Gathering, in-place sweeps"),
     ("JACOBI", "Jacobi", "Gathering, whole-vector sweeps"),
@@ -49,6 +54,7 @@ class BakeOptions:
     attribute_name: str = "Radiosity"
     exposure: float = 0.0               # stops: values written are radiance * 2**exposure
     include_others: bool = True         # other visible meshes occlude/emit, are not written
+    use_lights: bool = True             # lamps and the world light the scene (as in Cycles)
 
     @classmethod
     def from_props(cls, p):
@@ -62,7 +68,11 @@ class BakeOptions:
             tolerance=float(p.tolerance),
             max_iterations=int(p.max_iterations),
         )
-        return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others))
+        if hasattr(s, "direct"):
+            s.direct = p.direct.lower()
+            s.direct_samples = int(p.direct_samples)
+        return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
+                   bool(p.use_lights))
 
 
 def _source_of(ob):
@@ -171,7 +181,14 @@ class BakeJob:
             scene_input = read.read_scene(depsgraph, targets, others)
         except read.ReadError as ex:
             raise BakeError(str(ex)) from None
+        light_notes = []
+        if options.use_lights:
+            from .lights import read_lights
+
+            lights, world, light_notes = read_lights(depsgraph)
+            scene_input.lights, scene_input.world = tuple(lights), world
         job = cls(scene_input, options)
+        job.notes += light_notes
         job.cache = cache
         job.timings["read"] = time.perf_counter() - t
         return job

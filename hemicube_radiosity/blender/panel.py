@@ -18,6 +18,9 @@ def draw_settings(layout, context):
         col.prop(s, "rays_per_patch")
     else:
         col.prop(s, "resolution")
+    col.prop(s, "direct")
+    if s.direct == "EXACT":
+        col.prop(s, "direct_samples")
     col.separator()
     col.prop(s, "solver")
     col.prop(s, "tolerance")
@@ -26,6 +29,7 @@ def draw_settings(layout, context):
     col.prop(s, "output_mode")
     col.prop(s, "attribute_name")
     col.prop(s, "exposure")
+    col.prop(s, "use_lights")
     col.prop(s, "include_others")
     layout.separator()
     row = layout.row(align=True)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from .bake import METHOD_ITEMS, OUTPUT_ITEMS, SOLVER_ITEMS
+from .bake import DIRECT_ITEMS, METHOD_ITEMS, OUTPUT_ITEMS, SOLVER_ITEMS
 
 __all__ = ["setting_annotations", "SETTING_NAMES", "RadiositySettings", "register", "unregister"]
 
@@ -23,6 +23,11 @@ def setting_annotations():
                                description="How form factors are computed"),
         "rays_per_patch": IntProperty(name="Rays per Patch", default=512, min=1, soft_max=65536,
                                       description="Rays per patch for the stochastic Embree method"),
+        "direct": EnumProperty(name="Direct Light", items=DIRECT_ITEMS, default="EXACT",
+                               description="How light from emitters reaches the surfaces"),
+        "direct_samples": IntProperty(name="Shadow Rays", default=16, min=1, soft_max=1024,
+                                      description="Shadow rays per point and emitting face "
+                                                  "(exact direct light)"),
         "solver": EnumProperty(name="Solver", items=SOLVER_ITEMS, default="GAUSS_SEIDEL",
                                description="Iterative solver for the radiosity equation"),
         "tolerance": FloatProperty(name="Tolerance", default=1e-4, min=1e-10, max=1.0, precision=6,
@@ -36,6 +41,9 @@ def setting_annotations():
         "exposure": FloatProperty(name="Exposure", default=0.0, soft_min=-10.0, soft_max=10.0,
                                   description="Stops: written values are radiance x 2^exposure "
                                               "(0 keeps radiance units, nothing is clamped)"),
+        "use_lights": BoolProperty(
+            name="Lamps and World", default=True,
+            description="Light objects and the world's background light the scene, in Cycles' units"),
         "include_others": BoolProperty(
             name="Other Visible Meshes", default=True,
             description="Visible meshes that are not selected take part as occluders and emitters "
