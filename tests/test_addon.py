@@ -435,6 +435,12 @@ def test_in_place_mode_and_exposure(addon, empty_scene):
     order_a = np.lexsort(pos_a.T)
     np.testing.assert_allclose(pos_c[order_c], pos_a[order_a], atol=1e-6)
     np.testing.assert_allclose(col_c[order_c], 2.0 * col_a[order_a], rtol=1e-5)   # exposure +1
+    # back to in place: the copy goes away and the original is shown again
+    select(bpy, sub(addon, "blender.write").copies_of(["A"]))
+    assert bpy.ops.object.radiosity_bake(patch_size=0, resolution=16, attribute_name="GI",
+                                         output_mode="IN_PLACE") == {"FINISHED"}
+    assert sub(addon, "blender.write").copies_of(["A"]) == []
+    assert not a.hide_get() and not a.hide_render
 
 
 # ----------------------------------------------------------------------------- progress/cancel
@@ -467,3 +473,15 @@ def test_cancel_leaves_scene_unchanged_and_stages_are_printed(addon, empty_scene
     assert "residual" in lines[stages.index("solve")]
     assert "nonzeros" in lines[stages.index("form factors")]
 
+
+
+def test_invoke_without_window_runs_synchronously_and_clear_restores(addon, empty_scene):
+    bpy = empty_scene
+    bpy.ops.mesh.primitive_plane_add()
+    plane = bpy.context.active_object
+    assert bpy.ops.object.radiosity_bake("INVOKE_DEFAULT", patch_size=0.5, resolution=8) == {"FINISHED"}
+    write = sub(addon, "blender.write")
+    assert len(write.copies_of([plane.name])) == 1 and plane.hide_get()
+    assert bpy.ops.object.radiosity_clear(all=True) == {"FINISHED"}
+    assert write.copies_of([plane.name]) == [] and not plane.hide_get() and not plane.hide_render
+    assert len(bpy.data.meshes) == 1

@@ -194,6 +194,8 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
     notes = []
     written = []
     P = result.patches
+    # an earlier baked copy of these objects is replaced by the in-place result
+    remove_bakes([s.name for s in scene_input.objects if s.bake], unhide=True)
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
             continue
