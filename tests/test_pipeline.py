@@ -127,3 +127,36 @@ def test_relight_reuses_form_factors_and_equals_a_cold_bake():
     # geometry change -> recomputed
     moved = cornell_box(light_size=0.6)
     assert bake(moved, s, cache=cache).form_factor_source == "computed"
+
+
+def test_relight_with_lamps_reuses_form_factors_and_direct_transport(monkeypatch):
+    """A new lamp colour, a new emission strength and a new wall colour: F and the emitters'
+    direct-light transport come from the cache (no hemi-cube, no emitter ray is cast), and the
+    result equals a cold bake of the changed scene."""
+    from hemicube_radiosity.core import direct, pipeline
+    from hemicube_radiosity.core.lights import PointLight
+
+    s = BakeSettings(patch_size=0.25, resolution=32, tolerance=1e-8)
+    cache = FormFactorCache()
+    lamp = PointLight(position=(1.0, 0.6, 1.5), color=(1.0, 1.0, 1.0), power_w=40.0, radius=0.0)
+    first = bake(cornell_box(), s, cache=cache, lights=[lamp])
+    changed = cornell_box(light_radiance=5.0)
+    changed[2].face_rho[:] = (0.3, 0.6, 0.3)
+    lamp2 = PointLight(position=(1.0, 0.6, 1.5), color=(1.0, 0.5, 0.2), power_w=40.0, radius=0.0)
+    cold = bake(changed, s, lights=[lamp2])
+
+    def no_rays(*a, **k):
+        raise AssertionError("the emitters' transport must come from the cache")
+
+    def no_hemicubes(*a, **k):
+        raise AssertionError("form factors must come from the cache")
+
+    monkeypatch.setattr(direct, "emitter_transport", no_rays)
+    monkeypatch.setattr(pipeline, "compute_form_factors", no_hemicubes)
+    warm = bake(changed, s, cache=cache, lights=[lamp2])
+    assert warm.form_factor_source == "cached"
+    np.testing.assert_allclose(warm.solution.B, cold.solution.B, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+    # and the lamp's colour really changed the bake: the lamp dominates, blue drops most
+    ratio = warm.solution.B.sum(0) / first.solution.B.sum(0)
+    assert ratio[2] < ratio[1] < ratio[0]

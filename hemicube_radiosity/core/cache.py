@@ -11,6 +11,8 @@ import hashlib
 import os
 from collections import OrderedDict
 
+import numpy as np
+
 from .sparse import CSR
 
 __all__ = ["FormFactorCache", "cache_key"]
@@ -23,7 +25,7 @@ def cache_key(geometry_key: bytes, settings_key) -> str:
 
 
 class FormFactorCache:
-    def __init__(self, directory=None, max_items=4):
+    def __init__(self, directory=None, max_items=8):
         self.directory = os.fspath(directory) if directory else None
         self.max_items = max_items
         self._mem: OrderedDict[str, CSR] = OrderedDict()
@@ -33,21 +35,29 @@ class FormFactorCache:
     def _path(self, key):
         return os.path.join(self.directory, key + ".npz")
 
-    def get(self, key: str) -> CSR | None:
+    def get(self, key: str):
+        """The CSR (or array) stored under ``key``, from memory or disk; None when absent."""
         if key in self._mem:
             self._mem.move_to_end(key)
             return self._mem[key]
         if self.directory and os.path.exists(self._path(key)):
-            F = CSR.load(self._path(key))
-            self._remember(key, F)
-            return F
+            with np.load(self._path(key), allow_pickle=False) as z:
+                item = z["array"] if "array" in z.files else None
+            if item is None:
+                item = CSR.load(self._path(key))
+            self._remember(key, item)
+            return item
         return None
 
-    def put(self, key: str, F: CSR) -> None:
-        self._remember(key, F)
+    def put(self, key: str, item) -> None:
+        """Store a CSR (form factors) or an ndarray (e.g. direct-light transport)."""
+        self._remember(key, item)
         if self.directory:
             tmp = self._path(key) + ".tmp.npz"
-            F.save(tmp)
+            if isinstance(item, CSR):
+                item.save(tmp)
+            else:
+                np.savez_compressed(tmp, array=np.asarray(item))
             os.replace(tmp, self._path(key))
 
     def _remember(self, key, F):

@@ -19,7 +19,7 @@ import numpy as np
 from .lights import polygon_form_factor
 from .patches import PatchSet
 
-__all__ = ["polygon_form_factors", "emitter_direct", "vertex_frames"]
+__all__ = ["polygon_form_factors", "emitter_transport", "emitter_direct", "vertex_frames"]
 
 
 def polygon_form_factors(points, normals, polys, poly_normals=None):
@@ -78,37 +78,36 @@ def _emitter_samples(corners, samples, rng):
     return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
 
 
-def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16, seed=0,
-                   emitters=None, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
-    """(P, 3) radiance arriving directly from the emissive patches at ``points`` with ``normals``.
+def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
+                      seed=0, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
+    """(P, M) float32 ``T[p, m] = F(x_p -> e_m) * V(x_p, e_m)``: how much of emitter patch m's
+    radiance arrives at point p. Geometry only, so a change of emission strength or colour is
+    ``T @ L`` and needs no rays.
 
-    ``scene``: an :class:`.embree_ff.EmbreeScene` of the same patches for shadow rays (None: no
-    shadows — only for scenes without occluders). ``samples`` shadow rays per point and emitter
-    patch. ``emitters``: patch ids to use (default: every patch with emission > 0).
+    ``scene``: anything with ``occluded(origins, directions, tfar)`` (Embree scene or NumPy BVH,
+    see :func:`.lights.occluder`) for shadow rays; None means no shadows. ``samples``: shadow
+    rays per point and emitter patch (stratified over the patch, seeded).
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
-    em = np.flatnonzero(patches.emission.max(axis=1) > 0) if emitters is None else np.asarray(emitters)
-    out = np.zeros((len(points), 3))
+    em = np.asarray(emitters, dtype=np.int64)
+    T = np.zeros((len(points), em.size), dtype=np.float32)
     if em.size == 0 or len(points) == 0:
-        return out
+        return T
     corners = patches.corners()[em]
-    L = patches.emission[em]
     scale = float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0
     eps = 1e-5 * scale
     rng = np.random.default_rng(seed)
     ys = _emitter_samples(corners, samples, rng)                       # (M, S, 3)
     S = ys.shape[1]
-    per_point = em.size * S
-    step = max(1, min(len(points), chunk_rays // max(per_point, 1), 4096))
+    step = max(1, min(len(points), chunk_rays // max(em.size * S, 1), 4096))
     for s in range(0, len(points), step):
         x = points[s:s + step]
         nx = normals[s:s + step]
         F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
         if scene is not None:
-            live = F > 0
             vis = np.zeros(F.shape)
-            pi, mi = np.nonzero(live)
+            pi, mi = np.nonzero(F > 0)
             if pi.size:
                 o = x[pi] + eps * nx[pi]                                  # (r, 3)
                 d = ys[mi] - o[:, None, :]                                 # (r, S, 3)
@@ -116,7 +115,17 @@ def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16
                                          np.full(pi.size * S, 1 - 1e-4))
                 vis[pi, mi] = 1 - blocked.reshape(-1, S).mean(axis=1)
             F = F * vis
-        out[s:s + step] = F @ L
+        T[s:s + step] = F
         if ticker is not None:
             ticker.tick(s + len(x), len(points))
-    return out
+    return T
+
+
+def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16, seed=0,
+                   emitters=None, ticker=None) -> np.ndarray:
+    """(P, 3) radiance arriving directly from the emissive patches at ``points`` with ``normals``
+    (``emitters`` default: every patch with emission > 0). See :func:`emitter_transport`."""
+    em = np.flatnonzero(patches.emission.max(axis=1) > 0) if emitters is None else np.asarray(emitters)
+    T = emitter_transport(patches, points, normals, em, scene=scene, samples=samples, seed=seed,
+                          ticker=ticker)
+    return T.astype(np.float64) @ patches.emission[em]

@@ -116,9 +116,11 @@ def _exact_direct_plan(patches: PatchSet, settings: BakeSettings, lights):
     emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
     if settings.direct == "hemicube" or (emitters.size == 0 and not lights):
         return None
+    from functools import lru_cache
+
     from .lights import occluder
 
-    occ = occluder(patches, "auto")
+    occ = lru_cache(maxsize=1)(lambda: occluder(patches, "auto"))  # built only if rays are cast
     # shadow rays per emitting *face*: split between the patches it was cut into
     samples = settings.direct_samples
     if emitters.size:
@@ -128,15 +130,28 @@ def _exact_direct_plan(patches: PatchSet, settings: BakeSettings, lights):
     return {"emitters": emitters, "scene": occ, "samples": samples}
 
 
-def _direct_at(patches, points, normals, plan, lights, light_options, cancelled):
-    """Radiance arriving directly (emitters and lamps) at points: (P, 3)."""
-    from .direct import emitter_direct
+def _direct_at(patches, points, normals, plan, lights, light_options, cancelled, cache, where):
+    """Radiance arriving directly (emitters and lamps) at points: (P, 3).
+
+    The emitters' part goes through a transport matrix that depends on geometry only, cached
+    with the form factors: a new emission strength or colour is a matrix product, no rays.
+    """
+    from .direct import emitter_transport
     from .progress import Ticker
 
     D = np.zeros((len(points), 3))
-    if plan["emitters"].size:
-        D += emitter_direct(patches, points, normals, scene=plan["scene"], samples=plan["samples"],
-                            emitters=plan["emitters"], ticker=Ticker(None, cancelled))
+    em = plan["emitters"]
+    if em.size:
+        key = None
+        if cache is not None:
+            key = cache_key(patches.geometry_key() + em.tobytes(), ("direct", where, plan["samples"]))
+        T = cache.get(key) if key else None
+        if T is None:
+            T = emitter_transport(patches, points, normals, em, scene=plan["scene"](),
+                                  samples=plan["samples"], ticker=Ticker(None, cancelled))
+            if key:
+                cache.put(key, T)
+        D += T.astype(np.float64) @ patches.emission[em]
     if lights:
         from .lights import direct_irradiance
 
@@ -224,10 +239,13 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         # direct light (emitters and lamps) arrives by the exact path; the solve carries only
         # reflected light R, and B = E + R (F would otherwise carry E a second time)
         say("direct", 0.0, f"exact direct light: {exact['emitters'].size} emitting patches, {len(lights)} lamps")
-        D_patch = _direct_at(patches, patches.centers, patches.normals, exact, lights, light_options, cancelled)
+        D_patch = _direct_at(patches, patches.centers, patches.normals, exact, lights, light_options,
+                             cancelled, cache, "centres")
         H = np.pi * D_patch
         S = source_term(patches, F, world=world) - patches.emission + patches.rho * D_patch
-        if type(exact["scene"]).__name__ == "NumpyOccluder":
+        from .embree_ff import embree_available
+
+        if not embree_available():
             notes.append("Embree is not available: shadow rays use the slower NumPy BVH")
     timings["direct"] = time.perf_counter() - t
     check()
@@ -251,7 +269,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         # direct light again at every vertex (sharp shadows, exact falloff); only the smoother
         # light reflected more than once is interpolated from the patches, as in the paper
         xv, nv, rho_v = vertex_frames(patches)
-        D_vert = _direct_at(patches, xv, nv, exact, lights, light_options, cancelled)
+        D_vert = _direct_at(patches, xv, nv, exact, lights, light_options, cancelled, cache, "vertices")
         rest = sol.B - patches.rho * D_patch
         Bv = vertex_radiosity(patches, patches.emission) + rho_v * D_vert + vertex_radiosity(patches, rest)
         sol.extra["reflected_only"] = True
