@@ -485,3 +485,83 @@ def test_invoke_without_window_runs_synchronously_and_clear_restores(addon, empt
     assert bpy.ops.object.radiosity_clear(all=True) == {"FINISHED"}
     assert write.copies_of([plane.name]) == [] and not plane.hide_get() and not plane.hide_render
     assert len(bpy.data.meshes) == 1
+
+
+class _FakeUI:
+    """The window-manager/workspace calls the modal loop makes, recorded (no window headless)."""
+
+    def __init__(self):
+        self.progress, self.status, self.timers_removed, self.ended = [], [], 0, False
+
+    def progress_update(self, v):
+        self.progress.append(v)
+
+    def progress_end(self):
+        self.ended = True
+
+    def event_timer_remove(self, timer):
+        self.timers_removed += 1
+
+    def status_text_set(self, text):
+        self.status.append(text)
+
+
+def _modal_run(addon, bpy, objs, cancel_first):
+    """Drive the operator's modal loop (worker thread + timer events) with a recording UI."""
+    import threading
+    import time
+    import types
+
+    ops = sub(addon, "blender.operators")
+    bake = sub(addon, "blender.bake")
+    cls = ops.OBJECT_OT_radiosity_bake
+    ui = _FakeUI()
+
+    class Ctx:
+        window_manager = ui
+        workspace = ui
+
+        def __getattr__(self, name):
+            return getattr(bpy.context, name)
+
+    op = types.SimpleNamespace(reports=[])
+    op.report = lambda level, msg: op.reports.append((level, msg))
+    for name in ("_work", "_progress", "_finish", "_cleanup", "_report_done"):
+        setattr(op, name, types.MethodType(getattr(cls, name), op))
+    op._job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeOptions(bake.BakeSettings(**BAKE)))
+    op._cancel = threading.Event()
+    op._state = {"stage": "patches", "fraction": 0.0, "message": "", "error": None, "cancelled": False}
+    op._timer = object()
+    op._thread = threading.Thread(target=op._work)
+    if cancel_first:
+        esc = types.SimpleNamespace(type="ESC", value="PRESS")
+        assert cls.modal(op, Ctx(), esc) == {"RUNNING_MODAL"}
+    op._thread.start()
+    timer = types.SimpleNamespace(type="TIMER", value="NOTHING")
+    for _ in range(6000):
+        ret = cls.modal(op, Ctx(), timer)
+        if ret != {"RUNNING_MODAL"}:
+            break
+        time.sleep(0.01)
+    return ret, op, ui
+
+
+def test_modal_loop_progress_finish_and_esc_cancel(addon, empty_scene):
+    bpy = empty_scene
+    objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
+    write = sub(addon, "blender.write")
+    n_obj = len(bpy.data.objects)
+    # Esc: the worker stops, nothing is written, the UI is cleaned up
+    ret, op, ui = _modal_run(addon, bpy, objs, cancel_first=True)
+    assert ret == {"CANCELLED"}
+    assert len(bpy.data.objects) == n_obj and write.copies_of([o.name for o in objs]) == []
+    assert ui.timers_removed == 1 and ui.ended and ui.status[-1] is None
+    assert any("cancelled" in m for _, m in op.reports)
+    # to the end: progress rises to the write stage, the result is written on the main thread
+    ret, op, ui = _modal_run(addon, bpy, objs, cancel_first=False)
+    assert ret == {"FINISHED"}
+    assert len(write.copies_of([o.name for o in objs])) == 8
+    assert ui.progress == sorted(ui.progress) and ui.progress[-1] >= 850
+    assert any(s and s.startswith("Radiosity: form factors") for s in ui.status)
+    assert ui.timers_removed == 1 and ui.ended and ui.status[-1] is None
+    assert any("patches" in m for lvl, m in op.reports if lvl == {"INFO"})
