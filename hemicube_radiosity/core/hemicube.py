@@ -1,0 +1,518 @@
+"""Form factors by the hemi-cube (Cohen & Greenberg 1985), rasterised in NumPy.
+
+For every receiver patch i a hemi-cube is put at the patch centre, moved a tiny distance along
+the normal (``EYE_OFFSET`` times the scene's bounding-box diagonal) so that the patch and its
+coplanar neighbours lie below the horizon.  All patches are transformed into the receiver frame
+(normal = +Z), culled when they lie wholly below the horizon, and projected onto the five faces:
+
+* a patch whose corners all fall in one face's 90-degree frustum is projected directly;
+* the others are clipped (Sutherland-Hodgman, vectorised over polygons) against the frustum of
+  every face they may touch, the near plane and the horizon.
+
+The projected convex polygons are rasterised as pixel spans: per polygon and pixel row, the
+edge functions bound the run of pixel centres inside, and ``np.repeat`` expands the runs.  The rasterisation is watertight: every corner is
+transformed once per receiver (patches sharing a corner share its projection), a clipped edge is
+cut from its inside end, and an edge function is evaluated in one canonical direction and negated
+for the polygon that runs the other way, so a pixel centre on a shared edge is covered by both
+patches (the depth test picks one) and never by neither.  Each fragment carries the reciprocal depth ``1/w`` of
+the patch plane at that pixel (exact for planar patches, interpolated per pixel), and the item
+buffer keeps the nearest fragment per pixel (one ``np.minimum.at`` on int64 keys packing depth
+and patch id).  Summing the delta form factors (:mod:`deltaff`) per visible patch gives a row
+of F (eq. 7).  A patch seen from behind writes its depth (it occludes) but adds to neither F nor
+the sky; a pixel that sees nothing adds its weight to ``sky[i]``.
+
+All five faces share one item buffer of width R: the top face's R rows, then the R/2 rows of the
+side faces +X, -X, +Y and -Y (the pixel order of :func:`pixel_weights`).  Several receivers are
+processed per NumPy call (their buffers stacked), which amortises the interpreter overhead.
+
+Frames match :mod:`embree_ff`: the tangent u is the normal crossed into the world axis least
+aligned with it, and ``rotate_seed`` turns each receiver's frame about its normal by an angle
+drawn for all patches at once (so a row does not depend on which receivers are asked for).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .deltaff import delta_form_factors
+from .patches import PatchSet
+from .progress import Ticker
+from .sparse import CSR
+
+__all__ = ["hemicube_form_factors", "receiver_frames", "pixel_weights"]
+
+#: Eye offset along the receiver normal, as a fraction of the scene's bounding-box diagonal.
+EYE_OFFSET = 1e-5
+#: Near-plane distance, as a fraction of the scene's bounding-box diagonal.
+NEAR = 1e-7
+#: Span ends this close (in pixels) to a pixel centre are decided by the edge inequalities.
+SNAP = 1e-3
+#: Bound on the fragments expanded at once in the rasteriser (about 40 bytes each).
+FRAGMENTS_PER_CHUNK = 1 << 21
+#: Bound on receivers x patches transformed per batch (about 100 bytes each).
+PATCHES_PER_BATCH = 1 << 18
+#: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys).
+PIXELS_PER_BATCH = 1 << 22
+
+# Face f maps receiver-frame (x, y, z) to face coordinates (u, v, w) = _FACE_AXES[f] @ (x, y, z):
+# u runs along the face (table column), v up the face (table row), w is the depth along the
+# face axis.  Order: top (+Z), +X, -X, +Y, -Y.
+_FACE_AXES = np.array([
+    [[1, 0, 0], [0, 1, 0], [0, 0, 1]],
+    [[0, 1, 0], [0, 0, 1], [1, 0, 0]],
+    [[0, 1, 0], [0, 0, 1], [-1, 0, 0]],
+    [[1, 0, 0], [0, 0, 1], [0, 1, 0]],
+    [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
+], dtype=np.float32)
+# v of the face's bottom pixel edge: the top face spans v in [-1, 1], a side face v in [0, 1].
+_FACE_V0 = np.array([-1.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
+_EMPTY = np.iinfo(np.int64).max
+_ID_MASK = np.int64(0xFFFFFFFF)
+
+
+def pixel_weights(resolution):
+    """Delta form factors of all hemi-cube pixels in item-buffer order.
+
+    Parameters
+    ----------
+    resolution : int
+        Pixels across the top face (even).
+
+    Returns
+    -------
+    ndarray, shape (3 R^2,), float64
+        The top table row by row, then the side table four times (faces +X, -X, +Y, -Y).
+    """
+    top, side = delta_form_factors(resolution)
+    return np.concatenate([top.ravel()] + [side.ravel()] * 4)
+
+
+def receiver_frames(normals, rotate_seed=None):
+    """Orthonormal hemi-cube frames, one per patch.
+
+    Parameters
+    ----------
+    normals : (N, 3) array_like
+        Unit patch normals.
+    rotate_seed : int or None
+        None keeps the fixed frame; an int turns every frame about its normal by an angle drawn
+        uniformly from ``numpy.random.default_rng(rotate_seed)`` (N angles, patch order).
+
+    Returns
+    -------
+    ndarray, shape (N, 3, 3), float64
+        Rows (u, v, n): right-handed, ``u`` is the normal crossed into the world axis least
+        aligned with it (then turned).  ``frames[i] @ d`` expresses a world vector in frame i.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    helper = np.zeros_like(n)
+    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(n, u)
+    if rotate_seed is not None:
+        angles = np.random.default_rng(rotate_seed).uniform(0.0, 2.0 * np.pi, len(n))
+        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        u, v = ca * u + sa * v, -sa * u + ca * v
+    return np.stack([u, v, n], axis=1)
+
+
+class _Scene:
+    """What every batch needs: patch geometry centred on the scene, in float32, and the constants.
+
+    verts (V, 3) float32, centred; corner_ids (N, 4) int64 (triangles repeat corner 2);
+    normals (N, 3) float64; plane (N,) float64 ``n . c`` (centred); eyes (N, 3) float64 (centred,
+    offset along the normal); near (float32); weights (3 R^2,) pixel delta form factors.
+    """
+
+    def __init__(self, patches, resolution):
+        verts = np.asarray(patches.verts, dtype=np.float64)
+        lo, hi = verts.min(axis=0), verts.max(axis=0)
+        origin = 0.5 * (lo + hi)
+        scale = float(np.linalg.norm(hi - lo)) or 1.0
+        self.n = len(patches)
+        self.resolution = resolution
+        self.verts = (verts - origin).astype(np.float32)
+        polys = np.asarray(patches.polys)
+        self.corner_ids = np.where(polys < 0, polys[:, 2:3], polys)
+        self.normals = np.asarray(patches.normals, dtype=np.float64)
+        self.plane = np.einsum("ij,ij->i", self.normals, patches.centers - origin)
+        self.eyes = patches.centers - origin + EYE_OFFSET * scale * self.normals
+        self.near = np.float32(NEAR * scale)
+        self.weights = pixel_weights(resolution)
+
+
+def _to_receiver_frames(scene, frames, eyes):
+    """Corners of every patch in every receiver frame of a batch.
+
+    Each vertex is transformed once, so patches sharing a corner get bit-identical coordinates.
+    Returns x, y, z, each (B, N, 4) float32.
+    """
+    B = len(frames)
+    rows = frames.reshape(B * 3, 3).astype(np.float32)
+    local = rows @ scene.verts.T                                     # (3B, V)
+    local -= np.einsum("bij,bj->bi", frames, eyes).reshape(B * 3, 1).astype(np.float32)
+    local = local[:, scene.corner_ids].reshape(B, 3, scene.n, 4)
+    return local[:, 0], local[:, 1], local[:, 2]
+
+
+def _vertex_faces(x, y, z, near):
+    """Face (0..4) whose frustum holds each vertex; -1 below the horizon or at the eye."""
+    ax, ay = np.abs(x), np.abs(y)
+    side = np.where(ax >= ay, np.where(x >= 0, 1, 2), np.where(y >= 0, 3, 4)).astype(np.int8)
+    m = np.maximum(ax, ay)
+    face = np.where(z >= m, np.int8(0), side)
+    face[(z < 0) | (np.maximum(z, m) < near)] = -1
+    return face
+
+
+def _face_coords(faces, x, y, z):
+    """(M, K, 3) face coordinates of vertices (M, K) given in the receiver frame, per face (M,)."""
+    A = _FACE_AXES[faces]                                            # (M, 3, 3)
+    p = np.stack([x, y, z], axis=-1)                                 # (M, K, 3)
+    return np.einsum("mij,mkj->mki", A, p)
+
+
+def _face_planes(uvw, faces, near):
+    """Signed distances (..., K, 5) to the clip planes of each face; inside is >= 0.
+
+    Planes: w - u, w + u, w - v, v - v0 w (bottom: -w on top, the horizon on a side face),
+    w - near.
+    """
+    u, v, w = uvw[..., 0], uvw[..., 1], uvw[..., 2]
+    v0 = _FACE_V0[faces][..., None]
+    return np.stack([w - u, w + u, w - v, v - v0 * w, w - near], axis=-1)
+
+
+def _clip_convex(poly, dist):
+    """Clip convex polygons against one plane each (Sutherland-Hodgman, all polygons at once).
+
+    Parameters
+    ----------
+    poly : (M, K, 3) float
+        Vertices in order; shorter polygons repeat their last vertex.
+    dist : (M, K) float
+        Signed distance of every vertex to the plane; inside is >= 0.
+
+    Returns
+    -------
+    poly : (M, K', 3)
+        Clipped polygons, padded by repeating the last vertex (K' <= K + 1 for convex input).
+    count : (M,) int
+        Vertices kept (0 when the polygon lies wholly outside).
+    """
+    nxt = np.roll(poly, -1, axis=1)
+    dn = np.roll(dist, -1, axis=1)
+    inside = dist >= 0
+    cross = inside != (dn >= 0)
+    # cut every edge from its inside end, so neighbours sharing the edge get the same point
+    p_in = np.where(inside[..., None], poly, nxt)
+    p_out = np.where(inside[..., None], nxt, poly)
+    d_in = np.where(inside, dist, dn)
+    d_out = np.where(inside, dn, dist)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(cross, d_in / (d_in - d_out), 0)
+    hit = p_in + t[..., None] * (p_out - p_in)
+    out = np.stack([poly, hit], axis=2).reshape(len(poly), -1, 3)
+    keep = np.stack([inside, cross], axis=2).reshape(len(poly), -1)
+    count = keep.sum(axis=1)
+    order = np.argsort(~keep, axis=1, kind="stable")
+    width = max(int(count.max(initial=0)), 1)
+    pad = np.minimum(np.arange(width), np.maximum(count, 1)[:, None] - 1)
+    take = np.take_along_axis(order, pad, axis=1)
+    return np.take_along_axis(out, take[..., None], axis=1), count
+
+
+def _clip_to_faces(uvw, faces, near):
+    """Clip polygons (M, 4, 3) in face coordinates to their face's frustum, as triangle fans.
+
+    Successive planes can leave vertices a rounding error apart, which makes the clipped polygon
+    slightly non-convex; its fan triangles are convex whatever the noise, so they are what is
+    rasterised.  Returns triangles (T, 3, 3) and the index (T,) of the input polygon of each;
+    polygons clipped away entirely leave none.
+    """
+    poly = uvw
+    alive = np.arange(len(uvw))
+    for p in range(5):
+        poly, count = _clip_convex(poly, _face_planes(poly, faces[alive], near)[..., p])
+        ok = count >= 3
+        poly, alive, count = poly[ok], alive[ok], count[ok]
+    m, k = np.nonzero(np.arange(1, poly.shape[1] - 1) < (count[:, None] - 1))
+    k = k + 1
+    tris = np.stack([poly[m, 0], poly[m, k], poly[m, k + 1]], axis=1)
+    return tris, alive[m]
+
+
+def _depth_planes(scene, frames, eyes, bi, ni, faces):
+    """Reciprocal depth ``1/w`` of each patch plane as an affine function of pixel coordinates.
+
+    For pixel coordinates (px, py) on face f (the face spans [0, R] x [0, R or R/2]),
+    ``1/w = a px + b py + c`` with (a, b, c) per instance.  Also returns whether the receiver
+    sees the patch's front, and whether it sees the patch at all (not edge-on: the eye lies
+    farther than the near distance from the patch plane).
+    """
+    R = scene.resolution
+    nrm = scene.normals[ni]
+    d = scene.plane[ni] - np.einsum("mj,mj->m", nrm, eyes[bi])      # n . (c - eye); < 0: front
+    seen = np.abs(d) > scene.near
+    d = np.where(seen, d, 1.0)
+    n_face = np.einsum("mij,mjk,mk->mi", _FACE_AXES[faces].astype(np.float64), frames[bi], nrm)
+    s = 2.0 / (R * d)
+    a = n_face[:, 0] * s
+    b = n_face[:, 1] * s
+    c = (n_face[:, 2] - n_face[:, 0] + _FACE_V0[faces] * n_face[:, 1]) / d
+    return np.stack([a, b, c], axis=1).astype(np.float32), d < 0, seen
+
+
+def _project(uvw, faces, R):
+    """Pixel coordinates (px, py) of face-coordinate vertices (M, K, 3) on their face."""
+    half = np.float32(R / 2)
+    w = uvw[..., 2]
+    px = (uvw[..., 0] / w + 1) * half
+    py = (uvw[..., 1] / w - _FACE_V0[faces][:, None]) * half
+    return px.astype(np.float32), py.astype(np.float32)
+
+
+def _edge_functions(px, py):
+    """Edge functions of convex polygons (M, K) in either winding.
+
+    Returns (a, b, c), each (M, K) float32: ``a X + b Y + c >= 0`` for a point (X, Y) on the
+    inner side of edge k (or on it).  Each edge's coefficients are computed from its endpoints
+    in a canonical order (lexicographic) and negated as the polygon's winding needs, so two
+    polygons sharing an edge evaluate exactly opposite values.  Polygons of zero area get
+    ``c = -1`` (they cover nothing).
+    """
+    nx, ny = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
+    swap = (nx < px) | ((nx == px) & (ny < py))
+    sx, sy = np.where(swap, nx, px), np.where(swap, ny, py)
+    ex, ey = np.where(swap, px, nx) - sx, np.where(swap, py, ny) - sy
+    area2 = np.sum(px * ny - nx * py, axis=1, keepdims=True)
+    sign = (np.sign(area2) * np.where(swap, -1, 1)).astype(np.float32)
+    a = -ey * sign
+    b = ex * sign
+    c = (ey * sx - ex * sy) * sign
+    c[area2[:, 0] == 0] = -1
+    return a, b, c
+
+
+def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
+    """Write polygons into the item buffer, keeping the nearest fragment per pixel.
+
+    Parameters
+    ----------
+    px, py : (M, K) float32
+        Convex polygons in pixel coordinates of their face, padded by repeating a vertex.
+    face_rows : (M,) int
+        Rows of each polygon's face (R or R/2); columns are R for every face.
+    pixel_base : (M,) int64
+        Index in ``keys`` of pixel (0, 0) of the polygon's face for its receiver.
+    depth : (M, 3) float32
+        Reciprocal depth ``a px + b py + c`` per polygon.
+    item : (M,) int64
+        Id written to the item buffer.
+    keys : (P,) int64
+        Item buffer, updated in place: ``(depth bits << 32) | item``, smaller is nearer.
+    R : int
+        Pixels across a face.
+    """
+    edges = _edge_functions(px, py)
+    j0 = np.maximum(np.ceil(py.min(axis=1) - 0.5), 0).astype(np.int64)
+    j1 = np.minimum(np.floor(py.max(axis=1) - 0.5), face_rows - 1).astype(np.int64)
+    rows = np.maximum(j1 - j0 + 1, 0)
+    width = np.clip(np.ceil(px.max(axis=1)) - np.floor(px.min(axis=1)), 1, R).astype(np.int64)
+    keep = np.flatnonzero(rows)
+    ends = np.cumsum(rows[keep] * width[keep])   # bound on the fragments of each polygon
+    lo = 0
+    while lo < keep.size:
+        hi = int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + FRAGMENTS_PER_CHUNK, "right"))
+        hi = max(hi, lo + 1)
+        sel = keep[lo:hi]
+        _draw_spans(*_spans(sel, rows[sel], j0, edges, R), pixel_base, depth, item, keys, R)
+        lo = hi
+
+
+def _spans(sel, rows, j0, edges, R):
+    """Pixel spans covered by polygons ``sel``, one per (polygon, pixel row).
+
+    Pixel (i, j) is covered when its centre satisfies every edge function.  On row j each edge
+    ``a X + b Y + c >= 0`` bounds X from one side at ``-(b Y + c) / a``; a polygon sharing the
+    edge computes the same bound with both signs flipped, so the two spans meet without a gap.
+    When a bound falls within ``SNAP`` of a pixel centre, that pixel is decided by the edge
+    inequalities themselves (``a X >= -(b Y + c)``, exactly complementary between neighbours),
+    not by the rounded quotient, so a centre lying on an edge is covered as a point test would.
+
+    Returns (poly, j, i_lo, n): polygon, row, first column and length (> 0) of every span.
+    """
+    a, b, c = edges
+    poly = np.repeat(sel, rows)
+    j = j0[poly] + np.arange(poly.size) - np.repeat(np.cumsum(rows) - rows, rows)
+    Y = j.astype(np.float32)[:, None] + np.float32(0.5)
+    A = a[poly]
+    rhs = -(b[poly] * Y + c[poly])                                   # need A X >= rhs
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = rhs / A
+    lo = np.where(A > 0, bound, -np.inf).max(axis=1)
+    hi = np.where(A < 0, bound, np.inf).min(axis=1)
+    level_ok = np.all((A != 0) | (rhs <= 0), axis=1)               # edges parallel to the rows
+    i_lo = np.maximum(_snap_to_pixels(lo, A, rhs, Y, first=True), 0)
+    i_hi = np.minimum(_snap_to_pixels(hi, A, rhs, Y, first=False), R - 1)
+    n = np.where(level_ok & (i_hi >= i_lo), i_hi - i_lo + 1, 0).astype(np.int64)
+    ok = n > 0
+    return poly[ok], j[ok], i_lo[ok].astype(np.int64), n[ok]
+
+
+def _snap_to_pixels(bound, A, rhs, Y, first):
+    """First (or last) pixel column whose centre lies inside, given the span bound on X.
+
+    Columns whose centres are within ``SNAP`` of the bound are tested with the inequalities
+    ``A X >= rhs`` (all edges) instead of trusting the quotient's rounding.
+    """
+    t = bound - np.float32(0.5)
+    col = np.ceil(t) if first else np.floor(t)
+    near = np.round(t)
+    with np.errstate(invalid="ignore"):  # unbounded side: inf - inf
+        check = np.flatnonzero(np.abs(t - near) < SNAP)
+    if check.size:
+        X = near[check] + np.float32(0.5)
+        inside = np.all(A[check] * X[:, None] >= rhs[check], axis=1)
+        col[check] = np.where(inside, near[check], near[check] + (1 if first else -1))
+    return col
+
+
+def _draw_spans(poly, j, i_lo, n, pixel_base, depth, item, keys, R):
+    """Depth-test the pixels of the spans into the item buffer ``keys`` (see :func:`_rasterise`)."""
+    dq = depth[poly, 0]
+    q0 = dq * (i_lo.astype(np.float32) + np.float32(0.5)) + depth[poly, 1] * (
+        j.astype(np.float32) + np.float32(0.5)) + depth[poly, 2]
+    off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    q = np.repeat(q0, n) + np.repeat(dq, n) * off.astype(np.float32)
+    qbits = np.maximum(q, np.float32(1e-30)).view(np.int32).astype(np.int64)
+    frag = ((np.int64(0x7F800000) - qbits) << 32) | np.repeat(item[poly], n)
+    np.minimum.at(keys, np.repeat(pixel_base[poly] + j * R + i_lo, n) + off, frag)
+
+
+def _batch_item_buffer(scene, recv, frames, eyes):
+    """Item buffers of a batch of receivers: keys (B, 3 R^2) int64 (``_EMPTY`` where nothing)."""
+    R = scene.resolution
+    B, N = len(recv), scene.n
+    P = 3 * R * R
+    x, y, z = _to_receiver_frames(scene, frames[recv], eyes[recv])
+    vface = _vertex_faces(x, y, z, scene.near)
+    visible = ~np.all(z < 0, axis=2)
+    visible[np.arange(B), recv] = False
+    f0 = vface[..., 0]
+    whole = (f0 >= 0) & np.all(vface == f0[..., None], axis=2)
+    face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
+    face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
+    keys = np.full(B * P, _EMPTY, dtype=np.int64)
+
+    def draw(bi, ni, faces, uvw):
+        plane, front, seen = _depth_planes(scene, frames, eyes, recv[bi], ni, faces)
+        item = np.where(front, ni, N).astype(np.int64)
+        px, py = _project(uvw[seen], faces[seen], R)
+        _rasterise(px, py, face_rows[faces[seen]], (bi * P + face_base[faces])[seen], plane[seen],
+                   item[seen], keys, R)
+
+    # patches wholly inside one face's frustum: project as they are
+    bi, ni = np.nonzero(visible & whole)
+    faces = f0[bi, ni]
+    draw(bi, ni, faces, _face_coords(faces, x[bi, ni], y[bi, ni], z[bi, ni]))
+    # the rest: clip against every face whose frustum they may reach
+    bi, ni = np.nonzero(visible & ~whole)
+    if bi.size:
+        xs, ys, zs = x[bi, ni], y[bi, ni], z[bi, ni]
+        all_faces = np.broadcast_to(np.arange(5), (bi.size, 5))
+        uvw = np.stack([_face_coords(all_faces[:, f], xs, ys, zs) for f in range(5)], axis=1)
+        outside = np.any(np.all(_face_planes(uvw, all_faces, scene.near) < 0, axis=2), axis=2)
+        si, fi = np.nonzero(~outside)
+        poly, src = _clip_to_faces(uvw[si, fi], fi, scene.near)
+        draw(bi[si[src]], ni[si[src]], fi[src], poly)
+    return keys.reshape(B, P)
+
+
+def _resolve(keys, weights, n):
+    """Sum pixel weights per visible front-facing patch.
+
+    Returns F rows (B, n) float64 and sky (B,) float64.
+    """
+    B = len(keys)
+    empty = keys == _EMPTY
+    ids = np.where(empty, n, keys & _ID_MASK)
+    sky = empty.astype(np.float64) @ weights
+    bins = (np.arange(B)[:, None] * (n + 1) + ids).ravel()
+    rows = np.bincount(bins, weights=np.tile(weights, B), minlength=B * (n + 1))
+    return rows.reshape(B, n + 1)[:, :n], sky
+
+
+def _receiver_ids(n, receivers):
+    """Sorted unique receiver ids (all patches when None); ValueError when out of range."""
+    if receivers is None:
+        return np.arange(n, dtype=np.int64)
+    r = np.unique(np.asarray(receivers, dtype=np.int64).reshape(-1))
+    if r.size and (r[0] < 0 or r[-1] >= n):
+        raise ValueError(f"receiver ids must be in [0, {n}), got {r[0]}..{r[-1]}")
+    return r
+
+
+def _batch_size(n, resolution, requested):
+    if requested is not None:
+        if int(requested) < 1:
+            raise ValueError(f"batch must be >= 1, got {requested}")
+        return int(requested)
+    return max(1, min(PATCHES_PER_BATCH // max(n, 1), PIXELS_PER_BATCH // (3 * resolution ** 2)))
+
+
+def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None, receivers=None,
+                          progress=None, cancelled=None, batch=None) -> CSR:
+    """Form-factor matrix F by the hemi-cube, one rasterised hemi-cube per receiver.
+
+    Parameters
+    ----------
+    patches : PatchSet
+        Convex planar quads and triangles (as :func:`patches.build_patches` makes them).
+    resolution : int
+        Pixels across the top face (even); side faces have ``resolution // 2`` rows.
+    rotate_seed : int or None
+        None: fixed frames; an int turns each receiver's hemi-cube about its normal by a random
+        angle (reproducible, see :func:`receiver_frames`).
+    receivers : array_like of int or None
+        Patch ids whose rows are computed; the other rows stay empty and their sky is 0.
+    progress : callable(float) or None
+        Called now and then with the fraction done.
+    cancelled : callable() -> bool or None
+        Polled between batches; when it returns True, :class:`progress.Cancelled` is raised.
+    batch : int or None
+        Receivers per NumPy pass; None picks one that bounds memory (about 100 MB).
+
+    Returns
+    -------
+    CSR
+        (N, N) float32 with ``F_ii = 0``, ``meta = {'method': 'hemicube', 'resolution': R,
+        'rotate_seed': rotate_seed}`` and ``sky`` (N,) float32, the fraction of each receiver's
+        hemisphere (cosine-weighted) that sees no surface.
+    """
+    R = int(resolution)
+    delta_form_factors(R)  # validates the resolution
+    n = len(patches)
+    recv = _receiver_ids(n, receivers)
+    scene = _Scene(patches, R)
+    frames = receiver_frames(patches.normals, rotate_seed)
+    B = _batch_size(n, R, batch)
+    ticker = Ticker(progress, cancelled)
+    ticker.tick(0, recv.size, force=True)
+    sky = np.zeros(n, dtype=np.float32)
+    counts = np.zeros(n + 1, dtype=np.int64)
+    cols_l, vals_l = [], []
+    for lo in range(0, recv.size, B):
+        ids = recv[lo:lo + B]
+        keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
+        rows, sky_b = _resolve(keys, scene.weights, n)
+        r, c = np.nonzero(rows)
+        counts[ids + 1] = np.bincount(r, minlength=ids.size)
+        cols_l.append(c.astype(np.int32))
+        vals_l.append(rows[r, c].astype(np.float32))
+        sky[ids] = sky_b
+        ticker.tick(lo + ids.size, recv.size)
+    indices = np.concatenate(cols_l) if cols_l else np.zeros(0, np.int32)
+    data = np.concatenate(vals_l) if vals_l else np.zeros(0, np.float32)
+    meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
+    return CSR(np.cumsum(counts), indices, data, (n, n), meta, sky)
