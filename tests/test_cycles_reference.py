@@ -62,7 +62,7 @@ def test_point_light_intensity_is_power_over_4pi():
     d2 = (d * d).sum(1)
     want = RHO / math.pi * 100.0 / (4 * math.pi) * (1.0 / np.sqrt(d2)) / d2
     np.testing.assert_allclose(got, want, rtol=1e-3)
-    # the falsifiable part on its own: 4x the distance squared, a quarter... times the cosine
+    # the brightest corner is the one nearest the lamp (inverse square beats nothing else here)
     i0 = np.argmin(d2)
     assert got.max() == pytest.approx(got[i0])
 

@@ -18,7 +18,6 @@ Usage: ``.venv/bin/python tools/lighting_pictures.py [case ...] [--size 256] [--
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import sys
 
