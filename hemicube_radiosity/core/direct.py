@@ -37,13 +37,16 @@ def polygon_form_factors(points, normals, polys, poly_normals=None):
                             np.broadcast_to(polys[None], (P,) + polys.shape).reshape((P * M,) + polys.shape[1:]))
     F = F.reshape(P, M)
     if poly_normals is not None:
+        # in front of the plane by more than round-off: a point on the emitter's own plane (a
+        # neighbour on the same wall) must get 0, not Lambert's in-plane 1/2 or 1
         centre = polys.mean(axis=1)
-        front = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float)) > 0
-        F = np.where(front, F, 0.0)
+        size = np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1)
+        h = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float))
+        F = np.where(h > 1e-9 * np.maximum(size, 1e-300)[None, :], F, 0.0)
     return F
 
 
-def vertex_frames(patches: PatchSet, inset=1e-3):
+def vertex_frames(patches: PatchSet, inset=1e-2):
     """Per patch vertex: an evaluation point, unit normal and reflectivity.
 
     Normal and reflectivity are the means over the patches around the vertex. The point is the
@@ -98,7 +101,9 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     scale = float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0
     eps = 1e-5 * scale
     rng = np.random.default_rng(seed)
-    ys = _emitter_samples(corners, samples, rng)                       # (M, S, 3)
+    # sample points lifted off the emitter a hair: a shadow ray that ends exactly on a surface
+    # would graze it at float32 precision (a wall lighting the floor at their shared edge)
+    ys = _emitter_samples(corners, samples, rng) + eps * patches.normals[em][:, None, :]  # (M, S, 3)
     S = ys.shape[1]
     step = max(1, min(len(points), chunk_rays // max(em.size * S, 1), 4096))
     for s in range(0, len(points), step):
