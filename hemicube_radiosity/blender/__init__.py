@@ -46,3 +46,6 @@ def unregister():
     for cls in reversed(_classes):
         bpy.utils.unregister_class(cls)
     props.unregister()
+    from .bake import clear_session_cache
+
+    clear_session_cache()  # cached form factors go with the add-on

@@ -14,11 +14,13 @@ from dataclasses import dataclass, field
 
 import bpy
 
+from ..core.cache import FormFactorCache
 from ..core.patches import PatchError
 from ..core.pipeline import BakeSettings, bake
 from . import read, write
 
 __all__ = ["BakeOptions", "BakeJob", "BakeError", "StagePrinter", "resolve_objects", "other_meshes",
+           "session_cache", "clear_session_cache",
            "METHOD_ITEMS", "SOLVER_ITEMS", "OUTPUT_ITEMS"]
 
 METHOD_ITEMS = (
@@ -55,6 +57,7 @@ class BakeOptions:
     exposure: float = 0.0               # stops: values written are radiance * 2**exposure
     include_others: bool = True         # other visible meshes occlude/emit, are not written
     use_lights: bool = True             # lamps and the world light the scene (as in Cycles)
+    cache_dir: str = ""                 # also keep form factors on disk here ("" = memory only)
 
     @classmethod
     def from_props(cls, p):
@@ -72,7 +75,24 @@ class BakeOptions:
             s.direct = p.direct.lower()
             s.direct_samples = int(p.direct_samples)
         return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
-                   bool(p.use_lights))
+                   bool(p.use_lights), bpy.path.abspath(p.cache_dir) if p.cache_dir else "")
+
+
+_SESSION_CACHE = {}
+
+
+def session_cache(directory=""):
+    """The add-on's form-factor cache for this Blender session (one per cache folder; "" keeps
+    them in memory only). A relight (materials, emission, lamps, world) reuses form factors and
+    the emitters' direct-light transport; a geometry change recomputes them."""
+    cache = _SESSION_CACHE.get(directory)
+    if cache is None:
+        cache = _SESSION_CACHE[directory] = FormFactorCache(directory or None)
+    return cache
+
+
+def clear_session_cache():
+    _SESSION_CACHE.clear()
 
 
 def _source_of(ob):
@@ -153,6 +173,7 @@ class BakeJob:
     def __init__(self, scene_input, options):
         self.scene_input = scene_input
         self.options = options
+        self.cache = None
         self.result = None
         self.written = []
         self.notes = list(scene_input.notes())
@@ -189,7 +210,7 @@ class BakeJob:
             scene_input.lights, scene_input.world = tuple(lights), world
         job = cls(scene_input, options)
         job.notes += light_notes
-        job.cache = cache
+        job.cache = cache if cache is not None else session_cache(options.cache_dir)
         job.timings["read"] = time.perf_counter() - t
         return job
 
@@ -198,7 +219,7 @@ class BakeJob:
         try:
             self.result = bake(self.scene_input.meshes, self.options.settings, progress=progress,
                                cancelled=cancelled, lights=self.scene_input.lights,
-                               world=self.scene_input.world, cache=getattr(self, "cache", None))
+                               world=self.scene_input.world, cache=self.cache)
         except PatchError as ex:
             raise BakeError(str(ex)) from None
         self.notes += list(self.result.notes)

@@ -31,6 +31,7 @@ def draw_settings(layout, context):
     col.prop(s, "exposure")
     col.prop(s, "use_lights")
     col.prop(s, "include_others")
+    col.prop(s, "cache_dir")
     layout.separator()
     row = layout.row(align=True)
     row.scale_y = 1.4

@@ -44,6 +44,10 @@ def setting_annotations():
         "use_lights": BoolProperty(
             name="Lamps and World", default=True,
             description="Light objects and the world's background light the scene, in Cycles' units"),
+        "cache_dir": StringProperty(
+            name="Cache Folder", default="", subtype="DIR_PATH",
+            description="Form factors depend on geometry only and are kept for this session; "
+                        "with a folder they are also saved there and reused across sessions"),
         "include_others": BoolProperty(
             name="Other Visible Meshes", default=True,
             description="Visible meshes that are not selected take part as occluders and emitters "
