@@ -528,6 +528,7 @@ def _modal_run(addon, bpy, objs, cancel_first):
     op.report = lambda level, msg: op.reports.append((level, msg))
     for name in ("_work", "_progress", "_finish", "_cleanup", "_report_done"):
         setattr(op, name, types.MethodType(getattr(cls, name), op))
+    bake.clear_session_cache()  # earlier tests baked this geometry: make the form factors run
     op._job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeOptions(bake.BakeSettings(**BAKE)))
     op._cancel = threading.Event()
     op._state = {"stage": "patches", "fraction": 0.0, "message": "", "error": None, "cancelled": False}
