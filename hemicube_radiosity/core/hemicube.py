@@ -63,6 +63,9 @@ _FACE_AXES = np.array([
     [[1, 0, 0], [0, 0, 1], [0, 1, 0]],
     [[1, 0, 0], [0, 0, 1], [0, -1, 0]],
 ], dtype=np.float32)
+# the same maps as a permutation and signs: (u, v, w) = sign * (x, y, z)[perm]
+_FACE_PERM = np.abs(_FACE_AXES).argmax(axis=2)
+_FACE_SIGN = np.take_along_axis(_FACE_AXES, _FACE_PERM[..., None], axis=2)[..., 0]
 # v of the face's bottom pixel edge: the top face spans v in [-1, 1], a side face v in [0, 1].
 _FACE_V0 = np.array([-1.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
 _EMPTY = np.iinfo(np.int64).max
@@ -167,9 +170,8 @@ def _vertex_faces(x, y, z, near):
 
 def _face_coords(faces, x, y, z):
     """(M, K, 3) face coordinates of vertices (M, K) given in the receiver frame, per face (M,)."""
-    A = _FACE_AXES[faces]                                            # (M, 3, 3)
     p = np.stack([x, y, z], axis=-1)                                 # (M, K, 3)
-    return np.einsum("mij,mkj->mki", A, p)
+    return np.take_along_axis(p, _FACE_PERM[faces][:, None, :], axis=2) * _FACE_SIGN[faces][:, None, :]
 
 
 def _face_planes(uvw, faces, near):
@@ -255,7 +257,8 @@ def _depth_planes(scene, frames, eyes, bi, ni, faces):
     d = scene.plane[ni] - np.einsum("mj,mj->m", nrm, eyes[bi])      # n . (c - eye); < 0: front
     seen = np.abs(d) > scene.near
     d = np.where(seen, d, 1.0)
-    n_face = np.einsum("mij,mjk,mk->mi", _FACE_AXES[faces].astype(np.float64), frames[bi], nrm)
+    n_local = np.einsum("mjk,mk->mj", frames[bi], nrm)
+    n_face = np.take_along_axis(n_local, _FACE_PERM[faces], axis=1) * _FACE_SIGN[faces]
     s = 2.0 / (R * d)
     a = n_face[:, 0] * s
     b = n_face[:, 1] * s
