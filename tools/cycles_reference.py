@@ -330,10 +330,12 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
 # ----------------------------------------------------------------------------- scene helpers
 # Small bpy builders shared by the Cycles comparison tests and tools/lighting_pictures.py.
 def new_empty_scene():
-    """Factory settings without objects or world; returns the scene."""
+    """An empty scene without a world; returns the scene. (``read_homefile``, not
+    ``read_factory_settings``: the latter resets the preferences and so disables the add-on and
+    its extension repository for every test that runs after it.)"""
     import bpy
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
+    bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.world = None
     return scene
