@@ -104,26 +104,52 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None) -
             "imbalance": float(np.max(imb))}
 
 
-def _gauss_seidel(F, rho, S, tol, max_it, ticker):
-    B = S.copy()
-    ip, ix, dv = F.indptr, F.indices, F.data.astype(np.float64)
+def _segment_sums(vals, cols, x, starts, nonempty, nrows):
+    """Row sums of ``vals * x[cols]`` per band; x is (bands, N), rows given by CSR ``starts``
+    of the non-empty rows. Returns (nrows, bands)."""
+    out = np.zeros((nrows, x.shape[0]))
+    if starts.size:
+        for k in range(x.shape[0]):
+            out[nonempty, k] = np.add.reduceat(vals * x[k][cols], starts)
+    return out
+
+
+def _gauss_seidel(F, rho, S, tol, max_it, ticker, block=None):
+    """Gauss-Seidel sweeps over blocks of rows: each block is updated at once from the newest
+    values of every block before it (block Gauss-Seidel, a Jacobi step inside a block). With
+    ``block=1`` this is the paper's row-by-row Gauss-Seidel; larger blocks trade a little
+    convergence per sweep for NumPy-speed sweeps (default: N/32 rows, at most 256). Converges
+    whenever the row-wise method does (I - rho F is strictly diagonally dominant)."""
     n = F.shape[0]
+    block = block or max(1, min(256, n // 32))
+    B = S.copy()
+    BT = np.ascontiguousarray(B.T)          # (bands, N): contiguous gathers per band
+    ip, ix = F.indptr, F.indices
+    dv = F.data.astype(np.float64)
+    blocks = []
+    for b0 in range(0, n, block):
+        b1 = min(n, b0 + block)
+        s, e = ip[b0], ip[b1]
+        counts = np.diff(ip[b0:b1 + 1])
+        nonempty = np.flatnonzero(counts)
+        starts = (ip[b0:b1][nonempty] - s).astype(np.int64)
+        blocks.append((b0, b1, ix[s:e], dv[s:e], starts, nonempty))
     it, converged = 0, False
     for it in range(1, max_it + 1):
         change = 0.0
-        for i in range(n):
-            s, e = ip[i], ip[i + 1]
-            new = S[i] + rho[i] * (dv[s:e] @ B[ix[s:e]]) if e > s else S[i]
-            d = np.abs(new - B[i]).max()
+        for b0, b1, cols, vals, starts, nonempty in blocks:
+            acc = _segment_sums(vals, cols, BT, starts, nonempty, b1 - b0)
+            new = S[b0:b1] + rho[b0:b1] * acc
+            d = np.abs(new - BT[:, b0:b1].T).max(initial=0.0)
             if d > change:
                 change = d
-            B[i] = new
-        scale = np.abs(B).max()
+            BT[:, b0:b1] = new.T
+        scale = np.abs(BT).max()
         ticker.tick(it, max_it)
         if scale == 0 or change <= tol * scale:
             converged = True
             break
-    return B, it, converged
+    return np.ascontiguousarray(BT.T), it, converged
 
 
 def _jacobi(F, rho, S, tol, max_it, ticker, rid):

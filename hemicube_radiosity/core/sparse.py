@@ -85,15 +85,20 @@ class CSR:
         return np.bincount(self.row_ids(), weights=self.data.astype(np.float64), minlength=self.shape[0])
 
     def matvec(self, x: np.ndarray, row_ids: np.ndarray | None = None) -> np.ndarray:
-        """F @ x for x of shape (N,) or (N, k), in float64."""
-        rid = self.row_ids() if row_ids is None else row_ids
+        """F @ x for x of shape (N,) or (N, k), in float64 (``row_ids`` is accepted for
+        compatibility and not needed)."""
         x = np.asarray(x, dtype=np.float64)
+        one = x.ndim == 1
+        xt = np.ascontiguousarray((x[:, None] if one else x).T)   # (k, N): contiguous gathers
+        counts = np.diff(self.indptr)
+        nonempty = np.flatnonzero(counts)
+        starts = self.indptr[:-1][nonempty]
         w = self.data.astype(np.float64)
-        if x.ndim == 1:
-            return np.bincount(rid, weights=w * x[self.indices], minlength=self.shape[0])
-        xs = x[self.indices]
-        return np.stack([np.bincount(rid, weights=w * xs[:, k], minlength=self.shape[0])
-                         for k in range(x.shape[1])], axis=1)
+        out = np.zeros((self.shape[0], xt.shape[0]))
+        if starts.size:
+            for k in range(xt.shape[0]):
+                out[nonempty, k] = np.add.reduceat(w * xt[k][self.indices], starts)
+        return out[:, 0] if one else out
 
     def transpose(self) -> "CSR":
         return CSR.from_coo(self.indices, self.row_ids(), self.data, (self.shape[1], self.shape[0]), self.meta)
