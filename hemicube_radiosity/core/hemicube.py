@@ -185,13 +185,30 @@ def _face_planes(uvw, faces, near):
     return np.stack([w - u, w + u, w - v, v - v0 * w, w - near], axis=-1)
 
 
-def _clip_convex(poly, dist):
+def _plane_distance(poly, faces, near, p):
+    """Signed distance (M, K) of vertices (M, K, 3) to clip plane ``p`` of their face
+    (the ``p``-th plane of :func:`_face_planes`, with the same float32 operations)."""
+    u, v, w = poly[..., 0], poly[..., 1], poly[..., 2]
+    if p == 0:
+        return w - u
+    if p == 1:
+        return w + u
+    if p == 2:
+        return w - v
+    if p == 3:
+        return v - _FACE_V0[faces][:, None] * w
+    return w - near
+
+
+def _clip_convex(poly, count, dist):
     """Clip convex polygons against one plane each (Sutherland-Hodgman, all polygons at once).
 
     Parameters
     ----------
     poly : (M, K, 3) float
-        Vertices in order; shorter polygons repeat their last vertex.
+        Vertices in order; a polygon with fewer than K vertices repeats its last one.
+    count : (M,) int
+        Vertices of each polygon (>= 1).
     dist : (M, K) float
         Signed distance of every vertex to the plane; inside is >= 0.
 
@@ -202,6 +219,7 @@ def _clip_convex(poly, dist):
     count : (M,) int
         Vertices kept (0 when the polygon lies wholly outside).
     """
+    M, K = dist.shape
     nxt = np.roll(poly, -1, axis=1)
     dn = np.roll(dist, -1, axis=1)
     inside = dist >= 0
@@ -214,14 +232,22 @@ def _clip_convex(poly, dist):
     with np.errstate(divide="ignore", invalid="ignore"):
         t = np.where(cross, d_in / (d_in - d_out), 0)
     hit = p_in + t[..., None] * (p_out - p_in)
-    out = np.stack([poly, hit], axis=2).reshape(len(poly), -1, 3)
-    keep = np.stack([inside, cross], axis=2).reshape(len(poly), -1)
+    out = np.stack([poly, hit], axis=2).reshape(M, -1, 3)
+    # the padding repeats the last vertex: slots count-1 .. K-2 hold copies of it joined by
+    # zero-length edges; only the last slot (whose edge closes the polygon) is kept
+    copy = (np.arange(K) >= count[:, None] - 1) & (np.arange(K) < K - 1)
+    keep = np.stack([inside & ~copy, cross], axis=2).reshape(M, -1)
     count = keep.sum(axis=1)
-    order = np.argsort(~keep, axis=1, kind="stable")
     width = max(int(count.max(initial=0)), 1)
-    pad = np.minimum(np.arange(width), np.maximum(count, 1)[:, None] - 1)
-    take = np.take_along_axis(order, pad, axis=1)
-    return np.take_along_axis(out, take[..., None], axis=1), count
+    slot = np.cumsum(keep, axis=1) - 1
+    m, k = np.nonzero(keep)
+    res = np.empty((M, width, 3), dtype=poly.dtype)
+    res[m, slot[m, k]] = out[m, k]
+    pad = np.arange(width) >= count[:, None]
+    if pad.any():
+        pm, pk = np.nonzero(pad)
+        res[pm, pk] = res[pm, np.maximum(count[pm], 1) - 1]
+    return res, count
 
 
 def _clip_to_faces(uvw, faces, near):
@@ -229,15 +255,39 @@ def _clip_to_faces(uvw, faces, near):
 
     Successive planes can leave vertices a rounding error apart, which makes the clipped polygon
     slightly non-convex; its fan triangles are convex whatever the noise, so they are what is
-    rasterised.  Returns triangles (T, 3, 3) and the index (T,) of the input polygon of each;
-    polygons clipped away entirely leave none.
+    rasterised.  A polygon is clipped only by the planes it crosses.  Returns triangles (T, 3, 3)
+    and the index (T,) of the input polygon of each; polygons clipped away entirely leave none.
     """
     poly = uvw
+    count = np.full(len(uvw), uvw.shape[1])
     alive = np.arange(len(uvw))
     for p in range(5):
-        poly, count = _clip_convex(poly, _face_planes(poly, faces[alive], near)[..., p])
+        dist = _plane_distance(poly, faces[alive], near, p)
+        out = dist < 0
+        cut = np.flatnonzero(out.any(axis=1))
+        if not cut.size:
+            continue
+        gone = out[cut].all(axis=1)
+        if gone.any():
+            ok = np.ones(len(poly), bool)
+            ok[cut[gone]] = False
+            cut = cut[~gone]
+            shift = np.cumsum(ok) - 1
+            poly, count, alive, dist = poly[ok], count[ok], alive[ok], dist[ok]
+            cut = shift[cut]
+        if not cut.size:
+            continue
+        cp, cc = _clip_convex(poly[cut], count[cut], dist[cut])
+        W = max(poly.shape[1], cp.shape[1])
+        if W > poly.shape[1]:
+            poly = np.concatenate([poly, np.repeat(poly[:, -1:], W - poly.shape[1], axis=1)], axis=1)
+        if cp.shape[1] < W:
+            cp = np.concatenate([cp, np.repeat(cp[:, -1:], W - cp.shape[1], axis=1)], axis=1)
+        poly[cut] = cp
+        count[cut] = cc
         ok = count >= 3
-        poly, alive, count = poly[ok], alive[ok], count[ok]
+        if not ok.all():
+            poly, count, alive = poly[ok], count[ok], alive[ok]
     m, k = np.nonzero(np.arange(1, poly.shape[1] - 1) < (count[:, None] - 1))
     k = k + 1
     tris = np.stack([poly[m, 0], poly[m, k], poly[m, k + 1]], axis=1)
@@ -393,42 +443,73 @@ def _draw_spans(poly, j, i_lo, n, pixel_base, depth, item, keys, R):
     np.minimum.at(keys, np.repeat(pixel_base[poly] + j * R + i_lo, n) + off, frag)
 
 
+def _vertex_projection(x, y, z, face, R):
+    """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`).
+
+    The same float32 operations as :func:`_project` on the :func:`_face_coords` of the vertex,
+    so a patch wholly inside one face gets bit-identical corners either way.  Vertices with
+    face -1 get meaningless values.
+    """
+    half = np.float32(R / 2)
+    top = face == 0
+    u = np.where((face == 1) | (face == 2), y, x)
+    v = np.where(top, y, z)
+    w = np.where(top, z, np.where(face <= 2, x, y))
+    w = np.where((face == 2) | (face == 4), -w, w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = (u / w + 1) * half
+        py = (v / w - _FACE_V0[face]) * half
+    return px, py
+
+
 def _batch_item_buffer(scene, recv, frames, eyes):
     """Item buffers of a batch of receivers: keys (B, 3 R^2) int64 (``_EMPTY`` where nothing)."""
     R = scene.resolution
     B, N = len(recv), scene.n
+    V = len(scene.verts)
     P = 3 * R * R
-    x, y, z = _to_receiver_frames(scene, frames[recv], eyes[recv])
-    vface = _vertex_faces(x, y, z, scene.near)
-    visible = ~np.all(z < 0, axis=2)
+    fr = frames[recv]
+    rows = fr.reshape(B * 3, 3).astype(np.float32)
+    local = rows @ scene.verts.T                                     # (3B, V)
+    local -= np.einsum("bij,bj->bi", fr, eyes[recv]).reshape(B * 3, 1).astype(np.float32)
+    local = local.reshape(B, 3, V)
+    x, y, z = local[:, 0], local[:, 1], local[:, 2]
+    vface = _vertex_faces(x, y, z, scene.near)                       # (B, V)
+    # per corner: face + 1 in the low bits, "above the horizon" in bit 3; four corners as a word
+    code = (vface + 1).astype(np.uint8) | ((z >= 0).astype(np.uint8) << 3)
+    word = np.take(code, scene.corner_ids, axis=1).view(np.uint32).reshape(B, N)
+    c0 = word & np.uint32(0xFF)
+    whole = (word == c0 * np.uint32(0x01010101)) & (c0 >= 9)
+    visible = (word & np.uint32(0x08080808)) != 0
     visible[np.arange(B), recv] = False
-    f0 = vface[..., 0]
-    whole = (f0 >= 0) & np.all(vface == f0[..., None], axis=2)
+    whole &= visible
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
     keys = np.full(B * P, _EMPTY, dtype=np.int64)
 
-    def draw(bi, ni, faces, uvw):
+    def draw(bi, ni, faces, px, py):
         plane, front, seen = _depth_planes(scene, frames, eyes, recv[bi], ni, faces)
         item = np.where(front, ni, N).astype(np.int64)
-        px, py = _project(uvw[seen], faces[seen], R)
-        _rasterise(px, py, face_rows[faces[seen]], (bi * P + face_base[faces])[seen], plane[seen],
-                   item[seen], keys, R)
+        _rasterise(px[seen], py[seen], face_rows[faces[seen]], (bi * P + face_base[faces])[seen],
+                   plane[seen], item[seen], keys, R)
 
-    # patches wholly inside one face's frustum: project as they are
-    bi, ni = np.nonzero(visible & whole)
-    faces = f0[bi, ni]
-    draw(bi, ni, faces, _face_coords(faces, x[bi, ni], y[bi, ni], z[bi, ni]))
+    # patches wholly inside one face's frustum: their corners' own projections
+    bi, ni = np.nonzero(whole)
+    vpx, vpy = _vertex_projection(x, y, z, vface, R)
+    corner = bi[:, None] * V + scene.corner_ids[ni]
+    draw(bi, ni, (c0[bi, ni] - 9).astype(np.intp), vpx.ravel()[corner], vpy.ravel()[corner])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
-        xs, ys, zs = x[bi, ni], y[bi, ni], z[bi, ni]
+        corner = bi[:, None] * V + scene.corner_ids[ni]
+        xs, ys, zs = x.ravel()[corner], y.ravel()[corner], z.ravel()[corner]
         all_faces = np.broadcast_to(np.arange(5), (bi.size, 5))
         uvw = np.stack([_face_coords(all_faces[:, f], xs, ys, zs) for f in range(5)], axis=1)
         outside = np.any(np.all(_face_planes(uvw, all_faces, scene.near) < 0, axis=2), axis=2)
         si, fi = np.nonzero(~outside)
         poly, src = _clip_to_faces(uvw[si, fi], fi, scene.near)
-        draw(bi[si[src]], ni[si[src]], fi[src], poly)
+        px, py = _project(poly, fi[src], R)
+        draw(bi[si[src]], ni[si[src]], fi[src], px, py)
     return keys.reshape(B, P)
 
 
