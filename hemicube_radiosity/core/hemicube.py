@@ -294,26 +294,24 @@ def _clip_to_faces(uvw, faces, near):
     return tris, alive[m]
 
 
-def _depth_planes(scene, frames, eyes, bi, ni, faces):
-    """Reciprocal depth ``1/w`` of each patch plane as an affine function of pixel coordinates.
+def _depth_planes(scene, R, nl, dist, faces):
+    """Reciprocal depth ``1/w`` of patch planes as affine functions of pixel coordinates.
 
     For pixel coordinates (px, py) on face f (the face spans [0, R] x [0, R or R/2]),
-    ``1/w = a px + b py + c`` with (a, b, c) per instance.  Also returns whether the receiver
-    sees the patch's front, and whether it sees the patch at all (not edge-on: the eye lies
-    farther than the near distance from the patch plane).
+    ``1/w = a px + b py + c``.  ``nl`` (3, M) are the patch normals in the receiver frame,
+    ``dist`` (M,) is ``n . (c - eye)`` (nonzero: the eye is not in the patch plane).
+    Returns a, b, c, each (M,) float32.
     """
-    R = scene.resolution
-    nrm = scene.normals[ni]
-    d = scene.plane[ni] - np.einsum("mj,mj->m", nrm, eyes[bi])      # n . (c - eye); < 0: front
-    seen = np.abs(d) > scene.near
-    d = np.where(seen, d, 1.0)
-    n_local = np.einsum("mjk,mk->mj", frames[bi], nrm)
-    n_face = np.take_along_axis(n_local, _FACE_PERM[faces], axis=1) * _FACE_SIGN[faces]
-    s = 2.0 / (R * d)
-    a = n_face[:, 0] * s
-    b = n_face[:, 1] * s
-    c = (n_face[:, 2] - n_face[:, 0] + _FACE_V0[faces] * n_face[:, 1]) / d
-    return np.stack([a, b, c], axis=1).astype(np.float32), d < 0, seen
+    nx, ny, nz = nl
+    nu = np.where((faces == 1) | (faces == 2), ny, nx)
+    nv = np.where(faces == 0, ny, nz)
+    nw = np.where(faces == 0, nz, np.where(faces <= 2, nx, ny))
+    nw = np.where((faces == 2) | (faces == 4), -nw, nw)
+    s = 2.0 / (R * dist)
+    a = (nu * s).astype(np.float32)
+    b = (nv * s).astype(np.float32)
+    c = ((nw - nu + _FACE_V0[faces] * nv) / dist).astype(np.float32)
+    return a, b, c
 
 
 def _project(uvw, faces, R):
@@ -326,25 +324,37 @@ def _project(uvw, faces, R):
 
 
 def _edge_functions(px, py):
-    """Edge functions of convex polygons (M, K) in either winding.
+    """Edge functions of convex polygons in either winding.
 
-    Returns (a, b, c), each (M, K) float32: ``a X + b Y + c >= 0`` for a point (X, Y) on the
-    inner side of edge k (or on it).  Each edge's coefficients are computed from its endpoints
-    in a canonical order (lexicographic) and negated as the polygon's winding needs, so two
-    polygons sharing an edge evaluate exactly opposite values.  Polygons of zero area get
-    ``c = -1`` (they cover nothing).
+    ``px``, ``py`` are lists of K arrays (M,) float32, the vertices in order.  Returns lists
+    (a, b, c) of K arrays (M,) float32: ``a X + b Y + c >= 0`` for a point (X, Y) on the inner
+    side of edge k (or on it).  Each edge's coefficients are computed from its endpoints in a
+    canonical order (lexicographic) and negated as the polygon's winding needs, so two polygons
+    sharing an edge evaluate exactly opposite values.  Polygons of zero area get ``c = -1``
+    (they cover nothing).
     """
-    nx, ny = np.roll(px, -1, axis=1), np.roll(py, -1, axis=1)
-    swap = (nx < px) | ((nx == px) & (ny < py))
-    sx, sy = np.where(swap, nx, px), np.where(swap, ny, py)
-    ex, ey = np.where(swap, px, nx) - sx, np.where(swap, py, ny) - sy
-    area2 = np.sum(px * ny - nx * py, axis=1, keepdims=True)
-    sign = (np.sign(area2) * np.where(swap, -1, 1)).astype(np.float32)
-    a = -ey * sign
-    b = ex * sign
-    c = (ey * sx - ex * sy) * sign
-    c[area2[:, 0] == 0] = -1
-    return a, b, c
+    K = len(px)
+    area2 = None
+    for k in range(K):  # summed left to right, as numpy sums a short row
+        t = px[k] * py[(k + 1) % K] - px[(k + 1) % K] * py[k]
+        area2 = t if area2 is None else area2 + t
+    flat = area2 == 0
+    sgn = np.sign(area2).astype(np.float32)
+    a_l, b_l, c_l = [], [], []
+    for k in range(K):
+        x0, y0, x1, y1 = px[k], py[k], px[(k + 1) % K], py[(k + 1) % K]
+        swap = (x1 < x0) | ((x1 == x0) & (y1 < y0))
+        sx, sy = np.where(swap, x1, x0), np.where(swap, y1, y0)
+        ex, ey = np.where(swap, x0, x1) - sx, np.where(swap, y0, y1) - sy
+        sign = np.where(swap, -sgn, sgn)
+        a = -ey * sign
+        b = ex * sign
+        c = (ey * sx - ex * sy) * sign
+        c[flat] = -1
+        a_l.append(a)
+        b_l.append(b)
+        c_l.append(c)
+    return a_l, b_l, c_l
 
 
 def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
@@ -352,13 +362,13 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
 
     Parameters
     ----------
-    px, py : (M, K) float32
+    px, py : lists of K arrays (M,) float32
         Convex polygons in pixel coordinates of their face, padded by repeating a vertex.
     face_rows : (M,) int
         Rows of each polygon's face (R or R/2); columns are R for every face.
     pixel_base : (M,) int64
         Index in ``keys`` of pixel (0, 0) of the polygon's face for its receiver.
-    depth : (M, 3) float32
+    depth : 3 arrays (M,) float32
         Reciprocal depth ``a px + b py + c`` per polygon.
     item : (M,) int64
         Id written to the item buffer.
@@ -367,24 +377,41 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     R : int
         Pixels across a face.
     """
+    lo_y, hi_y = _reduce(np.minimum, py), _reduce(np.maximum, py)
+    j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
+    j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
+    rows = j1 - j0 + 1
+    keep = np.flatnonzero(rows > 0)
+    if not keep.size:
+        return
+    px = [p[keep] for p in px]
+    py = [p[keep] for p in py]
+    j0, rows = j0[keep], rows[keep]
     edges = _edge_functions(px, py)
-    j0 = np.maximum(np.ceil(py.min(axis=1) - 0.5), 0).astype(np.int64)
-    j1 = np.minimum(np.floor(py.max(axis=1) - 0.5), face_rows - 1).astype(np.int64)
-    rows = np.maximum(j1 - j0 + 1, 0)
-    width = np.clip(np.ceil(px.max(axis=1)) - np.floor(px.min(axis=1)), 1, R).astype(np.int64)
-    keep = np.flatnonzero(rows)
-    ends = np.cumsum(rows[keep] * width[keep])   # bound on the fragments of each polygon
+    width = np.clip(np.ceil(_reduce(np.maximum, px)) - np.floor(_reduce(np.minimum, px)), 1, R)
+    ends = np.cumsum(rows * width.astype(np.int64))   # bound on the fragments of each polygon
+    base = pixel_base[keep]
+    depth = [d[keep] for d in depth]
+    item = item[keep]
     lo = 0
     while lo < keep.size:
         hi = int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + FRAGMENTS_PER_CHUNK, "right"))
         hi = max(hi, lo + 1)
-        sel = keep[lo:hi]
-        _draw_spans(*_spans(sel, rows[sel], j0, edges, R), pixel_base, depth, item, keys, R)
+        sl = slice(lo, hi)
+        spans = _spans(rows[sl], j0[sl], [[e[sl] for e in edge] for edge in edges], R)
+        _draw_spans(*spans, base[sl], [d[sl] for d in depth], item[sl], keys, R)
         lo = hi
 
 
-def _spans(sel, rows, j0, edges, R):
-    """Pixel spans covered by polygons ``sel``, one per (polygon, pixel row).
+def _reduce(op, arrays):
+    out = arrays[0]
+    for a in arrays[1:]:
+        out = op(out, a)
+    return out
+
+
+def _spans(rows, j0, edges, R):
+    """Pixel spans covered by polygons, one per (polygon, pixel row).
 
     Pixel (i, j) is covered when its centre satisfies every edge function.  On row j each edge
     ``a X + b Y + c >= 0`` bounds X from one side at ``-(b Y + c) / a``; a polygon sharing the
@@ -393,27 +420,39 @@ def _spans(sel, rows, j0, edges, R):
     inequalities themselves (``a X >= -(b Y + c)``, exactly complementary between neighbours),
     not by the rounded quotient, so a centre lying on an edge is covered as a point test would.
 
-    Returns (poly, j, i_lo, n): polygon, row, first column and length (> 0) of every span.
+    Returns (poly, j, i_lo, n): polygon (index into ``rows``), row, first column and length
+    (> 0) of every span.
     """
     a, b, c = edges
-    poly = np.repeat(sel, rows)
-    j = j0[poly] + np.arange(poly.size) - np.repeat(np.cumsum(rows) - rows, rows)
-    Y = j.astype(np.float32)[:, None] + np.float32(0.5)
-    A = a[poly]
-    rhs = -(b[poly] * Y + c[poly])                                   # need A X >= rhs
+    start = np.cumsum(rows) - rows
+    poly = np.repeat(np.arange(rows.size), rows)
+    j = np.repeat(j0 - start, rows) + np.arange(poly.size)
+    Y = j.astype(np.float32) + np.float32(0.5)
+    lo = hi = None
+    ok = None
+    A_l, rhs_l = [], []
     with np.errstate(divide="ignore", invalid="ignore"):
-        bound = rhs / A
-    lo = np.where(A > 0, bound, -np.inf).max(axis=1)
-    hi = np.where(A < 0, bound, np.inf).min(axis=1)
-    level_ok = np.all((A != 0) | (rhs <= 0), axis=1)               # edges parallel to the rows
-    i_lo = np.maximum(_snap_to_pixels(lo, A, rhs, Y, first=True), 0)
-    i_hi = np.minimum(_snap_to_pixels(hi, A, rhs, Y, first=False), R - 1)
-    n = np.where(level_ok & (i_hi >= i_lo), i_hi - i_lo + 1, 0).astype(np.int64)
-    ok = n > 0
-    return poly[ok], j[ok], i_lo[ok].astype(np.int64), n[ok]
+        for k in range(len(a)):
+            A = a[k][poly]
+            rhs = -(b[k][poly] * Y + c[k][poly])                     # need A X >= rhs
+            bound = rhs / A
+            l = np.where(A > 0, bound, -np.inf)
+            h = np.where(A < 0, bound, np.inf)
+            level = (A != 0) | (rhs <= 0)                           # edges parallel to the rows
+            lo = l if lo is None else np.maximum(lo, l)
+            hi = h if hi is None else np.minimum(hi, h)
+            ok = level if ok is None else ok & level
+            A_l.append(A)
+            rhs_l.append(rhs)
+    i_lo = np.maximum(_snap_to_pixels(lo, A_l, rhs_l, first=True), 0)
+    i_hi = np.minimum(_snap_to_pixels(hi, A_l, rhs_l, first=False), R - 1)
+    ok &= i_hi >= i_lo
+    sel = np.flatnonzero(ok)
+    i_lo = i_lo[sel].astype(np.int64)
+    return poly[sel], j[sel], i_lo, i_hi[sel].astype(np.int64) - i_lo + 1
 
 
-def _snap_to_pixels(bound, A, rhs, Y, first):
+def _snap_to_pixels(bound, A, rhs, first):
     """First (or last) pixel column whose centre lies inside, given the span bound on X.
 
     Columns whose centres are within ``SNAP`` of the bound are tested with the inequalities
@@ -426,17 +465,23 @@ def _snap_to_pixels(bound, A, rhs, Y, first):
         check = np.flatnonzero(np.abs(t - near) < SNAP)
     if check.size:
         X = near[check] + np.float32(0.5)
-        inside = np.all(A[check] * X[:, None] >= rhs[check], axis=1)
+        inside = None
+        for Ak, rk in zip(A, rhs):
+            t_k = Ak[check] * X >= rk[check]
+            inside = t_k if inside is None else inside & t_k
         col[check] = np.where(inside, near[check], near[check] + (1 if first else -1))
     return col
 
 
 def _draw_spans(poly, j, i_lo, n, pixel_base, depth, item, keys, R):
     """Depth-test the pixels of the spans into the item buffer ``keys`` (see :func:`_rasterise`)."""
-    dq = depth[poly, 0]
-    q0 = dq * (i_lo.astype(np.float32) + np.float32(0.5)) + depth[poly, 1] * (
-        j.astype(np.float32) + np.float32(0.5)) + depth[poly, 2]
-    off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    da, db, dc = depth
+    dq = da[poly]
+    q0 = dq * (i_lo.astype(np.float32) + np.float32(0.5)) + db[poly] * (
+        j.astype(np.float32) + np.float32(0.5)) + dc[poly]
+    start = np.cumsum(n) - n
+    total = int(start[-1] + n[-1]) if n.size else 0
+    off = np.arange(total) - np.repeat(start, n)
     q = np.repeat(q0, n) + np.repeat(dq, n) * off.astype(np.float32)
     qbits = np.maximum(q, np.float32(1e-30)).view(np.int32).astype(np.int64)
     frag = ((np.int64(0x7F800000) - qbits) << 32) | np.repeat(item[poly], n)
@@ -486,18 +531,27 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
     keys = np.full(B * P, _EMPTY, dtype=np.int64)
+    # patch normals in the receiver frames and n . (c - eye): < 0 when the front is seen
+    nl = np.einsum("bjk,nk->bjn", fr, scene.normals).reshape(B * 3 * N)
+    dist = (scene.plane - np.einsum("nj,bj->bn", scene.normals, eyes[recv])).ravel()
 
     def draw(bi, ni, faces, px, py):
-        plane, front, seen = _depth_planes(scene, frames, eyes, recv[bi], ni, faces)
-        item = np.where(front, ni, N).astype(np.int64)
-        _rasterise(px[seen], py[seen], face_rows[faces[seen]], (bi * P + face_base[faces])[seen],
-                   plane[seen], item[seen], keys, R)
+        pair = bi * N + ni
+        d = dist[pair]
+        seen = np.flatnonzero(np.abs(d) > scene.near)   # not edge-on
+        bi, ni, faces, pair, d = bi[seen], ni[seen], faces[seen], pair[seen], d[seen]
+        k = bi * (3 * N) + ni
+        plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
+        item = np.where(d < 0, ni, N).astype(np.int64)
+        _rasterise([p[seen] for p in px], [p[seen] for p in py], face_rows[faces],
+                   bi * P + face_base[faces], plane, item, keys, R)
 
     # patches wholly inside one face's frustum: their corners' own projections
     bi, ni = np.nonzero(whole)
     vpx, vpy = _vertex_projection(x, y, z, vface, R)
-    corner = bi[:, None] * V + scene.corner_ids[ni]
-    draw(bi, ni, (c0[bi, ni] - 9).astype(np.intp), vpx.ravel()[corner], vpy.ravel()[corner])
+    vpx, vpy = vpx.ravel(), vpy.ravel()
+    corner = (bi[:, None] * V + scene.corner_ids[ni]).T
+    draw(bi, ni, (c0[bi, ni] - 9).astype(np.intp), [vpx[c] for c in corner], [vpy[c] for c in corner])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
@@ -509,7 +563,7 @@ def _batch_item_buffer(scene, recv, frames, eyes):
         si, fi = np.nonzero(~outside)
         poly, src = _clip_to_faces(uvw[si, fi], fi, scene.near)
         px, py = _project(poly, fi[src], R)
-        draw(bi[si[src]], ni[si[src]], fi[src], px, py)
+        draw(bi[si[src]], ni[si[src]], fi[src], list(px.T), list(py.T))
     return keys.reshape(B, P)
 
 
