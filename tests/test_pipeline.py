@@ -4,7 +4,7 @@ import pytest
 
 from hemicube_radiosity.core.cache import FormFactorCache
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
-from hemicube_radiosity.core.scenes import CORNELL_WHITE, closed_box, cornell_box
+from hemicube_radiosity.core.scenes import CORNELL_WHITE, box, closed_box, cornell_box
 
 METHODS = ["hemicube", "embree"]
 
@@ -160,3 +160,48 @@ def test_relight_with_lamps_reuses_form_factors_and_direct_transport(monkeypatch
     # and the lamp's colour really changed the bake: the lamp dominates, blue drops most
     ratio = warm.solution.B.sum(0) / first.solution.B.sum(0)
     assert ratio[2] < ratio[1] < ratio[0]
+
+
+@pytest.mark.parametrize("gather_rays", [0, 64])
+def test_furnace_holds_on_finer_output_elements(gather_rays):
+    """Coarse patches solve, a finer output mesh takes the detail (interpolated or gathered):
+    in the furnace every element vertex is still exactly E / (1 - rho)."""
+    r = bake(closed_box(size=(1.0, 1.3, 0.8), rho=(0.5,) * 3, emission=(1.0,) * 3),
+             BakeSettings(patch_size=0.4, element_size=0.1, gather_rays=gather_rays, tolerance=1e-8))
+    assert len(r.elements) > 4 * len(r.patches)
+    np.testing.assert_allclose(r.vertex_radiosity, 2.0, rtol=1e-4)
+
+
+def _plate_scene():
+    """A 2 m floor, a 0.4 m emitter 1.5 m above it and a floating 0.4 m plate between them:
+    a shadow with a sharp umbra and a penumbra, and no contact edges."""
+    from hemicube_radiosity.core.scenes import quad
+
+    floor = quad([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], (0.7, 0.7, 0.7), name="floor")
+    light = quad([(-0.2, -0.2, 1.5), (-0.2, 0.2, 1.5), (0.2, 0.2, 1.5), (0.2, -0.2, 1.5)],
+                 (0, 0, 0), (10.0, 10.0, 10.0), name="light")
+    plate = box((0.0, -0.2, 0.7), (0.4, 0.2, 0.72), (0.5, 0.5, 0.5), name="plate")
+    return [floor, light, plate]
+
+
+def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
+    """With 0.5 m patches alone the floor's vertices cannot follow the plate's shadow; with
+    0.1 m output elements (direct light exact at each vertex) they match a bake whose patches
+    are all 0.1 m."""
+    from hemicube_radiosity.core.interpolate import interpolate_at
+
+    fine = bake(_plate_scene(), BakeSettings(patch_size=0.1, resolution=32, method="embree"))
+    elem = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32, element_size=0.1))
+    coarse = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32))
+    E = fine.elements
+    assert np.allclose(elem.elements.verts, E.verts)
+    floor = np.isin(np.arange(len(E.verts)), E.polys[E.owner == 0])
+    lum = np.array([0.2126, 0.7152, 0.0722])
+    ref = fine.vertex_radiosity[floor] @ lum
+    got = elem.vertex_radiosity[floor] @ lum
+    blurred = interpolate_at(coarse.elements, coarse.vertex_radiosity, E.verts[floor]) @ lum
+    err_elem = np.sqrt(np.mean((got - ref) ** 2)) / ref.mean()
+    err_coarse = np.sqrt(np.mean((blurred - ref) ** 2)) / ref.mean()
+    assert err_coarse > 0.1          # the shadow is there, and coarse patches smear it
+    assert err_elem < 0.2 * err_coarse
+    assert err_elem < 0.04          # penumbra sampling and interpolated indirect light

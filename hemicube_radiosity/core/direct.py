@@ -81,15 +81,26 @@ def _emitter_samples(corners, samples, rng):
     return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
 
 
+def _visible_fraction(scene, origins, targets):
+    """(r,) fraction of the segments origins (r,3) -> targets (r,S,3) that nothing blocks."""
+    S = targets.shape[1]
+    d = targets - origins[:, None, :]
+    blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
+                             np.full(len(origins) * S, 1 - 1e-4))
+    return 1 - blocked.reshape(-1, S).mean(axis=1)
+
+
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
-                      seed=0, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
+                      seed=0, refine=3, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
     """(P, M) float32 ``T[p, m] = F(x_p -> e_m) * V(x_p, e_m)``: how much of emitter patch m's
     radiance arrives at point p. Geometry only, so a change of emission strength or colour is
     ``T @ L`` and needs no rays.
 
     ``scene``: anything with ``occluded(origins, directions, tfar)`` (Embree scene or NumPy BVH,
     see :func:`.lights.occluder`) for shadow rays; None means no shadows. ``samples``: shadow
-    rays per point and emitter patch (stratified over the patch, seeded).
+    rays per point and emitter patch (stratified over the patch, seeded); where they disagree
+    (a penumbra) ``refine * samples`` more are cast, so soft shadow edges are not noisy while
+    fully lit or fully shadowed points cost only ``samples``.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -115,10 +126,13 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
             pi, mi = np.nonzero(F > 0)
             if pi.size:
                 o = x[pi] + eps * nx[pi]                                  # (r, 3)
-                d = ys[mi] - o[:, None, :]                                 # (r, S, 3)
-                blocked = scene.occluded(np.repeat(o, S, axis=0), d.reshape(-1, 3),
-                                         np.full(pi.size * S, 1 - 1e-4))
-                vis[pi, mi] = 1 - blocked.reshape(-1, S).mean(axis=1)
+                v = _visible_fraction(scene, o, ys[mi])
+                # penumbra: where some rays pass and some do not, cast ``refine`` times more
+                part = (v > 0) & (v < 1)
+                if refine > 0 and part.any():
+                    extra = _emitter_samples(corners, refine * S, rng) + eps * patches.normals[em][:, None, :]
+                    v[part] = (v[part] + refine * _visible_fraction(scene, o[part], extra[mi[part]])) / (1 + refine)
+                vis[pi, mi] = v
             F = F * vis
         T[s:s + step] = F
         if ticker is not None:

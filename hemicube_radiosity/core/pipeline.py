@@ -15,7 +15,8 @@ from .progress import Cancelled
 from .solve import SOLVERS, Solution, solve
 from .sparse import CSR
 from .direct import vertex_frames
-from .vertex import vertex_radiosity
+from .interpolate import interpolate_at
+from .vertex import exposure, vertex_radiosity
 
 __all__ = ["BakeSettings", "BakeResult", "bake", "compute_form_factors", "source_term", "METHODS"]
 
@@ -37,6 +38,14 @@ class BakeSettings:
     BVH without it), at patch centres for the solve and again at every vertex for the output
     (sharp shadows and exact falloff without finer patches); F then carries only reflected
     light. 'hemicube': the paper's way, emitted light through F too (lamps at patch centres).
+    element_size: the output mesh's detail (world units), finer than ``patch_size``: the paper's
+    "finer elements take detail from a coarse patch solution". The solve runs on the patches;
+    the output mesh is cut to ``element_size``, direct light is evaluated exactly at each of its
+    vertices and light reflected more than once is interpolated bilinearly from the patches.
+    None: the patches are the output mesh. Needs ``direct='exact'``.
+    gather_rays: with elements, the light reflected more than once is *gathered* at each element
+    vertex by this many cosine rays that read the patch solution where they land (a final
+    gather; needs Embree) instead of interpolated (0).
     """
 
     patch_size: float | None = 0.25
@@ -49,6 +58,8 @@ class BakeSettings:
     rotate_seed: int | None = None
     direct: str = "exact"
     direct_samples: int = 16
+    element_size: float | None = None
+    gather_rays: int = 0
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -63,8 +74,18 @@ class BakeSettings:
             raise ValueError(f"patch size must be >= 0, got {self.patch_size}")
         if self.direct not in DIRECT_MODES:
             raise ValueError(f"unknown direct-light mode {self.direct!r}; choose one of {', '.join(DIRECT_MODES)}")
+        if self.element_size is not None and self.element_size < 0:
+            raise ValueError(f"element size must be >= 0, got {self.element_size}")
+        if self.uses_elements() and self.direct != "exact":
+            raise ValueError("finer output elements need direct='exact' (direct light at every element vertex)")
         if not self.tolerance > 0 or self.max_iterations < 1:
             raise ValueError("tolerance must be > 0 and max_iterations >= 1")
+
+    def uses_elements(self) -> bool:
+        """True when the output mesh is cut finer than the patches."""
+        if not self.element_size:
+            return False
+        return not self.patch_size or self.element_size < self.patch_size
 
     def form_factor_key(self) -> tuple:
         """What shapes F (besides geometry): a change here recomputes, anything else re-solves."""
@@ -75,6 +96,10 @@ class BakeSettings:
 
 @dataclass
 class BakeResult:
+    """``patches`` are what was solved (``solution.B`` per patch); ``elements`` is the output mesh
+    (the patches themselves unless ``element_size`` cut it finer) and ``vertex_radiosity`` (V, 3)
+    is per ``elements.verts``."""
+
     patches: PatchSet
     form_factors: CSR
     solution: Solution
@@ -84,6 +109,11 @@ class BakeResult:
     source: np.ndarray
     direct_irradiance: np.ndarray | None = None
     notes: list = field(default_factory=list)
+    elements: PatchSet | None = None
+
+    def __post_init__(self):
+        if self.elements is None:
+            self.elements = self.patches
 
 
 def receivers_needed(patches: PatchSet) -> np.ndarray:
@@ -144,7 +174,9 @@ def _direct_at(patches, points, normals, plan, lights, light_options, cancelled,
     if em.size:
         key = None
         if cache is not None:
-            key = cache_key(patches.geometry_key() + em.tobytes(), ("direct", where, plan["samples"]))
+            pts = np.ascontiguousarray(points, dtype=np.float64)
+            key = cache_key(patches.geometry_key() + em.tobytes() + pts.tobytes(),
+                            ("direct", where, plan["samples"]))
         T = cache.get(key) if key else None
         if T is None:
             T = emitter_transport(patches, points, normals, em, scene=plan["scene"](),
@@ -158,6 +190,36 @@ def _direct_at(patches, points, normals, plan, lights, light_options, cancelled,
         D += direct_irradiance(patches, lights, points=points, normals=normals, cancelled=cancelled,
                                **(light_options or {})) / np.pi
     return D
+
+
+def _element_indirect(patches, elements, rest_v, xv, nv, plan, lights, light_options, cancelled, cache,
+                      settings, world, notes):
+    """Light reflected more than once arriving at element vertices, times their reflectivity:
+    a final gather over the patch solution, or its bilinear interpolation."""
+    from .embree_ff import embree_available
+
+    if settings.gather_rays > 0 and embree_available():
+        from .embree_ff import embree_scene
+        from .gather import final_gather
+        from .progress import Ticker
+
+        # the patches' reflected radiance R = rho (D + gathered) at their vertices, with the
+        # direct part exact at each vertex so that shadows are not smeared into what is gathered
+        pxv, pnv, prho = vertex_frames(patches)
+        R_v = prho * _direct_at(patches, pxv, pnv, plan, lights, light_options, cancelled, cache,
+                                "patch-vertices") + rest_v
+        G = final_gather(patches, R_v, xv, nv, embree_scene(patches), rays=settings.gather_rays,
+                         world=world, ticker=Ticker(None, cancelled))
+        _, _, rho_e = vertex_frames(elements)
+        return rho_e * G
+    if settings.gather_rays > 0:
+        notes.append("Embree is not available: element vertices interpolate the patch solution "
+                     "instead of gathering it")
+    owner_v = np.zeros(len(elements.verts), np.int64)
+    for c in range(4):
+        on = elements.polys[:, c] >= 0
+        owner_v[elements.polys[on, c]] = elements.owner[on]
+    return interpolate_at(patches, rest_v, xv, owner=owner_v, normals=nv)
 
 
 def source_term(patches: PatchSet, F: CSR, *, direct_irradiance=None, world=None) -> np.ndarray:
@@ -263,15 +325,25 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     check()
 
     t = time.perf_counter()
+    elements = patches
+    w = exposure(F)
     if exact is None:
-        Bv = vertex_radiosity(patches, sol.B)
+        Bv = vertex_radiosity(patches, sol.B, weights=w)
     else:
-        # direct light again at every vertex (sharp shadows, exact falloff); only the smoother
-        # light reflected more than once is interpolated from the patches, as in the paper
-        xv, nv, rho_v = vertex_frames(patches)
-        D_vert = _direct_at(patches, xv, nv, exact, lights, light_options, cancelled, cache, "vertices")
+        # direct light again at every output vertex (sharp shadows, exact falloff); only the
+        # smoother light reflected more than once comes from the patches, as in the paper
         rest = sol.B - patches.rho * D_patch
-        Bv = vertex_radiosity(patches, patches.emission) + rho_v * D_vert + vertex_radiosity(patches, rest)
+        rest_v = vertex_radiosity(patches, rest, weights=w)
+        if settings.uses_elements():
+            say("vertices", 0.0, f"cutting output elements of {settings.element_size:g}")
+            elements = build_patches(meshes, settings.element_size)
+            xv, nv, rho_v = vertex_frames(elements)
+            rest_v = _element_indirect(patches, elements, rest_v, xv, nv, exact, lights, light_options,
+                                       cancelled, cache, settings, world, notes)
+        else:
+            xv, nv, rho_v = vertex_frames(patches)
+        D_vert = _direct_at(patches, xv, nv, exact, lights, light_options, cancelled, cache, "vertices")
+        Bv = vertex_radiosity(elements, elements.emission) + rho_v * D_vert + rest_v
         sol.extra["reflected_only"] = True
         sol.B = sol.B + patches.emission
     timings["vertices"] = time.perf_counter() - t
@@ -279,4 +351,4 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     if not sol.converged:
         notes.append(f"solver stopped after {sol.iterations} iterations without reaching "
                      f"tolerance {settings.tolerance:g}")
-    return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes)
+    return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes, elements)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .patches import PatchSet
 
-__all__ = ["vertex_radiosity"]
+__all__ = ["vertex_radiosity", "exposure", "boundary_vertices"]
 
 
 def _incidence(polys):
@@ -42,19 +42,37 @@ def boundary_vertices(polys, n_verts) -> np.ndarray:
     return on
 
 
-def vertex_radiosity(patches: PatchSet, B, extrapolate=True) -> np.ndarray:
+def exposure(F) -> np.ndarray:
+    """(N,) how much of each patch's hemisphere sees front faces or the sky: row sum + sky.
+
+    A patch whose centre lies under a block standing on it sees only back faces (exposure 0):
+    its value says nothing about the exposed rest of the patch. Rows that were not computed
+    (empty) count as fully exposed."""
+    rs = F.row_sums()
+    sky = np.zeros_like(rs) if F.sky is None else np.asarray(F.sky, float)
+    e = np.clip(rs + sky, 0.0, 1.0)
+    return np.where(np.diff(F.indptr) == 0, 1.0, e)
+
+
+def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np.ndarray:
     """(V, 3) radiosity per patch vertex from (N, 3) patch radiosities ``B``.
 
-    ``extrapolate=False`` gives plain patch averages everywhere (for comparison).
-    Vertices no patch uses get 0.
+    ``weights`` (N,) weigh each patch in its vertices' averages and fits (e.g. :func:`exposure`,
+    so a patch buried under a block does not darken the vertices it shares with lit ones); a
+    vertex whose patches all weigh 0 takes their plain mean. ``extrapolate=False`` gives
+    averages everywhere (for comparison). Vertices no patch uses get 0.
     """
     B = np.asarray(B, dtype=np.float64)
     polys = patches.polys
     V = len(patches.verts)
     p, v, _ = _incidence(polys)
     cnt = np.bincount(v, minlength=V).astype(np.float64)
-    safe = np.maximum(cnt, 1)
-    avg = np.stack([np.bincount(v, weights=B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
+    w = np.ones(len(B)) if weights is None else np.asarray(weights, dtype=np.float64)
+    wsum = np.bincount(v, weights=w[p], minlength=V)
+    plain = wsum <= 1e-6 * np.maximum(cnt, 1)
+    wp = np.where(plain[v], 1.0, w[p])                          # per incidence
+    safe = np.maximum(np.bincount(v, weights=wp, minlength=V), 1e-300)
+    avg = np.stack([np.bincount(v, weights=wp * B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
     if not extrapolate:
         return avg
     boundary = boundary_vertices(polys, V) & (cnt > 0)
@@ -74,21 +92,23 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True) -> np.ndarray:
     has = np.zeros(V, bool)
     has[bv] = True
     # samples per boundary vertex: its patches (centre, B) and its interior neighbours (position, avg)
-    pb = boundary[v] & has[v]
+    pb = boundary[v] & has[v] & (wp > 0)
     sv = np.concatenate([v[pb], bv])
     sx = np.concatenate([patches.centers[p[pb]], patches.verts[iv]])
     sb = np.concatenate([B[p[pb]], avg[iv]])
+    sw = np.concatenate([wp[pb], np.ones(bv.size)])
     order = np.unique(sv, return_inverse=True)
     targets, slot = order[0], order[1].reshape(-1)
     d = sx - patches.verts[sv]                                # offsets from the vertex
     X = np.concatenate([np.ones((len(sv), 1)), d], axis=1)     # (S, 4): [1, dx, dy, dz]
     M = np.zeros((targets.size, 4, 4))
-    np.add.at(M, slot, X[:, :, None] * X[:, None, :])
+    np.add.at(M, slot, sw[:, None, None] * X[:, :, None] * X[:, None, :])
     rhs = np.zeros((targets.size, 4, B.shape[1]))
-    np.add.at(rhs, slot, X[:, :, None] * sb[:, None, :])
+    np.add.at(rhs, slot, sw[:, None, None] * X[:, :, None] * sb[:, None, :])
     # samples on a surface leave the gradient along the normal free: a tiny ridge term fixes it
     scale = np.einsum("ij,ij->i", d, d)
     lam = 1e-9 * np.bincount(slot, weights=scale, minlength=targets.size) / np.bincount(slot, minlength=targets.size)
+    lam = np.maximum(lam, 1e-30)
     M[:, 1:, 1:] += lam[:, None, None] * np.eye(3)
     coef = np.linalg.solve(M, rhs)                             # (T, 4, bands)
     out = avg.copy()
