@@ -56,6 +56,12 @@ def _add_bake_settings(p, defaults):
                         "form factors as in the paper (default %(default)s)")
     p.add_argument("--direct-samples", type=int, default=getattr(defaults, "direct_samples", 16),
                    metavar="N", help="shadow rays per point and emitting face (default %(default)s)")
+    p.add_argument("--element-size", type=float, default=0.0, metavar="S",
+                   help="cut the baked mesh finer than the patches (direct light exact at every "
+                        "vertex, bounced light from the patches); 0 = the patches (default)")
+    p.add_argument("--gather-rays", type=int, default=0, metavar="N",
+                   help="with --element-size: gather bounced light at every vertex with N rays "
+                        "instead of interpolating it (needs Embree; default 0)")
     p.add_argument("--solver", choices=("gauss_seidel", "jacobi", "progressive"),
                    default=defaults.solver, help="(default %(default)s)")
     p.add_argument("--tolerance", type=float, default=defaults.tolerance,
@@ -111,6 +117,8 @@ def _settings(args):
                      tolerance=args.tolerance, max_iterations=args.max_iterations)
     if hasattr(s, "direct"):
         s.direct, s.direct_samples = args.direct, args.direct_samples
+    s.element_size = args.element_size if args.element_size > 0 else None
+    s.gather_rays = args.gather_rays
     try:
         s.validate()
     except ValueError as ex:
@@ -200,6 +208,7 @@ def make_report(job, timings, extra=None):
     rep = {
         "timings": {k: float(v) for k, v in timings.items()},
         "patches": int(len(r.patches)),
+        "elements": int(len(r.elements)),
         "nonzeros": int(r.form_factors.nnz),
         "iterations": int(r.solution.iterations),
         "residual": float(r.solution.residual),
@@ -211,6 +220,7 @@ def make_report(job, timings, extra=None):
                      "tolerance": s.tolerance, "max_iterations": s.max_iterations,
                      "direct": getattr(s, "direct", None),
                      "direct_samples": getattr(s, "direct_samples", None),
+                     "element_size": s.element_size, "gather_rays": s.gather_rays,
                      "output_mode": job.options.output_mode,
                      "attribute": job.options.attribute_name, "exposure": job.options.exposure},
         "objects": [o.name for o in job.scene_input.objects if o.bake],

@@ -222,3 +222,29 @@ def test_demo_command_writes_glb_and_png(addon, tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (48, 48)
     rep = json.load(open(tmp_path / "cornell_report.json"))
     assert rep["timings"]["render"] > 0 and rep["patches"] > 50
+
+
+@pytest.mark.parametrize("gather", ["0", "64"])
+def test_detail_size_bakes_a_finer_mesh_over_coarse_patches(addon, cornell_blend, tmp_path, gather):
+    """--element-size: the solve runs on 0.5 m patches, the written mesh is cut to 0.125 m and
+    its colours follow the block's shadow on the floor that the coarse patches alone cannot."""
+    rep = tmp_path / "r.json"
+    rc, out, err = run(addon, ["bake", cornell_blend, "-o", str(tmp_path / "b.glb"), "--report", str(rep),
+                               "--patch-size", "0.5", "--element-size", "0.125", "--resolution", "32",
+                               "--gather-rays", gather])
+    assert rc == 0, err
+    r = json.loads(rep.read_text())
+    assert r["elements"] >= 12 * r["patches"]
+    assert r["settings"]["element_size"] == 0.125 and r["settings"]["gather_rays"] == int(gather)
+    doc, accessor = read_gltf(str(tmp_path / "b.glb"))
+    floor = next(m for m in doc["meshes"] if m["name"].startswith("Floor"))
+    col = accessor(floor["primitives"][0]["attributes"]["COLOR_0"])[:, :3]
+    pos = accessor(floor["primitives"][0]["attributes"]["POSITION"])
+    assert len(pos) == 17 * 17          # a 2 m floor cut into 16 x 16 elements
+    lum = col @ [0.2126, 0.7152, 0.0722]
+    # open floor in front (lit) against the floor in the tall block's umbra (from the light at
+    # the ceiling's centre): 0.5 m patches (4 x 4 over the floor) could only blur that contrast
+    x, y = pos[:, 0], -pos[:, 2]       # glTF is Y-up: Blender's y is glTF's -z
+    lit = lum[(x > 1.5) & (x < 1.9) & (y > 0.1) & (y < 0.6)].mean()
+    umbra = lum[(x > 1.65) & (x < 1.95) & (y > 1.65) & (y < 1.95)].mean()
+    assert lit > 2.5 * umbra            # measured 3.0

@@ -74,6 +74,8 @@ class BakeOptions:
         if hasattr(s, "direct"):
             s.direct = p.direct.lower()
             s.direct_samples = int(p.direct_samples)
+        s.element_size = float(p.element_size) if p.element_size > 0 else None
+        s.gather_rays = int(p.gather_rays)
         return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
                    bool(p.use_lights), bpy.path.abspath(p.cache_dir) if p.cache_dir else "")
 
@@ -250,6 +252,7 @@ class BakeJob:
 
     def summary(self):
         r = self.result
-        return (f"Radiosity: {len(r.patches)} patches, {r.form_factors.nnz} form factors "
+        detail = "" if r.elements is r.patches else f" ({len(r.elements)} output elements)"
+        return (f"Radiosity: {len(r.patches)} patches{detail}, {r.form_factors.nnz} form factors "
                 f"({r.form_factor_source}), {r.solution.iterations} iterations, residual "
                 f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s")

@@ -18,6 +18,9 @@ def draw_settings(layout, context):
         col.prop(s, "rays_per_patch")
     else:
         col.prop(s, "resolution")
+    col.prop(s, "element_size")
+    if s.element_size > 0:
+        col.prop(s, "gather_rays")
     col.prop(s, "direct")
     if s.direct == "EXACT":
         col.prop(s, "direct_samples")

@@ -25,6 +25,14 @@ def setting_annotations():
                                       description="Rays per patch for the stochastic Embree method"),
         "direct": EnumProperty(name="Direct Light", items=DIRECT_ITEMS, default="EXACT",
                                description="How light from emitters reaches the surfaces"),
+        "element_size": FloatProperty(
+            name="Detail Size", default=0.0, min=0.0, soft_max=10.0, unit="LENGTH", precision=3,
+            description="Cut the baked mesh finer than the patches (0: the patches are the baked mesh). "
+                        "Direct light is exact at every vertex; bounced light comes from the patches"),
+        "gather_rays": IntProperty(
+            name="Gather Rays", default=0, min=0, soft_max=4096,
+            description="With a detail size: gather bounced light at every vertex with this many rays "
+                        "(0: interpolate it from the patches). Needs Embree"),
         "direct_samples": IntProperty(name="Shadow Rays", default=16, min=1, soft_max=1024,
                                       description="Shadow rays per point and emitting face "
                                                   "(exact direct light)"),

@@ -146,7 +146,7 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
         if not src.bake:
             continue
         local, loop_vert, starts, colors, _ = patch_mesh_arrays(
-            result.patches, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
+            result.elements, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
         me = bpy.data.meshes.new(f"{src.name}.radiosity")
         me.vertices.add(len(local))
         me.vertices.foreach_set("co", local.astype(np.float32).ravel())
@@ -193,7 +193,7 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
     scale = 2.0 ** float(exposure)
     notes = []
     written = []
-    P = result.patches
+    P = result.elements
     # an earlier baked copy of these objects is replaced by the in-place result
     remove_bakes([s.name for s in scene_input.objects if s.bake], unhide=True)
     for oi, src in enumerate(scene_input.objects):
