@@ -38,28 +38,13 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.lights import AreaLight, PointLight, SpotLight, SunLight
+from .read import _follow
 
 __all__ = ["read_lights", "light_from_object", "world_radiance"]
 
 
 def _rgb(v):
     return np.array([float(v[0]), float(v[1]), float(v[2])])
-
-
-def _follow(socket):
-    """(node, from_socket) linked into ``socket`` (reroutes skipped), or (None, None)."""
-    while socket is not None and socket.is_linked:
-        link = socket.links[0]
-        if not link.is_valid or link.is_muted:
-            return None, None
-        node = link.from_node
-        if node.type == "REROUTE":
-            socket = node.inputs[0]
-            continue
-        if getattr(node, "mute", False):
-            return None, None
-        return node, link.from_socket
-    return None, None
 
 
 def _output_node(nt, kind):

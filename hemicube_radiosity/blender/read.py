@@ -98,7 +98,8 @@ def _value(node, notes, *names, default=0.0, color=True):
 
 
 def _follow(socket):
-    """The node and output socket feeding ``socket``, skipping reroutes; (None, None) if unlinked."""
+    """The node and output socket feeding ``socket``, skipping reroutes; (None, None) if unlinked
+    (or the link or the node feeding it is muted)."""
     while socket is not None and socket.is_linked:
         link = socket.links[0]
         if not link.is_valid or link.is_muted:
@@ -107,6 +108,8 @@ def _follow(socket):
         if node.type == "REROUTE":
             socket = node.inputs[0]
             continue
+        if getattr(node, "mute", False):
+            return None, None
         return node, link.from_socket
     return None, None
 
