@@ -327,18 +327,18 @@ def _edge_functions(px, py):
     """Edge functions of convex polygons in either winding.
 
     ``px``, ``py`` are lists of K arrays (M,) float32, the vertices in order.  Returns lists
-    (a, b, c) of K arrays (M,) float32: ``a X + b Y + c >= 0`` for a point (X, Y) on the inner
-    side of edge k (or on it).  Each edge's coefficients are computed from its endpoints in a
-    canonical order (lexicographic) and negated as the polygon's winding needs, so two polygons
-    sharing an edge evaluate exactly opposite values.  Polygons of zero area get ``c = -1``
-    (they cover nothing).
+    (a, b, c) of K arrays (M,) float32 and ``flat`` (M,) bool: ``a X + b Y + c >= 0`` for a
+    point (X, Y) on the inner side of edge k (or on it).  Each edge's coefficients are computed
+    from its endpoints in a canonical order (lexicographic) and negated as the polygon's winding
+    needs, so two polygons sharing an edge evaluate exactly opposite values.  ``flat`` marks
+    polygons of zero area (they cover nothing; their coefficients are meaningless).  ``a`` is
+    never -0.
     """
     K = len(px)
     area2 = None
     for k in range(K):  # summed left to right, as numpy sums a short row
         t = px[k] * py[(k + 1) % K] - px[(k + 1) % K] * py[k]
         area2 = t if area2 is None else area2 + t
-    flat = area2 == 0
     sgn = np.sign(area2).astype(np.float32)
     a_l, b_l, c_l = [], [], []
     for k in range(K):
@@ -348,13 +348,15 @@ def _edge_functions(px, py):
         ex, ey = np.where(swap, x0, x1) - sx, np.where(swap, y0, y1) - sy
         sign = np.where(swap, -sgn, sgn)
         a = -ey * sign
-        b = ex * sign
-        c = (ey * sx - ex * sy) * sign
-        c[flat] = -1
+        a += np.float32(0)                                           # -0 -> +0
         a_l.append(a)
-        b_l.append(b)
-        c_l.append(c)
-    return a_l, b_l, c_l
+        b_l.append(ex * sign)
+        c_l.append((ey * sx - ex * sy) * sign)
+    return a_l, b_l, c_l, area2 == 0
+
+
+#: Row-count classes of the rasteriser: polygons are rasterised in groups of similar height.
+_ROW_CLASSES = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
 
 
 def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
@@ -381,25 +383,24 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
     j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
     rows = j1 - j0 + 1
-    keep = np.flatnonzero(rows > 0)
-    if not keep.size:
+    cls = np.searchsorted(np.array(_ROW_CLASSES), rows)   # rows <= 0 -> class 0, checked below
+    cls[rows <= 0] = -1
+    spans = []
+    for ci in np.flatnonzero(np.bincount(cls + 1, minlength=len(_ROW_CLASSES) + 2)[1:]):
+        sel = np.flatnonzero(cls == ci)
+        height = _ROW_CLASSES[ci] if ci < len(_ROW_CLASSES) else int(rows[sel].max())
+        spans.append(_spans(sel, height, rows[sel], j0[sel], [p[sel] for p in px],
+                            [p[sel] for p in py], R))
+    if not spans:
         return
-    px = [p[keep] for p in px]
-    py = [p[keep] for p in py]
-    j0, rows = j0[keep], rows[keep]
-    edges = _edge_functions(px, py)
-    width = np.clip(np.ceil(_reduce(np.maximum, px)) - np.floor(_reduce(np.minimum, px)), 1, R)
-    ends = np.cumsum(rows * width.astype(np.int64))   # bound on the fragments of each polygon
-    base = pixel_base[keep]
-    depth = [d[keep] for d in depth]
-    item = item[keep]
+    poly, j, i_lo, n = (np.concatenate(s) for s in zip(*spans))
+    ends = np.cumsum(n)
     lo = 0
-    while lo < keep.size:
+    while lo < n.size:
         hi = int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + FRAGMENTS_PER_CHUNK, "right"))
         hi = max(hi, lo + 1)
         sl = slice(lo, hi)
-        spans = _spans(rows[sl], j0[sl], [[e[sl] for e in edge] for edge in edges], R)
-        _draw_spans(*spans, base[sl], [d[sl] for d in depth], item[sl], keys, R)
+        _draw_spans(poly[sl], j[sl], i_lo[sl], n[sl], pixel_base, depth, item, keys, R)
         lo = hi
 
 
@@ -410,8 +411,9 @@ def _reduce(op, arrays):
     return out
 
 
-def _spans(rows, j0, edges, R):
-    """Pixel spans covered by polygons, one per (polygon, pixel row).
+def _spans(sel, height, rows, j0, px, py, R):
+    """Pixel spans covered by polygons ``sel`` (at most ``height`` rows each), one per
+    (polygon, pixel row).
 
     Pixel (i, j) is covered when its centre satisfies every edge function.  On row j each edge
     ``a X + b Y + c >= 0`` bounds X from one side at ``-(b Y + c) / a``; a polygon sharing the
@@ -419,44 +421,46 @@ def _spans(rows, j0, edges, R):
     When a bound falls within ``SNAP`` of a pixel centre, that pixel is decided by the edge
     inequalities themselves (``a X >= -(b Y + c)``, exactly complementary between neighbours),
     not by the rounded quotient, so a centre lying on an edge is covered as a point test would.
+    An edge parallel to the rows (``a = 0``) empties the rows outside it.
 
-    Returns (poly, j, i_lo, n): polygon (index into ``rows``), row, first column and length
-    (> 0) of every span.
+    The rows are laid out (height, S): row r of every polygon at once, no gathers.
+    Returns (poly, j, i_lo, n): polygon, row, first column and length (> 0) of every span.
     """
-    a, b, c = edges
-    start = np.cumsum(rows) - rows
-    poly = np.repeat(np.arange(rows.size), rows)
-    j = np.repeat(j0 - start, rows) + np.arange(poly.size)
-    Y = j.astype(np.float32) + np.float32(0.5)
+    a, b, c, flat = _edge_functions(px, py)
+    S = sel.size
+    r = np.arange(height)[:, None]
+    Y = (j0 + r).astype(np.float32) + np.float32(0.5)                  # (height, S)
     lo = hi = None
-    ok = None
-    A_l, rhs_l = [], []
+    A_l, rhs_l = a, []
+    inf = np.float32(np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
         for k in range(len(a)):
-            A = a[k][poly]
-            rhs = -(b[k][poly] * Y + c[k][poly])                     # need A X >= rhs
+            A = a[k]
+            rhs = -(b[k] * Y + c[k])                                     # need A X >= rhs
             bound = rhs / A
-            l = np.where(A > 0, bound, -np.inf)
-            h = np.where(A < 0, bound, np.inf)
-            level = (A != 0) | (rhs <= 0)                           # edges parallel to the rows
-            lo = l if lo is None else np.maximum(lo, l)
-            hi = h if hi is None else np.minimum(hi, h)
-            ok = level if ok is None else ok & level
-            A_l.append(A)
+            # a left edge (A > 0) bounds from below, a right edge (A < 0) from above; a level
+            # edge (A = +0) gives +inf (row outside: empty), -inf or nan (no bound) from below
+            l = bound + np.where(A < 0, -inf, 0).astype(np.float32)
+            h = bound + np.where(A > 0, inf, 0).astype(np.float32)
+            h[:, A == 0] = inf
+            lo = l if lo is None else np.fmax(lo, l)
+            hi = h if hi is None else np.fmin(hi, h)
             rhs_l.append(rhs)
-    i_lo = np.maximum(_snap_to_pixels(lo, A_l, rhs_l, first=True), 0)
-    i_hi = np.minimum(_snap_to_pixels(hi, A_l, rhs_l, first=False), R - 1)
-    ok &= i_hi >= i_lo
-    sel = np.flatnonzero(ok)
-    i_lo = i_lo[sel].astype(np.int64)
-    return poly[sel], j[sel], i_lo, i_hi[sel].astype(np.int64) - i_lo + 1
+        i_lo = np.maximum(_snap_to_pixels(lo, A_l, rhs_l, first=True), 0)
+        i_hi = np.minimum(_snap_to_pixels(hi, A_l, rhs_l, first=False), R - 1)
+        n = i_hi - i_lo + 1
+        ok = (n > 0) & (r < rows) & ~flat
+    idx = np.flatnonzero(ok)
+    s = idx % S
+    return sel[s], j0[s] + idx // S, i_lo.ravel()[idx].astype(np.int64), n.ravel()[idx].astype(np.int64)
 
 
 def _snap_to_pixels(bound, A, rhs, first):
     """First (or last) pixel column whose centre lies inside, given the span bound on X.
 
-    Columns whose centres are within ``SNAP`` of the bound are tested with the inequalities
-    ``A X >= rhs`` (all edges) instead of trusting the quotient's rounding.
+    ``bound`` and ``rhs[k]`` are (height, S), ``A[k]`` (S,).  Columns whose centres are within
+    ``SNAP`` of the bound are tested with the inequalities ``A X >= rhs`` (all edges) instead
+    of trusting the quotient's rounding.
     """
     t = bound - np.float32(0.5)
     col = np.ceil(t) if first else np.floor(t)
@@ -464,12 +468,15 @@ def _snap_to_pixels(bound, A, rhs, first):
     with np.errstate(invalid="ignore"):  # unbounded side: inf - inf
         check = np.flatnonzero(np.abs(t - near) < SNAP)
     if check.size:
-        X = near[check] + np.float32(0.5)
+        S = bound.shape[1]
+        s = check % S
+        nr = near.ravel()[check]
+        X = nr + np.float32(0.5)
         inside = None
         for Ak, rk in zip(A, rhs):
-            t_k = Ak[check] * X >= rk[check]
+            t_k = Ak[s] * X >= rk.ravel()[check]
             inside = t_k if inside is None else inside & t_k
-        col[check] = np.where(inside, near[check], near[check] + (1 if first else -1))
+        col.ravel()[check] = np.where(inside, nr, nr + (1 if first else -1))
     return col
 
 
@@ -505,6 +512,32 @@ def _vertex_projection(x, y, z, face, R):
         px = (u / w + 1) * half
         py = (v / w - _FACE_V0[face]) * half
     return px, py
+
+
+def _face_uvw(f, x, y, z):
+    """Face coordinates (u, v, w) on face ``f`` of receiver-frame coordinates (as _FACE_AXES)."""
+    if f == 0:
+        return x, y, z
+    if f == 1:
+        return y, z, x
+    if f == 2:
+        return y, z, -x
+    if f == 3:
+        return x, z, y
+    return x, z, -y
+
+
+def _plane_distance_1(u, v, w, f, p, near):
+    """Signed distance to clip plane ``p`` of face ``f`` (as :func:`_face_planes`)."""
+    if p == 0:
+        return w - u
+    if p == 1:
+        return w + u
+    if p == 2:
+        return w - v
+    if p == 3:
+        return v + w if f == 0 else v
+    return w - near
 
 
 def _batch_item_buffer(scene, recv, frames, eyes):
@@ -555,13 +588,24 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
-        corner = bi[:, None] * V + scene.corner_ids[ni]
-        xs, ys, zs = x.ravel()[corner], y.ravel()[corner], z.ravel()[corner]
-        all_faces = np.broadcast_to(np.arange(5), (bi.size, 5))
-        uvw = np.stack([_face_coords(all_faces[:, f], xs, ys, zs) for f in range(5)], axis=1)
-        outside = np.any(np.all(_face_planes(uvw, all_faces, scene.near) < 0, axis=2), axis=2)
-        si, fi = np.nonzero(~outside)
-        poly, src = _clip_to_faces(uvw[si, fi], fi, scene.near)
+        corner = (bi[:, None] * V + scene.corner_ids[ni]).T
+        xyz = [c.ravel()[corner] for c in (x, y, z)]                 # each (4, S)
+        polys, faces, pairs = [], [], []
+        for f in range(5):
+            u, v, w = _face_uvw(f, *xyz)
+            # wholly outside one of the face's clip planes: clipping would leave nothing
+            out = None
+            for p in range(5):
+                d = _plane_distance_1(u, v, w, f, p, scene.near) < 0
+                d = d[0] & d[1] & d[2] & d[3]
+                out = d if out is None else out | d
+            s = np.flatnonzero(~out)
+            polys.append(np.stack([u[:, s], v[:, s], w[:, s]], axis=-1).transpose(1, 0, 2))
+            faces.append(np.full(s.size, f))
+            pairs.append(s)
+        fi = np.concatenate(faces)
+        si = np.concatenate(pairs)
+        poly, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
         px, py = _project(poly, fi[src], R)
         draw(bi[si[src]], ni[si[src]], fi[src], list(px.T), list(py.T))
     return keys.reshape(B, P)
