@@ -480,19 +480,44 @@ def _snap_to_pixels(bound, A, rhs, first):
     return col
 
 
+#: Span-length classes of the fragment stage: spans up to 8 pixels long are expanded by exact
+#: length, longer ones padded up to the next class.
+_SPAN_CLASSES = (1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512)
+
+
 def _draw_spans(poly, j, i_lo, n, pixel_base, depth, item, keys, R):
-    """Depth-test the pixels of the spans into the item buffer ``keys`` (see :func:`_rasterise`)."""
+    """Depth-test the pixels of the spans into the item buffer ``keys`` (see :func:`_rasterise`).
+
+    Spans are grouped by length and expanded as (length, spans) grids, so the per-pixel work is
+    broadcasting, not repeating.  The depth of pixel ``i_lo + o`` is ``q0 + dq o`` in float32.
+    """
     da, db, dc = depth
+    classes = np.array(_SPAN_CLASSES)
+    if n.size and n.max() > classes[-1]:
+        classes = np.append(classes, n.max())
+    cls = np.searchsorted(classes, n).astype(np.int16)
+    order = np.argsort(cls, kind="stable")
+    counts = np.bincount(cls, minlength=classes.size)
+    poly, j, i_lo, n = poly[order], j[order], i_lo[order], n[order]
     dq = da[poly]
     q0 = dq * (i_lo.astype(np.float32) + np.float32(0.5)) + db[poly] * (
         j.astype(np.float32) + np.float32(0.5)) + dc[poly]
-    start = np.cumsum(n) - n
-    total = int(start[-1] + n[-1]) if n.size else 0
-    off = np.arange(total) - np.repeat(start, n)
-    q = np.repeat(q0, n) + np.repeat(dq, n) * off.astype(np.float32)
-    qbits = np.maximum(q, np.float32(1e-30)).view(np.int32).astype(np.int64)
-    frag = ((np.int64(0x7F800000) - qbits) << 32) | np.repeat(item[poly], n)
-    np.minimum.at(keys, np.repeat(pixel_base[poly] + j * R + i_lo, n) + off, frag)
+    start = pixel_base[poly] + j * R + i_lo
+    ids = item[poly]
+    lo = 0
+    for ci in np.flatnonzero(counts):
+        hi = lo + int(counts[ci])
+        L = int(classes[ci])
+        o = np.arange(L)[:, None]
+        q = q0[lo:hi] + dq[lo:hi] * o.astype(np.float32)             # (L, S)
+        qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
+        frag = ((np.int32(0x7F800000) - qbits).astype(np.int64) << 32) | ids[lo:hi]
+        pix = start[lo:hi] + o
+        if ci >= 8:  # padded class: keep the pixels inside the spans
+            inside = o < n[lo:hi]
+            frag, pix = frag[inside], pix[inside]
+        np.minimum.at(keys, pix.ravel(), frag.ravel())
+        lo = hi
 
 
 def _vertex_projection(x, y, z, face, R):
