@@ -68,7 +68,6 @@ _FACE_PERM = np.abs(_FACE_AXES).argmax(axis=2)
 _FACE_SIGN = np.take_along_axis(_FACE_AXES, _FACE_PERM[..., None], axis=2)[..., 0]
 # v of the face's bottom pixel edge: the top face spans v in [-1, 1], a side face v in [0, 1].
 _FACE_V0 = np.array([-1.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
-_EMPTY = np.iinfo(np.int64).max
 _ID_MASK = np.int64(0xFFFFFFFF)
 
 
@@ -328,11 +327,11 @@ def _edge_functions(px, py):
 
     ``px``, ``py`` are lists of K arrays (M,) float32, the vertices in order.  Returns lists
     (a, b, c) of K arrays (M,) float32 and ``flat`` (M,) bool: ``a X + b Y + c >= 0`` for a
-    point (X, Y) on the inner side of edge k (or on it).  Each edge's coefficients are computed
-    from its endpoints in a canonical order (lexicographic) and negated as the polygon's winding
-    needs, so two polygons sharing an edge evaluate exactly opposite values.  ``flat`` marks
-    polygons of zero area (they cover nothing; their coefficients are meaningless).  ``a`` is
-    never -0.
+    point (X, Y) on the inner side of edge k (or on it).  ``c`` is computed from the edge's
+    lexicographically first endpoint and its direction away from it, then negated as the
+    polygon's winding needs, so two polygons sharing an edge evaluate exactly opposite values.
+    ``flat`` marks polygons of zero area (they cover nothing; their coefficients are
+    meaningless).  ``a`` is never -0.
     """
     K = len(px)
     area2 = None
@@ -343,20 +342,30 @@ def _edge_functions(px, py):
     a_l, b_l, c_l = [], [], []
     for k in range(K):
         x0, y0, x1, y1 = px[k], py[k], px[(k + 1) % K], py[(k + 1) % K]
+        dx, dy = x1 - x0, y1 - y0
+        # first endpoint in (x, y) order: its x is the smaller one, its y that of the same end
         swap = (x1 < x0) | ((x1 == x0) & (y1 < y0))
-        sx, sy = np.where(swap, x1, x0), np.where(swap, y1, y0)
-        ex, ey = np.where(swap, x0, x1) - sx, np.where(swap, y0, y1) - sy
-        sign = np.where(swap, -sgn, sgn)
-        a = -ey * sign
+        sx, sy = np.minimum(x0, x1), np.where(swap, y1, y0)
+        a = (y0 - y1) * sgn
         a += np.float32(0)                                           # -0 -> +0
         a_l.append(a)
-        b_l.append(ex * sign)
-        c_l.append((ey * sx - ex * sy) * sign)
+        b_l.append(dx * sgn)
+        c_l.append((dy * sx - dx * sy) * sgn)
     return a_l, b_l, c_l, area2 == 0
 
 
 #: Row-count classes of the rasteriser: polygons are rasterised in groups of similar height.
 _ROW_CLASSES = (1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256)
+#: Span-length classes of the fragment stage: spans up to 8 pixels long are expanded by exact
+#: length, longer ones padded up to the next class.
+_SPAN_CLASSES = (1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512)
+_EXACT_SPANS = 8
+
+
+def _classes(bounds, top):
+    """Class bounds up to ``top`` and a table: class of every size 0..top."""
+    b = [x for x in bounds if x < top] + [top]
+    return b, np.searchsorted(np.array(b), np.arange(top + 1)).astype(np.int16)
 
 
 def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
@@ -383,24 +392,25 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
     j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
     rows = j1 - j0 + 1
-    cls = np.searchsorted(np.array(_ROW_CLASSES), rows)   # rows <= 0 -> class 0, checked below
+    bounds, table = _classes(_ROW_CLASSES, R)
+    cls = table[np.clip(rows, 0, R)].astype(np.int64)
     cls[rows <= 0] = -1
     spans = []
-    for ci in np.flatnonzero(np.bincount(cls + 1, minlength=len(_ROW_CLASSES) + 2)[1:]):
+    for ci in np.flatnonzero(np.bincount(cls + 1, minlength=len(bounds) + 1)[1:]):
         sel = np.flatnonzero(cls == ci)
-        height = _ROW_CLASSES[ci] if ci < len(_ROW_CLASSES) else int(rows[sel].max())
-        spans.append(_spans(sel, height, rows[sel], j0[sel], [p[sel] for p in px],
-                            [p[sel] for p in py], R))
+        spans.append(_spans(bounds[ci], rows[sel], j0[sel], [p[sel] for p in px],
+                            [p[sel] for p in py], pixel_base[sel], [d[sel] for d in depth],
+                            item[sel], R))
     if not spans:
         return
-    poly, j, i_lo, n = (np.concatenate(s) for s in zip(*spans))
+    q0, dq, start, ids, n = (np.concatenate(s) for s in zip(*spans))
     ends = np.cumsum(n)
     lo = 0
     while lo < n.size:
         hi = int(np.searchsorted(ends, (ends[lo - 1] if lo else 0) + FRAGMENTS_PER_CHUNK, "right"))
         hi = max(hi, lo + 1)
         sl = slice(lo, hi)
-        _draw_spans(poly[sl], j[sl], i_lo[sl], n[sl], pixel_base, depth, item, keys, R)
+        _draw_spans(q0[sl], dq[sl], start[sl], ids[sl], n[sl], keys, R)
         lo = hi
 
 
@@ -411,9 +421,8 @@ def _reduce(op, arrays):
     return out
 
 
-def _spans(sel, height, rows, j0, px, py, R):
-    """Pixel spans covered by polygons ``sel`` (at most ``height`` rows each), one per
-    (polygon, pixel row).
+def _spans(height, rows, j0, px, py, pixel_base, depth, item, R):
+    """Pixel spans covered by polygons of at most ``height`` rows, one per (polygon, pixel row).
 
     Pixel (i, j) is covered when its centre satisfies every edge function.  On row j each edge
     ``a X + b Y + c >= 0`` bounds X from one side at ``-(b Y + c) / a``; a polygon sharing the
@@ -424,35 +433,44 @@ def _spans(sel, height, rows, j0, px, py, R):
     An edge parallel to the rows (``a = 0``) empties the rows outside it.
 
     The rows are laid out (height, S): row r of every polygon at once, no gathers.
-    Returns (poly, j, i_lo, n): polygon, row, first column and length (> 0) of every span.
+    Returns (q0, dq, start, item, n) per span: reciprocal depth at the first pixel and its step
+    along the row (float32), index of the first pixel in the item buffer, id, and length (> 0).
     """
     a, b, c, flat = _edge_functions(px, py)
-    S = sel.size
+    S = rows.size
     r = np.arange(height)[:, None]
-    Y = (j0 + r).astype(np.float32) + np.float32(0.5)                  # (height, S)
+    j = j0 + r
+    Y = j.astype(np.float32) + np.float32(0.5)                         # (height, S)
     lo = hi = None
-    A_l, rhs_l = a, []
+    rhs_l = []
     inf = np.float32(np.inf)
+    zero = np.float32(0)
     with np.errstate(divide="ignore", invalid="ignore"):
         for k in range(len(a)):
             A = a[k]
-            rhs = -(b[k] * Y + c[k])                                     # need A X >= rhs
+            rhs = (-b[k]) * Y + (-c[k])                                  # need A X >= rhs
             bound = rhs / A
             # a left edge (A > 0) bounds from below, a right edge (A < 0) from above; a level
             # edge (A = +0) gives +inf (row outside: empty), -inf or nan (no bound) from below
-            l = bound + np.where(A < 0, -inf, 0).astype(np.float32)
-            h = bound + np.where(A > 0, inf, 0).astype(np.float32)
-            h[:, A == 0] = inf
+            # and nothing from above (nan and inf are ignored by fmax / fmin)
+            l = bound + np.where(A < 0, -inf, zero)
+            h = bound + np.where(A >= 0, inf, zero)
             lo = l if lo is None else np.fmax(lo, l)
             hi = h if hi is None else np.fmin(hi, h)
             rhs_l.append(rhs)
-        i_lo = np.maximum(_snap_to_pixels(lo, A_l, rhs_l, first=True), 0)
-        i_hi = np.minimum(_snap_to_pixels(hi, A_l, rhs_l, first=False), R - 1)
+        i_lo = np.maximum(_snap_to_pixels(lo, a, rhs_l, first=True), zero)
+        i_hi = np.minimum(_snap_to_pixels(hi, a, rhs_l, first=False), np.float32(R - 1))
         n = i_hi - i_lo + 1
         ok = (n > 0) & (r < rows) & ~flat
+    da, db, dc = depth
     idx = np.flatnonzero(ok)
     s = idx % S
-    return sel[s], j0[s] + idx // S, i_lo.ravel()[idx].astype(np.int64), n.ravel()[idx].astype(np.int64)
+    i_lo = i_lo.ravel()[idx]
+    Yk = Y.ravel()[idx]
+    dq = da[s]
+    q0 = dq * (i_lo + np.float32(0.5)) + db[s] * Yk + dc[s]
+    start = pixel_base[s] + j.ravel()[idx] * R + i_lo.astype(np.int64)
+    return q0, dq, start, item[s], n.ravel()[idx].astype(np.int64)
 
 
 def _snap_to_pixels(bound, A, rhs, first):
@@ -480,40 +498,28 @@ def _snap_to_pixels(bound, A, rhs, first):
     return col
 
 
-#: Span-length classes of the fragment stage: spans up to 8 pixels long are expanded by exact
-#: length, longer ones padded up to the next class.
-_SPAN_CLASSES = (1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 24, 32, 48, 64, 96, 128, 192, 256, 384, 512)
-
-
-def _draw_spans(poly, j, i_lo, n, pixel_base, depth, item, keys, R):
+def _draw_spans(q0, dq, start, ids, n, keys, R):
     """Depth-test the pixels of the spans into the item buffer ``keys`` (see :func:`_rasterise`).
 
     Spans are grouped by length and expanded as (length, spans) grids, so the per-pixel work is
-    broadcasting, not repeating.  The depth of pixel ``i_lo + o`` is ``q0 + dq o`` in float32.
+    broadcasting, not repeating.  The reciprocal depth of pixel ``start + o`` is ``q0 + dq o``
+    in float32.
     """
-    da, db, dc = depth
-    classes = np.array(_SPAN_CLASSES)
-    if n.size and n.max() > classes[-1]:
-        classes = np.append(classes, n.max())
-    cls = np.searchsorted(classes, n).astype(np.int16)
+    bounds, table = _classes(_SPAN_CLASSES, R)
+    cls = table[n]
     order = np.argsort(cls, kind="stable")
-    counts = np.bincount(cls, minlength=classes.size)
-    poly, j, i_lo, n = poly[order], j[order], i_lo[order], n[order]
-    dq = da[poly]
-    q0 = dq * (i_lo.astype(np.float32) + np.float32(0.5)) + db[poly] * (
-        j.astype(np.float32) + np.float32(0.5)) + dc[poly]
-    start = pixel_base[poly] + j * R + i_lo
-    ids = item[poly]
+    counts = np.bincount(cls, minlength=len(bounds))
+    q0, dq, start, ids, n = q0[order], dq[order], start[order], ids[order], n[order]
     lo = 0
     for ci in np.flatnonzero(counts):
         hi = lo + int(counts[ci])
-        L = int(classes[ci])
+        L = bounds[ci]
         o = np.arange(L)[:, None]
         q = q0[lo:hi] + dq[lo:hi] * o.astype(np.float32)             # (L, S)
         qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
         frag = ((np.int32(0x7F800000) - qbits).astype(np.int64) << 32) | ids[lo:hi]
         pix = start[lo:hi] + o
-        if ci >= 8:  # padded class: keep the pixels inside the spans
+        if L > _EXACT_SPANS:  # padded class: keep the pixels inside the spans
             inside = o < n[lo:hi]
             frag, pix = frag[inside], pix[inside]
         np.minimum.at(keys, pix.ravel(), frag.ravel())
@@ -565,8 +571,26 @@ def _plane_distance_1(u, v, w, f, p, near):
     return w - near
 
 
+def _seen(ctx, bi, ni):
+    """Indices of the (receiver, patch) pairs whose patch plane the eye is not in (edge-on)."""
+    scene, _, _, dist = ctx[:4]
+    return np.flatnonzero(np.abs(dist[bi * scene.n + ni]) > scene.near)
+
+
+def _draw(ctx, bi, ni, faces, px, py):
+    """Rasterise polygons (pixel coordinates ``px``, ``py`` on ``faces``) of patches ``ni``
+    into the item buffers of batch receivers ``bi``."""
+    scene, keys, nl, dist, face_rows, face_base = ctx
+    N, R = scene.n, scene.resolution
+    d = dist[bi * N + ni]
+    k = bi * (3 * N) + ni
+    plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
+    item = np.where(d < 0, ni, N).astype(np.int64)
+    _rasterise(px, py, face_rows[faces], bi * (3 * R * R) + face_base[faces], plane, item, keys, R)
+
+
 def _batch_item_buffer(scene, recv, frames, eyes):
-    """Item buffers of a batch of receivers: keys (B, 3 R^2) int64 (``_EMPTY`` where nothing)."""
+    """Item buffers of a batch of receivers: keys (B, 3 R^2) int64 (see :func:`_empty_key`)."""
     R = scene.resolution
     B, N = len(recv), scene.n
     V = len(scene.verts)
@@ -588,28 +612,22 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     whole &= visible
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
-    keys = np.full(B * P, _EMPTY, dtype=np.int64)
+    keys = np.full(B * P, _empty_key(N), dtype=np.int64)
     # patch normals in the receiver frames and n . (c - eye): < 0 when the front is seen
     nl = np.einsum("bjk,nk->bjn", fr, scene.normals).reshape(B * 3 * N)
     dist = (scene.plane - np.einsum("nj,bj->bn", scene.normals, eyes[recv])).ravel()
 
-    def draw(bi, ni, faces, px, py):
-        pair = bi * N + ni
-        d = dist[pair]
-        seen = np.flatnonzero(np.abs(d) > scene.near)   # not edge-on
-        bi, ni, faces, pair, d = bi[seen], ni[seen], faces[seen], pair[seen], d[seen]
-        k = bi * (3 * N) + ni
-        plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
-        item = np.where(d < 0, ni, N).astype(np.int64)
-        _rasterise([p[seen] for p in px], [p[seen] for p in py], face_rows[faces],
-                   bi * P + face_base[faces], plane, item, keys, R)
+    ctx = (scene, keys, nl, dist, face_rows, face_base)
 
     # patches wholly inside one face's frustum: their corners' own projections
     bi, ni = np.nonzero(whole)
     vpx, vpy = _vertex_projection(x, y, z, vface, R)
     vpx, vpy = vpx.ravel(), vpy.ravel()
     corner = (bi[:, None] * V + scene.corner_ids[ni]).T
-    draw(bi, ni, (c0[bi, ni] - 9).astype(np.intp), [vpx[c] for c in corner], [vpy[c] for c in corner])
+    faces = (c0[bi, ni] - 9).astype(np.intp)
+    seen = _seen(ctx, bi, ni)
+    bi, ni, faces, corner = bi[seen], ni[seen], faces[seen], corner[:, seen]
+    _draw(ctx, bi, ni, faces, [vpx[c] for c in corner], [vpy[c] for c in corner])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
@@ -631,9 +649,17 @@ def _batch_item_buffer(scene, recv, frames, eyes):
         fi = np.concatenate(faces)
         si = np.concatenate(pairs)
         poly, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
-        px, py = _project(poly, fi[src], R)
-        draw(bi[si[src]], ni[si[src]], fi[src], list(px.T), list(py.T))
+        bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
+        seen = _seen(ctx, bi, ni)
+        px, py = _project(poly[seen], fi[seen], R)
+        _draw(ctx, bi[seen], ni[seen], fi[seen], list(px.T), list(py.T))
     return keys.reshape(B, P)
+
+
+def _empty_key(n):
+    """Item-buffer key of a pixel that sees nothing: farther than any fragment, id ``n + 1``
+    (fragments carry a patch id, or ``n`` for a back face)."""
+    return (np.int64(0x7F800000) << 32) | np.int64(n + 1)
 
 
 def _resolve(keys, weights, n):
@@ -642,12 +668,11 @@ def _resolve(keys, weights, n):
     Returns F rows (B, n) float64 and sky (B,) float64.
     """
     B = len(keys)
-    empty = keys == _EMPTY
-    ids = np.where(empty, n, keys & _ID_MASK)
-    sky = empty.astype(np.float64) @ weights
-    bins = (np.arange(B)[:, None] * (n + 1) + ids).ravel()
-    rows = np.bincount(bins, weights=np.tile(weights, B), minlength=B * (n + 1))
-    return rows.reshape(B, n + 1)[:, :n], sky
+    bins = keys & _ID_MASK
+    bins += (np.arange(B) * (n + 2))[:, None]
+    rows = np.bincount(bins.ravel(), weights=np.tile(weights, B), minlength=B * (n + 2))
+    rows = rows.reshape(B, n + 2)
+    return rows[:, :n], rows[:, n + 1]
 
 
 def _receiver_ids(n, receivers):
