@@ -31,6 +31,8 @@ drawn for all patches at once (so a row does not depend on which receivers are a
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from .deltaff import delta_form_factors
@@ -69,6 +71,8 @@ _FACE_SIGN = np.take_along_axis(_FACE_AXES, _FACE_PERM[..., None], axis=2)[..., 
 # v of the face's bottom pixel edge: the top face spans v in [-1, 1], a side face v in [0, 1].
 _FACE_V0 = np.array([-1.0, 0.0, 0.0, 0.0, 0.0], dtype=np.float32)
 _ID_MASK = np.int64(0xFFFFFFFF)
+# index of the high 32-bit half of an int64 viewed as two int32
+_HIGH = 1 if sys.byteorder == "little" else 0
 
 
 def pixel_weights(resolution):
@@ -235,27 +239,27 @@ def _clip_convex(poly, count, dist):
     # the padding repeats the last vertex: slots count-1 .. K-2 hold copies of it joined by
     # zero-length edges; only the last slot (whose edge closes the polygon) is kept
     copy = (np.arange(K) >= count[:, None] - 1) & (np.arange(K) < K - 1)
-    keep = np.stack([inside & ~copy, cross], axis=2).reshape(M, -1)
-    count = keep.sum(axis=1)
+    keep = np.stack([inside & ~copy, cross], axis=2).reshape(-1)
+    kept = np.flatnonzero(keep)
+    vals = out.reshape(-1, 3)[kept]
+    count = np.bincount(kept // (2 * K), minlength=M)
+    first = np.cumsum(count) - count
     width = max(int(count.max(initial=0)), 1)
-    slot = np.cumsum(keep, axis=1) - 1
-    m, k = np.nonzero(keep)
-    res = np.empty((M, width, 3), dtype=poly.dtype)
-    res[m, slot[m, k]] = out[m, k]
-    pad = np.arange(width) >= count[:, None]
-    if pad.any():
-        pm, pk = np.nonzero(pad)
-        res[pm, pk] = res[pm, np.maximum(count[pm], 1) - 1]
+    # slot k of polygon m holds its kept vertex min(k, count - 1): padded by the last one
+    src = first[:, None] + np.minimum(np.arange(width), np.maximum(count, 1)[:, None] - 1)
+    res = vals[np.minimum(src, max(kept.size - 1, 0))] if kept.size else np.zeros((M, width, 3), poly.dtype)
     return res, count
 
 
 def _clip_to_faces(uvw, faces, near):
-    """Clip polygons (M, 4, 3) in face coordinates to their face's frustum, as triangle fans.
+    """Clip polygons (M, 4, 3) in face coordinates to their face's frustum.
 
-    Successive planes can leave vertices a rounding error apart, which makes the clipped polygon
-    slightly non-convex; its fan triangles are convex whatever the noise, so they are what is
-    rasterised.  A polygon is clipped only by the planes it crosses.  Returns triangles (T, 3, 3)
-    and the index (T,) of the input polygon of each; polygons clipped away entirely leave none.
+    A polygon is clipped only by the planes it crosses.  Returns the clipped polygons (M', K, 3)
+    padded by repeating their last vertex, their vertex counts (>= 3) and the index (M',) of
+    the input polygon of each; polygons clipped away entirely are left out.  Successive planes
+    can leave vertices a rounding error apart, which makes a clipped polygon slightly
+    non-convex; its fan triangles (:func:`_fans`) are convex whatever the noise, so they are
+    what is rasterised.
     """
     poly = uvw
     count = np.full(len(uvw), uvw.shape[1])
@@ -287,10 +291,20 @@ def _clip_to_faces(uvw, faces, near):
         ok = count >= 3
         if not ok.all():
             poly, count, alive = poly[ok], count[ok], alive[ok]
-    m, k = np.nonzero(np.arange(1, poly.shape[1] - 1) < (count[:, None] - 1))
-    k = k + 1
-    tris = np.stack([poly[m, 0], poly[m, k], poly[m, k + 1]], axis=1)
-    return tris, alive[m]
+    return poly, count, alive
+
+
+def _fans(px, py, count):
+    """Fan triangles (v0, vk, vk+1) of polygons (M, K) with ``count`` vertices each.
+
+    Returns px, py as lists of 3 arrays (T,) and the polygon (T,) of each triangle.
+    """
+    W = px.shape[1]
+    m, k = np.nonzero(np.arange(1, W - 1) < (count[:, None] - 1))
+    i0 = m * W
+    i1 = i0 + k + 1
+    px, py = px.ravel(), py.ravel()
+    return [px[i0], px[i1], px[i1 + 1]], [py[i0], py[i1], py[i1 + 1]], m
 
 
 def _depth_planes(scene, R, nl, dist, faces):
@@ -365,7 +379,7 @@ _EXACT_SPANS = 8
 def _classes(bounds, top):
     """Class bounds up to ``top`` and a table: class of every size 0..top."""
     b = [x for x in bounds if x < top] + [top]
-    return b, np.searchsorted(np.array(b), np.arange(top + 1)).astype(np.int16)
+    return b, np.searchsorted(np.array(b), np.arange(top + 1)).astype(np.int8)
 
 
 def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
@@ -381,7 +395,7 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
         Index in ``keys`` of pixel (0, 0) of the polygon's face for its receiver.
     depth : 3 arrays (M,) float32
         Reciprocal depth ``a px + b py + c`` per polygon.
-    item : (M,) int64
+    item : (M,) int32
         Id written to the item buffer.
     keys : (P,) int64
         Item buffer, updated in place: ``(depth bits << 32) | item``, smaller is nearer.
@@ -507,7 +521,7 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
     """
     bounds, table = _classes(_SPAN_CLASSES, R)
     cls = table[n]
-    order = np.argsort(cls, kind="stable")
+    order = np.argsort(cls, kind="stable")                            # radix sort
     counts = np.bincount(cls, minlength=len(bounds))
     q0, dq, start, ids, n = q0[order], dq[order], start[order], ids[order], n[order]
     lo = 0
@@ -517,7 +531,10 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
         o = np.arange(L)[:, None]
         q = q0[lo:hi] + dq[lo:hi] * o.astype(np.float32)             # (L, S)
         qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
-        frag = ((np.int32(0x7F800000) - qbits).astype(np.int64) << 32) | ids[lo:hi]
+        frag = np.empty(q.shape + (2,), dtype=np.int32)             # (high, low) int64 halves
+        np.subtract(np.int32(0x7F800000), qbits, out=frag[..., _HIGH])
+        frag[..., 1 - _HIGH] = ids[lo:hi]
+        frag = frag.view(np.int64)[..., 0]
         pix = start[lo:hi] + o
         if L > _EXACT_SPANS:  # padded class: keep the pixels inside the spans
             inside = o < n[lo:hi]
@@ -585,7 +602,7 @@ def _draw(ctx, bi, ni, faces, px, py):
     d = dist[bi * N + ni]
     k = bi * (3 * N) + ni
     plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
-    item = np.where(d < 0, ni, N).astype(np.int64)
+    item = np.where(d < 0, ni, N).astype(np.int32)
     _rasterise(px, py, face_rows[faces], bi * (3 * R * R) + face_base[faces], plane, item, keys, R)
 
 
@@ -648,11 +665,12 @@ def _batch_item_buffer(scene, recv, frames, eyes):
             pairs.append(s)
         fi = np.concatenate(faces)
         si = np.concatenate(pairs)
-        poly, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
+        poly, count, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
         bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
         seen = _seen(ctx, bi, ni)
-        px, py = _project(poly[seen], fi[seen], R)
-        _draw(ctx, bi[seen], ni[seen], fi[seen], list(px.T), list(py.T))
+        bi, ni, fi, poly, count = bi[seen], ni[seen], fi[seen], poly[seen], count[seen]
+        px, py, m = _fans(*_project(poly, fi, R), count)
+        _draw(ctx, bi[m], ni[m], fi[m], px, py)
     return keys.reshape(B, P)
 
 
