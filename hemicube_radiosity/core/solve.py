@@ -89,9 +89,16 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None) -
     rs = F.row_sums()
     if computed is not None and not np.all(computed):
         miss = ~np.asarray(computed, bool)
-        FT = F.transpose()
-        rs_recip = FT.matvec(areas * computed) / areas   # only computed rows i contribute
-        H_recip = FT.matvec(areas[:, None] * B * computed[:, None]) / areas[:, None]
+        # column sums of A_i F_ij over computed rows i, without forming the transpose
+        # (only the entries in the left-out columns matter: few, e.g. the lights)
+        sel = np.flatnonzero(miss[F.indices])
+        rid = (F.row_ids() if row_ids is None else row_ids)[sel]
+        col = F.indices[sel]
+        w = F.data[sel].astype(np.float64) * (areas * computed)[rid]
+        n = F.shape[1]
+        rs_recip = np.bincount(col, weights=w, minlength=n) / areas
+        H_recip = np.stack([np.bincount(col, weights=w * B[rid, k], minlength=n)
+                            for k in range(B.shape[1])], 1) / areas[:, None]
         rs = np.where(miss, rs_recip, rs)
         H = np.where(miss[:, None], H_recip, H)
     a = areas[:, None]
@@ -105,12 +112,13 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None) -
 
 
 def _segment_sums(vals, cols, x, starts, nonempty, nrows):
-    """Row sums of ``vals * x[cols]`` per band; x is (bands, N), rows given by CSR ``starts``
-    of the non-empty rows. Returns (nrows, bands)."""
+    """Row sums of ``vals * x[cols]`` per band; x is (bands, N) float32 (half the memory traffic
+    of the gathers), sums accumulate in float64; rows given by CSR ``starts`` of the non-empty
+    rows. Returns (nrows, bands)."""
     out = np.zeros((nrows, x.shape[0]))
     if starts.size:
         for k in range(x.shape[0]):
-            out[nonempty, k] = np.add.reduceat(vals * x[k][cols], starts)
+            out[nonempty, k] = np.add.reduceat(vals * x[k][cols], starts, dtype=np.float64)
     return out
 
 
@@ -124,8 +132,9 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, block=None):
     block = block or max(1, min(256, n // 32))
     B = S.copy()
     BT = np.ascontiguousarray(B.T)          # (bands, N): contiguous gathers per band
+    B32 = BT.astype(np.float32)             # what the gathers read
     ip, ix = F.indptr, F.indices
-    dv = F.data.astype(np.float64)
+    dv = F.data.astype(np.float32)
     blocks = []
     for b0 in range(0, n, block):
         b1 = min(n, b0 + block)
@@ -138,12 +147,13 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, block=None):
     for it in range(1, max_it + 1):
         change = 0.0
         for b0, b1, cols, vals, starts, nonempty in blocks:
-            acc = _segment_sums(vals, cols, BT, starts, nonempty, b1 - b0)
+            acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0)
             new = S[b0:b1] + rho[b0:b1] * acc
             d = np.abs(new - BT[:, b0:b1].T).max(initial=0.0)
             if d > change:
                 change = d
             BT[:, b0:b1] = new.T
+            B32[:, b0:b1] = new.T
         scale = np.abs(BT).max()
         ticker.tick(it, max_it)
         if scale == 0 or change <= tol * scale:

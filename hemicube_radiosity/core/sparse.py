@@ -73,16 +73,25 @@ class CSR:
         r, c = np.nonzero(a)
         return cls.from_coo(r, c, a[r, c], a.shape, meta)
 
+    def _memo(self, name, make):
+        """F never changes once built (it is cached and shared by relights): derived arrays are
+        computed once per matrix."""
+        memo = self.__dict__.setdefault("_derived", {})
+        if name not in memo:
+            memo[name] = make()
+        return memo[name]
+
     def row_ids(self) -> np.ndarray:
         """(nnz,) the row of every stored entry."""
-        return np.repeat(np.arange(self.shape[0]), np.diff(self.indptr))
+        return self._memo("row_ids", lambda: np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)))
 
     def row(self, i):
         s, e = self.indptr[i], self.indptr[i + 1]
         return self.indices[s:e], self.data[s:e]
 
     def row_sums(self) -> np.ndarray:
-        return np.bincount(self.row_ids(), weights=self.data.astype(np.float64), minlength=self.shape[0])
+        return self._memo("row_sums", lambda: np.bincount(self.row_ids(), weights=self.data.astype(np.float64),
+                                                          minlength=self.shape[0]))
 
     def matvec(self, x: np.ndarray, row_ids: np.ndarray | None = None) -> np.ndarray:
         """F @ x for x of shape (N,) or (N, k), in float64 (``row_ids`` is accepted for
