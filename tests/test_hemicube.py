@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.hemicube import hemicube_form_factors
+from hemicube_radiosity.core.hemicube import (hemicube_form_factors, pixel_directions, pixel_weights,
+                                              receiver_frames)
 from hemicube_radiosity.core.patches import MeshInput, build_patches
 from hemicube_radiosity.core.progress import Cancelled
 
@@ -215,6 +216,42 @@ def test_per_pixel_depth_splits_interpenetrating_quads():
     assert row[2] == pytest.approx(exact_b, rel=1e-2)
     # the halves differ enough that giving all to either quad would fail the checks above
     assert point_to_polygon(o, n, A) > 1.5 * exact_a and point_to_polygon(o, n, B) > 1.5 * exact_b
+
+
+def test_pixel_directions_and_weights_are_the_item_buffer_order():
+    # a square far smaller than a pixel, centred on the ray through pixel k's centre and facing
+    # the receiver, covers pixel k alone: its entry is exactly that pixel's weight. One square
+    # per face and several per face (corner and middle pixels) check the order of the faces,
+    # rows and columns shared by the rasteriser, pixel_directions and pixel_weights.
+    R = 16
+    dirs, w = pixel_directions(R), pixel_weights(R)
+    assert dirs.shape == (3 * R * R, 3) and w.shape == (3 * R * R,)
+    assert w.sum() == pytest.approx(1.0, abs=1e-12)
+    tiny, half = 1e-3, 0.004
+    receiver = quad_mesh([(-tiny, -tiny, 0), (tiny, -tiny, 0), (tiny, tiny, 0), (-tiny, tiny, 0)], "r")
+    frame = receiver_frames(np.array([[0.0, 0.0, 1.0]]))[0]
+    side = R * R // 2
+    picks = [0, R - 1, R * (R - 1), R * R - 1, R * R // 2 + 3]                  # top face
+    for f in range(4):                                                         # +X, -X, +Y, -Y
+        base = R * R + f * side
+        picks += [base, base + R - 1, base + side - 1, base + 5 * R + 9]
+    meshes = [receiver]
+    for i, k in enumerate(picks):
+        d = frame.T @ dirs[k]
+        d /= np.linalg.norm(d)
+        a = np.cross(d, [0.3, 0.5, 0.7])
+        a /= np.linalg.norm(a)
+        b = np.cross(a, d)
+        meshes.append(quad_mesh([d + half * (sa * a + sb * b) for sa, sb in
+                                 [(-1, -1), (1, -1), (1, 1), (-1, 1)]], f"p{i}"))
+    p = build_patches(meshes, None)
+    F = hemicube_form_factors(p, R, receivers=[0])
+    row = dict(zip(*F.row(0)))
+    assert len(row) == len(picks)
+    for i, k in enumerate(picks):
+        (pid,) = np.flatnonzero(p.owner == i + 1)
+        assert row[pid] == np.float32(w[k])
+    assert F.sky[0] == pytest.approx(1 - w[picks].sum(), abs=1e-6)
 
 
 # ------------------------------------------------------------------------------------------

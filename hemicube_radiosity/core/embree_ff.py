@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .hemicube import pixel_directions, pixel_weights, receiver_frames, tangent_frames
 from .patches import PatchSet
 from .progress import Ticker
 from .sparse import CSR
@@ -127,64 +128,17 @@ def embree_scene(patches: PatchSet) -> EmbreeScene:
 # Hemi-cube pixel directions (local frame: +Z is the normal)
 
 
-def _delta_tables(resolution):
-    from .deltaff import delta_form_factors
-
-    return delta_form_factors(resolution)
-
-
 def hemicube_directions(resolution: int):
     """Unnormalised local directions through every hemi-cube pixel centre, and their weights.
 
-    Returns (dirs (3R^2, 3), weights (3R^2,)): the R*R top-face pixels, then the four side
-    faces +X, -X, +Y, -Y with R/2 * R pixels each. Pixel centres: top face (x, y, 1) with
-    x, y = -1 + (k + 1/2) * 2/R; a side face at unit distance, height z = (r + 1/2) * 2/R for
-    table row r, and along-face coordinate -1 + (c + 1/2) * 2/R for table column c. Weights come
-    from ``deltaff.delta_form_factors`` (the rasteriser's own table), so the two methods weigh
-    the same pixels alike.
+    Returns (dirs (3R^2, 3), weights (3R^2,)): the rasteriser's own pixel order and delta form
+    factors (:func:`hemicube.pixel_directions`, :func:`hemicube.pixel_weights`), so the two
+    methods sample and weigh the same pixels alike.
     """
     R = int(resolution)
     if R < 2 or R % 2:
         raise ValueError(f"hemi-cube resolution must be an even number >= 2, got {resolution}")
-    top, side = _delta_tables(R)
-    t = -1.0 + (np.arange(R) + 0.5) * (2.0 / R)        # along a face
-    h = (np.arange(R // 2) + 0.5) * (2.0 / R)           # height above the horizon
-    Y, X = np.meshgrid(t, t, indexing="ij")              # top[i, j] at (x=t[j], y=t[i])
-    dirs = [np.stack([X, Y, np.ones_like(X)], -1).reshape(-1, 3)]
-    wts = [np.asarray(top, float).reshape(-1)]
-    Hh, A = np.meshgrid(h, t, indexing="ij")             # side[r, c] at height h[r], along t[c]
-    one = np.ones_like(A)
-    for face in (np.stack([one, A, Hh], -1), np.stack([-one, A, Hh], -1),
-                 np.stack([A, one, Hh], -1), np.stack([A, -one, Hh], -1)):
-        dirs.append(face.reshape(-1, 3))
-        wts.append(np.asarray(side, float).reshape(-1))
-    return np.concatenate(dirs), np.concatenate(wts)
-
-
-def tangent_frames(normals, angles=None):
-    """(N,3,3) rows (u, v, n): a right-handed orthonormal frame around each unit normal.
-
-    u is the normal crossed into the world axis least aligned with it, then turned by
-    ``angles`` (N,) radians about n when given.
-    """
-    n = np.asarray(normals, float)
-    helper = np.zeros_like(n)
-    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
-    u = np.cross(helper, n)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(n, u)
-    if angles is not None:
-        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
-        u, v = ca * u + sa * v, -sa * u + ca * v
-    return np.stack([u, v, n], axis=1)
-
-
-def _rotation_angles(n, rotate_seed):
-    """Per-patch rotation about the normal (radians), drawn for all patches so a receiver's
-    angle does not depend on which receivers are asked for."""
-    if rotate_seed is None:
-        return None
-    return np.random.default_rng(rotate_seed).uniform(0.0, 2.0 * np.pi, n)
+    return pixel_directions(R), pixel_weights(R)
 
 
 # --------------------------------------------------------------------------------------------
@@ -258,7 +212,7 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
     n = len(patches)
     recv = _receivers(patches, receivers)
     local, weights = hemicube_directions(resolution)
-    frames = tangent_frames(patches.normals, _rotation_angles(n, rotate_seed))
+    frames = receiver_frames(patches.normals, rotate_seed)
 
     def dirs_fn(batch):
         d = np.einsum("kc,bcj->bkj", local, frames[batch])  # local (x,y,z) -> x u + y v + z n

@@ -40,7 +40,8 @@ from .patches import PatchSet
 from .progress import Ticker
 from .sparse import CSR
 
-__all__ = ["hemicube_form_factors", "receiver_frames", "pixel_weights"]
+__all__ = ["hemicube_form_factors", "receiver_frames", "tangent_frames", "pixel_weights",
+           "pixel_directions"]
 
 #: Eye offset along the receiver normal, as a fraction of the scene's bounding-box diagonal.
 EYE_OFFSET = 1e-5
@@ -92,6 +93,56 @@ def pixel_weights(resolution):
     return np.concatenate([top.ravel()] + [side.ravel()] * 4)
 
 
+def pixel_directions(resolution):
+    """Directions through every hemi-cube pixel centre, in item-buffer order.
+
+    Parameters
+    ----------
+    resolution : int
+        Pixels across the top face (even).
+
+    Returns
+    -------
+    ndarray, shape (3 R^2, 3), float64
+        Unnormalised receiver-frame directions (+Z is the normal), in the order of
+        :func:`pixel_weights`: the top face ``(x, y, 1)`` row by row (row = y, column = x, both
+        ``-1 + (k + 1/2) 2/R``), then the side faces +X, -X, +Y, -Y at unit distance, row r at
+        height ``z = (r + 1/2) 2/R``, column c at ``-1 + (c + 1/2) 2/R`` along the face
+        (y on the +-X faces, x on the +-Y faces).
+    """
+    R = int(resolution)
+    step = 2.0 / R
+    along = -1.0 + (np.arange(R) + 0.5) * step
+    height = (np.arange(R // 2) + 0.5) * step
+    out = []
+    for f in range(5):
+        v, u = np.meshgrid(along if f == 0 else height, along, indexing="ij")
+        uvw = np.stack([u.ravel(), v.ravel(), np.ones(u.size)], axis=1)
+        xyz = np.empty_like(uvw)
+        xyz[:, _FACE_PERM[f]] = uvw * _FACE_SIGN[f]                   # (u, v, w) -> (x, y, z)
+        out.append(xyz)
+    return np.concatenate(out)
+
+
+def tangent_frames(normals, angles=None):
+    """Orthonormal frames (N, 3, 3), rows (u, v, n), around unit normals.
+
+    ``u`` is the normal crossed into the world axis least aligned with it, then turned by
+    ``angles`` (N,) radians about the normal when given.  Right-handed; ``frames[i] @ d``
+    expresses a world vector in frame i.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    helper = np.zeros_like(n)
+    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
+    u = np.cross(helper, n)
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    v = np.cross(n, u)
+    if angles is not None:
+        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        u, v = ca * u + sa * v, -sa * u + ca * v
+    return np.stack([u, v, n], axis=1)
+
+
 def receiver_frames(normals, rotate_seed=None):
     """Orthonormal hemi-cube frames, one per patch.
 
@@ -106,20 +157,12 @@ def receiver_frames(normals, rotate_seed=None):
     Returns
     -------
     ndarray, shape (N, 3, 3), float64
-        Rows (u, v, n): right-handed, ``u`` is the normal crossed into the world axis least
-        aligned with it (then turned).  ``frames[i] @ d`` expresses a world vector in frame i.
+        :func:`tangent_frames` of the normals, turned by those angles.
     """
-    n = np.asarray(normals, dtype=np.float64)
-    helper = np.zeros_like(n)
-    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
-    u = np.cross(helper, n)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(n, u)
+    angles = None
     if rotate_seed is not None:
-        angles = np.random.default_rng(rotate_seed).uniform(0.0, 2.0 * np.pi, len(n))
-        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
-        u, v = ca * u + sa * v, -sa * u + ca * v
-    return np.stack([u, v, n], axis=1)
+        angles = np.random.default_rng(rotate_seed).uniform(0.0, 2.0 * np.pi, len(normals))
+    return tangent_frames(normals, angles)
 
 
 class _Scene:
