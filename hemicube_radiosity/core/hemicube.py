@@ -450,9 +450,14 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
     j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
     rows = j1 - j0 + 1
+    # no pixel-centre column within SNAP of the polygon's x-range: nothing to cover (rounding in
+    # the edge inequalities moves a boundary by far less than SNAP)
+    lo_x, hi_x = _reduce(np.minimum, px), _reduce(np.maximum, px)
+    i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
+    i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
     bounds, table = _classes(_ROW_CLASSES, R)
     cls = table[np.clip(rows, 0, R)].astype(np.int64)
-    cls[rows <= 0] = -1
+    cls[(rows <= 0) | (i1 < i0)] = -1
     spans = []
     for ci in np.flatnonzero(np.bincount(cls + 1, minlength=len(bounds) + 1)[1:]):
         sel = np.flatnonzero(cls == ci)
