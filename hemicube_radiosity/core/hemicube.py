@@ -2,21 +2,28 @@
 
 For every receiver patch i a hemi-cube is put at the patch centre, moved a tiny distance along
 the normal (``EYE_OFFSET`` times the scene's bounding-box diagonal) so that the patch and its
-coplanar neighbours lie below the horizon.  All patches are transformed into the receiver frame
-(normal = +Z), culled when they lie wholly below the horizon, and projected onto the five faces:
+coplanar neighbours lie below the horizon.  The scene's vertices are transformed into the
+receiver frame (normal = +Z) once per receiver, each is assigned the face whose 90-degree frustum
+holds it and projected onto that face; a patch is then classified from its corners' faces
+(packed into one 32-bit word per patch):
 
-* a patch whose corners all fall in one face's 90-degree frustum is projected directly;
+* a patch whose corners all fall in one face's frustum takes its corners' projections directly;
+* a patch wholly below the horizon is culled;
 * the others are clipped (Sutherland-Hodgman, vectorised over polygons) against the frustum of
-  every face they may touch, the near plane and the horizon.
+  every face they may touch (the near plane and the horizon included), each polygon only by
+  the planes it crosses, and the clipped polygons are rasterised as triangle fans.
 
 The projected convex polygons are rasterised as pixel spans: per polygon and pixel row, the
-edge functions bound the run of pixel centres inside, and ``np.repeat`` expands the runs.  The rasterisation is watertight: every corner is
+edge functions bound the run of pixel centres inside.  Polygons are grouped by height and their
+rows laid out (height, polygons), spans are grouped by length and expanded as (length, spans)
+grids, so per-row and per-pixel work is broadcasting rather than gathers and ``np.repeat``.
+The rasterisation is watertight: every vertex is
 transformed once per receiver (patches sharing a corner share its projection), a clipped edge is
 cut from its inside end, and an edge function is evaluated in one canonical direction and negated
 for the polygon that runs the other way, so a pixel centre on a shared edge is covered by both
 patches (the depth test picks one) and never by neither.  Each fragment carries the reciprocal depth ``1/w`` of
 the patch plane at that pixel (exact for planar patches, interpolated per pixel), and the item
-buffer keeps the nearest fragment per pixel (one ``np.minimum.at`` on int64 keys packing depth
+buffer keeps the nearest fragment per pixel (``np.minimum.at`` on int64 keys packing depth
 and patch id).  Summing the delta form factors (:mod:`deltaff`) per visible patch gives a row
 of F (eq. 7).  A patch seen from behind writes its depth (it occludes) but adds to neither F nor
 the sky; a pixel that sees nothing adds its weight to ``sky[i]``.
@@ -25,9 +32,11 @@ All five faces share one item buffer of width R: the top face's R rows, then the
 side faces +X, -X, +Y and -Y (the pixel order of :func:`pixel_weights`).  Several receivers are
 processed per NumPy call (their buffers stacked), which amortises the interpreter overhead.
 
-Frames match :mod:`embree_ff`: the tangent u is the normal crossed into the world axis least
-aligned with it, and ``rotate_seed`` turns each receiver's frame about its normal by an angle
-drawn for all patches at once (so a row does not depend on which receivers are asked for).
+Frames (:func:`tangent_frames`, :func:`receiver_frames`) and the pixel order
+(:func:`pixel_directions`, :func:`pixel_weights`) are the ones :mod:`embree_ff` casts its rays
+with: the tangent u is the normal crossed into the world axis least aligned with it, and
+``rotate_seed`` turns each receiver's frame about its normal by an angle drawn for all patches
+at once (so a row does not depend on which receivers are asked for).
 """
 from __future__ import annotations
 
@@ -191,20 +200,6 @@ class _Scene:
         self.weights = pixel_weights(resolution)
 
 
-def _to_receiver_frames(scene, frames, eyes):
-    """Corners of every patch in every receiver frame of a batch.
-
-    Each vertex is transformed once, so patches sharing a corner get bit-identical coordinates.
-    Returns x, y, z, each (B, N, 4) float32.
-    """
-    B = len(frames)
-    rows = frames.reshape(B * 3, 3).astype(np.float32)
-    local = rows @ scene.verts.T                                     # (3B, V)
-    local -= np.einsum("bij,bj->bi", frames, eyes).reshape(B * 3, 1).astype(np.float32)
-    local = local[:, scene.corner_ids].reshape(B, 3, scene.n, 4)
-    return local[:, 0], local[:, 1], local[:, 2]
-
-
 def _vertex_faces(x, y, z, near):
     """Face (0..4) whose frustum holds each vertex; -1 below the horizon or at the eye."""
     ax, ay = np.abs(x), np.abs(y)
@@ -215,27 +210,10 @@ def _vertex_faces(x, y, z, near):
     return face
 
 
-def _face_coords(faces, x, y, z):
-    """(M, K, 3) face coordinates of vertices (M, K) given in the receiver frame, per face (M,)."""
-    p = np.stack([x, y, z], axis=-1)                                 # (M, K, 3)
-    return np.take_along_axis(p, _FACE_PERM[faces][:, None, :], axis=2) * _FACE_SIGN[faces][:, None, :]
-
-
-def _face_planes(uvw, faces, near):
-    """Signed distances (..., K, 5) to the clip planes of each face; inside is >= 0.
-
-    Planes: w - u, w + u, w - v, v - v0 w (bottom: -w on top, the horizon on a side face),
-    w - near.
-    """
-    u, v, w = uvw[..., 0], uvw[..., 1], uvw[..., 2]
-    v0 = _FACE_V0[faces][..., None]
-    return np.stack([w - u, w + u, w - v, v - v0 * w, w - near], axis=-1)
-
-
-def _plane_distance(poly, faces, near, p):
-    """Signed distance (M, K) of vertices (M, K, 3) to clip plane ``p`` of their face
-    (the ``p``-th plane of :func:`_face_planes`, with the same float32 operations)."""
-    u, v, w = poly[..., 0], poly[..., 1], poly[..., 2]
+def _plane_distance(u, v, w, v0, p, near):
+    """Signed distance of points in face coordinates to clip plane ``p`` of their face; inside
+    is >= 0.  Planes: w - u, w + u, w - v, v - v0 w (``v0`` of :data:`_FACE_V0`: -w on top,
+    the horizon on a side face), w - near."""
     if p == 0:
         return w - u
     if p == 1:
@@ -243,7 +221,7 @@ def _plane_distance(poly, faces, near, p):
     if p == 2:
         return w - v
     if p == 3:
-        return v - _FACE_V0[faces][:, None] * w
+        return v - v0 * w
     return w - near
 
 
@@ -309,7 +287,8 @@ def _clip_to_faces(uvw, faces, near):
     count = np.full(len(uvw), uvw.shape[1])
     alive = np.arange(len(uvw))
     for p in range(5):
-        dist = _plane_distance(poly, faces[alive], near, p)
+        dist = _plane_distance(poly[..., 0], poly[..., 1], poly[..., 2], _FACE_V0[faces[alive]][:, None],
+                               p, near)
         out = dist < 0
         cut = np.flatnonzero(out.any(axis=1))
         if not cut.size:
@@ -456,11 +435,13 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
     i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
     bounds, table = _classes(_ROW_CLASSES, R)
-    cls = table[np.clip(rows, 0, R)].astype(np.int64)
+    cls = table[np.clip(rows, 0, R)]
     cls[(rows <= 0) | (i1 < i0)] = -1
+    order = np.argsort(cls, kind="stable")                            # radix sort
+    ends = np.cumsum(np.bincount(cls + 1, minlength=len(bounds) + 1))
     spans = []
-    for ci in np.flatnonzero(np.bincount(cls + 1, minlength=len(bounds) + 1)[1:]):
-        sel = np.flatnonzero(cls == ci)
+    for ci in np.flatnonzero(np.diff(ends)):
+        sel = order[ends[ci]:ends[ci + 1]]
         spans.append(_spans(bounds[ci], rows[sel], j0[sel], [p[sel] for p in px],
                             [p[sel] for p in py], pixel_base[sel], [d[sel] for d in depth],
                             item[sel], R))
@@ -595,8 +576,8 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
 def _vertex_projection(x, y, z, face, R):
     """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`).
 
-    The same float32 operations as :func:`_project` on the :func:`_face_coords` of the vertex,
-    so a patch wholly inside one face gets bit-identical corners either way.  Vertices with
+    The same float32 operations as :func:`_project` on the vertex's :func:`_face_uvw`, so a
+    patch wholly inside one face gets bit-identical corners either way.  Vertices with
     face -1 get meaningless values.
     """
     half = np.float32(R / 2)
@@ -612,7 +593,7 @@ def _vertex_projection(x, y, z, face, R):
 
 
 def _face_uvw(f, x, y, z):
-    """Face coordinates (u, v, w) on face ``f`` of receiver-frame coordinates (as _FACE_AXES)."""
+    """Face coordinates (u, v, w) on face ``f`` of receiver-frame coordinates (:data:`_FACE_AXES`)."""
     if f == 0:
         return x, y, z
     if f == 1:
@@ -622,19 +603,6 @@ def _face_uvw(f, x, y, z):
     if f == 3:
         return x, z, y
     return x, z, -y
-
-
-def _plane_distance_1(u, v, w, f, p, near):
-    """Signed distance to clip plane ``p`` of face ``f`` (as :func:`_face_planes`)."""
-    if p == 0:
-        return w - u
-    if p == 1:
-        return w + u
-    if p == 2:
-        return w - v
-    if p == 3:
-        return v + w if f == 0 else v
-    return w - near
 
 
 def _seen(ctx, bi, ni):
@@ -705,7 +673,7 @@ def _batch_item_buffer(scene, recv, frames, eyes):
             # wholly outside one of the face's clip planes: clipping would leave nothing
             out = None
             for p in range(5):
-                d = _plane_distance_1(u, v, w, f, p, scene.near) < 0
+                d = _plane_distance(u, v, w, _FACE_V0[f], p, scene.near) < 0
                 d = d[0] & d[1] & d[2] & d[3]
                 out = d if out is None else out | d
             s = np.flatnonzero(~out)
