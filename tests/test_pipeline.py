@@ -205,3 +205,10 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
     assert err_coarse > 0.1          # the shadow is there, and coarse patches smear it
     assert err_elem < 0.2 * err_coarse
     assert err_elem < 0.04          # penumbra sampling and interpolated indirect light
+
+
+def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
+    from hemicube_radiosity.core.patches import PatchError
+
+    with pytest.raises(PatchError, match=r"cuts the scene into \d+ patches, more than the limit of 500"):
+        bake(cornell_box(), BakeSettings(patch_size=0.1, max_patches=500))

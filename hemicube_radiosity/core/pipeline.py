@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cache import FormFactorCache, cache_key
-from .patches import PatchSet, build_patches
+from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
 from .solve import SOLVERS, Solution, solve
 from .sparse import CSR
@@ -43,6 +43,8 @@ class BakeSettings:
     the output mesh is cut to ``element_size``, direct light is evaluated exactly at each of its
     vertices and light reflected more than once is interpolated bilinearly from the patches.
     None: the patches are the output mesh. Needs ``direct='exact'``.
+    max_patches: a bake that would cut more patches stops before the form factors with an error
+    that says so (form factors grow with the square of the patch count).
     gather_rays: with elements, the light reflected more than once is *gathered* at each element
     vertex by this many cosine rays that read the patch solution where they land (a final
     gather; needs Embree) instead of interpolated (0).
@@ -60,6 +62,7 @@ class BakeSettings:
     direct_samples: int = 16
     element_size: float | None = None
     gather_rays: int = 0
+    max_patches: int = 20000
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -259,6 +262,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     say("patches", 0.0, "cutting meshes into patches")
     if patches is None:
         patches = build_patches(meshes, settings.patch_size)
+    if len(patches) > settings.max_patches:
+        raise PatchError(f"a patch size of {settings.patch_size} cuts the scene into {len(patches)} patches, "
+                         f"more than the limit of {settings.max_patches}: use a larger patch size "
+                         "(and a detail size for sharp output)")
     timings["patches"] = time.perf_counter() - t0
     say("patches", 1.0, f"{len(patches)} patches")
     check()
