@@ -437,6 +437,12 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     bounds, table = _classes(_ROW_CLASSES, R)
     cls = table[np.clip(rows, 0, R)]
     cls[(rows <= 0) | (i1 < i0)] = -1
+    # one candidate pixel (one row, one column within SNAP of the x-range): a point test
+    single = np.flatnonzero((rows == 1) & (i1 == i0))
+    if single.size:
+        cls[single] = -1
+        _draw_points(i0[single], j0[single], [p[single] for p in px], [p[single] for p in py],
+                     pixel_base[single], [d[single] for d in depth], item[single], keys, R)
     order = np.argsort(cls, kind="stable")                            # radix sort
     ends = np.cumsum(np.bincount(cls + 1, minlength=len(bounds) + 1))
     spans = []
@@ -448,6 +454,9 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
     if not spans:
         return
     q0, dq, start, ids, n = (np.concatenate(s) for s in zip(*spans))
+    if n.sum() <= FRAGMENTS_PER_CHUNK:
+        _draw_spans(q0, dq, start, ids, n, keys, R)
+        return
     ends = np.cumsum(n)
     lo = 0
     while lo < n.size:
@@ -540,6 +549,33 @@ def _snap_to_pixels(bound, A, rhs, first):
             inside = t_k if inside is None else inside & t_k
         col.ravel()[check] = np.where(inside, nr, nr + (1 if first else -1))
     return col
+
+
+def _draw_points(i, j, px, py, pixel_base, depth, item, keys, R):
+    """Depth-test polygons that can cover one pixel centre only, (i, j), into ``keys``.
+
+    The pixel is covered when its centre satisfies every edge inequality ``a X >= -(b Y + c)``
+    (as computed in :func:`_spans`, which decides a single candidate the same way), and its
+    fragment carries the same depth and key as there.
+    """
+    a, b, c, flat = _edge_functions(px, py)
+    X = i.astype(np.float32) + np.float32(0.5)
+    Y = j.astype(np.float32) + np.float32(0.5)
+    inside = ~flat
+    for k in range(len(a)):
+        inside &= a[k] * X >= (-b[k]) * Y + (-c[k])
+    sel = np.flatnonzero(inside)
+    if not sel.size:
+        return
+    da, db, dc = depth
+    X, Y = X[sel], Y[sel]
+    q = da[sel] * X + db[sel] * Y + dc[sel]
+    qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
+    frag = np.empty(q.shape + (2,), dtype=np.int32)
+    np.subtract(np.int32(0x7F800000), qbits, out=frag[..., _HIGH])
+    frag[..., 1 - _HIGH] = item[sel]
+    np.minimum.at(keys, pixel_base[sel] + j[sel] * R + i[sel].astype(np.int64),
+                  frag.view(np.int64)[..., 0])
 
 
 def _draw_spans(q0, dq, start, ids, n, keys, R):
