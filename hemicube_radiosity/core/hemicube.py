@@ -178,7 +178,8 @@ def receiver_frames(normals, rotate_seed=None):
 class _Scene:
     """What every batch needs: patch geometry centred on the scene, in float32, and the constants.
 
-    verts (V, 3) float32, centred; corner_ids (N, 4) int64 (triangles repeat corner 2);
+    verts (V, 3) float32, centred; corner_ids (N, 4) int64 (triangles repeat corner 2) and
+    its transpose corners_t (4, N);
     normals (N, 3) float64; plane (N,) float64 ``n . c`` (centred); eyes (N, 3) float64 (centred,
     offset along the normal); near (float32); weights (3 R^2,) pixel delta form factors.
     """
@@ -193,6 +194,7 @@ class _Scene:
         self.verts = (verts - origin).astype(np.float32)
         polys = np.asarray(patches.polys)
         self.corner_ids = np.where(polys < 0, polys[:, 2:3], polys)
+        self.corners_t = np.ascontiguousarray(self.corner_ids.T)         # (4, N)
         self.normals = np.asarray(patches.normals, dtype=np.float64)
         self.plane = np.einsum("ij,ij->i", self.normals, patches.centers - origin)
         self.eyes = patches.centers - origin + EYE_OFFSET * scale * self.normals
@@ -693,15 +695,15 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     bi, ni = np.nonzero(whole)
     vpx, vpy = _vertex_projection(x, y, z, vface, R)
     vpx, vpy = vpx.ravel(), vpy.ravel()
-    corner = (bi[:, None] * V + scene.corner_ids[ni]).T
-    faces = (c0[bi, ni] - 9).astype(np.intp)
     seen = _seen(ctx, bi, ni)
-    bi, ni, faces, corner = bi[seen], ni[seen], faces[seen], corner[:, seen]
+    bi, ni = bi[seen], ni[seen]
+    faces = (c0[bi, ni] - 9).astype(np.intp)
+    corner = scene.corners_t[:, ni] + bi * V                          # (4, M)
     _draw(ctx, bi, ni, faces, [vpx[c] for c in corner], [vpy[c] for c in corner])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
-        corner = (bi[:, None] * V + scene.corner_ids[ni]).T
+        corner = scene.corners_t[:, ni] + bi * V
         xyz = [c.ravel()[corner] for c in (x, y, z)]                 # each (4, S)
         polys, faces, pairs = [], [], []
         for f in range(5):
