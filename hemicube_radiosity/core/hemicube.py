@@ -292,10 +292,10 @@ def _clip_to_faces(uvw, faces, near):
         dist = _plane_distance(poly[..., 0], poly[..., 1], poly[..., 2], _FACE_V0[faces[alive]][:, None],
                                p, near)
         out = dist < 0
-        cut = np.flatnonzero(out.any(axis=1))
+        cut = np.flatnonzero(_reduce(np.logical_or, list(out.T)))
         if not cut.size:
             continue
-        gone = out[cut].all(axis=1)
+        gone = _reduce(np.logical_and, list(out[cut].T))
         if gone.any():
             ok = np.ones(len(poly), bool)
             ok[cut[gone]] = False
@@ -470,6 +470,7 @@ def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
 
 
 def _reduce(op, arrays):
+    """``op`` folded over a list of arrays (faster than a reduction along a short axis)."""
     out = arrays[0]
     for a in arrays[1:]:
         out = op(out, a)
