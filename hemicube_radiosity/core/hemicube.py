@@ -408,6 +408,13 @@ def _classes(bounds, top):
 
 
 def _rasterise(px, py, face_rows, pixel_base, depth, item, keys, R):
+    """Write polygons into the item buffer (see :func:`_rasterise_quiet`); infinities and nans
+    of edges parallel to the rows or of unbounded spans are expected, their warnings are off."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R)
+
+
+def _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R):
     """Write polygons into the item buffer, keeping the nearest fragment per pixel.
 
     Parameters
@@ -501,23 +508,23 @@ def _spans(height, rows, j0, px, py, pixel_base, depth, item, R):
     rhs_l = []
     inf = np.float32(np.inf)
     zero = np.float32(0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for k in range(len(a)):
-            A = a[k]
-            rhs = (-b[k]) * Y + (-c[k])                                  # need A X >= rhs
-            bound = rhs / A
-            # a left edge (A > 0) bounds from below, a right edge (A < 0) from above; a level
-            # edge (A = +0) gives +inf (row outside: empty), -inf or nan (no bound) from below
-            # and nothing from above (nan and inf are ignored by fmax / fmin)
-            l = bound + np.where(A < 0, -inf, zero)
-            h = bound + np.where(A >= 0, inf, zero)
-            lo = l if lo is None else np.fmax(lo, l)
-            hi = h if hi is None else np.fmin(hi, h)
-            rhs_l.append(rhs)
-        i_lo = np.maximum(_snap_to_pixels(lo, a, rhs_l, first=True), zero)
-        i_hi = np.minimum(_snap_to_pixels(hi, a, rhs_l, first=False), np.float32(R - 1))
-        n = i_hi - i_lo + 1
-        ok = (n > 0) & (r < rows) & ~flat
+    # (called with division and invalid-value warnings off: see _rasterise)
+    for k in range(len(a)):
+        A = a[k]
+        rhs = (-b[k]) * Y + (-c[k])                                  # need A X >= rhs
+        bound = rhs / A
+        # a left edge (A > 0) bounds from below, a right edge (A < 0) from above; a level
+        # edge (A = +0) gives +inf (row outside: empty), -inf or nan (no bound) from below
+        # and nothing from above (nan and inf are ignored by fmax / fmin)
+        l = bound + np.where(A < 0, -inf, zero)
+        h = bound + np.where(A >= 0, inf, zero)
+        lo = l if lo is None else np.fmax(lo, l)
+        hi = h if hi is None else np.fmin(hi, h)
+        rhs_l.append(rhs)
+    i_lo = np.maximum(_snap_to_pixels(lo, a, rhs_l, first=True), zero)
+    i_hi = np.minimum(_snap_to_pixels(hi, a, rhs_l, first=False), np.float32(R - 1))
+    n = i_hi - i_lo + 1
+    ok = (n > 0) & (r < rows) & ~flat
     da, db, dc = depth
     idx = np.flatnonzero(ok)
     s = idx % S
@@ -539,8 +546,7 @@ def _snap_to_pixels(bound, A, rhs, first):
     t = bound - np.float32(0.5)
     col = np.ceil(t) if first else np.floor(t)
     near = np.round(t)
-    with np.errstate(invalid="ignore"):  # unbounded side: inf - inf
-        check = np.flatnonzero(np.abs(t - near) < SNAP)
+    check = np.flatnonzero(np.abs(t - near) < SNAP)                 # nan on an unbounded side
     if check.size:
         S = bound.shape[1]
         s = check % S
