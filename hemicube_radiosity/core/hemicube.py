@@ -598,7 +598,7 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
     cls = table[n]
     order = np.argsort(cls, kind="stable")                            # radix sort
     counts = np.bincount(cls, minlength=len(bounds))
-    q0, dq, start, ids, n = q0[order], dq[order], start[order], ids[order], n[order]
+    q0, dq, start, ids = q0[order], dq[order], start[order], ids[order]
     lo = 0
     for ci in np.flatnonzero(counts):
         hi = lo + int(counts[ci])
@@ -612,7 +612,7 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
         frag = frag.view(np.int64)[..., 0]
         pix = start[lo:hi] + o
         if L > _EXACT_SPANS:  # padded class: keep the pixels inside the spans
-            inside = o < n[lo:hi]
+            inside = o < n[order[lo:hi]]
             frag, pix = frag[inside], pix[inside]
         np.minimum.at(keys, pix.ravel(), frag.ravel())
         lo = hi
