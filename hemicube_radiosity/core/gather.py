@@ -56,7 +56,8 @@ def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, ra
     point, stratified cosine directions turned by a random angle per point (seeded). ``world``
     (k,) radiance seen by rays that hit nothing (None: black).
     """
-    from .embree_ff import cosine_directions, tangent_frames
+    from .embree_ff import cosine_directions
+    from .hemicube import tangent_frames
 
     vals = np.asarray(vertex_values, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
