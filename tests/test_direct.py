@@ -2,16 +2,11 @@
 import numpy as np
 import pytest
 
+from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.direct import emitter_direct, polygon_form_factors
 from hemicube_radiosity.core.embree_ff import embree_scene
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core.scenes import quad
-
-
-def corner_rect(a, b, c):
-    """Siegel & Howell: point under a corner of an a x b rectangle in a parallel plane c away."""
-    A, B = a / c, b / c
-    return (A / np.hypot(1, A) * np.arctan(B / np.hypot(1, A)) + B / np.hypot(1, B) * np.arctan(A / np.hypot(1, B))) / (2 * np.pi)
 
 
 SQ = np.array([[[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]], float)
@@ -20,8 +15,8 @@ SQ = np.array([[[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]], float)
 def test_parallel_rectangle_matches_closed_form():
     pts = [[0.5, 0.5, 0], [0, 0, 0], [0.25, 0.5, 0]]
     F = polygon_form_factors(pts, [[0, 0, 1]] * 3, SQ, poly_normals=[[0, 0, -1]])[:, 0]
-    expect = [4 * corner_rect(0.5, 0.5, 1), corner_rect(1, 1, 1),
-              2 * corner_rect(0.25, 0.5, 1) + 2 * corner_rect(0.75, 0.5, 1)]
+    expect = [4 * point_under_rectangle_corner(0.5, 0.5, 1), point_under_rectangle_corner(1, 1, 1),
+              2 * point_under_rectangle_corner(0.25, 0.5, 1) + 2 * point_under_rectangle_corner(0.75, 0.5, 1)]
     np.testing.assert_allclose(F, expect, rtol=1e-12)
 
 
@@ -51,7 +46,7 @@ def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
     sc = embree_scene(ps)
     pts = np.array([[0.5, 0.5, 0.0], [1.5, 0.5, 0.0], [-1.0 + 1e-3, 0.5, 0.0]])
     D = emitter_direct(ps, pts, [[0, 0, 1]] * 3, scene=sc, samples=256)
-    open_half = 2 * corner_rect(0.5, 0.5, 1)          # the x > 0.5 half of the light, seen from its edge
+    open_half = 2 * point_under_rectangle_corner(0.5, 0.5, 1)          # the x > 0.5 half of the light, seen from its edge
     np.testing.assert_allclose(D[0], open_half * np.array([2.0, 1.0, 0.5]), rtol=0.02)
     # (1.5,.5,0): the ray to the light's far corner (0,*,1) crosses z=.5 at x=.75 > .5: fully lit
     full = polygon_form_factors(pts[1:2], [[0, 0, 1]], SQ)[0, 0]

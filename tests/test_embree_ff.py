@@ -7,6 +7,7 @@ import pytest
 from hemicube_radiosity.core import scenes
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core import embree_ff
+from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core.embree_ff import (EmbreeUnavailable, embree_available,
                                                embree_hemicube_form_factors,
                                                embree_stochastic_form_factors)
@@ -15,45 +16,16 @@ from hemicube_radiosity.core.progress import Cancelled
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
 
 
-def parallel_squares_closed_form(a=1.0, b=1.0, c=1.0):
-    """Siegel & Howell: directly opposed parallel a x b rectangles a distance c apart."""
-    X, Y = a / c, b / c
-    return 2.0 / (np.pi * X * Y) * (
-        np.log(np.sqrt((1 + X * X) * (1 + Y * Y) / (1 + X * X + Y * Y)))
-        + X * np.sqrt(1 + Y * Y) * np.arctan(X / np.sqrt(1 + Y * Y))
-        + Y * np.sqrt(1 + X * X) * np.arctan(Y / np.sqrt(1 + X * X))
-        - X * np.arctan(X) - Y * np.arctan(Y))
-
-
-def perpendicular_closed_form(w=1.0, h=1.0, l=1.0):
-    """Siegel & Howell: from a w x l rectangle to an h x l one sharing the edge of length l."""
-    W, H = w / l, h / l
-    S = W * W + H * H
-    log_term = np.log((1 + W * W) * (1 + H * H) / (1 + S)
-                      * (W * W * (1 + S) / ((1 + W * W) * S)) ** (W * W)
-                      * (H * H * (1 + S) / ((1 + H * H) * S)) ** (H * H))
-    return (W * np.arctan(1 / W) + H * np.arctan(1 / H) - np.sqrt(S) * np.arctan(1 / np.sqrt(S))
-            + 0.25 * log_term) / (np.pi * W)
-
-
-def object_factor(patches, F, src=0, dst=1):
-    """Area-weighted object-to-object factor from the patch matrix."""
-    D = F.to_dense()
-    a, b = patches.owner == src, patches.owner == dst
-    A = patches.areas[a]
-    return float((A[:, None] * D[np.ix_(a, b)]).sum() / A.sum())
-
-
 def test_closed_forms_are_the_catalogue_values():
-    assert parallel_squares_closed_form() == pytest.approx(0.1998, abs=5e-5)
-    assert perpendicular_closed_form() == pytest.approx(0.2000, abs=5e-5)
+    assert parallel_rectangles() == pytest.approx(0.1998, abs=5e-5)
+    assert perpendicular_rectangles() == pytest.approx(0.2000, abs=5e-5)
 
 
 # 10 x 10 patches per square: the centre-point rule itself is within 3.5e-4 of the area-to-area
 # closed form here (0.20013 vs 0.19982 for the parallel squares), pixel aliasing with rotated
 # R = 64 hemi-cubes adds a few 1e-4.
-CASES = [("parallel", scenes.parallel_squares, parallel_squares_closed_form()),
-         ("perpendicular", scenes.perpendicular_squares, perpendicular_closed_form())]
+CASES = [("parallel", scenes.parallel_squares, parallel_rectangles()),
+         ("perpendicular", scenes.perpendicular_squares, perpendicular_rectangles())]
 
 
 @needs_embree
@@ -108,7 +80,7 @@ def test_back_faces_block_but_count_for_nothing():
     bottom = np.flatnonzero(p.owner == 0)
     assert F.to_dense()[bottom].sum() == 0
     # what the bottom patches see of the square is neither F nor sky
-    expected_open = 1 - parallel_squares_closed_form()
+    expected_open = 1 - parallel_rectangles()
     assert F.sky[bottom] @ p.areas[bottom] / p.areas[bottom].sum() == pytest.approx(expected_open, abs=0.02)
 
 

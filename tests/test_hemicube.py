@@ -2,6 +2,7 @@
 import numpy as np
 import pytest
 
+from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core import scenes
 from hemicube_radiosity.core.hemicube import (hemicube_form_factors, pixel_directions, pixel_weights,
                                               receiver_frames)
@@ -11,27 +12,6 @@ from hemicube_radiosity.core.progress import Cancelled
 
 # ------------------------------------------------------------------------------------------
 # independent truth
-
-
-def parallel_closed_form(a=1.0, b=1.0, c=1.0):
-    """Siegel & Howell: directly opposed parallel a x b rectangles a distance c apart."""
-    X, Y = a / c, b / c
-    return 2 / (np.pi * X * Y) * (
-        np.log(np.sqrt((1 + X * X) * (1 + Y * Y) / (1 + X * X + Y * Y)))
-        + X * np.sqrt(1 + Y * Y) * np.arctan(X / np.sqrt(1 + Y * Y))
-        + Y * np.sqrt(1 + X * X) * np.arctan(Y / np.sqrt(1 + X * X))
-        - X * np.arctan(X) - Y * np.arctan(Y))
-
-
-def perpendicular_closed_form(w=1.0, h=1.0, l=1.0):
-    """Siegel & Howell: from a w x l rectangle to an h x l rectangle sharing the edge l."""
-    W, H = w / l, h / l
-    S = W * W + H * H
-    log_term = np.log((1 + W * W) * (1 + H * H) / (1 + S)
-                      * (W * W * (1 + S) / ((1 + W * W) * S)) ** (W * W)
-                      * (H * H * (1 + S) / ((1 + H * H) * S)) ** (H * H))
-    return (W * np.arctan(1 / W) + H * np.arctan(1 / H) - np.sqrt(S) * np.arctan(1 / np.sqrt(S))
-            + 0.25 * log_term) / (np.pi * W)
 
 
 def point_to_polygon(point, normal, poly):
@@ -46,8 +26,8 @@ def point_to_polygon(point, normal, poly):
 
 
 def test_closed_forms_are_the_catalogue_values():
-    assert parallel_closed_form() == pytest.approx(0.1998, abs=5e-5)
-    assert perpendicular_closed_form() == pytest.approx(0.2000, abs=5e-5)
+    assert parallel_rectangles() == pytest.approx(0.1998, abs=5e-5)
+    assert perpendicular_rectangles() == pytest.approx(0.2000, abs=5e-5)
     square = [(0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)]
     # corner of a unit square at unit height: 1/4 of the centred 2x2 square
     assert point_to_polygon(np.zeros(3), np.array([0, 0, 1.0]), square) == pytest.approx(
@@ -79,13 +59,6 @@ def box_mesh(lo, hi, inward, bottom=True, triangles=False, name="box"):
     return MeshInput.from_faces(verts, polys, name=name)
 
 
-def object_factor(patches, F, src, dst):
-    """Area-weighted factor from object ``src`` to object ``dst``."""
-    D = F.to_dense()
-    a, b = patches.owner == src, patches.owner == dst
-    return float((patches.areas[a] * D[np.ix_(a, b)].sum(axis=1)).sum() / patches.areas[a].sum())
-
-
 # ------------------------------------------------------------------------------------------
 # closed forms
 
@@ -96,7 +69,7 @@ def test_parallel_squares_match_siegel_howell():
     receivers = np.flatnonzero(p.owner == 0)
     assert receivers.size == 256
     F = hemicube_form_factors(p, 128, receivers=receivers)
-    exact = parallel_closed_form()
+    exact = parallel_rectangles()
     assert object_factor(p, F, 0, 1) == pytest.approx(exact, rel=5e-3)
     # with nothing else in the scene the rest of every hemisphere is sky
     np.testing.assert_allclose(F.row_sums()[receivers] + F.sky[receivers], 1.0, atol=1e-6)
@@ -107,7 +80,7 @@ def test_perpendicular_squares_match_siegel_howell():
     # wall's edge on the receiver's horizon is clipped at the horizon, not dropped
     p = build_patches(scenes.perpendicular_squares(), 0.1)
     F = hemicube_form_factors(p, 128, receivers=np.flatnonzero(p.owner == 0))
-    assert object_factor(p, F, 0, 1) == pytest.approx(perpendicular_closed_form(), rel=1e-2)
+    assert object_factor(p, F, 0, 1) == pytest.approx(perpendicular_rectangles(), rel=1e-2)
 
 
 # ------------------------------------------------------------------------------------------
