@@ -17,6 +17,7 @@ import importlib
 import os
 import tempfile
 
+import numpy as np
 import pytest
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -119,3 +120,17 @@ def read_gltf(path):
         return out.astype(np.float64 if dt.kind == "f" else np.int64)
 
     return doc, accessor
+
+
+def corner_data(ob, attr="Radiosity"):
+    """World positions and RGB of every face corner of a baked object."""
+    me = ob.data
+    co = np.empty(len(me.vertices) * 3, np.float32)
+    me.vertices.foreach_get("co", co)
+    lv = np.empty(len(me.loops), np.int32)
+    me.loops.foreach_get("vertex_index", lv)
+    col = np.empty(len(me.loops) * 4, np.float32)
+    me.color_attributes[attr].data.foreach_get("color", col)
+    M = np.array(ob.matrix_world)
+    pos = co.reshape(-1, 3)[lv] @ M[:3, :3].T + M[:3, 3]
+    return pos, col.reshape(-1, 4)[:, :3].astype(np.float64)

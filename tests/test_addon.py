@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from conftest import ADDON_MODULE, disable_addon, enable_addon
+from conftest import ADDON_MODULE, corner_data, disable_addon, enable_addon
 
 BAKE = dict(patch_size=0.25, resolution=32)   # coarse: the whole module bakes in seconds
 
@@ -28,20 +28,6 @@ def mesh_snapshot(me):
     snap["attributes"] = sorted(a.name for a in me.attributes)
     snap["materials"] = [m.name if m else None for m in me.materials]
     return snap
-
-
-def corner_data(ob, attr="Radiosity"):
-    """World positions and RGB of every face corner of a baked object."""
-    me = ob.data
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    lv = np.empty(len(me.loops), np.int32)
-    me.loops.foreach_get("vertex_index", lv)
-    col = np.empty(len(me.loops) * 4, np.float32)
-    me.color_attributes[attr].data.foreach_get("color", col)
-    M = np.array(ob.matrix_world)
-    pos = co.reshape(-1, 3)[lv] @ M[:3, :3].T + M[:3, 3]
-    return pos, col.reshape(-1, 4)[:, :3].astype(np.float64)
 
 
 def region(data, x0, x1, y0, y1):

@@ -5,7 +5,8 @@ import importlib
 
 import numpy as np
 
-from test_addon import corner_data, select
+from conftest import corner_data
+from test_addon import select
 
 BAKE = dict(patch_size=0.25, resolution=32)
 

@@ -11,7 +11,7 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, read_gltf
+from conftest import ROOT, corner_data, read_gltf
 
 BAKE_ARGS = ["--patch-size", "0.25", "--resolution", "32"]
 
@@ -28,20 +28,13 @@ def run(addon, argv):
 
 
 def baked_attributes(bpy):
-    """{source name: (corner positions, corner colours)} of every baked copy in the file."""
+    """{source name: (corner world positions, corner colours)} of every baked copy in the file."""
     out = {}
     for ob in bpy.data.objects:
         src = ob.get("radiosity_source")
         if src is None:
             continue
-        me = ob.data
-        co = np.empty(len(me.vertices) * 3, np.float32)
-        me.vertices.foreach_get("co", co)
-        lv = np.empty(len(me.loops), np.int32)
-        me.loops.foreach_get("vertex_index", lv)
-        col = np.empty(len(me.loops) * 4, np.float32)
-        me.color_attributes["Radiosity"].data.foreach_get("color", col)
-        out[src] = (co.reshape(-1, 3)[lv], col.reshape(-1, 4)[:, :3].astype(np.float64))
+        out[src] = corner_data(ob)
     return out
 
 

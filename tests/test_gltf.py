@@ -6,7 +6,7 @@ import importlib
 import numpy as np
 import pytest
 
-from conftest import read_gltf
+from conftest import corner_data, read_gltf
 
 
 def sub(addon, name):
@@ -15,16 +15,8 @@ def sub(addon, name):
 
 def corners(ob, attr="Radiosity"):
     """World positions (glTF is Y-up: x, z, -y) and RGB of every corner."""
-    me = ob.data
-    co = np.empty(len(me.vertices) * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    lv = np.empty(len(me.loops), np.int32)
-    me.loops.foreach_get("vertex_index", lv)
-    col = np.empty(len(me.loops) * 4, np.float32)
-    me.color_attributes[attr].data.foreach_get("color", col)
-    M = np.array(ob.matrix_world)
-    p = co.reshape(-1, 3)[lv] @ M[:3, :3].T + M[:3, 3]
-    return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1), col.reshape(-1, 4)[:, :3].astype(np.float64)
+    p, col = corner_data(ob, attr)
+    return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1), col
 
 
 def gltf_vertices(doc, accessor, object_name):
