@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .hemicube import pixel_directions, pixel_weights, receiver_frames, tangent_frames
+from .hemicube import _receiver_ids, pixel_directions, pixel_weights, receiver_frames, tangent_frames
 from .patches import PatchSet
 from .progress import Ticker
 from .sparse import CSR
@@ -145,16 +145,6 @@ def hemicube_directions(resolution: int):
 # Shared driver
 
 
-def _receivers(patches, receivers):
-    n = len(patches)
-    if receivers is None:
-        return np.arange(n, dtype=np.int64)
-    r = np.unique(np.asarray(receivers, dtype=np.int64).reshape(-1))
-    if r.size and (r[0] < 0 or r[-1] >= n):
-        raise ValueError(f"receiver ids must be in [0, {n}), got {r[0]}..{r[-1]}")
-    return r
-
-
 def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled):
     """Cast every receiver's rays (built by ``local_dirs_fn(batch) -> (B, K, 3) world dirs,
     (B, K) weights``) and accumulate F rows and sky. Returns (rows, cols, vals, sky)."""
@@ -210,7 +200,7 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
     """
     _import_embreex()
     n = len(patches)
-    recv = _receivers(patches, receivers)
+    recv = _receiver_ids(len(patches), receivers)
     local, weights = hemicube_directions(resolution)
     frames = receiver_frames(patches.normals, rotate_seed)
 
@@ -269,7 +259,7 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
     if k < 1:
         raise ValueError(f"rays_per_patch must be >= 1, got {rays_per_patch}")
     n = len(patches)
-    recv = _receivers(patches, receivers)
+    recv = _receiver_ids(len(patches), receivers)
     angles = np.random.default_rng([seed, 0x5eed]).uniform(0, 2 * np.pi, n)
     frames = tangent_frames(patches.normals, angles)
 
