@@ -216,3 +216,28 @@ def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
 
     with pytest.raises(PatchError, match=r"cuts the scene into \d+ patches, more than the limit of 500"):
         bake(cornell_box(), BakeSettings(patch_size=0.1, max_patches=500))
+
+
+def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(monkeypatch):
+    """With output elements and a final gather, a relight reuses F, the emitters' transport, the
+    element mesh and the gather matrix: no hemi-cube, no ray, no cutting; same result as cold."""
+    from hemicube_radiosity.core import direct, gather, pipeline
+
+    s = BakeSettings(patch_size=0.5, element_size=0.125, gather_rays=64, resolution=32, tolerance=1e-8)
+    cache = FormFactorCache()
+    bake(cornell_box(), s, cache=cache)
+    changed = cornell_box(light_radiance=7.0)
+    changed[3].face_rho[:] = (0.2, 0.2, 0.7)
+    cold = bake(changed, s)
+
+    def forbidden(*a, **k):
+        raise AssertionError("a relight must not recompute geometry-only work")
+
+    for mod, name in ((pipeline, "compute_form_factors"), (direct, "emitter_transport"),
+                      (gather, "gather_matrix"), (pipeline, "build_patches")):
+        monkeypatch.setattr(mod, name, forbidden)
+    warm = bake(changed, s, cache=cache, patches=cold.patches)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+    # the cached element mesh took its materials from the changed meshes
+    red = warm.elements.owner == warm.elements.object_names.index("RedWall")
+    np.testing.assert_allclose(warm.elements.rho[red], [[0.2, 0.2, 0.7]] * int(red.sum()))

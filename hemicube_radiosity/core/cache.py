@@ -50,9 +50,10 @@ class FormFactorCache:
         return None
 
     def put(self, key: str, item) -> None:
-        """Store a CSR (form factors) or an ndarray (e.g. direct-light transport)."""
+        """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
+        on disk; anything else (e.g. an output element mesh) in memory only."""
         self._remember(key, item)
-        if self.directory:
+        if self.directory and isinstance(item, (CSR, np.ndarray)):
             tmp = self._path(key) + ".tmp.npz"
             if isinstance(item, CSR):
                 item.save(tmp)

@@ -14,7 +14,8 @@ import numpy as np
 
 from .patches import PatchSet
 
-__all__ = ["final_gather", "patch_parameters", "surface_values"]
+__all__ = ["final_gather", "gather_matrix", "apply_gather", "patch_parameters", "surface_values",
+           "surface_weights"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -32,48 +33,60 @@ def patch_parameters(patches: PatchSet):
     return c[:, 0], e1, e2, inv, tri
 
 
-def surface_values(params, polys, vertex_values, pid, y):
-    """Values at points ``y`` (H,3) on patches ``pid`` (H,): bilinear in a quad, linear in a
-    triangle, from ``vertex_values`` (V,k) at the patch corners."""
+def surface_weights(params, polys, pid, y):
+    """Corner vertex ids (H, 4) and weights (H, 4) of points ``y`` (H,3) on patches ``pid`` (H,):
+    bilinear in a quad, linear in a triangle (its 4th weight is 0)."""
     c0, e1, e2, inv, tri = params
     rel = y - c0[pid]
     g = np.stack([(rel * e1[pid]).sum(1), (rel * e2[pid]).sum(1)], 1)
     uv = np.clip(np.einsum("hij,hj->hi", inv[pid], g), 0.0, 1.0)
-    u, v = uv[:, :1], uv[:, 1:]
-    p = polys[pid]
-    q = vertex_values[p[:, 0]], vertex_values[p[:, 1]], vertex_values[p[:, 2]], vertex_values[np.maximum(p[:, 3], 0)]
-    quad = (1 - u) * (1 - v) * q[0] + u * (1 - v) * q[1] + u * v * q[2] + (1 - u) * v * q[3]
-    lin = q[0] + u * (q[1] - q[0]) + v * (q[2] - q[0])
-    return np.where(tri[pid][:, None], lin, quad)
+    u, v = uv[:, 0], uv[:, 1]
+    t = tri[pid]
+    w_quad = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v], 1)
+    w_tri = np.stack([1 - u - v, u, v, np.zeros_like(u)], 1)
+    # a triangle's (u, v) can leave it (u + v > 1): fold back onto its hypotenuse
+    over = np.maximum(u + v - 1, 0) / 2
+    w_tri[:, 1] -= over
+    w_tri[:, 2] -= over
+    w_tri[:, 0] = 1 - w_tri[:, 1] - w_tri[:, 2]
+    ids = polys[pid].copy()
+    ids[:, 3] = np.where(ids[:, 3] < 0, ids[:, 0], ids[:, 3])
+    return ids, np.where(t[:, None], w_tri, w_quad)
 
 
-def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, rays=256, seed=0,
-                 world=None, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
-    """(P, k) mean radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose
-    outgoing radiance is ``vertex_values`` (V, k) at ``patches.verts`` (bilinear inside a patch).
+def surface_values(params, polys, vertex_values, pid, y):
+    """Values at points ``y`` (H,3) on patches ``pid`` (H,): bilinear in a quad, linear in a
+    triangle, from ``vertex_values`` (V,k) at the patch corners."""
+    ids, w = surface_weights(params, polys, pid, y)
+    return np.einsum("hc,hck->hk", w, np.asarray(vertex_values, dtype=np.float64)[ids])
+
+
+def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
+                  chunk_rays=1 << 20, ticker=None):
+    """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
+    radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
+    radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
 
     ``scene``: :func:`.embree_ff.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
-    point, stratified cosine directions turned by a random angle per point (seeded). ``world``
-    (k,) radiance seen by rays that hit nothing (None: black).
+    point, stratified cosine directions turned by a random angle per point (seeded). A ray that
+    hits the back of a patch sees nothing. G depends on geometry only: a relight reuses it.
     """
     from .embree_ff import cosine_directions
     from .hemicube import tangent_frames
+    from .sparse import CSR
 
-    vals = np.asarray(vertex_values, dtype=np.float64)
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
-    P, k = len(points), vals.shape[1]
-    out = np.zeros((P, k))
-    if P == 0:
-        return out
+    P, V = len(points), len(patches.verts)
     rng = np.random.default_rng(seed)
     g = int(np.ceil(np.sqrt(rays)))
     R = g * g
     i, j = np.meshgrid(np.arange(g), np.arange(g), indexing="ij")
     params = patch_parameters(patches)
-    world = None if world is None else np.asarray(world, dtype=np.float64)
     eps = 1e-5 * scene.scale
     step = max(1, chunk_rays // R)
+    rows, cols, vals = [], [], []
+    sky = np.zeros(P)
     for s in range(0, P, step):
         x, n = points[s:s + step], normals[s:s + step]
         m = len(x)
@@ -81,22 +94,39 @@ def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, ra
                       (j.ravel()[None] + rng.uniform(0, 1, (m, R))) / g], axis=-1)   # (m, R, 2)
         local = cosine_directions(u.reshape(-1, 2)).reshape(m, R, 3)
         frames = tangent_frames(n, rng.uniform(0, 2 * np.pi, m))                 # (m, 3, 3) rows u, v, n
-        d = np.einsum("mrj,mjc->mrc", local, frames)
+        d = np.einsum("mrj,mjc->mrc", local, frames).reshape(-1, 3)
         o = np.repeat(x + eps * n, R, axis=0)
-        pid, tfar = scene.intersect(o, d.reshape(-1, 3))
+        pid, tfar = scene.intersect(o, d)
         pid = np.asarray(pid)
         hit = pid >= 0
-        front = np.zeros_like(hit)
-        dd = d.reshape(-1, 3)
-        front[hit] = np.einsum("ij,ij->i", dd[hit], patches.normals[pid[hit]]) < 0
-        seen = np.zeros((m * R, k))
-        if front.any():
-            f = np.flatnonzero(front)
-            y = o[f] + np.asarray(tfar, np.float64)[f, None] * dd[f]
-            seen[f] = surface_values(params, patches.polys, vals, pid[f], y)
-        if world is not None:
-            seen[~hit] = world
-        out[s:s + m] = seen.reshape(m, R, k).mean(axis=1)
+        sky[s:s + m] = (~hit).reshape(m, R).mean(axis=1)
+        f = np.flatnonzero(hit)
+        f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]          # front faces only
+        y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
+        ids, w = surface_weights(params, patches.polys, pid[f], y)
+        rows.append(np.repeat(s + f // R, 4))
+        cols.append(ids.ravel())
+        vals.append(w.ravel() / R)
         if ticker is not None:
             ticker.tick(s + m, P)
+    cat = (lambda a: np.concatenate(a) if a else np.zeros(0))
+    G = CSR.from_coo(cat(rows).astype(np.int64), cat(cols).astype(np.int64), cat(vals), (P, V),
+                     {"rays": R, "seed": seed})
+    return G, sky
+
+
+def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, rays=256, seed=0,
+                 world=None, ticker=None) -> np.ndarray:
+    """(P, k) mean radiance arriving at ``points`` from surfaces whose outgoing radiance is
+    ``vertex_values`` (V, k) at ``patches.verts``; ``world`` (k,) is seen by rays that hit
+    nothing (None: black). See :func:`gather_matrix`."""
+    G, sky = gather_matrix(patches, points, normals, scene, rays=rays, seed=seed, ticker=ticker)
+    return apply_gather(G, sky, vertex_values, world)
+
+
+def apply_gather(G, sky, vertex_values, world=None) -> np.ndarray:
+    """``G @ vals + sky * world`` (see :func:`gather_matrix`)."""
+    out = G.matvec(np.asarray(vertex_values, dtype=np.float64))
+    if world is not None:
+        out = out + sky[:, None] * np.asarray(world, dtype=np.float64)[None, :]
     return out

@@ -14,7 +14,7 @@ from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
 from .solve import SOLVERS, Solution, solve
 from .sparse import CSR
-from .direct import vertex_frames
+from .direct import apply_transport, vertex_frames
 from .interpolate import interpolate_at
 from .vertex import exposure, vertex_radiosity
 
@@ -186,7 +186,7 @@ def _direct_at(patches, points, normals, plan, lights, light_options, cancelled,
                                   samples=plan["samples"], ticker=Ticker(None, cancelled))
             if key:
                 cache.put(key, T)
-        D += T.astype(np.float64) @ patches.emission[em]
+        D += apply_transport(T, patches.emission[em])
     if lights:
         from .lights import direct_irradiance
 
@@ -195,15 +195,51 @@ def _direct_at(patches, points, normals, plan, lights, light_options, cancelled,
     return D
 
 
+def meshes_key(meshes) -> bytes:
+    """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for m in meshes:
+        for a in (m.verts, m.face_offsets, m.face_indices):
+            a = np.ascontiguousarray(a)
+            h.update(str(a.shape).encode() + a.tobytes())
+    return h.digest()
+
+
+def _cached(cache, key, make):
+    item = cache.get(key) if cache is not None else None
+    if item is None:
+        item = make()
+        if cache is not None:
+            cache.put(key, item)
+    return item
+
+
+def output_elements(meshes, settings, cache=None) -> PatchSet:
+    """The output mesh cut to ``settings.element_size``; its geometry is cached (a relight only
+    re-reads reflectivity and emission from the meshes)."""
+    key = cache_key(meshes_key(meshes), ("elements", settings.element_size))
+    el = _cached(cache, key, lambda: build_patches(meshes, settings.element_size))
+    rho = np.empty((len(el), 3))
+    em = np.empty((len(el), 3))
+    for oi, m in enumerate(meshes):
+        sel = el.owner == oi
+        rho[sel] = np.asarray(m.face_rho, float)[el.source_face[sel]]
+        em[sel] = np.asarray(m.face_emission, float)[el.source_face[sel]]
+    return el.with_materials(rho, em)
+
+
 def _element_indirect(patches, elements, rest_v, xv, nv, plan, lights, light_options, cancelled, cache,
                       settings, world, notes):
     """Light reflected more than once arriving at element vertices, times their reflectivity:
-    a final gather over the patch solution, or its bilinear interpolation."""
+    a final gather over the patch solution (its ray hits cached as a matrix), or the solution's
+    bilinear interpolation."""
     from .embree_ff import embree_available
 
     if settings.gather_rays > 0 and embree_available():
         from .embree_ff import embree_scene
-        from .gather import final_gather
+        from .gather import apply_gather, gather_matrix
         from .progress import Ticker
 
         # the patches' reflected radiance R = rho (D + gathered) at their vertices, with the
@@ -211,10 +247,17 @@ def _element_indirect(patches, elements, rest_v, xv, nv, plan, lights, light_opt
         pxv, pnv, prho = vertex_frames(patches)
         R_v = prho * _direct_at(patches, pxv, pnv, plan, lights, light_options, cancelled, cache,
                                 "patch-vertices") + rest_v
-        G = final_gather(patches, R_v, xv, nv, embree_scene(patches), rays=settings.gather_rays,
-                         world=world, ticker=Ticker(None, cancelled))
+
+        def make():
+            G, sky = gather_matrix(patches, xv, nv, embree_scene(patches), rays=settings.gather_rays,
+                                   ticker=Ticker(None, cancelled))
+            G.sky = sky
+            return G
+
+        key = cache_key(patches.geometry_key() + elements.geometry_key(), ("gather", settings.gather_rays))
+        G = _cached(cache, key, make)
         _, _, rho_e = vertex_frames(elements)
-        return rho_e * G
+        return rho_e * apply_gather(G, G.sky, R_v, world)
     if settings.gather_rays > 0:
         notes.append("Embree is not available: element vertices interpolate the patch solution "
                      "instead of gathering it")
@@ -343,7 +386,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         rest_v = vertex_radiosity(patches, rest, weights=w)
         if settings.uses_elements():
             say("vertices", 0.0, f"cutting output elements of {settings.element_size:g}")
-            elements = build_patches(meshes, settings.element_size)
+            elements = output_elements(meshes, settings, cache)
             xv, nv, rho_v = vertex_frames(elements)
             rest_v = _element_indirect(patches, elements, rest_v, xv, nv, exact, lights, light_options,
                                        cancelled, cache, settings, world, notes)
