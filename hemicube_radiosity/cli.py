@@ -56,12 +56,12 @@ def _add_bake_settings(p, defaults):
                         "form factors as in the paper (default %(default)s)")
     p.add_argument("--direct-samples", type=int, default=getattr(defaults, "direct_samples", 16),
                    metavar="N", help="shadow rays per point and emitting face (default %(default)s)")
-    p.add_argument("--element-size", type=float, default=0.0, metavar="S",
+    p.add_argument("--element-size", type=float, default=defaults.element_size or 0.0, metavar="S",
                    help="cut the baked mesh finer than the patches (direct light exact at every "
-                        "vertex, bounced light from the patches); 0 = the patches (default)")
-    p.add_argument("--gather-rays", type=int, default=0, metavar="N",
+                        "vertex, bounced light from the patches); 0 = the patches (default %(default)s)")
+    p.add_argument("--gather-rays", type=int, default=defaults.gather_rays, metavar="N",
                    help="with --element-size: gather bounced light at every vertex with N rays "
-                        "instead of interpolating it (needs Embree; default 0)")
+                        "instead of interpolating it (needs Embree; default %(default)s)")
     p.add_argument("--solver", choices=("gauss_seidel", "jacobi", "progressive"),
                    default=defaults.solver, help="(default %(default)s)")
     p.add_argument("--tolerance", type=float, default=defaults.tolerance,

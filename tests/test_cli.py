@@ -13,7 +13,7 @@ import pytest
 
 from conftest import ROOT, corner_data, read_gltf
 
-BAKE_ARGS = ["--patch-size", "0.25", "--resolution", "32"]
+BAKE_ARGS = ["--patch-size", "0.25", "--resolution", "32", "--element-size", "0"]
 
 
 def sub(addon, name):
@@ -108,7 +108,7 @@ def test_operator_and_cli_agree(addon, cornell_blend, cli_bake):
     bpy.ops.wm.open_mainfile(filepath=cornell_blend)
     for o in bpy.context.view_layer.objects:
         o.select_set(o.type == "MESH")
-    assert bpy.ops.object.radiosity_bake(patch_size=0.25, resolution=32) == {"FINISHED"}
+    assert bpy.ops.object.radiosity_bake(patch_size=0.25, resolution=32, element_size=0.0) == {"FINISHED"}
     op = baked_attributes(bpy)
     bpy.ops.wm.open_mainfile(filepath=cli_bake["blend"])
     cli = baked_attributes(bpy)

@@ -27,7 +27,7 @@ from hemicube_radiosity.core.pipeline import BakeSettings, bake  # noqa: E402
 
 RHO = 0.8
 TOL = 0.03
-SETTINGS = dict(patch_size=None, resolution=64, method="hemicube")
+SETTINGS = dict(patch_size=None, resolution=64, method="hemicube", element_size=None)  # faces = patches = output
 LIGHT_OPTIONS = dict(samples=64, seed=1)
 
 

@@ -58,7 +58,7 @@ def light_visibility(points, s=2.0, light=0.5, n=16):
 
 @pytest.fixture(scope="module")
 def cornell():
-    settings = BakeSettings(patch_size=0.125, resolution=64, method="hemicube")
+    settings = BakeSettings(patch_size=0.125, resolution=64, method="hemicube", element_size=None)
     cache = FormFactorCache()
     with_blocks = bake(cornell_box(), settings, cache=cache)
     no_blocks = bake(cornell_box()[:6], settings)
@@ -194,9 +194,9 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
     are all 0.1 m."""
     from hemicube_radiosity.core.interpolate import interpolate_at
 
-    fine = bake(_plate_scene(), BakeSettings(patch_size=0.1, resolution=32, method="embree"))
-    elem = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32, element_size=0.1))
-    coarse = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32))
+    fine = bake(_plate_scene(), BakeSettings(patch_size=0.1, resolution=32, method="embree", element_size=None))
+    elem = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32, element_size=0.1, gather_rays=0))
+    coarse = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32, element_size=None))
     E = fine.elements
     assert np.allclose(elem.elements.verts, E.verts)
     floor = np.isin(np.arange(len(E.verts)), E.polys[E.owner == 0])

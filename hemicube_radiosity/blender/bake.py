@@ -74,7 +74,8 @@ class BakeOptions:
         if hasattr(s, "direct"):
             s.direct = p.direct.lower()
             s.direct_samples = int(p.direct_samples)
-        s.element_size = float(p.element_size) if p.element_size > 0 else None
+        # in place, the user's faces are the output: a finer detail size has nowhere to go
+        s.element_size = float(p.element_size) if p.element_size > 0 and p.output_mode != "IN_PLACE" else None
         s.gather_rays = int(p.gather_rays)
         return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
                    bool(p.use_lights), bpy.path.abspath(p.cache_dir) if p.cache_dir else "")

@@ -5,19 +5,23 @@ from __future__ import annotations
 import bpy
 from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
+from ..core.pipeline import BakeSettings
 from .bake import DIRECT_ITEMS, METHOD_ITEMS, OUTPUT_ITEMS, SOLVER_ITEMS
 
 __all__ = ["setting_annotations", "SETTING_NAMES", "RadiositySettings", "register", "unregister"]
+
+
+_D = BakeSettings()  # defaults come from the core, chosen by the benchmark
 
 
 def setting_annotations():
     """Fresh property definitions (Blender needs one set per class)."""
     return {
         "patch_size": FloatProperty(
-            name="Patch Size", default=0.25, min=0.0, soft_max=10.0, precision=3, unit="LENGTH",
+            name="Patch Size", default=_D.patch_size, min=0.0, soft_max=10.0, precision=3, unit="LENGTH",
             description="Target edge length of a radiosity patch; 0 keeps every face as one patch"),
         "resolution": IntProperty(
-            name="Hemi-cube Resolution", default=64, min=2, soft_min=8, max=2048, soft_max=512, step=2,
+            name="Hemi-cube Resolution", default=_D.resolution, min=2, soft_min=8, max=2048, soft_max=512, step=2,
             description="Pixels along a side of the hemi-cube's top face (even)"),
         "method": EnumProperty(name="Method", items=METHOD_ITEMS, default="HEMICUBE",
                                description="How form factors are computed"),
@@ -26,11 +30,11 @@ def setting_annotations():
         "direct": EnumProperty(name="Direct Light", items=DIRECT_ITEMS, default="EXACT",
                                description="How light from emitters reaches the surfaces"),
         "element_size": FloatProperty(
-            name="Detail Size", default=0.0, min=0.0, soft_max=10.0, unit="LENGTH", precision=3,
+            name="Detail Size", default=_D.element_size or 0.0, min=0.0, soft_max=10.0, unit="LENGTH", precision=3,
             description="Cut the baked mesh finer than the patches (0: the patches are the baked mesh). "
                         "Direct light is exact at every vertex; bounced light comes from the patches"),
         "gather_rays": IntProperty(
-            name="Gather Rays", default=0, min=0, soft_max=4096,
+            name="Gather Rays", default=_D.gather_rays, min=0, soft_max=4096,
             description="With a detail size: gather bounced light at every vertex with this many rays "
                         "(0: interpolate it from the patches). Needs Embree"),
         "direct_samples": IntProperty(name="Shadow Rays", default=16, min=1, soft_max=1024,

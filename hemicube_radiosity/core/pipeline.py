@@ -43,15 +43,19 @@ class BakeSettings:
     the output mesh is cut to ``element_size``, direct light is evaluated exactly at each of its
     vertices and light reflected more than once is interpolated bilinearly from the patches.
     None: the patches are the output mesh. Needs ``direct='exact'``.
-    max_patches: a bake that would cut more patches stops before the form factors with an error
-    that says so (form factors grow with the square of the patch count).
+    max_patches, max_elements: a bake that would cut more stops with an error that says so
+    (form factors grow with the square of the patch count).
+
+    Defaults are the speed-against-error frontier of ``make bench`` (docs/performance.md):
+    resolution 32 gives the error of 64..256 at half the cost, and 0.25 m patches with 0.08 m
+    elements and 64 gather rays reach Cycles' 64-spp vertex error several times faster.
     gather_rays: with elements, the light reflected more than once is *gathered* at each element
     vertex by this many cosine rays that read the patch solution where they land (a final
     gather; needs Embree) instead of interpolated (0).
     """
 
     patch_size: float | None = 0.25
-    resolution: int = 64
+    resolution: int = 32
     method: str = "hemicube"
     rays_per_patch: int = 512
     solver: str = "gauss_seidel"
@@ -60,9 +64,10 @@ class BakeSettings:
     rotate_seed: int | None = None
     direct: str = "exact"
     direct_samples: int = 16
-    element_size: float | None = None
-    gather_rays: int = 0
+    element_size: float | None = 0.08
+    gather_rays: int = 64
     max_patches: int = 20000
+    max_elements: int = 400000
 
     def validate(self) -> None:
         if self.method not in METHODS:
@@ -387,6 +392,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         if settings.uses_elements():
             say("vertices", 0.0, f"cutting output elements of {settings.element_size:g}")
             elements = output_elements(meshes, settings, cache)
+            if len(elements) > settings.max_elements:
+                raise PatchError(f"a detail size of {settings.element_size} cuts the scene into "
+                                 f"{len(elements)} output elements, more than the limit of "
+                                 f"{settings.max_elements}: use a larger detail size")
             xv, nv, rho_v = vertex_frames(elements)
             rest_v = _element_indirect(patches, elements, rest_v, xv, nv, exact, lights, light_options,
                                        cancelled, cache, settings, world, notes)
