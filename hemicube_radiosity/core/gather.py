@@ -68,8 +68,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
 
     ``scene``: :func:`.embree_ff.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
-    point, stratified cosine directions turned by a random angle per point (seeded). A ray that
-    hits the back of a patch sees nothing. G depends on geometry only: a relight reuses it.
+    point: one jittered-grid cosine pattern (seeded) shared by every point, in the point's
+    normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
+    a relight reuses it.
     """
     from .embree_ff import cosine_directions
     from .hemicube import tangent_frames
@@ -85,16 +86,18 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     params = patch_parameters(patches)
     eps = 1e-5 * scene.scale
     step = max(1, chunk_rays // R)
+    # one stratified pattern for every point, in a frame that depends on the normal alone:
+    # neighbouring points on a surface cast parallel rays, so what remains of the sampling error
+    # varies smoothly over the surface instead of as per-vertex speckle
+    u = np.stack([(i.ravel() + rng.uniform(0, 1, R)) / g, (j.ravel() + rng.uniform(0, 1, R)) / g], -1)
+    local = cosine_directions(u)                                                  # (R, 3)
     rows, cols, vals = [], [], []
     sky = np.zeros(P)
     for s in range(0, P, step):
         x, n = points[s:s + step], normals[s:s + step]
         m = len(x)
-        u = np.stack([(i.ravel()[None] + rng.uniform(0, 1, (m, R))) / g,
-                      (j.ravel()[None] + rng.uniform(0, 1, (m, R))) / g], axis=-1)   # (m, R, 2)
-        local = cosine_directions(u.reshape(-1, 2)).reshape(m, R, 3)
-        frames = tangent_frames(n, rng.uniform(0, 2 * np.pi, m))                 # (m, 3, 3) rows u, v, n
-        d = np.einsum("mrj,mjc->mrc", local, frames).reshape(-1, 3)
+        frames = tangent_frames(n)                                                # (m, 3, 3) rows u, v, n
+        d = np.einsum("rj,mjc->mrc", local, frames).reshape(-1, 3)
         o = np.repeat(x + eps * n, R, axis=0)
         pid, tfar = scene.intersect(o, d)
         pid = np.asarray(pid)
