@@ -147,14 +147,18 @@ def hemicube_directions(resolution: int):
 
 def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled):
     """Cast every receiver's rays (built by ``local_dirs_fn(batch) -> (B, K, 3) world dirs,
-    (B, K) weights``) and accumulate F rows and sky. Returns (rows, cols, vals, sky)."""
+    (B, K) weights``) and accumulate F rows and sky. Returns the CSR arrays (indptr, indices
+    int32, data float32) and sky: batches come in receiver order and each is reduced to sorted
+    unique (row, column) entries, so the rows are assembled as they come, without a global sort
+    (whose temporaries peaked at several times the size of F)."""
     scene = embree_scene(patches)
     n = len(patches)
     eps = 1e-5 * scene.scale
     per_batch = max(1, RAYS_PER_BATCH // max(1, rays_per_receiver))
     ticker = Ticker(progress, cancelled)
     sky = np.zeros(n, dtype=np.float64)
-    rows_l, cols_l, vals_l = [], [], []
+    counts = np.zeros(n, dtype=np.int64)
+    cols_l, vals_l = [], []
     ticker.tick(0, len(recv), force=True)
     for start in range(0, len(recv), per_batch):
         batch = recv[start:start + per_batch]
@@ -175,12 +179,14 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         key = rid_h[ok] * n + pid_h[ok]
         uk, inv = np.unique(key, return_inverse=True)
         vals = np.bincount(inv.reshape(-1), weights=w_h[ok], minlength=uk.size)
-        rows_l.append(batch[uk // n])
-        cols_l.append(uk % n)
-        vals_l.append(vals)
+        counts[batch] = np.bincount(uk // n, minlength=B)
+        cols_l.append((uk % n).astype(np.int32))
+        vals_l.append(vals.astype(np.float32))
         ticker.tick(start + B, len(recv))
-    cat = (lambda l, dt: np.concatenate(l).astype(dt) if l else np.zeros(0, dt))
-    return cat(rows_l, np.int64), cat(cols_l, np.int64), cat(vals_l, np.float64), sky
+    indptr = np.zeros(n + 1, dtype=np.int64)
+    np.cumsum(counts, out=indptr[1:])
+    cat = (lambda l, dt: np.concatenate(l) if l else np.zeros(0, dt))
+    return indptr, cat(cols_l, np.int32), cat(vals_l, np.float32), sky
 
 
 # --------------------------------------------------------------------------------------------
@@ -208,10 +214,10 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
         d = np.einsum("kc,bcj->bkj", local, frames[batch])  # local (x,y,z) -> x u + y v + z n
         return d, np.broadcast_to(weights, (len(batch), weights.size))
 
-    rows, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled)
+    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled)
     meta = {"method": "embree", "resolution": int(resolution), "rotate_seed": rotate_seed,
             "n_patches": n, "n_receivers": int(recv.size), "rays_per_receiver": int(weights.size)}
-    F = CSR.from_coo(rows, cols, vals, (n, n), meta)
+    F = CSR(indptr, cols, vals, (n, n), meta)
     F.sky = sky.astype(np.float32)
     return F
 
@@ -271,9 +277,9 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
         d = np.einsum("bkc,bcj->bkj", local, frames[batch])
         return d, np.full((len(batch), k), 1.0 / k)
 
-    rows, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled)
+    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled)
     meta = {"method": "embree_stochastic", "rays_per_patch": k, "seed": seed,
             "n_patches": n, "n_receivers": int(recv.size)}
-    F = CSR.from_coo(rows, cols, vals, (n, n), meta)
+    F = CSR(indptr, cols, vals, (n, n), meta)
     F.sky = sky.astype(np.float32)
     return F
