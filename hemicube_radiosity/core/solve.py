@@ -134,7 +134,7 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, block=None):
     BT = np.ascontiguousarray(B.T)          # (bands, N): contiguous gathers per band
     B32 = BT.astype(np.float32)             # what the gathers read
     ip, ix = F.indptr, F.indices
-    dv = F.data.astype(np.float32)
+    dv = np.asarray(F.data, dtype=np.float32)   # no copy: F is stored float32
     blocks = []
     for b0 in range(0, n, block):
         b1 = min(n, b0 + block)

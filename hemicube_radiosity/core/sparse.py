@@ -83,7 +83,8 @@ class CSR:
 
     def row_ids(self) -> np.ndarray:
         """(nnz,) the row of every stored entry."""
-        return self._memo("row_ids", lambda: np.repeat(np.arange(self.shape[0]), np.diff(self.indptr)))
+        idx = np.int32 if self.shape[0] < 2 ** 31 else np.int64   # half the memory of int64 indices
+        return self._memo("row_ids", lambda: np.repeat(np.arange(self.shape[0], dtype=idx), np.diff(self.indptr)))
 
     def row(self, i):
         s, e = self.indptr[i], self.indptr[i + 1]
@@ -102,11 +103,10 @@ class CSR:
         counts = np.diff(self.indptr)
         nonempty = np.flatnonzero(counts)
         starts = self.indptr[:-1][nonempty]
-        w = self.data.astype(np.float64)
         out = np.zeros((self.shape[0], xt.shape[0]))
         if starts.size:
-            for k in range(xt.shape[0]):
-                out[nonempty, k] = np.add.reduceat(w * xt[k][self.indices], starts)
+            for k in range(xt.shape[0]):   # float32 data times float64 x: products in float64
+                out[nonempty, k] = np.add.reduceat(self.data * xt[k][self.indices], starts)
         return out[:, 0] if one else out
 
     def transpose(self) -> "CSR":
