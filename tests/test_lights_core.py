@@ -139,6 +139,20 @@ def test_sun_at_30_degrees_box_shadow(shadows):
     assert np.all(H[box][n[:, 1] > 0.5] == 0)
 
 
+def test_a_light_that_casts_no_shadow_shines_through_the_box():
+    """Blender's per-light 'Shadow' switch off: the floor under the box gets the full sun."""
+    th = np.radians(30)
+    p = build_patches([scenes.quad([(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], name="floor"),
+                       scenes.box((-0.5, -0.5, 0), (0.5, 0.5, 1.0), bottom=False)], 0.25)
+    on = SunLight((0, np.sin(th), -np.cos(th)), strength=3.0)
+    off = SunLight((0, np.sin(th), -np.cos(th)), strength=3.0, cast_shadows=False)
+    fl = p.owner == 0
+    H_on = direct_irradiance(p, [on])[fl, 0]
+    H_off = direct_irradiance(p, [off])[fl, 0]
+    assert (H_on == 0).sum() > 10
+    np.testing.assert_allclose(H_off, 3.0 * np.cos(th), rtol=1e-12)
+
+
 def test_sun_with_angle_keeps_irradiance_above_the_horizon():
     p = floor()
     H = direct_irradiance(p, [SunLight((0.3, 0.1, -1), strength=2.0, angle=np.radians(10))],

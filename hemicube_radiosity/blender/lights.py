@@ -109,8 +109,6 @@ def light_from_object(ob, matrix_world, notes):
         return None
     if abs(float(getattr(data, "diffuse_factor", 1.0)) - 1.0) > 1e-6:
         notes.append(f"{what}: diffuse factor {data.diffuse_factor:g} ignored (EEVEE only; Cycles ignores it too)")
-    if not getattr(data, "use_shadow", True):
-        notes.append(f"{what}: casts no shadow in Blender; its shadows are still computed here")
     ll = getattr(ob, "light_linking", None)
     if ll is not None and (ll.receiver_collection is not None or ll.blocker_collection is not None):
         notes.append(f"{what}: light linking ignored (it lights and is blocked by everything)")
@@ -223,6 +221,7 @@ def read_lights(depsgraph_or_scene):
     for ob, M in items:
         light = light_from_object(ob, M, notes)
         if light is not None:
+            light.cast_shadows = bool(getattr(ob.data, "use_shadow", True))   # Blender's Shadow switch
             lights.append(light)
     world = world_radiance(scene.world, notes)
     return lights, world, notes

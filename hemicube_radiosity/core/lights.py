@@ -111,6 +111,7 @@ class PointLight:
     power_w: float = 1000.0
     radius: float = 0.0
     soft_falloff: bool = True
+    cast_shadows: bool = True
 
     def __post_init__(self):
         self.position = _vec3(self.position, "PointLight.position")
@@ -133,6 +134,7 @@ class SpotLight:
     spot_size: float = np.pi / 4
     spot_blend: float = 0.15
     soft_falloff: bool = True
+    cast_shadows: bool = True
 
     def __post_init__(self):
         self.position = _vec3(self.position, "SpotLight.position")
@@ -157,6 +159,7 @@ class SunLight:
     color: tuple = (1.0, 1.0, 1.0)
     strength: float = 1.0
     angle: float = 0.0
+    cast_shadows: bool = True
 
     def __post_init__(self):
         self.direction = _unit(self.direction, "SunLight.direction")
@@ -179,6 +182,7 @@ class AreaLight:
     size_y: float = 1.0
     color: tuple = (1.0, 1.0, 1.0)
     power_w: float = 100.0
+    cast_shadows: bool = True
 
     def __post_init__(self):
         m = np.asarray(self.matrix_world, dtype=np.float64)
@@ -600,7 +604,9 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         ids = recv[s:s + RECEIVERS_PER_CHUNK]
         # one random stream per (seed, light, chunk start): reproducible for a given receiver set
         rng = np.random.default_rng([seed, _index, s])
-        out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples, occ, eps)
+        # a light with Blender's 'Shadow' switch off shines through everything
+        out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples,
+                      occ if getattr(light, "cast_shadows", True) else None, eps)
     return out
 
 
