@@ -41,10 +41,23 @@ class _Parser(argparse.ArgumentParser):
         raise CLIError(f"{self.prog}: {message}", status=2)
 
 
+def _size(text):
+    """A size argument: 'auto' or a number >= 0."""
+    if text == "auto":
+        return text
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v:g}")
+    return v
+
+
 def _add_bake_settings(p, defaults):
-    p.add_argument("--patch-size", type=float, default=defaults.patch_size, metavar="S",
-                   help="target patch edge length in scene units; 0 = one patch per face "
-                        "(default %(default)s)")
+    p.add_argument("--patch-size", type=_size, default=defaults.patch_size, metavar="S",
+                   help="target patch edge length in scene units; 0 = one patch per face; auto = "
+                        "the scene's diagonal / 14 (default %(default)s)")
     p.add_argument("--resolution", type=int, default=defaults.resolution, metavar="R",
                    help="hemi-cube top-face resolution, even (default %(default)s)")
     p.add_argument("--method", choices=("hemicube", "embree", "embree_stochastic"),
@@ -56,9 +69,10 @@ def _add_bake_settings(p, defaults):
                         "form factors as in the paper (default %(default)s)")
     p.add_argument("--direct-samples", type=int, default=getattr(defaults, "direct_samples", 16),
                    metavar="N", help="shadow rays per point and emitting face (default %(default)s)")
-    p.add_argument("--element-size", type=float, default=defaults.element_size or 0.0, metavar="S",
+    p.add_argument("--element-size", type=_size, default=defaults.element_size, metavar="S",
                    help="cut the baked mesh finer than the patches (direct light exact at every "
-                        "vertex, bounced light from the patches); 0 = the patches (default %(default)s)")
+                        "vertex, bounced light from the patches); 0 = the patches; auto = a third "
+                        "of the patch size (default %(default)s)")
     p.add_argument("--gather-rays", type=int, default=defaults.gather_rays, metavar="N",
                    help="with --element-size: gather bounced light at every vertex with N rays "
                         "instead of interpolating it (needs Embree; default %(default)s)")
@@ -111,13 +125,13 @@ def _settings(args):
     from .blender.bake import BakeOptions
     from .core.pipeline import BakeSettings
 
-    s = BakeSettings(patch_size=args.patch_size if args.patch_size and args.patch_size > 0 else None,
+    s = BakeSettings(patch_size=args.patch_size or None,
                      resolution=args.resolution, method=args.method,
                      rays_per_patch=args.rays_per_patch, solver=args.solver,
                      tolerance=args.tolerance, max_iterations=args.max_iterations)
     if hasattr(s, "direct"):
         s.direct, s.direct_samples = args.direct, args.direct_samples
-    s.element_size = args.element_size if args.element_size > 0 else None
+    s.element_size = args.element_size or None
     s.gather_rays = args.gather_rays
     try:
         s.validate()
@@ -204,7 +218,7 @@ def _jsonable(x):
 
 def make_report(job, timings, extra=None):
     r = job.result
-    s = job.options.settings
+    s = r.settings or job.options.settings   # as used: 'auto' sizes in scene units
     rep = {
         "timings": {k: float(v) for k, v in timings.items()},
         "patches": int(len(r.patches)),

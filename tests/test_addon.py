@@ -175,7 +175,10 @@ def test_operator_takes_unset_values_from_panel_settings(addon, empty_scene):
     bpy.ops.mesh.primitive_plane_add(size=2)
     plane = bpy.context.active_object
     s = bpy.context.scene.hemicube_radiosity
+    assert s.auto_size                 # sizes follow the scene unless the artist sets them
+    s.auto_size = False
     s.patch_size = 0.5
+    s.element_size = 0.0               # the patches are the baked mesh
     s.attribute_name = "FromPanel"
     assert bpy.ops.object.radiosity_bake(resolution=8) == {"FINISHED"}
     copy = sub(addon, "blender.write").copies_of([plane.name])[0]

@@ -241,3 +241,21 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
     # the cached element mesh took its materials from the changed meshes
     red = warm.elements.owner == warm.elements.object_names.index("RedWall")
     np.testing.assert_allclose(warm.elements.rho[red], [[0.2, 0.2, 0.7]] * int(red.sum()))
+
+
+def test_automatic_sizes_follow_the_scene_scale():
+    """'auto': patch size = diagonal / 14, detail = a third of it, so a scene scaled by 10
+    is cut into the same patches and elements."""
+    from hemicube_radiosity.core.patches import build_patches
+
+    small = cornell_box()
+    big = cornell_box(size=20.0, light_size=5.0)
+    s = BakeSettings()
+    assert s.patch_size == "auto" and s.element_size == "auto"
+    rs, rb = s.resolved(small), s.resolved(big)
+    diag = np.linalg.norm([2.0, 2.0, 2.0])
+    assert rs.patch_size == pytest.approx(diag / 14) and rs.element_size == pytest.approx(diag / 42)
+    assert rb.patch_size == pytest.approx(10 * rs.patch_size)
+    assert len(build_patches(small, rs.patch_size)) == len(build_patches(big, rb.patch_size))
+    r = bake(big, BakeSettings(resolution=16, gather_rays=0))
+    assert r.settings.patch_size == pytest.approx(rb.patch_size) and len(r.elements) > 4 * len(r.patches)

@@ -63,7 +63,7 @@ class BakeOptions:
     def from_props(cls, p):
         """From the add-on's property group or the operator (same property names)."""
         s = BakeSettings(
-            patch_size=float(p.patch_size) if p.patch_size > 0 else None,
+            patch_size="auto" if p.auto_size else (float(p.patch_size) if p.patch_size > 0 else None),
             resolution=int(p.resolution),
             method=p.method.lower(),
             rays_per_patch=int(p.rays_per_patch),
@@ -75,7 +75,9 @@ class BakeOptions:
             s.direct = p.direct.lower()
             s.direct_samples = int(p.direct_samples)
         # in place, the user's faces are the output: a finer detail size has nowhere to go
-        s.element_size = float(p.element_size) if p.element_size > 0 and p.output_mode != "IN_PLACE" else None
+        s.element_size = ("auto" if p.auto_size else float(p.element_size) if p.element_size > 0 else None)
+        if p.output_mode == "IN_PLACE":
+            s.element_size = None
         s.gather_rays = int(p.gather_rays)
         return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
                    bool(p.use_lights), bpy.path.abspath(p.cache_dir) if p.cache_dir else "")

@@ -54,9 +54,13 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
     # -- settings
     def _options(self, context):
         s = getattr(context.scene, "hemicube_radiosity", None)
+        explicit = {n for n in SETTING_NAMES if self.properties.is_property_set(n)}
         for name in SETTING_NAMES:
-            if s is not None and not self.properties.is_property_set(name):
+            if s is not None and name not in explicit:
                 setattr(self, name, getattr(s, name))
+        # a script that passes a size means that size, not the automatic one
+        if "auto_size" not in explicit and explicit & {"patch_size", "element_size"}:
+            self.auto_size = False
         return BakeOptions.from_props(self)
 
     def _report_done(self, job):

@@ -12,15 +12,17 @@ def draw_settings(layout, context):
     layout.use_property_split = True
     layout.use_property_decorate = False
     col = layout.column()
-    col.prop(s, "patch_size")
+    col.prop(s, "auto_size")
+    sizes = col.column()
+    sizes.enabled = not s.auto_size
+    sizes.prop(s, "patch_size")
+    sizes.prop(s, "element_size")
     col.prop(s, "method")
     if s.method == "EMBREE_STOCHASTIC":
         col.prop(s, "rays_per_patch")
     else:
         col.prop(s, "resolution")
-    col.prop(s, "element_size")
-    if s.element_size > 0:
-        col.prop(s, "gather_rays")
+    col.prop(s, "gather_rays")
     col.prop(s, "direct")
     if s.direct == "EXACT":
         col.prop(s, "direct_samples")

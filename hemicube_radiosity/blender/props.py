@@ -17,8 +17,12 @@ _D = BakeSettings()  # defaults come from the core, chosen by the benchmark
 def setting_annotations():
     """Fresh property definitions (Blender needs one set per class)."""
     return {
+        "auto_size": BoolProperty(
+            name="Automatic Sizes", default=True,
+            description="Patch size = the scene's diagonal / 14 and detail size = a third of it "
+                        "(the benchmark's best trade-off at any scale); off: use the sizes below"),
         "patch_size": FloatProperty(
-            name="Patch Size", default=_D.patch_size, min=0.0, soft_max=10.0, precision=3, unit="LENGTH",
+            name="Patch Size", default=0.25, min=0.0, soft_max=10.0, precision=3, unit="LENGTH",
             description="Target edge length of a radiosity patch; 0 keeps every face as one patch"),
         "resolution": IntProperty(
             name="Hemi-cube Resolution", default=_D.resolution, min=2, soft_min=8, max=2048, soft_max=512, step=2,
@@ -30,7 +34,7 @@ def setting_annotations():
         "direct": EnumProperty(name="Direct Light", items=DIRECT_ITEMS, default="EXACT",
                                description="How light from emitters reaches the surfaces"),
         "element_size": FloatProperty(
-            name="Detail Size", default=_D.element_size or 0.0, min=0.0, soft_max=10.0, unit="LENGTH", precision=3,
+            name="Detail Size", default=0.08, min=0.0, soft_max=10.0, unit="LENGTH", precision=3,
             description="Cut the baked mesh finer than the patches (0: the patches are the baked mesh). "
                         "Direct light is exact at every vertex; bounced light comes from the patches"),
         "gather_rays": IntProperty(

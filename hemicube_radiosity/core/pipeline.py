@@ -22,11 +22,14 @@ __all__ = ["BakeSettings", "BakeResult", "bake", "compute_form_factors", "source
 
 METHODS = ("hemicube", "embree", "embree_stochastic")
 DIRECT_MODES = ("exact", "hemicube")
+AUTO_PATCHES_PER_DIAGONAL = 14.0
 
 
 @dataclass
 class BakeSettings:
-    """patch_size: target patch edge length in world units (None/0: one patch per face).
+    """patch_size: target patch edge length in world units (None/0: one patch per face), or
+    'auto': the scene's bounding-box diagonal / 14 (0.25 m for the 2 m Cornell box, the size the
+    benchmark's frontier picked; about 1/8 of a room's width whatever its scale).
     resolution: hemi-cube top-face pixels per side (hemicube and embree methods).
     method: 'hemicube' (NumPy rasteriser), 'embree' (rays through the same hemi-cube pixels),
     'embree_stochastic' (cosine-weighted random rays, ``rays_per_patch`` each).
@@ -42,7 +45,8 @@ class BakeSettings:
     "finer elements take detail from a coarse patch solution". The solve runs on the patches;
     the output mesh is cut to ``element_size``, direct light is evaluated exactly at each of its
     vertices and light reflected more than once is interpolated bilinearly from the patches.
-    None: the patches are the output mesh. Needs ``direct='exact'``.
+    None: the patches are the output mesh; 'auto': a third of the patch size (the frontier's
+    ratio). Needs ``direct='exact'``.
     max_patches, max_elements: a bake that would cut more stops with an error that says so
     (form factors grow with the square of the patch count).
 
@@ -54,7 +58,7 @@ class BakeSettings:
     gather; needs Embree) instead of interpolated (0).
     """
 
-    patch_size: float | None = 0.25
+    patch_size: float | str | None = "auto"
     resolution: int = 32
     method: str = "hemicube"
     rays_per_patch: int = 512
@@ -64,7 +68,7 @@ class BakeSettings:
     rotate_seed: int | None = None
     direct: str = "exact"
     direct_samples: int = 16
-    element_size: float | None = 0.08
+    element_size: float | str | None = "auto"
     gather_rays: int = 64
     max_patches: int = 20000
     max_elements: int = 400000
@@ -78,21 +82,38 @@ class BakeSettings:
             raise ValueError(f"hemi-cube resolution must be an even number >= 2, got {self.resolution}")
         if self.method == "embree_stochastic" and self.rays_per_patch < 1:
             raise ValueError(f"rays per patch must be >= 1, got {self.rays_per_patch}")
-        if self.patch_size is not None and self.patch_size < 0:
-            raise ValueError(f"patch size must be >= 0, got {self.patch_size}")
+        for name in ("patch_size", "element_size"):
+            v = getattr(self, name)
+            if isinstance(v, str) and v != "auto" or not isinstance(v, str) and v is not None and v < 0:
+                raise ValueError(f"{name.replace('_', ' ')} must be >= 0 or 'auto', got {v!r}")
         if self.direct not in DIRECT_MODES:
             raise ValueError(f"unknown direct-light mode {self.direct!r}; choose one of {', '.join(DIRECT_MODES)}")
-        if self.element_size is not None and self.element_size < 0:
-            raise ValueError(f"element size must be >= 0, got {self.element_size}")
         if self.uses_elements() and self.direct != "exact":
             raise ValueError("finer output elements need direct='exact' (direct light at every element vertex)")
         if not self.tolerance > 0 or self.max_iterations < 1:
             raise ValueError("tolerance must be > 0 and max_iterations >= 1")
 
+    def resolved(self, meshes) -> "BakeSettings":
+        """A copy with 'auto' sizes turned into world units for ``meshes``."""
+        from dataclasses import replace
+
+        patch, element = self.patch_size, self.element_size
+        if patch == "auto":
+            lo = np.min([np.min(m.verts, axis=0) for m in meshes], axis=0)
+            hi = np.max([np.max(m.verts, axis=0) for m in meshes], axis=0)
+            patch = float(np.linalg.norm(hi - lo)) / AUTO_PATCHES_PER_DIAGONAL or None
+        if element == "auto":
+            element = patch / 3 if patch else None
+        return replace(self, patch_size=patch, element_size=element)
+
     def uses_elements(self) -> bool:
         """True when the output mesh is cut finer than the patches."""
         if not self.element_size:
             return False
+        if self.element_size == "auto":
+            return bool(self.patch_size)
+        if self.patch_size == "auto":
+            return True
         return not self.patch_size or self.element_size < self.patch_size
 
     def form_factor_key(self) -> tuple:
@@ -118,6 +139,7 @@ class BakeResult:
     direct_irradiance: np.ndarray | None = None
     notes: list = field(default_factory=list)
     elements: PatchSet | None = None
+    settings: BakeSettings | None = None      # as used: 'auto' sizes resolved to world units
 
     def __post_init__(self):
         if self.elements is None:
@@ -299,6 +321,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     """
     settings = settings or BakeSettings()
     settings.validate()
+    if meshes is not None:
+        settings = settings.resolved(meshes)
+    elif "auto" in (settings.patch_size, settings.element_size):
+        raise ValueError("'auto' sizes need the meshes")
     say = progress or (lambda stage, fraction, message="": None)
     t0 = time.perf_counter()
     timings = {}
@@ -410,4 +436,4 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     if not sol.converged:
         notes.append(f"solver stopped after {sol.iterations} iterations without reaching "
                      f"tolerance {settings.tolerance:g}")
-    return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes, elements)
+    return BakeResult(patches, F, sol, Bv, timings, source, S, H, notes, elements, settings)
