@@ -32,7 +32,7 @@ __all__ = ["embree_available", "EmbreeUnavailable", "embree_hemicube_form_factor
            "embree_stochastic_form_factors", "EmbreeScene", "embree_scene"]
 
 #: Rays per ``scene.run`` call (memory: ~60 bytes per ray for inputs and outputs).
-RAYS_PER_BATCH = 1 << 20
+RAYS_PER_BATCH = 1 << 18
 
 
 class EmbreeUnavailable(RuntimeError):
