@@ -341,7 +341,6 @@ def _subdivide(verts, polys, patch_size):
     V = len(verts)
     # vertices inside edges: edge e owns n[e]-1 vertices at t = k/n[e], k = 1..n-1 from edges[e,0]
     e_off = V + np.concatenate([[0], np.cumsum(n - 1)])
-    ev_t = np.concatenate([np.arange(1, k) / k for k in np.unique(n)]) if False else None  # noqa
     # positions of edge vertices
     e_rep = np.repeat(np.arange(len(edges)), n - 1)
     k_in = np.arange(e_rep.size) - (e_off[e_rep] - V) + 1
@@ -355,11 +354,9 @@ def _subdivide(verts, polys, patch_size):
         """Global index of the k-th vertex (k in 0..n) walking along face edge `side` in face order."""
         e = face_edges[face_ids, side]
         m = n[e]
-        kk = np.where(flipped[face_ids, side], m - k, k)
         first = np.where(flipped[face_ids, side], edges[e, 1], edges[e, 0])
         last = np.where(flipped[face_ids, side], edges[e, 0], edges[e, 1])
         inner = e_off[e] + np.where(flipped[face_ids, side], m - k, k) - 1
-        del kk
         return np.where(k == 0, first, np.where(k == m, last, inner))
 
     tri = polys[:, 3] < 0
