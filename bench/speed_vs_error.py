@@ -346,7 +346,7 @@ def dominated_by_slow(c, n, done, cap):
 def label(c):
     if c.get("defaults"):
         return "defaults: " + label({k: v for k, v in c.items() if k != "defaults"})
-    p = "faces" if c["patch_size"] is None else f"{c['patch_size']:g} m"
+    p = _size(c["patch_size"], c.get("resolved", {}).get("patch_size"), "faces")
     if c["method"] == "embree_stochastic":
         s = f"embree_stochastic {c['rays']} rays, patches {p}"
     else:
@@ -356,9 +356,26 @@ def label(c):
     if c.get("direct_samples", 16) != 16:
         s += f", {c['direct_samples']} shadow rays"
     if c.get("element_size"):
-        s += f", elements {c['element_size']:g} m" + (f" + {c['gather_rays']} gather rays" if c.get("gather_rays")
+        s += ", elements " + _size(c["element_size"], c.get("resolved", {}).get("element_size")) + (f" + {c['gather_rays']} gather rays" if c.get("gather_rays")
                                                       else " (interpolated)")
     return s
+
+
+def _size(v, resolved=None, none="none"):
+    """A size for labels: world units, or 'auto' with the size it resolved to when known."""
+    if v is None:
+        return none
+    if isinstance(v, str):
+        return v if resolved is None else f"{v} = {resolved:.3g} m"
+    return f"{v:g} m"
+
+
+def _patch_count(sc, p):
+    if p is None:
+        return sc.n_fine_faces
+    if isinstance(p, str):   # 'auto': what the pipeline resolves it to on the coarse scene
+        p = pipeline.BakeSettings(patch_size=p).resolved(sc.coarse).patch_size
+    return len(build_patches(sc.coarse, p))
 
 
 def run_scene(sc, args):
@@ -407,7 +424,7 @@ def run_scene(sc, args):
     for c in grid:
         p = c["patch_size"]
         if p not in npatch:
-            npatch[p] = sc.n_fine_faces if p is None else len(build_patches(sc.coarse, p))
+            npatch[p] = _patch_count(sc, p)
     grid.sort(key=lambda c: (family(c), npatch[c["patch_size"]], c.get("resolution", c.get("rays"))))
     for c in grid:
         n = npatch[c["patch_size"]]
@@ -425,6 +442,11 @@ def run_scene(sc, args):
             log(f"FAIL  {label(c)}: {rec['error']}")
             continue
         err = correct(errors(vals, R, mask), out["ref_noise"])
+        if res.settings is not None and any(isinstance(c.get(k), str) for k in ("patch_size", "element_size")):
+            # 'auto' sizes: label with what the bake resolved them to
+            rec["resolved"] = {k: getattr(res.settings, k) for k in ("patch_size", "element_size")}
+            rec["label"] = label(rec)
+            n = rec["patches"] = len(res.patches.areas)
         total = core_s + (wt if np.isfinite(wt) else 0.0) + writer.read_seconds
         rec.update(seconds=total, core_seconds=core_s, write_seconds=wt,
                    stages={k: float(v) for k, v in res.timings.items()},
@@ -432,7 +454,7 @@ def run_scene(sc, args):
                    ff_mb=res.form_factors.nbytes / 1e6, error=err)
         done.append(rec)
         st = res.timings
-        log(f"ours  {label(c):48s} N={n:5d} {total:7.2f} s (ff {st['form_factors']:.2f}, direct"
+        log(f"ours  {rec['label']:48s} N={n:5d} {total:7.2f} s (ff {st['form_factors']:.2f}, direct"
             f" {st.get('direct', 0):.2f}, solve {st['solve']:.2f}, vertices {st.get('vertices', 0):.2f}, write {wt:.2f})  rms {100 * err[METRIC]:6.2f}% (raw {100 * err['rms']:.2f}%)  p95 {100 * err['p95']:6.2f}%")
     out["ours"] = [d for d in done if not d.get("skipped")]
     out["skipped"] = [d for d in done if d.get("skipped")]
@@ -662,8 +684,11 @@ def _fmt_s(x):
 
 def _defaults_text():
     d = pipeline.BakeSettings()
-    return (f"method={d.method!r}, resolution={d.resolution}, patch_size={d.patch_size:g}, element_size="
-            f"{d.element_size:g}, gather_rays={d.gather_rays}, solver={d.solver!r}, direct={d.direct!r}")
+    auto = {"patch_size": " (bounding-box diagonal / 14)", "element_size": " (patch / 3)"}
+    sz = {k: (f"{getattr(d, k)!r}{auto[k]}" if isinstance(getattr(d, k), str) else f"{getattr(d, k):g}")
+          for k in auto}
+    return (f"method={d.method!r}, resolution={d.resolution}, patch_size={sz['patch_size']}, element_size="
+            f"{sz['element_size']}, gather_rays={d.gather_rays}, solver={d.solver!r}, direct={d.direct!r}")
 
 
 def headline(sc):
