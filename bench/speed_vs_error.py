@@ -153,11 +153,7 @@ def _material(rho, emission, name):
     if max(emission) <= 0:
         return cr.diffuse_material(tuple(rho), 0.0, name=name)
     m = bpy.data.materials.new(name)
-    nt = m.node_tree
-    for n in list(nt.nodes):
-        if n.type != "OUTPUT_MATERIAL":
-            nt.nodes.remove(n)
-    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt, out = cr.bare_node_tree(m)
     d = nt.nodes.new("ShaderNodeBsdfDiffuse")
     d.inputs["Color"].default_value = (*rho, 1.0)
     e = nt.nodes.new("ShaderNodeEmission")

@@ -341,16 +341,21 @@ def new_empty_scene():
     return scene
 
 
+def bare_node_tree(material):
+    """(node tree, output node) of ``material`` with every node but the material output removed."""
+    nt = material.node_tree
+    for n in list(nt.nodes):
+        if n.type != "OUTPUT_MATERIAL":
+            nt.nodes.remove(n)
+    return nt, next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+
+
 def diffuse_material(rho=(0.8, 0.8, 0.8), emission=0.0, emission_color=(1.0, 1.0, 1.0), name="diffuse"):
     """A Diffuse BSDF of colour ``rho`` (plus an Emission of ``emission`` strength when > 0)."""
     import bpy
 
     m = bpy.data.materials.new(name)
-    nt = m.node_tree
-    for n in list(nt.nodes):
-        if n.type != "OUTPUT_MATERIAL":
-            nt.nodes.remove(n)
-    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt, out = bare_node_tree(m)
     d = nt.nodes.new("ShaderNodeBsdfDiffuse")
     d.inputs["Color"].default_value = (*rho, 1.0)
     if emission > 0:

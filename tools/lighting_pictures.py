@@ -30,6 +30,7 @@ import bpy  # noqa: E402
 from mathutils import Vector  # noqa: E402
 
 from tests import test_lighting_cycles as cases  # noqa: E402
+from tools import cycles_reference as cr  # noqa: E402
 
 CAMERAS = {   # eye, target
     "point": ((0.0, -4.6, 3.2), (0.0, 0.2, 0.0)),
@@ -88,11 +89,7 @@ def show_values(objects, c, values):
     """Corner attribute = ``values`` (per compared corner) on each object, emission material,
     lamps and world off."""
     mat = bpy.data.materials.get("_show") or bpy.data.materials.new("_show")
-    nt = mat.node_tree
-    for n in list(nt.nodes):
-        if n.type != "OUTPUT_MATERIAL":
-            nt.nodes.remove(n)
-    out = next(n for n in nt.nodes if n.type == "OUTPUT_MATERIAL")
+    nt, out = cr.bare_node_tree(mat)
     attr = nt.nodes.new("ShaderNodeAttribute")
     attr.attribute_name = "_shown"
     em = nt.nodes.new("ShaderNodeEmission")
