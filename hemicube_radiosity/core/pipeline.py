@@ -257,7 +257,7 @@ def output_elements(meshes, settings, cache=None) -> PatchSet:
     return el.with_materials(rho, em)
 
 
-def _element_indirect(patches, elements, rest_v, xv, nv, plan, lights, light_options, cancelled, cache,
+def _element_indirect(patches, elements, rest_v, xv, nv, rho_v, plan, lights, light_options, cancelled, cache,
                       settings, world, notes):
     """Light reflected more than once arriving at element vertices, times their reflectivity:
     a final gather over the patch solution (its ray hits cached as a matrix), or the solution's
@@ -283,8 +283,7 @@ def _element_indirect(patches, elements, rest_v, xv, nv, plan, lights, light_opt
 
         key = cache_key(patches.geometry_key() + elements.geometry_key(), ("gather", settings.gather_rays))
         G = _cached(cache, key, make)
-        _, _, rho_e = vertex_frames(elements)
-        return rho_e * apply_gather(G, G.sky, R_v, world)
+        return rho_v * apply_gather(G, G.sky, R_v, world)
     if settings.gather_rays > 0:
         notes.append("Embree is not available: element vertices interpolate the patch solution "
                      "instead of gathering it")
@@ -423,7 +422,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
                                  f"{len(elements)} output elements, more than the limit of "
                                  f"{settings.max_elements}: use a larger detail size")
             xv, nv, rho_v = vertex_frames(elements)
-            rest_v = _element_indirect(patches, elements, rest_v, xv, nv, exact, lights, light_options,
+            rest_v = _element_indirect(patches, elements, rest_v, xv, nv, rho_v, exact, lights, light_options,
                                        cancelled, cache, settings, world, notes)
         else:
             xv, nv, rho_v = vertex_frames(patches)
