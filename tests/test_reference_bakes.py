@@ -1,0 +1,26 @@
+"""The bake gives the numbers it gave before a refactor: ``tests/data/reference_bakes.npz`` was written
+by ``tools/reference_bakes.py`` on the code before the settings schema and the stage list (cfa6419).
+A change that is meant to alter results regenerates the file in the same commit and says why."""
+import os
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
+import reference_bakes  # noqa: E402
+
+from hemicube_radiosity.core.pipeline import BakeSettings  # noqa: E402
+
+REF = np.load(os.path.join(os.path.dirname(__file__), "data", "reference_bakes.npz"))
+
+
+@pytest.mark.parametrize("name", sorted(reference_bakes.CASES))
+def test_same_numbers_as_before(name):
+    got = reference_bakes.run_case(name, lambda d: BakeSettings(**d))
+    for key, value in got.items():
+        ref = REF[f"{name}/{key}"]
+        assert value.shape == ref.shape, key
+        scale = float(np.max(np.abs(ref)))
+        assert scale > 0
+        np.testing.assert_allclose(value, ref, rtol=0, atol=1e-6 * scale, err_msg=f"{name}/{key}")
