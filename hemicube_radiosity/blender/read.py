@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.patches import MeshInput
+from ..core.errors import RadiosityError
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
            "read_scene", "weld_corners", "RHO_MAX"]
@@ -37,7 +38,7 @@ COPLANAR_COS = float(np.cos(1e-3))
 DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 
-class ReadError(ValueError):
+class ReadError(RadiosityError, ValueError):
     """The scene cannot be baked; the message names the object."""
 
 

@@ -27,6 +27,7 @@ from .hemicube import _receiver_ids, pixel_directions, pixel_weights, receiver_f
 from .patches import PatchSet
 from .progress import Ticker
 from .sparse import CSR
+from .errors import RadiosityError
 
 __all__ = ["embree_available", "EmbreeUnavailable", "embree_hemicube_form_factors",
            "embree_stochastic_form_factors", "EmbreeScene", "embree_scene"]
@@ -35,7 +36,7 @@ __all__ = ["embree_available", "EmbreeUnavailable", "embree_hemicube_form_factor
 RAYS_PER_BATCH = 1 << 18
 
 
-class EmbreeUnavailable(RuntimeError):
+class EmbreeUnavailable(RadiosityError, RuntimeError):
     """``embreex`` cannot be imported (not installed, or its binary does not load here)."""
 
     def __init__(self, detail: str = ""):

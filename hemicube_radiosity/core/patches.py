@@ -18,11 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from .errors import RadiosityError
 
 __all__ = ["MeshInput", "PatchSet", "build_patches", "PatchError"]
 
 
-class PatchError(ValueError):
+class PatchError(RadiosityError, ValueError):
     """Bad mesh input; the message names the object and the problem."""
 
 
