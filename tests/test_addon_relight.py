@@ -14,7 +14,7 @@ BAKE = dict(patch_size=0.25, resolution=32)
 def test_relight_in_the_session_reuses_form_factors(addon, empty_scene, monkeypatch, tmp_path):
     bpy = empty_scene
     bake_mod = importlib.import_module(f"{addon.__name__}.blender.bake")
-    pipeline = importlib.import_module(f"{addon.__name__}.core.pipeline")
+    form_factors = importlib.import_module(f"{addon.__name__}.core.form_factors")
     write = importlib.import_module(f"{addon.__name__}.blender.write")
     demo = importlib.import_module(f"{addon.__name__}.blender.demo")
     bake_mod.clear_session_cache()
@@ -24,8 +24,8 @@ def test_relight_in_the_session_reuses_form_factors(addon, empty_scene, monkeypa
     lamp.data.energy = 30.0
     names = [o.name for o in objs]
     calls = []
-    real = pipeline.compute_form_factors
-    monkeypatch.setattr(pipeline, "compute_form_factors", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = form_factors.compute_form_factors
+    monkeypatch.setattr(form_factors, "compute_form_factors", lambda *a, **k: calls.append(1) or real(*a, **k))
 
     def bake(**kw):
         # after a bake the originals are hidden and the user selects the baked copies

@@ -27,8 +27,8 @@ from hemicube_radiosity.core.pipeline import BakeSettings, bake  # noqa: E402
 
 RHO = 0.8
 TOL = 0.03
-SETTINGS = dict(patch_size=None, resolution=64, method="hemicube", element_size=None)  # faces = patches = output
-LIGHT_OPTIONS = dict(samples=64, seed=1)
+SETTINGS = dict(patch_size=None, resolution=64, method="hemicube", element_size=None,  # faces = patches = output
+                light_samples=64, light_seed=1)
 
 
 # ----------------------------------------------------------------------------- harness
@@ -44,8 +44,7 @@ class Comparison:
         lights, world, notes = read_lights(dg)
         self.lights, self.world, self.notes = lights, world, notes
         t = time.perf_counter()
-        res = bake(scene_input.meshes, BakeSettings(**SETTINGS), lights=lights, world=world,
-                   light_options=LIGHT_OPTIONS)
+        res = bake(scene_input.meshes, BakeSettings(**SETTINGS), lights=lights, world=world)
         self.our_seconds = time.perf_counter() - t
         self.result = res
         P = res.patches

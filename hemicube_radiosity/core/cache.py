@@ -15,13 +15,23 @@ import numpy as np
 
 from .sparse import CSR
 
-__all__ = ["FormFactorCache", "cache_key"]
+__all__ = ["FormFactorCache", "cache_key", "cached"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
     h = hashlib.sha256(geometry_key)
     h.update(repr(settings_key).encode())
     return h.hexdigest()
+
+
+def cached(cache, key, make):
+    """``cache``'s item under ``key``, made by ``make()`` and stored when absent (no cache: made)."""
+    item = cache.get(key) if cache is not None else None
+    if item is None:
+        item = make()
+        if cache is not None:
+            cache.put(key, item)
+    return item
 
 
 class FormFactorCache:

@@ -1,0 +1,130 @@
+"""The direct-light stage: light that reaches a surface straight from an emitter or a lamp.
+
+Two ways, chosen by ``settings.direct``:
+
+* 'exact' (default): radiance arriving from the emissive patches in closed form times the visible
+  fraction of shadow rays (:mod:`.direct`), plus the lamps' irradiance / pi (:mod:`.lights`), at
+  the patch centres for the solve and again at every output vertex (:mod:`.output`). The solve
+  then carries only reflected light.
+* 'hemicube' (the paper's): emitted light goes through F like any other; lamps are evaluated at
+  the patch centres only.
+
+Units: radiance (W m^-2 sr^-1 per unit of colour); ``H`` is irradiance (W m^-2) = pi * radiance.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .cache import cache_key, cached
+from .direct import apply_transport, emitter_transport
+from .lights import direct_irradiance
+from .patches import PatchSet
+from .progress import Ticker
+from .rays import embree_available, occluder
+
+__all__ = ["DirectLight", "direct_stage", "source_term"]
+
+
+@dataclass
+class DirectLight:
+    """Exact direct light for one bake: emissive patches and lamps, evaluated at any points.
+
+    ``emitters`` (M,) ids of emissive patches; ``samples`` shadow rays per point and emitting
+    patch (``settings.direct_samples`` shared between the patches an emitting face was cut into);
+    ``lights`` core.lights objects with ``light_samples`` / ``light_seed`` for their shadow rays.
+    The emitters' part goes through a transport matrix that depends on geometry only, cached in
+    ``cache``: a new emission strength or colour is a matrix product, no rays.
+    """
+
+    patches: PatchSet
+    lights: list
+    emitters: np.ndarray
+    samples: int
+    light_samples: int = 16
+    light_seed: int = 0
+    cancelled: object = None
+    cache: object = None
+    _scene: object = field(default=None, repr=False)
+
+    @classmethod
+    def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None):
+        """The exact direct light for ``settings``, or None when it is off or there is none."""
+        emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
+        if settings.direct == "hemicube" or (emitters.size == 0 and not lights):
+            return None
+        samples = settings.direct_samples
+        if emitters.size:
+            face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
+            per_face = np.unique(face, return_counts=True)[1].max()
+            samples = max(1, int(settings.direct_samples) // int(per_face))
+        return cls(patches, list(lights), emitters, samples, settings.light_samples,
+                   settings.light_seed, cancelled, cache)
+
+    def scene(self):
+        """The shadow-ray scene, built once and only if a ray is cast."""
+        if self._scene is None:
+            self._scene = occluder(self.patches, "auto")
+        return self._scene
+
+    def at(self, points, normals, where: str) -> np.ndarray:
+        """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
+        ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...)."""
+        D = np.zeros((len(points), 3))
+        em = self.emitters
+        if em.size:
+            key = None
+            if self.cache is not None:
+                pts = np.ascontiguousarray(points, dtype=np.float64)
+                key = cache_key(self.patches.geometry_key() + em.tobytes() + pts.tobytes(),
+                                ("direct", where, self.samples))
+            T = cached(self.cache if key else None, key, lambda: emitter_transport(
+                self.patches, points, normals, em, scene=self.scene(), samples=self.samples,
+                ticker=Ticker(None, self.cancelled)))
+            D += apply_transport(T, self.patches.emission[em])
+        if self.lights:
+            D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
+                                   cancelled=self.cancelled, samples=self.light_samples,
+                                   seed=self.light_seed) / np.pi
+        return D
+
+
+def source_term(patches: PatchSet, F, *, direct_irradiance=None, world=None) -> np.ndarray:
+    """S = emission + rho * H_direct / pi + rho * sky * L_world  (radiance units, (N, 3)).
+
+    ``direct_irradiance`` (N,3) W/m^2 from lamps; ``world`` (3,) constant world radiance seen by
+    the part of each hemisphere that sees no surface (``F.sky``).
+    """
+    S = np.array(patches.emission, dtype=np.float64)
+    if direct_irradiance is not None:
+        S += patches.rho * np.asarray(direct_irradiance, float) / np.pi
+    if world is not None and np.any(np.asarray(world) > 0):
+        if F.sky is None:
+            raise ValueError("these form factors carry no sky fractions; the world cannot be lit")
+        S += patches.rho * F.sky[:, None] * np.asarray(world, float)[None, :]
+    return S
+
+
+def direct_stage(ctx) -> None:
+    """Fill ``ctx.direct`` (the exact plan or None), ``ctx.direct_patch`` (radiance arriving at
+    the patch centres, exact path), ``ctx.irradiance`` (N, 3) and the solve's source ``ctx.source``."""
+    p, s = ctx.patches, ctx.settings
+    ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache)
+    if ctx.direct is None:
+        if ctx.lights:
+            ctx.say(0.0, f"{len(ctx.lights)} lights")
+            ctx.irradiance = direct_irradiance(p, ctx.lights, cancelled=ctx.cancelled,
+                                               samples=s.light_samples, seed=s.light_seed)
+        ctx.source = source_term(p, ctx.form_factors, direct_irradiance=ctx.irradiance, world=ctx.world)
+        return
+    # direct light (emitters and lamps) arrives by the exact path; the solve carries only
+    # reflected light R, and B = E + R (F would otherwise carry E a second time)
+    ctx.say(0.0, f"exact direct light: {ctx.direct.emitters.size} emitting patches, "
+                 f"{len(ctx.lights)} lamps")
+    ctx.direct_patch = ctx.direct.at(p.centers, p.normals, "centres")
+    ctx.irradiance = np.pi * ctx.direct_patch
+    ctx.source = (source_term(p, ctx.form_factors, world=ctx.world) - p.emission
+                  + p.rho * ctx.direct_patch)
+    if not embree_available():
+        ctx.notes.append("Embree is not available: shadow rays use the slower NumPy BVH")

@@ -1,0 +1,121 @@
+"""The output stage: radiosity at the vertices of the mesh that is written.
+
+The output mesh is the patches themselves, or (``settings.element_size`` finer than the patches)
+*elements*: the input meshes cut finer, as the paper's "finer elements take detail from a coarse
+patch solution". Per output vertex (V, 3), radiance units:
+
+    B_v = E_v + rho_v * D_v + R_v
+
+with D_v the exact direct light at the vertex (:class:`.direct_light.DirectLight`) and R_v the
+light reflected more than once, from the patch solution: averaged to the vertices as in the paper,
+then for elements gathered by cosine rays that read it where they land (:mod:`.gather`, needs
+Embree) or interpolated bilinearly (:mod:`.interpolate`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .cache import cache_key, cached
+from .direct import vertex_frames
+from .errors import RadiosityError
+from .gather import apply_gather, gather_matrix
+from .interpolate import interpolate_at
+from .patches import PatchSet, build_patches
+from .progress import Ticker
+from .rays import embree_available, embree_scene
+from .vertex import exposure, vertex_radiosity
+
+__all__ = ["meshes_key", "output_elements", "vertex_stage"]
+
+
+def meshes_key(meshes) -> bytes:
+    """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for m in meshes:
+        for a in (m.verts, m.face_offsets, m.face_indices):
+            a = np.ascontiguousarray(a)
+            h.update(str(a.shape).encode() + a.tobytes())
+    return h.digest()
+
+
+def output_elements(meshes, settings, cache=None) -> PatchSet:
+    """The output mesh cut to ``settings.element_size``; its geometry is cached (a relight only
+    re-reads reflectivity and emission from the meshes)."""
+    key = cache_key(meshes_key(meshes), ("elements", settings.element_size))
+    el = cached(cache, key, lambda: build_patches(meshes, settings.element_size))
+    rho = np.empty((len(el), 3))
+    em = np.empty((len(el), 3))
+    for oi, m in enumerate(meshes):
+        sel = el.owner == oi
+        rho[sel] = np.asarray(m.face_rho, float)[el.source_face[sel]]
+        em[sel] = np.asarray(m.face_emission, float)[el.source_face[sel]]
+    return el.with_materials(rho, em)
+
+
+def _gathered(ctx, elements, rest_v, xv, nv):
+    """Reflected light R at element vertices by a final gather over the patch solution (the
+    gather's ray hits cached as a matrix): (V, 3), before the elements' reflectivity."""
+    patches = ctx.patches
+    # the patches' reflected radiance R = rho (D + gathered) at their vertices, with the direct
+    # part exact at each vertex so that shadows are not smeared into what is gathered
+    pxv, pnv, prho = vertex_frames(patches)
+    R_v = prho * ctx.direct.at(pxv, pnv, "patch-vertices") + rest_v
+
+    def make():
+        G, sky = gather_matrix(patches, xv, nv, embree_scene(patches), rays=ctx.settings.gather_rays,
+                               ticker=Ticker(None, ctx.cancelled))
+        G.sky = sky
+        return G
+
+    key = cache_key(patches.geometry_key() + elements.geometry_key(), ("gather", ctx.settings.gather_rays))
+    G = cached(ctx.cache, key, make)
+    return apply_gather(G, G.sky, R_v, ctx.world)
+
+
+def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v):
+    """Light reflected more than once arriving at element vertices, times their reflectivity:
+    gathered (Embree) or the patch solution's bilinear interpolation."""
+    if ctx.settings.gather_rays > 0 and embree_available():
+        return rho_v * _gathered(ctx, elements, rest_v, xv, nv)
+    if ctx.settings.gather_rays > 0:
+        ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
+                         "instead of gathering it")
+    owner_v = np.zeros(len(elements.verts), np.int64)
+    for c in range(4):
+        on = elements.polys[:, c] >= 0
+        owner_v[elements.polys[on, c]] = elements.owner[on]
+    return interpolate_at(ctx.patches, rest_v, xv, owner=owner_v, normals=nv)
+
+
+def _cut_elements(ctx) -> PatchSet:
+    s = ctx.settings
+    ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
+    elements = output_elements(ctx.meshes, s, ctx.cache)
+    if len(elements) > s.max_elements:
+        raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
+                             f"output elements, more than the limit of {s.max_elements}: use a "
+                             "larger detail size")
+    return elements
+
+
+def vertex_stage(ctx) -> None:
+    """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts."""
+    patches = ctx.patches
+    weights = exposure(ctx.form_factors)
+    ctx.elements = patches
+    if ctx.direct is None:
+        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.solution.B, weights=weights)
+        return
+    # direct light again at every output vertex (sharp shadows, exact falloff); only the
+    # smoother light reflected more than once comes from the patches, as in the paper
+    rest_v = vertex_radiosity(patches, ctx.reflected - patches.rho * ctx.direct_patch, weights=weights)
+    if ctx.settings.uses_elements():
+        ctx.elements = _cut_elements(ctx)
+        xv, nv, rho_v = vertex_frames(ctx.elements)
+        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v)
+    else:
+        xv, nv, rho_v = vertex_frames(patches)
+    D_vert = ctx.direct.at(xv, nv, "vertices")
+    ctx.vertex_radiosity = vertex_radiosity(ctx.elements, ctx.elements.emission) + rho_v * D_vert + rest_v

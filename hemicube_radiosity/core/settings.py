@@ -1,0 +1,253 @@
+"""Every bake setting, once: default, choices or limits, unit, label and help text.
+
+:class:`BakeSettings` is the single source of the bake's settings. The Blender layer generates its
+property group and the operator's properties from :func:`schema` (``blender/props.py``), the CLI
+its options (``blender/cli.py``), and the report is ``dataclasses.asdict(settings)``. Adding a
+setting is one field here (plus the code that reads it and its test); the panel, the operator, the
+CLI and the report follow.
+
+A field's ``metadata`` (see :func:`setting`):
+    label, help     the panel's name and tooltip, the CLI's help text.
+    group           which panel section shows it: 'main' (the top of the panel), 'patches',
+                    'form_factors', 'light', 'solver', 'output'; None: not in the panel (CLI only).
+    choices         ((value, label, description), ...) for an enum; values are lower case here,
+                    upper case in Blender (``value.upper()``), as Blender's own enums are.
+    min, max, soft_min, soft_max, step, precision, unit ('LENGTH' for world units)
+    size            True for a size that may be 'auto' (follow the scene) or 0/None (one patch per
+                    face / no finer output mesh); the panel shows it as a length under the shared
+                    ``auto_size`` switch, with ``manual`` as the length it shows when that is off.
+    cli             the CLI flag when it is not ``--field-name`` ("--no-lights" for a switch that
+                    is on by default).
+"""
+from __future__ import annotations
+
+from dataclasses import MISSING, asdict, dataclass, field, fields, replace
+
+import numpy as np
+
+from .errors import SettingsError
+
+__all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES",
+           "OUTPUT_MODES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
+
+AUTO_PATCHES_PER_DIAGONAL = 14.0   # 'auto' patch size: the scene's bounding-box diagonal / 14
+AUTO_ELEMENTS_PER_PATCH = 3.0      # 'auto' detail size: a third of the patch size
+AUTO_SWITCH = "auto_size"          # the panel's one switch for every 'auto' size
+
+METHODS = (
+    ("hemicube", "Hemi-cube", "Rasterise a hemi-cube per patch in NumPy (the paper's method)"),
+    ("embree", "Embree", "Cast rays through the hemi-cube pixel centres with Embree (needs embreex)"),
+    ("embree_stochastic", "Embree (stochastic)", "Cosine-weighted random rays with Embree"),
+)
+SOLVERS = (
+    ("gauss_seidel", "Gauss-Seidel", "Gathering, in-place sweeps"),
+    ("jacobi", "Jacobi", "Gathering, whole-vector sweeps"),
+    ("progressive", "Progressive", "Shooting: the patch with most unshot power first"),
+)
+DIRECT_MODES = (
+    ("exact", "Exact", "Closed-form irradiance from each emitter times the visible fraction from "
+     "shadow rays, at patch centres and again at every vertex (sharp shadows)"),
+    ("hemicube", "Hemi-cube", "The paper's way: emitted light goes through the form factors too"),
+)
+OUTPUT_MODES = (
+    ("copy", "Baked Copy", "New objects in a 'Radiosity' collection carry the result; "
+     "originals are hidden, never modified"),
+    ("in_place", "In Place", "Write the colour attribute on the original meshes (modifies them)"),
+)
+
+
+def setting(default, label, help, group, **meta):
+    """A dataclass field carrying its schema entry (see the module docstring)."""
+    return field(default=default, metadata=dict(label=label, help=help, group=group, **meta))
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One entry of :func:`schema`: a field of :class:`BakeSettings` and its metadata."""
+
+    name: str
+    default: object
+    type: type
+    label: str
+    help: str
+    group: str | None
+    meta: dict
+
+    @property
+    def choices(self):
+        return self.meta.get("choices")
+
+    @property
+    def values(self):
+        """The choices' values (lower case), or None."""
+        return None if self.choices is None else tuple(c[0] for c in self.choices)
+
+
+@dataclass
+class BakeSettings:
+    """What a bake does; see :func:`schema` for each field's label, help, limits and unit.
+
+    Sizes are in world units ('auto' follows the scene: patches are its bounding-box diagonal / 14,
+    details a third of that; 0 or None: one patch per input face / no finer output mesh).
+    Defaults are the speed-against-error frontier of ``make bench`` (docs/performance.md).
+    """
+
+    # -- the top of the panel
+    output_mode: str = setting("copy", "Output", "Where the result goes", "main", choices=OUTPUT_MODES)
+    use_lights: bool = setting(True, "Lamps and World", "Light objects and the world's background "
+                               "light the scene, in Cycles' units", "main", cli="--no-lights")
+    include_others: bool = setting(True, "Other Visible Meshes", "Visible meshes that are not "
+                                   "selected take part as occluders and emitters (they get no "
+                                   "result)", "main", cli="--no-others")
+    # -- patches
+    patch_size: float | str | None = setting(
+        "auto", "Patch Size", "Target edge length of a radiosity patch; 0 keeps every face as one "
+        "patch; auto: the scene's diagonal / 14", "patches", size=True, manual=0.25, min=0.0,
+        soft_max=10.0, precision=3, unit="LENGTH")
+    element_size: float | str | None = setting(
+        "auto", "Detail Size", "Cut the baked mesh finer than the patches (0: the patches are the "
+        "baked mesh; auto: a third of the patch size). Direct light is exact at every vertex; "
+        "bounced light comes from the patches", "patches", size=True, manual=0.08, min=0.0,
+        soft_max=10.0, precision=3, unit="LENGTH")
+    max_patches: int = setting(20000, "Max Patches", "Stop with an error before cutting more "
+                               "patches (form factors grow with their square)", "patches",
+                               min=1, soft_max=100000)
+    max_elements: int = setting(400000, "Max Details", "Stop with an error before cutting more "
+                                "output elements", "patches", min=1, soft_max=4000000)
+    # -- form factors
+    method: str = setting("hemicube", "Method", "How form factors are computed", "form_factors",
+                          choices=METHODS)
+    resolution: int = setting(32, "Hemi-cube Resolution", "Pixels along a side of the hemi-cube's "
+                              "top face (even)", "form_factors", min=2, max=2048, soft_min=8,
+                              soft_max=512, step=2)
+    rays_per_patch: int = setting(512, "Rays per Patch", "Rays per patch for the stochastic Embree "
+                                  "method", "form_factors", min=1, soft_max=65536)
+    rotate_seed: int | None = setting(None, "Rotate Seed", "Rotate each hemi-cube about its normal "
+                                      "at random with this seed (default: no rotation)", None, min=0)
+    cache_dir: str = setting("", "Cache Folder", "Form factors depend on geometry only and are "
+                             "kept for this session; with a folder they are also saved there and "
+                             "reused across sessions", "form_factors", cli="--cache",
+                             subtype="DIR_PATH")
+    # -- light
+    direct: str = setting("exact", "Direct Light", "How light from emitters reaches the surfaces",
+                          "light", choices=DIRECT_MODES)
+    direct_samples: int = setting(16, "Shadow Rays", "Shadow rays per point and emitting face "
+                                  "(exact direct light)", "light", min=1, soft_max=1024)
+    light_samples: int = setting(16, "Lamp Shadow Rays", "Shadow rays per point for lamps with a "
+                                 "size (radius, angle, area); a point of zero size uses one",
+                                 "light", min=1, soft_max=1024)
+    light_seed: int = setting(0, "Lamp Seed", "Random seed of the lamps' shadow rays", None, min=0)
+    gather_rays: int = setting(64, "Gather Rays", "With a detail size: gather bounced light at "
+                               "every vertex with this many rays (0: interpolate it from the "
+                               "patches). Needs Embree", "light", min=0, soft_max=4096)
+    # -- solver
+    solver: str = setting("gauss_seidel", "Solver", "Iterative solver for the radiosity equation",
+                          "solver", choices=SOLVERS)
+    tolerance: float = setting(1e-4, "Tolerance", "Stop when the relative residual falls below "
+                               "this", "solver", min=1e-10, max=1.0, precision=6)
+    max_iterations: int = setting(200, "Max Iterations", "Give up after this many sweeps (or "
+                                  "shots)", "solver", min=1, soft_max=10000)
+    # -- output
+    attribute_name: str = setting("Radiosity", "Attribute", "Name of the FLOAT_COLOR corner "
+                                  "attribute", "output", cli="--attribute", maxlen=63)
+    exposure: float = setting(0.0, "Exposure", "Stops: written values are radiance x 2^exposure "
+                              "(0 keeps radiance units, nothing is clamped)", "output",
+                              soft_min=-10.0, soft_max=10.0)
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_mapping(cls, mapping) -> "BakeSettings":
+        """Settings from anything with the fields as keys or attributes: a dict, argparse's
+        namespace, Blender's property group or operator. Missing fields keep their defaults;
+        enum values may be upper case (Blender's); a size of 0 means None; the panel's
+        ``auto_size`` switch, where present, turns every size to 'auto' (on) or to its length
+        (off)."""
+        get = mapping.get if isinstance(mapping, dict) else (lambda k, d=None: getattr(mapping, k, d))
+        auto = get(AUTO_SWITCH, None)
+        kw = {}
+        for s in schema():
+            v = get(s.name, MISSING)
+            if v is MISSING:
+                continue
+            if s.choices is not None:
+                v = str(v).lower()
+            elif s.meta.get("size"):
+                v = "auto" if auto else (None if v in (None, 0) or v == 0.0 else v)
+            kw[s.name] = v
+        return cls(**kw)
+
+    def as_dict(self) -> dict:
+        """Plain values (JSON-ready) for the report."""
+        return asdict(self)
+
+    # ------------------------------------------------------------------ checks
+    def validate(self) -> None:
+        """Raise :class:`SettingsError` naming the first setting outside its choices or limits."""
+        for s in schema():
+            v = getattr(self, s.name)
+            if s.values is not None and v not in s.values:
+                raise SettingsError(f"unknown {s.label.lower()} {v!r}; choose one of {', '.join(s.values)}")
+            if s.meta.get("size"):
+                if (isinstance(v, str) and v != "auto") or (not isinstance(v, str) and v is not None
+                                                            and not (np.isfinite(v) and v >= 0)):
+                    raise SettingsError(f"{s.label.lower()} must be >= 0 or 'auto', got {v!r}")
+                continue
+            if v is None or isinstance(v, (str, bool)):
+                continue
+            lo, hi = s.meta.get("min"), s.meta.get("max")
+            if not np.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+                raise SettingsError(f"{s.label.lower()} must be in [{lo}, {hi}], got {v!r}")
+        if self.method != "embree_stochastic" and self.resolution % 2:
+            raise SettingsError(f"hemi-cube resolution must be an even number >= 2, got {self.resolution}")
+        if self.uses_elements() and self.direct != "exact":
+            raise SettingsError("finer output elements need direct='exact' (direct light at every "
+                                "element vertex)")
+
+    # ------------------------------------------------------------------ derived values
+    def resolved(self, meshes) -> "BakeSettings":
+        """A copy with 'auto' sizes turned into world units for ``meshes`` (core.patches.MeshInput)."""
+        patch, element = self.patch_size, self.element_size
+        if patch == "auto":
+            lo = np.min([np.min(m.verts, axis=0) for m in meshes], axis=0)
+            hi = np.max([np.max(m.verts, axis=0) for m in meshes], axis=0)
+            patch = float(np.linalg.norm(hi - lo)) / AUTO_PATCHES_PER_DIAGONAL or None
+        if element == "auto":
+            element = patch / AUTO_ELEMENTS_PER_PATCH if patch else None
+        if self.output_mode == "in_place":
+            element = None
+        return replace(self, patch_size=patch, element_size=element)
+
+    def uses_elements(self) -> bool:
+        """True when the output mesh is cut finer than the patches (never in place: there the
+        user's own faces are the output)."""
+        if not self.element_size or self.output_mode == "in_place":
+            return False
+        if self.element_size == "auto":
+            return bool(self.patch_size)
+        if self.patch_size == "auto":
+            return True
+        return not self.patch_size or self.element_size < self.patch_size
+
+    def form_factor_key(self) -> tuple:
+        """What shapes F (besides geometry): a change here recomputes, anything else re-solves."""
+        if self.method == "embree_stochastic":
+            return (self.method, int(self.rays_per_patch), self.rotate_seed)
+        return (self.method, int(self.resolution), self.rotate_seed)
+
+
+def _field_type(f):
+    """The Python type of a field's value (bool, int, float, str; sizes are float)."""
+    if f.metadata.get("size"):
+        return float
+    return type(f.default) if f.default is not None else int
+
+
+_SCHEMA = tuple(Setting(f.name, f.default, _field_type(f), f.metadata["label"], f.metadata["help"],
+                        f.metadata["group"], {k: v for k, v in f.metadata.items()
+                                              if k not in ("label", "help", "group")})
+                for f in fields(BakeSettings))
+
+
+def schema() -> tuple:
+    """Every setting, in the panel's order: a tuple of :class:`Setting`."""
+    return _SCHEMA
