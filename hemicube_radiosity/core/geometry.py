@@ -1,0 +1,206 @@
+"""Geometry and sampling helpers shared by the form-factor, light and gather modules (pure NumPy).
+
+Frames
+------
+* :func:`orthonormal_basis` (N, 3) unit vectors -> two (N, 3) unit vectors spanning the plane
+  perpendicular to them: the first is the vector crossed into the world axis least aligned
+  with it, the second completes a right-handed frame.
+* :func:`tangent_frames` (N, 3) unit normals -> (N, 3, 3) frames, rows (u, v, n), the same basis
+  optionally turned about the normal; the hemi-cube, Embree and the final gather cast with it.
+
+Sampling (points in the unit square [0, 1)^2, dimensionless)
+------------------------------------------------------------
+Two stratified samplers, kept apart because their draws differ and saved bakes depend on them:
+
+* :func:`stratified_unit_square` (count, k, 2): an m x (k // m) jittered grid, m = floor(sqrt k),
+  the leftover points uniform (lamp shadow samples, stochastic form factors).
+* :func:`jittered_grid` (count, g^2) u and v: a g x g jittered grid, g = ceil(sqrt samples)
+  (emitter shadow samples, the final gather's ray pattern).
+
+:func:`cosine_directions` maps the square to cosine-distributed unit directions in a local
+frame (+Z the normal); :func:`disk_samples` to points on disks, uniform by area.
+
+Form factors (dimensionless)
+----------------------------
+* :func:`polygon_form_factor` (N,): differential area -> convex polygon, Lambert's contour
+  integral over the part above the receiver's horizon.
+* :func:`polygon_form_factors` (P, M): every point to every polygon, optionally one-sided.
+* :func:`disk_polygons` (N, sides, 3): regular polygons standing in for disks (same area), so
+  a disk's form factor is a polygon's.
+
+Lengths are in the scene's units (Blender metres); angles in radians.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["orthonormal_basis", "tangent_frames", "stratified_unit_square", "jittered_grid",
+           "cosine_directions", "polygon_form_factor", "polygon_form_factors",
+           "equal_area_scale", "disk_polygons", "disk_samples", "DISK_SIDES"]
+
+#: Sides of the regular polygon standing in for disks and ellipses.
+DISK_SIDES = 64
+
+
+# --------------------------------------------------------------------------------------------
+# Frames
+
+
+def orthonormal_basis(m):
+    """(N,3), (N,3): two unit vectors spanning the plane perpendicular to unit vectors ``m``
+    (N,3): ``e1`` is ``m`` crossed into the world axis least aligned with it, ``e2 = m x e1``."""
+    m = np.asarray(m, dtype=np.float64)
+    helper = np.zeros_like(m)
+    helper[np.arange(len(m)), np.argmin(np.abs(m), axis=1)] = 1.0
+    e1 = np.cross(helper, m)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    return e1, np.cross(m, e1)
+
+
+def tangent_frames(normals, angles=None):
+    """Orthonormal frames (N, 3, 3), rows (u, v, n), around unit normals (N, 3).
+
+    ``u``, ``v``: :func:`orthonormal_basis` of the normals, turned by ``angles`` (N,) radians
+    about the normal when given.  Right-handed; ``frames[i] @ d`` expresses a world vector in
+    frame i.
+    """
+    n = np.asarray(normals, dtype=np.float64)
+    u, v = orthonormal_basis(n)
+    if angles is not None:
+        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
+        u, v = ca * u + sa * v, -sa * u + ca * v
+    return np.stack([u, v, n], axis=1)
+
+
+# --------------------------------------------------------------------------------------------
+# Sampling the unit square
+
+
+def stratified_unit_square(rng, count, k):
+    """(count, k, 2) points in [0,1)^2: a jittered m x (k // m) grid (m = floor(sqrt k)), the
+    k - m * (k // m) left over drawn uniformly; a fresh jitter per row. ``rng``: a NumPy
+    ``Generator`` (the jitter is drawn first, then the leftovers)."""
+    m = max(1, int(np.floor(np.sqrt(k))))
+    c = k // m
+    gi, gj = np.meshgrid(np.arange(m), np.arange(c), indexing="ij")
+    base = np.stack([gi.reshape(-1) / m, gj.reshape(-1) / c], -1)          # (m*c, 2)
+    pts = base[None] + rng.random((count, m * c, 2)) * np.array([1.0 / m, 1.0 / c])
+    if k > m * c:
+        pts = np.concatenate([pts, rng.random((count, k - m * c, 2))], axis=1)
+    return pts
+
+
+def jittered_grid(rng, count, samples):
+    """``u``, ``v`` (count, g*g) in [0,1): a g x g jittered grid, g = ceil(sqrt samples) (so at
+    least ``samples`` points), cell (i, j) at index i * g + j. ``rng``: a NumPy ``Generator``
+    (all u jitter is drawn, then all v)."""
+    g = int(np.ceil(np.sqrt(samples)))
+    i, j = np.meshgrid(np.arange(g), np.arange(g), indexing="ij")
+    u = (i.ravel()[None] + rng.uniform(0, 1, (count, g * g))) / g
+    v = (j.ravel()[None] + rng.uniform(0, 1, (count, g * g))) / g
+    return u, v
+
+
+def cosine_directions(u):
+    """Map (..., 2) points of the unit square to cosine-distributed local unit directions
+    (..., 3), +Z the normal (Malley: uniform on the disk by area, lifted to the hemisphere)."""
+    r = np.sqrt(u[..., 0])
+    phi = 2.0 * np.pi * u[..., 1]
+    z = np.sqrt(np.maximum(0.0, 1.0 - u[..., 0]))
+    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
+
+
+# --------------------------------------------------------------------------------------------
+# Disks
+
+
+def equal_area_scale(sides=DISK_SIDES):
+    """Circumradius of the regular ``sides``-gon with the area of the unit circle."""
+    return np.sqrt(np.pi / (0.5 * sides * np.sin(2 * np.pi / sides)))
+
+
+def disk_polygons(center, normal, radius, sides=DISK_SIDES):
+    """(N, sides, 3) regular polygons with the area of the disks ``center`` (N,3), unit
+    ``normal`` (N,3), ``radius`` (N,), in the plane of :func:`orthonormal_basis` of the normal."""
+    e1, e2 = orthonormal_basis(normal)
+    phi = 2 * np.pi * np.arange(sides) / sides
+    r = (equal_area_scale(sides) * radius)[:, None, None]
+    return center[:, None] + r * (np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None])
+
+
+def disk_samples(u, center, normal, radius):
+    """Points (N,S,3) on the disks ``center`` (N,3), unit ``normal`` (N,3), ``radius`` (N,) from
+    unit-square points ``u`` (N,S,2), uniform by area."""
+    e1, e2 = orthonormal_basis(normal)
+    r = np.sqrt(u[..., 0]) * radius[:, None]
+    phi = 2 * np.pi * u[..., 1]
+    return center[:, None] + (r * np.cos(phi))[..., None] * e1[:, None] + (r * np.sin(phi))[..., None] * e2[:, None]
+
+
+# --------------------------------------------------------------------------------------------
+# Point-to-polygon form factors
+
+
+def polygon_form_factor(x, n, poly):
+    """Form factor (N,) from differential areas at ``x`` (N,3) with unit normals ``n`` (N,3) to
+    the part of a planar convex polygon above their tangent planes (either side of the polygon).
+
+    ``poly``: (K,3) shared, or (N,K,3) one per receiver. Lambert's contour integral,
+    ``F = |sum_k angle(a_k, a_k+1) n . unit(a_k x a_k+1)| / (2 pi)`` over the polygon clipped to
+    ``n . (p - x) > 0`` (Sutherland-Hodgman, vectorised: missing slots repeat the previous
+    vertex, and zero-length edges contribute nothing).
+    """
+    x = np.asarray(x, np.float64)
+    n = np.asarray(n, np.float64)
+    N = len(x)
+    poly = np.asarray(poly, np.float64)
+    if poly.ndim == 2:
+        poly = np.broadcast_to(poly, (N,) + poly.shape)
+    K = poly.shape[1]
+    rel = poly - x[:, None, :]
+    h = np.einsum("nkc,nc->nk", rel, n)
+    rel_n, h_n = np.roll(rel, -1, axis=1), np.roll(h, -1, axis=1)
+    inside = h > 0
+    crosses = inside != (h_n > 0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(crosses, h / (h - h_n), 0.0)
+    cut = rel + t[..., None] * (rel_n - rel)
+    pts = np.stack([rel, cut], axis=2).reshape(N, 2 * K, 3)
+    valid = np.stack([inside, crosses], axis=2).reshape(N, 2 * K)
+    idx = np.maximum.accumulate(np.where(valid, np.arange(2 * K), -1), axis=1)
+    last = idx[:, -1:]
+    idx = np.maximum(np.where(idx < 0, last, idx), 0)
+    q = np.take_along_axis(pts, idx[..., None], axis=1)
+    a, b = q, np.roll(q, -1, axis=1)
+    c = np.cross(a, b)
+    cn = np.linalg.norm(c, axis=-1)
+    theta = np.arctan2(cn, np.einsum("nkc,nkc->nk", a, b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        g = np.where(cn > 0, np.einsum("nkc,nc->nk", c, n) / cn, 0.0)
+    F = np.abs((theta * g).sum(axis=1)) / (2 * np.pi)
+    F[last[:, 0] < 0] = 0.0
+    return F
+
+
+def polygon_form_factors(points, normals, polys, poly_normals=None):
+    """(P, M) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
+    ``normals`` to every polygon of ``polys`` (M, K, 3) (any winding; a triangle may repeat a
+    corner), over the part of each polygon above the point's horizon
+    (:func:`polygon_form_factor`). With ``poly_normals`` (M, 3) an emitter only shines from its
+    front: F = 0 for points behind or in its plane.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    polys = np.asarray(polys, dtype=np.float64)
+    P, M = len(points), len(polys)
+    F = polygon_form_factor(np.repeat(points, M, axis=0), np.repeat(normals, M, axis=0),
+                            np.broadcast_to(polys[None], (P,) + polys.shape).reshape((P * M,) + polys.shape[1:]))
+    F = F.reshape(P, M)
+    if poly_normals is not None:
+        # in front of the plane by more than round-off: a point on the emitter's own plane (a
+        # neighbour on the same wall) must get 0, not Lambert's in-plane 1/2 or 1
+        centre = polys.mean(axis=1)
+        size = np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1)
+        h = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float))
+        F = np.where(h > 1e-9 * np.maximum(size, 1e-300)[None, :], F, 0.0)
+    return F
