@@ -3,9 +3,10 @@ import numpy as np
 import pytest
 
 from analytic import point_under_rectangle_corner
-from hemicube_radiosity.core.direct import emitter_direct, polygon_form_factors
-from hemicube_radiosity.core.embree_ff import embree_scene
+from hemicube_radiosity.core.direct import emitter_direct
+from hemicube_radiosity.core.geometry import polygon_form_factors
 from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.rays import embree_scene
 from hemicube_radiosity.core.scenes import quad
 
 

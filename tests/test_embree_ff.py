@@ -8,10 +8,10 @@ from hemicube_radiosity.core import scenes
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core import embree_ff
 from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
-from hemicube_radiosity.core.embree_ff import (EmbreeUnavailable, embree_available,
-                                               embree_hemicube_form_factors,
+from hemicube_radiosity.core.embree_ff import (embree_hemicube_form_factors,
                                                embree_stochastic_form_factors)
 from hemicube_radiosity.core.progress import Cancelled
+from hemicube_radiosity.core.rays import EmbreeUnavailable, embree_available
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
 

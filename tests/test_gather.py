@@ -2,10 +2,10 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.direct import polygon_form_factors
-from hemicube_radiosity.core.embree_ff import embree_scene
 from hemicube_radiosity.core.gather import final_gather, patch_parameters, surface_values
+from hemicube_radiosity.core.geometry import polygon_form_factors
 from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.rays import embree_scene
 from hemicube_radiosity.core.scenes import closed_box, quad
 
 

@@ -7,43 +7,20 @@ light is most of the detail in a bake, so it is computed apart:
     D(x) = sum_e L_e * F(x -> e) * V(x, e)
 
 with F the exact unoccluded point-to-polygon form factor (Lambert's contour formula, after
-clipping the emitter to the receiver's horizon) and V the fraction of stratified sample points
-on the emitter that are visible from x (Embree shadow rays). D is the radiance arriving from
-the emitters, so a receiver with reflectivity rho reflects ``rho * D`` of it; the radiosity
-solve then carries only the reflected light (see :mod:`.pipeline`), never the emitters' E.
+clipping the emitter to the receiver's horizon: :func:`.geometry.polygon_form_factors`) and V
+the fraction of stratified sample points on the emitter that are visible from x (shadow rays,
+:mod:`.rays`). D is the radiance arriving from the emitters, so a receiver with reflectivity
+rho reflects ``rho * D`` of it; the radiosity solve then carries only the reflected light (see
+:mod:`.pipeline`), never the emitters' E.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .lights import polygon_form_factor
+from .geometry import jittered_grid, polygon_form_factors
 from .patches import PatchSet
 
-__all__ = ["polygon_form_factors", "emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
-
-
-def polygon_form_factors(points, normals, polys, poly_normals=None):
-    """(P, M) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
-    ``normals`` to every polygon of ``polys`` (M, K, 3) (any winding; a triangle may repeat a
-    corner), over the part of each polygon above the point's horizon (Lambert's contour
-    integral, :func:`.lights.polygon_form_factor`). With ``poly_normals`` (M, 3) an emitter only
-    shines from its front: F = 0 for points behind or in its plane.
-    """
-    points = np.asarray(points, dtype=np.float64)
-    normals = np.asarray(normals, dtype=np.float64)
-    polys = np.asarray(polys, dtype=np.float64)
-    P, M = len(points), len(polys)
-    F = polygon_form_factor(np.repeat(points, M, axis=0), np.repeat(normals, M, axis=0),
-                            np.broadcast_to(polys[None], (P,) + polys.shape).reshape((P * M,) + polys.shape[1:]))
-    F = F.reshape(P, M)
-    if poly_normals is not None:
-        # in front of the plane by more than round-off: a point on the emitter's own plane (a
-        # neighbour on the same wall) must get 0, not Lambert's in-plane 1/2 or 1
-        centre = polys.mean(axis=1)
-        size = np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1)
-        h = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float))
-        F = np.where(h > 1e-9 * np.maximum(size, 1e-300)[None, :], F, 0.0)
-    return F
+__all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
 
 
 def vertex_frames(patches: PatchSet, inset=1e-2):
@@ -71,11 +48,7 @@ def vertex_frames(patches: PatchSet, inset=1e-2):
 
 def _emitter_samples(corners, samples, rng):
     """(M, S, 3) stratified points on each emitter patch (bilinear map of jittered grid cells)."""
-    g = int(np.ceil(np.sqrt(samples)))
-    i, j = np.meshgrid(np.arange(g), np.arange(g), indexing="ij")
-    M = len(corners)
-    u = (i.ravel()[None] + rng.uniform(0, 1, (M, g * g))) / g
-    v = (j.ravel()[None] + rng.uniform(0, 1, (M, g * g))) / g
+    u, v = jittered_grid(rng, len(corners), samples)
     u, v = u[..., None], v[..., None]
     c = corners[:, None]
     return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
@@ -97,7 +70,7 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     ``T @ L`` and needs no rays.
 
     ``scene``: anything with ``occluded(origins, directions, tfar)`` (Embree scene or NumPy BVH,
-    see :func:`.lights.occluder`) for shadow rays; None means no shadows. ``samples``: shadow
+    see :func:`.rays.occluder`) for shadow rays; None means no shadows. ``samples``: shadow
     rays per point and emitter patch (stratified over the patch, seeded); where they disagree
     (a penumbra) ``refine * samples`` more are cast, so soft shadow edges are not noisy while
     fully lit or fully shadowed points cost only ``samples``.

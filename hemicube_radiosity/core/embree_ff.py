@@ -17,112 +17,25 @@ that hits its own receiver is dropped (F_ii = 0). Rays leave from the receiver c
 tiny distance along its normal, so a planar patch never sees itself and a neighbour sharing an
 edge is seen as the rasteriser sees it.
 
-All rays of a batch of receivers go to Embree in one ``scene.run`` call.
+All rays of a batch of receivers go to Embree in one ``scene.run`` call, on the cached scene of
+:func:`.rays.embree_scene`; directions and frames come from :mod:`.geometry` and :mod:`.hemicube`.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .hemicube import _receiver_ids, pixel_directions, pixel_weights, receiver_frames, tangent_frames
+from .geometry import cosine_directions, stratified_unit_square, tangent_frames
+from .hemicube import pixel_directions, pixel_weights, receiver_frames, receiver_ids
 from .patches import PatchSet
 from .progress import Ticker
+from .rays import embree_scene, import_embreex
+from .rays import EmbreeUnavailable, embree_available  # compat: pipeline/blender switch to core.rays
 from .sparse import CSR
-from .errors import RadiosityError
 
-__all__ = ["embree_available", "EmbreeUnavailable", "embree_hemicube_form_factors",
-           "embree_stochastic_form_factors", "EmbreeScene", "embree_scene"]
+__all__ = ["embree_hemicube_form_factors", "embree_stochastic_form_factors", "hemicube_directions"]
 
 #: Rays per ``scene.run`` call (memory: ~60 bytes per ray for inputs and outputs).
 RAYS_PER_BATCH = 1 << 18
-
-
-class EmbreeUnavailable(RadiosityError, RuntimeError):
-    """``embreex`` cannot be imported (not installed, or its binary does not load here)."""
-
-    def __init__(self, detail: str = ""):
-        msg = "embreex is not installed; use method='hemicube' or install embreex"
-        if detail:
-            msg += f" ({detail})"
-        super().__init__(msg)
-
-
-def _import_embreex():
-    """(rtcore_scene, TriangleMesh) or raise :class:`EmbreeUnavailable`."""
-    try:
-        from embreex import rtcore_scene
-        from embreex.mesh_construction import TriangleMesh
-    except Exception as exc:  # ImportError, or OSError from a missing shared library
-        raise EmbreeUnavailable(f"{type(exc).__name__}: {exc}") from exc
-    return rtcore_scene, TriangleMesh
-
-
-def embree_available() -> bool:
-    """True when ``embreex`` imports and can build a scene."""
-    try:
-        _import_embreex()
-    except EmbreeUnavailable:
-        return False
-    return True
-
-
-# --------------------------------------------------------------------------------------------
-# Scene: patches -> triangles, with the patch id of every triangle
-
-
-class EmbreeScene:
-    """An Embree scene of a PatchSet's patches (each quad as 2 triangles).
-
-    ``tri_patch[prim_id]`` is the patch a triangle belongs to. Degenerate triangles (the second
-    half of a triangle patch, or zero-area halves of a quad) are left out of the scene.
-    ``scale`` is the length of the scene's bounding-box diagonal (for ray offsets).
-    """
-
-    def __init__(self, patches: PatchSet):
-        rtcs, TriangleMesh = _import_embreex()
-        c = patches.corners()  # (N,4,3), triangles repeat corner 2
-        tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]], axis=0)  # (2N,3,3)
-        owner = np.concatenate([np.arange(len(patches)), np.arange(len(patches))])
-        quad = np.concatenate([np.ones(len(patches), bool), patches.polys[:, 3] >= 0])
-        area2 = np.linalg.norm(np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]), axis=1)
-        lo, hi = patches.verts.min(axis=0), patches.verts.max(axis=0)
-        self.scale = float(np.linalg.norm(hi - lo)) or 1.0
-        keep = quad & (area2 > (1e-12 * self.scale) ** 2)
-        self.tri_patch = owner[keep].astype(np.int64)
-        self.n_patches = len(patches)
-        self._scene = rtcs.EmbreeScene()
-        self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris[keep], dtype=np.float32))
-
-    def intersect(self, origins, directions, tfar=None):
-        """Nearest hit per ray: (patch id or -1, distance along the direction's length units)."""
-        o = np.ascontiguousarray(origins, dtype=np.float32)
-        d = np.ascontiguousarray(directions, dtype=np.float32)
-        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
-        res = self._scene.run(o, d, output=1, **kw)
-        prim = res["primID"].astype(np.int64)
-        pid = np.where(prim >= 0, self.tri_patch[np.maximum(prim, 0)], -1)
-        return pid, res["tfar"]
-
-    def occluded(self, origins, directions, tfar=None):
-        """(M,) bool: something lies on the ray between 0 and ``tfar`` (default: infinity)."""
-        o = np.ascontiguousarray(origins, dtype=np.float32)
-        d = np.ascontiguousarray(directions, dtype=np.float32)
-        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
-        return np.asarray(self._scene.run(o, d, query="OCCLUDED", **kw)) >= 0
-
-
-_SCENE_CACHE: dict = {}
-
-
-def embree_scene(patches: PatchSet) -> EmbreeScene:
-    """The Embree scene for ``patches``, built once per geometry (the two most recent are kept)."""
-    key = patches.geometry_key()
-    sc = _SCENE_CACHE.get(key)
-    if sc is None:
-        sc = EmbreeScene(patches)
-        while len(_SCENE_CACHE) >= 2:
-            _SCENE_CACHE.pop(next(iter(_SCENE_CACHE)))
-        _SCENE_CACHE[key] = sc
-    return sc
 
 
 # --------------------------------------------------------------------------------------------
@@ -203,11 +116,11 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
 
     ``receivers``: patch ids whose rows are computed (others stay empty). ``progress(f)`` is
     called now and then; ``cancelled()`` is polled between batches (raises ``Cancelled``).
-    Raises :class:`EmbreeUnavailable` when embreex cannot be imported.
+    Raises :class:`.rays.EmbreeUnavailable` when embreex cannot be imported.
     """
-    _import_embreex()
+    import_embreex()
     n = len(patches)
-    recv = _receiver_ids(len(patches), receivers)
+    recv = receiver_ids(len(patches), receivers)
     local, weights = hemicube_directions(resolution)
     frames = receiver_frames(patches.normals, rotate_seed)
 
@@ -227,30 +140,6 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
 # (b) stochastic cosine-weighted rays
 
 
-def _stratified_unit_square(rng, count, k):
-    """(count, k, 2) points in [0,1)^2: a jittered m x (k // m) grid (m = floor(sqrt k)), the
-    k - m * (k // m) left over drawn uniformly; a fresh jitter per row."""
-    m = max(1, int(np.floor(np.sqrt(k))))
-    c = k // m
-    gi, gj = np.meshgrid(np.arange(m), np.arange(c), indexing="ij")
-    base = np.stack([gi.reshape(-1) / m, gj.reshape(-1) / c], -1)          # (m*c, 2)
-    jit = rng.random((count, m * c, 2)) * np.array([1.0 / m, 1.0 / c])
-    pts = base[None] + jit
-    rest = k - m * c
-    if rest:
-        pts = np.concatenate([pts, rng.random((count, rest, 2))], axis=1)
-    return pts
-
-
-def cosine_directions(u):
-    """Map (..., 2) points of the unit square to cosine-distributed local directions (..., 3)
-    (Malley: uniform on the disk by area, lifted to the hemisphere)."""
-    r = np.sqrt(u[..., 0])
-    phi = 2.0 * np.pi * u[..., 1]
-    z = np.sqrt(np.maximum(0.0, 1.0 - u[..., 0]))
-    return np.stack([r * np.cos(phi), r * np.sin(phi), z], -1)
-
-
 def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, seed=0,
                                    receivers=None, progress=None, cancelled=None) -> CSR:
     """Form factors from ``rays_per_patch`` cosine-distributed rays per receiver, each worth
@@ -261,18 +150,18 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
     sqrt(F (1 - F) / rays_per_patch) (less with stratification). Deterministic for a ``seed``
     whatever ``receivers`` is (each receiver has its own random stream).
     """
-    _import_embreex()
+    import_embreex()
     k = int(rays_per_patch)
     if k < 1:
         raise ValueError(f"rays_per_patch must be >= 1, got {rays_per_patch}")
     n = len(patches)
-    recv = _receiver_ids(len(patches), receivers)
+    recv = receiver_ids(len(patches), receivers)
     angles = np.random.default_rng([seed, 0x5eed]).uniform(0, 2 * np.pi, n)
     frames = tangent_frames(patches.normals, angles)
 
     def dirs_fn(batch):
         # one stream per receiver id, so rows do not depend on the batch or receiver set
-        u = np.concatenate([_stratified_unit_square(np.random.default_rng([seed, int(i)]), 1, k)
+        u = np.concatenate([stratified_unit_square(np.random.default_rng([seed, int(i)]), 1, k)
                             for i in batch])
         local = cosine_directions(u)                                        # (B,k,3)
         d = np.einsum("bkc,bcj->bkj", local, frames[batch])

@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .geometry import cosine_directions, jittered_grid, tangent_frames
 from .patches import PatchSet
+from .sparse import CSR
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "patch_parameters", "surface_values",
            "surface_weights"]
@@ -67,30 +69,24 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
 
-    ``scene``: :func:`.embree_ff.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
+    ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
     point: one jittered-grid cosine pattern (seeded) shared by every point, in the point's
     normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
     a relight reuses it.
     """
-    from .embree_ff import cosine_directions
-    from .hemicube import tangent_frames
-    from .sparse import CSR
-
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     P, V = len(points), len(patches.verts)
     rng = np.random.default_rng(seed)
-    g = int(np.ceil(np.sqrt(rays)))
-    R = g * g
-    i, j = np.meshgrid(np.arange(g), np.arange(g), indexing="ij")
     params = patch_parameters(patches)
     eps = 1e-5 * scene.scale
-    step = max(1, chunk_rays // R)
     # one stratified pattern for every point, in a frame that depends on the normal alone:
     # neighbouring points on a surface cast parallel rays, so what remains of the sampling error
     # varies smoothly over the surface instead of as per-vertex speckle
-    u = np.stack([(i.ravel() + rng.uniform(0, 1, R)) / g, (j.ravel() + rng.uniform(0, 1, R)) / g], -1)
-    local = cosine_directions(u)                                                  # (R, 3)
+    u, v = jittered_grid(rng, 1, rays)
+    R = u.size
+    step = max(1, chunk_rays // R)
+    local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
     rows, cols, vals = [], [], []
     sky = np.zeros(P)
     for s in range(0, P, step):

@@ -32,7 +32,7 @@ All five faces share one item buffer of width R: the top face's R rows, then the
 side faces +X, -X, +Y and -Y (the pixel order of :func:`pixel_weights`).  Several receivers are
 processed per NumPy call (their buffers stacked), which amortises the interpreter overhead.
 
-Frames (:func:`tangent_frames`, :func:`receiver_frames`) and the pixel order
+Frames (:func:`.geometry.tangent_frames`, :func:`receiver_frames`) and the pixel order
 (:func:`pixel_directions`, :func:`pixel_weights`) are the ones :mod:`embree_ff` casts its rays
 with: the tangent u is the normal crossed into the world axis least aligned with it, and
 ``rotate_seed`` turns each receiver's frame about its normal by an angle drawn for all patches
@@ -45,11 +45,12 @@ import sys
 import numpy as np
 
 from .deltaff import delta_form_factors
+from .geometry import tangent_frames
 from .patches import PatchSet
 from .progress import Ticker
 from .sparse import CSR
 
-__all__ = ["hemicube_form_factors", "receiver_frames", "tangent_frames", "pixel_weights",
+__all__ = ["hemicube_form_factors", "receiver_frames", "receiver_ids", "pixel_weights",
            "pixel_directions"]
 
 #: Eye offset along the receiver normal, as a fraction of the scene's bounding-box diagonal.
@@ -134,25 +135,6 @@ def pixel_directions(resolution):
     return np.concatenate(out)
 
 
-def tangent_frames(normals, angles=None):
-    """Orthonormal frames (N, 3, 3), rows (u, v, n), around unit normals.
-
-    ``u`` is the normal crossed into the world axis least aligned with it, then turned by
-    ``angles`` (N,) radians about the normal when given.  Right-handed; ``frames[i] @ d``
-    expresses a world vector in frame i.
-    """
-    n = np.asarray(normals, dtype=np.float64)
-    helper = np.zeros_like(n)
-    helper[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
-    u = np.cross(helper, n)
-    u /= np.linalg.norm(u, axis=1, keepdims=True)
-    v = np.cross(n, u)
-    if angles is not None:
-        ca, sa = np.cos(angles)[:, None], np.sin(angles)[:, None]
-        u, v = ca * u + sa * v, -sa * u + ca * v
-    return np.stack([u, v, n], axis=1)
-
-
 def receiver_frames(normals, rotate_seed=None):
     """Orthonormal hemi-cube frames, one per patch.
 
@@ -167,7 +149,7 @@ def receiver_frames(normals, rotate_seed=None):
     Returns
     -------
     ndarray, shape (N, 3, 3), float64
-        :func:`tangent_frames` of the normals, turned by those angles.
+        :func:`.geometry.tangent_frames` of the normals, turned by those angles.
     """
     angles = None
     if rotate_seed is not None:
@@ -755,7 +737,7 @@ def _resolve(keys, weights, n):
     return rows[:, :n], rows[:, n + 1]
 
 
-def _receiver_ids(n, receivers):
+def receiver_ids(n, receivers):
     """Sorted unique receiver ids (all patches when None); ValueError when out of range."""
     if receivers is None:
         return np.arange(n, dtype=np.int64)
@@ -806,7 +788,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     R = int(resolution)
     delta_form_factors(R)  # validates the resolution
     n = len(patches)
-    recv = _receiver_ids(n, receivers)
+    recv = receiver_ids(n, receivers)
     scene = _Scene(patches, R)
     frames = receiver_frames(patches.normals, rotate_seed)
     B = _batch_size(n, R, batch)

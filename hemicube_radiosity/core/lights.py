@@ -1,4 +1,4 @@
-"""Direct light from Blender-style lamps onto patches (pure NumPy, Embree shadow rays if present).
+"""Blender-style lamps and the direct light they give the patches (pure NumPy, rays by .rays).
 
 What it computes
 ----------------
@@ -38,9 +38,9 @@ Cycles turns it into radiance with ``eval_fac`` (``intern/cycles/scene/light.cpp
   (Cycles 4.x and later; 3.x used ``0.25 / area``), i.e. a Lambertian emitter of radiance
   ``L = P / (pi A)``, ``A = |X| size_x * |Y| size_y`` (times pi/4 for DISK/ELLIPSE), X and Y the
   first two columns of the object matrix. ``H = pi L F`` with F the exact point-to-polygon
-  form factor (Lambert's contour integral) of the part of the light above the receiver's
-  horizon. Disks and ellipses are regular 64-gons of the same area. The *spread* setting is
-  ignored (taken as the default 180 degrees).
+  form factor (Lambert's contour integral, :func:`.geometry.polygon_form_factor`) of the part of
+  the light above the receiver's horizon. Disks and ellipses are regular 64-gons of the same
+  area. The *spread* setting is ignored (taken as the default 180 degrees).
 
 Shadows (soft shadows from radius / angle / size)
 -------------------------------------------------
@@ -52,7 +52,7 @@ the unshadowed integrand, ``H = H_unshadowed * sum(v_s w_s a_s) / sum(w_s)`` (a_
 attenuation). Points and a sun with zero size need a single shadow ray. Shadow rays go from the
 patch centre (moved a hair along its normal) to the sample point; any patch (front or back)
 blocks them. ``shadows``: 'embree' (needs embreex), 'numpy' (a NumPy BVH, slower, same
-answers), 'none', or 'auto' (Embree when available).
+answers), 'none', or 'auto' (Embree when available): :func:`.rays.occluder`.
 """
 from __future__ import annotations
 
@@ -60,15 +60,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .geometry import (DISK_SIDES, disk_polygons, disk_samples, equal_area_scale,
+                       polygon_form_factor, stratified_unit_square)
 from .patches import PatchSet
 from .progress import Ticker
+from .rays import occluder
 
 __all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "direct_irradiance",
-           "light_irradiance", "polygon_form_factor", "spot_attenuation", "NumpyOccluder", "occluder",
-           "AREA_SHAPES"]
+           "light_irradiance", "spot_attenuation", "AREA_SHAPES"]
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
-DISK_SIDES = 64          # polygon standing in for disks and ellipses
 RECEIVERS_PER_CHUNK = 4096
 
 
@@ -223,13 +224,13 @@ class AreaLight:
             s = np.array([(-1, -1), (1, -1), (1, 1), (-1, 1)], float) * 0.5
         else:
             phi = 2 * np.pi * np.arange(sides) / sides
-            k = np.sqrt(np.pi / (0.5 * sides * np.sin(2 * np.pi / sides)))  # same area as ellipse
+            k = equal_area_scale(sides)                                     # same area as ellipse
             s = 0.5 * k * np.stack([np.cos(phi), np.sin(phi)], 1)
         return c + s[:, :1] * lu * au + s[:, 1:] * lv * av
 
 
 # --------------------------------------------------------------------------------------------
-# Closed forms
+# Spot cone
 
 
 def spot_attenuation(cos_angle, spot_size, spot_blend):
@@ -241,228 +242,6 @@ def spot_attenuation(cos_angle, spot_size, spot_blend):
         return (c > ch).astype(np.float64)
     t = np.clip((c - ch) / ((1.0 - ch) * spot_blend), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
-
-
-def polygon_form_factor(x, n, poly):
-    """Form factor from differential areas at ``x`` (N,3) with unit normals ``n`` (N,3) to the
-    part of a planar convex polygon above their tangent planes (either side of the polygon).
-
-    ``poly``: (K,3) shared, or (N,K,3) one per receiver. Lambert's contour integral,
-    ``F = |sum_k angle(a_k, a_k+1) n . unit(a_k x a_k+1)| / (2 pi)`` over the polygon clipped to
-    ``n . (p - x) > 0`` (Sutherland-Hodgman, vectorised: missing slots repeat the previous
-    vertex, and zero-length edges contribute nothing).
-    """
-    x = np.asarray(x, np.float64)
-    n = np.asarray(n, np.float64)
-    N = len(x)
-    poly = np.asarray(poly, np.float64)
-    if poly.ndim == 2:
-        poly = np.broadcast_to(poly, (N,) + poly.shape)
-    K = poly.shape[1]
-    rel = poly - x[:, None, :]
-    h = np.einsum("nkc,nc->nk", rel, n)
-    rel_n, h_n = np.roll(rel, -1, axis=1), np.roll(h, -1, axis=1)
-    inside = h > 0
-    crosses = inside != (h_n > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = np.where(crosses, h / (h - h_n), 0.0)
-    cut = rel + t[..., None] * (rel_n - rel)
-    pts = np.stack([rel, cut], axis=2).reshape(N, 2 * K, 3)
-    valid = np.stack([inside, crosses], axis=2).reshape(N, 2 * K)
-    idx = np.maximum.accumulate(np.where(valid, np.arange(2 * K), -1), axis=1)
-    last = idx[:, -1:]
-    idx = np.maximum(np.where(idx < 0, last, idx), 0)
-    q = np.take_along_axis(pts, idx[..., None], axis=1)
-    a, b = q, np.roll(q, -1, axis=1)
-    c = np.cross(a, b)
-    cn = np.linalg.norm(c, axis=-1)
-    theta = np.arctan2(cn, np.einsum("nkc,nkc->nk", a, b))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        g = np.where(cn > 0, np.einsum("nkc,nc->nk", c, n) / cn, 0.0)
-    F = np.abs((theta * g).sum(axis=1)) / (2 * np.pi)
-    F[last[:, 0] < 0] = 0.0
-    return F
-
-
-def _basis(m):
-    """(N,3), (N,3): two unit vectors spanning the plane perpendicular to unit vectors m."""
-    helper = np.zeros_like(m)
-    helper[np.arange(len(m)), np.argmin(np.abs(m), axis=1)] = 1.0
-    e1 = np.cross(helper, m)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return e1, np.cross(m, e1)
-
-
-def _disk_polygons(center, normal, radius, sides=DISK_SIDES):
-    """(N, sides, 3) regular polygons with the area of the disks (centre, unit normal, radius)."""
-    e1, e2 = _basis(normal)
-    phi = 2 * np.pi * np.arange(sides) / sides
-    k = np.sqrt(np.pi / (0.5 * sides * np.sin(2 * np.pi / sides)))
-    r = (k * radius)[:, None, None]
-    return center[:, None] + r * (np.cos(phi)[None, :, None] * e1[:, None] + np.sin(phi)[None, :, None] * e2[:, None])
-
-
-def _stratified(rng, count, k):
-    """(count, k, 2) jittered-grid points in [0,1)^2 (m x k//m grid, the rest uniform)."""
-    m = max(1, int(np.floor(np.sqrt(k))))
-    c = k // m
-    gi, gj = np.meshgrid(np.arange(m), np.arange(c), indexing="ij")
-    base = np.stack([gi.reshape(-1) / m, gj.reshape(-1) / c], -1)
-    pts = base[None] + rng.random((count, m * c, 2)) * np.array([1.0 / m, 1.0 / c])
-    if k > m * c:
-        pts = np.concatenate([pts, rng.random((count, k - m * c, 2))], axis=1)
-    return pts
-
-
-def _disk_samples(u, center, normal, radius):
-    """Points (N,S,3) on disks from unit-square points u (N,S,2), uniform by area."""
-    e1, e2 = _basis(normal)
-    r = np.sqrt(u[..., 0]) * radius[:, None]
-    phi = 2 * np.pi * u[..., 1]
-    return center[:, None] + (r * np.cos(phi))[..., None] * e1[:, None] + (r * np.sin(phi))[..., None] * e2[:, None]
-
-
-# --------------------------------------------------------------------------------------------
-# Shadow rays
-
-
-class NumpyOccluder:
-    """Shadow-ray queries against the patches in plain NumPy: a median-split BVH over the
-    patch triangles, traversed breadth-first for a whole batch of rays at once."""
-
-    LEAF = 4
-    RAYS_PER_CHUNK = 1 << 14
-
-    def __init__(self, patches: PatchSet):
-        c = patches.corners()
-        tris = np.concatenate([c[:, [0, 1, 2]], c[:, [0, 2, 3]]], axis=0)
-        quad = np.concatenate([np.ones(len(patches), bool), patches.polys[:, 3] >= 0])
-        e1, e2 = tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0]
-        lo, hi = patches.verts.min(axis=0), patches.verts.max(axis=0)
-        self.scale = float(np.linalg.norm(hi - lo)) or 1.0
-        keep = quad & (np.linalg.norm(np.cross(e1, e2), axis=1) > (1e-12 * self.scale) ** 2)
-        tris = tris[keep]
-        self._build(tris)
-
-    def _build(self, tris):
-        T = len(tris)
-        cent = tris.mean(axis=1)
-        tlo, thi = tris.min(axis=1), tris.max(axis=1)
-        order = np.arange(T)
-        starts, counts, lefts, los, his = [], [], [], [], []
-        f_start, f_count = np.array([0]), np.array([T])
-        n_nodes = 0
-        while f_start.size:
-            ids = n_nodes + np.arange(f_start.size)
-            n_nodes += f_start.size
-            seg = np.repeat(np.arange(f_start.size), f_count)
-            pos = np.repeat(f_start - np.concatenate([[0], np.cumsum(f_count)[:-1]]), f_count) + np.arange(seg.size)
-            tri = order[pos]
-            bnd = np.concatenate([[0], np.cumsum(f_count)[:-1]])
-            lo = np.minimum.reduceat(tlo[tri], bnd, axis=0)
-            hi = np.maximum.reduceat(thi[tri], bnd, axis=0)
-            split = f_count > self.LEAF
-            left = np.full(f_start.size, -1, np.int64)
-            # children of this level's split nodes get consecutive ids after all current nodes
-            left[split] = n_nodes + 2 * np.arange(split.sum())
-            starts.append(f_start), counts.append(f_count), lefts.append(left)
-            los.append(lo), his.append(hi)
-            if not split.any():
-                break
-            clo = np.minimum.reduceat(cent[tri], bnd, axis=0)
-            chi = np.maximum.reduceat(cent[tri], bnd, axis=0)
-            axis = np.argmax(chi - clo, axis=1)
-            sel = split[seg]
-            key = cent[tri, axis[seg]]
-            perm = np.lexsort((key[sel], seg[sel]))
-            order[pos[sel]] = tri[sel][perm]
-            s_start, s_count = f_start[split], f_count[split]
-            half = s_count // 2
-            f_start = np.stack([s_start, s_start + half], 1).reshape(-1)
-            f_count = np.stack([half, s_count - half], 1).reshape(-1)
-            del ids
-        self.start = np.concatenate(starts)
-        self.count = np.concatenate(counts)
-        self.left = np.concatenate(lefts)
-        self.lo = np.concatenate(los)
-        self.hi = np.concatenate(his)
-        self.order = order
-        t = tris[order]
-        self.v0, self.e1, self.e2 = t[:, 0], t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-
-    def occluded(self, origins, directions, tfar=None):
-        """(M,) bool: a triangle crosses the segment origin + t * direction, 0 < t < tfar
-        (tfar None: infinite)."""
-        o = np.asarray(origins, np.float64)
-        d = np.asarray(directions, np.float64)
-        tf = np.full(len(o), np.inf) if tfar is None else np.asarray(tfar, np.float64)
-        out = np.zeros(len(o), bool)
-        for s in range(0, len(o), self.RAYS_PER_CHUNK):
-            sl = slice(s, s + self.RAYS_PER_CHUNK)
-            out[sl] = self._occluded_chunk(o[sl], d[sl], tf[sl])
-        return out
-
-    def _occluded_chunk(self, o, d, tf):
-        M = len(o)
-        occ = np.zeros(M, bool)
-        if M == 0 or len(self.order) == 0:
-            return occ
-        ds = np.where(np.abs(d) < 1e-30, np.where(d < 0, -1e-30, 1e-30), d)
-        inv = 1.0 / ds
-        ray = np.arange(M)
-        node = np.zeros(M, np.int64)
-        while ray.size:
-            oo, ii = o[ray], inv[ray]
-            t0 = (self.lo[node] - oo) * ii
-            t1 = (self.hi[node] - oo) * ii
-            tmin = np.minimum(t0, t1).max(axis=1)
-            tmax = np.maximum(t0, t1).min(axis=1)
-            hit = (tmin <= tmax) & (tmax >= 0) & (tmin <= tf[ray])
-            ray, node = ray[hit], node[hit]
-            leaf = self.left[node] < 0
-            lr, ln = ray[leaf], node[leaf]
-            if lr.size:
-                cnt = self.count[ln]
-                rr = np.repeat(lr, cnt)
-                first = np.repeat(self.start[ln] - np.concatenate([[0], np.cumsum(cnt)[:-1]]), cnt)
-                tri = first + np.arange(rr.size)
-                occ[rr[self._hits(o[rr], d[rr], tf[rr], tri)]] = True
-            ir, inn = ray[~leaf], node[~leaf]
-            ray = np.concatenate([ir, ir])
-            node = np.concatenate([self.left[inn], self.left[inn] + 1])
-            keep = ~occ[ray]
-            ray, node = ray[keep], node[keep]
-        return occ
-
-    def _hits(self, o, d, tf, tri):
-        e1, e2 = self.e1[tri], self.e2[tri]
-        p = np.cross(d, e2)
-        det = np.einsum("ij,ij->i", e1, p)
-        ok = np.abs(det) > 1e-300
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        s = o - self.v0[tri]
-        u = np.einsum("ij,ij->i", s, p) * inv
-        q = np.cross(s, e1)
-        v = np.einsum("ij,ij->i", d, q) * inv
-        t = np.einsum("ij,ij->i", e2, q) * inv
-        return ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0) & (t < tf)
-
-
-def occluder(patches, shadows="auto"):
-    """Something with ``occluded(origins, directions, tfar)`` for shadow rays: Embree's scene
-    ('embree', or 'auto' when embreex is there), the NumPy BVH ('numpy'), or None ('none')."""
-    if shadows == "none":
-        return None
-    if shadows not in ("auto", "embree", "numpy"):
-        raise ValueError(f"shadows must be 'auto', 'embree', 'numpy' or 'none', got {shadows!r}")
-    if shadows in ("auto", "embree"):
-        from .embree_ff import EmbreeUnavailable, embree_available, embree_scene
-
-        if embree_available():
-            return embree_scene(patches)
-        if shadows == "embree":
-            raise EmbreeUnavailable()
-    return NumpyOccluder(patches)
 
 
 # --------------------------------------------------------------------------------------------
@@ -528,8 +307,8 @@ def _point_like(light, x, n, rng, samples, occ, eps):
         dd = np.maximum(d, r * (1 + 1e-9))
         dc = c + (r * r / dd)[:, None] * towards
         dr = r * np.sqrt(1.0 - (r / dd) ** 2)
-    E0 = L * np.pi * polygon_form_factor(x, n, _disk_polygons(dc, towards, dr))
-    pts = _disk_samples(_stratified(rng, len(x), samples), dc, towards, dr)
+    E0 = L * np.pi * polygon_form_factor(x, n, disk_polygons(dc, towards, dr))
+    pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, towards, dr)
     w = _area_weights(x, n, pts, towards)
     a = None
     if spot:
@@ -551,8 +330,8 @@ def _sun(light, x, n, rng, samples, occ, eps):
     dc = x + to_sun
     m = np.broadcast_to(-to_sun, x.shape)
     dr = np.full(len(x), np.tan(h))
-    E0 = L * np.pi * polygon_form_factor(x, n, _disk_polygons(dc, m, dr))
-    pts = _disk_samples(_stratified(rng, len(x), samples), dc, m, dr)
+    E0 = L * np.pi * polygon_form_factor(x, n, disk_polygons(dc, m, dr))
+    pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, m, dr)
     w = _area_weights(x, n, pts, m)
     dirs = pts - x[:, None]
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
@@ -569,7 +348,7 @@ def _area(light, x, n, rng, samples, occ, eps):
     E0 = np.zeros(len(x))
     if front.any():
         E0[front] = L * np.pi * polygon_form_factor(x[front], n[front], light.polygon())
-    u = _stratified(rng, len(x), samples)
+    u = stratified_unit_square(rng, len(x), samples)
     if light.ellipse:
         r, phi = 0.5 * np.sqrt(u[..., 0]), 2 * np.pi * u[..., 1]
         su, sv = r * np.cos(phi), r * np.sin(phi)
