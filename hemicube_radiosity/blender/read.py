@@ -18,6 +18,14 @@ borders) is a hard edge: each side gets its own vertex copies and colours do not
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
 seen from the front in world space.
 
+What the render sees (issue 10): ``render_visible_objects(view_layer)`` lists the objects a
+render shows (not ``hide_render``, in a collection neither excluded nor disabled in renders),
+whatever the viewport shows; an object disabled in viewports is not evaluated by the viewport
+depsgraph, so it is read without modifiers and placed by ``world_matrix`` (noted). Viewport and
+render modifier settings that differ are noted. An emission colour at strength 0 and negative
+emission are no light, as in Cycles (a Principled BSDF clamps it; an Emission node's negative light,
+which Cycles does subtract, is not modelled), each with a note naming the material.
+
 Seam for lamps and world (issue 4): :class:`SceneInput` carries ``lights`` and ``world`` that a
 later ``read_lights`` fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
 """
@@ -31,7 +39,8 @@ from ..core.patches import MeshInput
 from ..core.errors import RadiosityError
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
-           "read_scene", "weld_corners", "RHO_MAX"]
+           "read_scene", "weld_corners", "RHO_MAX", "render_visible_objects", "is_render_visible",
+           "world_matrix"]
 
 RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
 COPLANAR_COS = float(np.cos(1e-3))
@@ -115,6 +124,17 @@ def _follow(socket):
     return None, None
 
 
+def _note_unlit(node, em, strength, color_name, strength_name, notes):
+    """An emission colour with strength 0 is no light in Cycles; say so (Blender 4.2's OBJ
+    importer turns an .mtl ``Ke`` into exactly that: the colour, strength 0)."""
+    if strength == 0 and np.any(em > 0):
+        s = node.inputs.get(strength_name)
+        if s is not None and s.is_linked:
+            return                       # already noted as linked
+        notes.append(f"{node.name} has {color_name} ({em[0]:.3g}, {em[1]:.3g}, {em[2]:.3g}) but "
+                     f"{strength_name} 0: no light (as in Cycles); raise the strength to make it glow")
+
+
 def _shader(node, out_socket, mat, notes, depth=0):
     """(rho, emission) of the shader that ``node`` outputs."""
     zero = np.zeros(3)
@@ -131,11 +151,25 @@ def _shader(node, out_socket, mat, notes, depth=0):
                 break
         em = _value(node, notes, "Emission Color", "Emission")
         strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
+        if strength < 0 and np.any(em > 0):
+            # Cycles clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
+            notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light (as in Cycles)")
+            strength = 0.0
+        _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
         return rho, em * strength
     if t == "BSDF_DIFFUSE":
         return _value(node, notes, "Color"), zero
     if t == "EMISSION":
-        return zero, _value(node, notes, "Color") * _value(node, notes, "Strength", default=1.0, color=False)
+        em = _value(node, notes, "Color")
+        strength = _value(node, notes, "Strength", default=1.0, color=False)
+        if strength < 0 and np.any(em > 0):
+            # Cycles really emits negative light from an Emission node (it darkens what it sees);
+            # the solve needs emission >= 0
+            notes.append(f"{node.name} Strength {strength:g} is negative: Cycles subtracts light there, "
+                         "this bake takes it as no light")
+            strength = 0.0
+        _note_unlit(node, em, strength, "Color", "Strength", notes)
+        return zero, em * strength
     if t in ("MIX_SHADER", "ADD_SHADER"):
         shaders = [s for s in node.inputs if s.type == "SHADER"]
         parts = []
@@ -200,7 +234,11 @@ def material_rho_emission(mat):
                     rho, em = _shader(node, sock, mat, sub)
                     notes += [f"material '{mat.name}': {s}" for s in sub]
     rho = np.asarray(rho, float)
-    em = np.maximum(np.asarray(em, float), 0.0)
+    em = np.asarray(em, float)
+    if np.any(em < 0):
+        notes.append(f"negative emission {tuple(np.round(em, 3))} taken as no light"
+                     + (f" in '{mat.name}'" if mat is not None else ""))
+        em = np.maximum(em, 0.0)
     if np.any(rho > RHO_MAX) or np.any(rho < 0):
         notes.append(f"reflectivity {tuple(np.round(rho, 3))} clipped to [0, {RHO_MAX}]"
                      + (f" in '{mat.name}'" if mat is not None else ""))
@@ -261,6 +299,95 @@ def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, fa
     return corner_vertex.reshape(-1), loop_vert[first_loop]
 
 
+# ----------------------------------------------------------------------------- render visibility
+def _render_collections(view_layer):
+    """Collections whose objects the render sees in ``view_layer``: the layer-collection tree
+    without excluded layer collections and collections disabled in renders (and everything under
+    them). The viewport's switches (eye, monitor) do not matter to a render."""
+    out, stack = [], [view_layer.layer_collection]
+    while stack:
+        lc = stack.pop()
+        if lc.exclude or lc.collection.hide_render:
+            continue
+        out.append(lc.collection)
+        stack.extend(lc.children)
+    return out
+
+
+def render_visible_objects(view_layer, types=None):
+    """Original objects that a render of ``view_layer`` shows, in view-layer order: in a
+    collection the render sees (not excluded, not disabled in renders up the tree) and not
+    ``hide_render`` themselves, whatever their viewport visibility (hidden with H, disabled in
+    viewports). ``types``: e.g. {'MESH'} or {'LIGHT'} (default: all). Instances made by
+    instancers are not listed (the depsgraph has them)."""
+    names = set()
+    for coll in _render_collections(view_layer):
+        names.update(o.name for o in coll.objects)
+    return [o for o in view_layer.objects
+            if o.name in names and not o.hide_render and (types is None or o.type in types)]
+
+
+def is_render_visible(ob, view_layer):
+    """True when a render of ``view_layer`` shows the original object ``ob``."""
+    ob = getattr(ob, "original", ob)
+    if ob.hide_render or view_layer.objects.get(ob.name) is None:
+        return False
+    return any(c.objects.get(ob.name) is not None for c in _render_collections(view_layer))
+
+
+def world_matrix(obj, depsgraph):
+    """(4, 4) world matrix of ``obj`` as the render places it. Objects disabled in viewports are
+    not evaluated by the viewport depsgraph and their stored ``matrix_world`` may be stale (never
+    computed for an object made by a script), so theirs is rebuilt from location/rotation/scale
+    and the parent chain (constraints and parent bones/vertices are not applied)."""
+    ob_eval = obj.evaluated_get(depsgraph)
+    if getattr(ob_eval, "is_evaluated", True):
+        return np.array(ob_eval.matrix_world, dtype=np.float64)
+    obj = getattr(obj, "original", obj)
+    M = np.array(obj.matrix_basis, dtype=np.float64)
+    if obj.parent is not None:
+        P = world_matrix(obj.parent, depsgraph)
+        M = P @ np.array(obj.matrix_parent_inverse, dtype=np.float64) @ M
+    return M
+
+
+def unevaluated_note(obj):
+    """Why the matrix of an object the viewport does not evaluate may differ from the render's."""
+    what = [w for w, on in (("constraints", len(obj.constraints) > 0),
+                            ("animation", obj.animation_data is not None),
+                            ("parent " + obj.parent_type.lower(),
+                             obj.parent is not None and obj.parent_type != "OBJECT")) if on]
+    if what:
+        return (f"disabled in viewports, so not evaluated; placed by its location/rotation/scale "
+                f"and parent only ({', '.join(what)} not applied)")
+    return None
+
+
+def _render_notes(obj, ob_eval):
+    """What the render sees differently from the viewport-evaluated mesh we read."""
+    notes = []
+    mods = [m for m in obj.modifiers]
+    if not getattr(ob_eval, "is_evaluated", True):
+        n = unevaluated_note(obj)
+        if n:
+            notes.append(n)
+        if any(m.show_render for m in mods):
+            notes.append("disabled in viewports (not evaluated there): read without its modifiers; "
+                         "enable it in viewports for an exact bake")
+            return notes
+    for m in mods:
+        if m.show_render != m.show_viewport:
+            notes.append(f"modifier '{m.name}' is {'on' if m.show_render else 'off'} in renders but "
+                         f"{'on' if m.show_viewport else 'off'} in the viewport; the viewport's mesh was used")
+        elif m.show_render and m.type in ("SUBSURF", "MULTIRES") and m.levels != m.render_levels:
+            notes.append(f"modifier '{m.name}': viewport level {m.levels} used (renders use {m.render_levels})")
+    off = [k for k in ("diffuse", "shadow") if not getattr(obj, f"visible_{k}", True)]
+    if off:
+        notes.append(f"not visible to {' and '.join(off)} rays in Cycles; here it still reflects and "
+                     "casts shadows like any surface")
+    return notes
+
+
 # ----------------------------------------------------------------------------- objects
 def _mesh_arrays(me):
     nv, nl, nf, ne = len(me.vertices), len(me.loops), len(me.polygons), len(me.edges)
@@ -312,7 +439,7 @@ def read_object(obj, depsgraph, bake=True) -> ObjectSource:
         ob_eval.to_mesh_clear()
     if ps.size == 0:
         raise ReadError(f"'{obj.name}' has no faces")
-    M = np.array(ob_eval.matrix_world, dtype=np.float64)
+    M = world_matrix(obj, depsgraph)
     verts_w = co @ M[:3, :3].T + M[:3, 3]
     det = float(np.linalg.det(M[:3, :3]))
     if abs(det) < 1e-300:
@@ -328,7 +455,7 @@ def read_object(obj, depsgraph, bake=True) -> ObjectSource:
     corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
     offsets = np.concatenate([[0], np.cumsum(pt)])
     used = set(np.unique(mi).tolist())
-    table, notes = [], []
+    table, notes = [], _render_notes(obj, ob_eval)
     for k, m in enumerate(mats):
         rho, em, n = material_rho_emission(m)
         table.append((rho, em))
