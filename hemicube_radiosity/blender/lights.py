@@ -24,21 +24,25 @@ SUN           ``energy`` is the irradiance (W/m^2) at normal incidence; ``angle`
 AREA          one-sided Lambertian emitter facing the object's -Z: radiance
               P / (pi A) with ``normalize`` on (A includes the object's scale), P / pi
               with it off (mapped as power P x A). SQUARE/RECTANGLE/DISK/ELLIPSE.
-World         Background node Color x Strength (unlinked inputs), seen wherever a
-              hemi-cube sees no surface.
+World         the active World Output's Background (or Emission) Color x Strength, Mix
+              and Add shaders of them followed; seen wherever a hemi-cube sees no surface.
+              A 4.x world with "Use Nodes" off arrives in Blender 5 as a new active output
+              fed by its old colour; before 5.0 it is ``world.color``. No world: black.
 ============  =====================================================================
 
-Visibility switches honoured: the object's ``hide_render`` (and the depsgraph's own
-visibility), the light object's ``visible_diffuse`` (off: no diffuse light at all in Cycles),
-the world's ``cycles_visibility.diffuse``. ``diffuse_factor`` is not used by Cycles (EEVEE
-only) and is ignored here too, with a note when it is not 1.
+Lights are taken by *render* visibility, as Cycles renders them, not the viewport's: a light
+hidden with H, disabled in viewports or in a collection hidden in the viewport still lights;
+``hide_render``, a collection disabled in renders or excluded from the view layer, does not
+(``read.render_visible_objects``). Also honoured: the light object's ``visible_diffuse`` (off: no
+diffuse light at all in Cycles), the world's ``cycles_visibility.diffuse``. ``diffuse_factor`` is
+not used by Cycles (EEVEE only) and is ignored here too, with a note when it is not 1.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ..core.lights import AreaLight, PointLight, SpotLight, SunLight
-from .read import _follow
+from .read import _follow, is_render_visible, render_visible_objects, unevaluated_note, world_matrix
 
 __all__ = ["read_lights", "light_from_object", "world_radiance"]
 
@@ -138,31 +142,23 @@ def light_from_object(ob, matrix_world, notes):
     return None
 
 
-def world_radiance(world, notes):
-    """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse)."""
-    if world is None:
+def _world_tree(world):
+    """The node tree a render of ``world`` uses, or None for a plain ``world.color`` world.
+
+    Blender 5 always renders a world's nodes (``use_nodes`` is deprecated and always on); a 4.x
+    file whose world had "Use Nodes" off is converted on load into a new active World Output fed by
+    a Background of the old ``world.color``, which the active-output rule below follows. Before
+    5.0, "Use Nodes" off renders ``world.color`` as a uniform background."""
+    import bpy
+
+    nt = world.node_tree
+    if bpy.app.version < (5, 0, 0) and not getattr(world, "use_nodes", True):
         return None
-    vis = getattr(world, "cycles_visibility", None)
-    if vis is not None and not vis.diffuse:
-        notes.append("world: not visible to diffuse rays; no sky light")
-        return None
-    nt = world.node_tree             # Blender 5 always renders worlds with their node tree
-    if nt is None:
-        c = _rgb(world.color)
-        return c if np.any(c > 0) else None
-    out = _output_node(nt, "OUTPUT_WORLD")
-    if out is None:
-        return None
-    node, _ = _follow(out.inputs.get("Surface"))
-    if node is None:
-        return None
-    if node.type != "BACKGROUND":
-        bg = [n for n in nt.nodes if n.type == "BACKGROUND"]
-        if not bg:
-            notes.append(f"world: surface '{node.name}' is not a Background node; no sky light")
-            return None
-        notes.append(f"world: '{node.name}' mixes shaders; used Background '{bg[0].name}' alone")
-        node = bg[0]
+    return nt
+
+
+def _world_color(node, notes):
+    """Constant Color x Strength of a Background (or Emission) node in a world."""
     strength = _input_value(node, "Strength", notes, "world", 1.0)
     cs = node.inputs["Color"]
     src, _ = _follow(cs)
@@ -172,11 +168,57 @@ def world_radiance(world, notes):
                      f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is modelled")
     elif src is not None and src.type not in ("RGB",):
         c = _rgb(cs.default_value)
-        notes.append(f"world: colour comes from '{src.name}' ({src.type}); used the socket's unlinked "
-                     "value as a constant colour")
+        notes.append(f"world: colour of '{node.name}' comes from '{src.name}' ({src.type}), which is not "
+                     f"read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) as a "
+                     "constant sky")
     else:
         c = _input_value(node, "Color", notes, "world", np.zeros(3))
-    c = np.maximum(np.asarray(c, float) * float(strength), 0.0)
+    return np.asarray(c, float) * float(strength)
+
+
+def _world_shader(node, notes, depth=0):
+    """(3,) radiance of the world shader ``node`` outputs (Background/Emission, Mix, Add)."""
+    if node is None or depth > 16:
+        return np.zeros(3)
+    t = node.type
+    if t in ("BACKGROUND", "EMISSION"):
+        return _world_color(node, notes)
+    if t in ("MIX_SHADER", "ADD_SHADER"):
+        parts = [_world_shader(_follow(s)[0], notes, depth + 1)
+                 for s in [s for s in node.inputs if s.type == "SHADER"][:2]]
+        while len(parts) < 2:
+            parts.append(np.zeros(3))
+        if t == "ADD_SHADER":
+            return parts[0] + parts[1]
+        fac = float(np.clip(_input_value(node, "Fac", notes, "world", 0.5), 0.0, 1.0))
+        return (1 - fac) * parts[0] + fac * parts[1]
+    notes.append(f"world: shader '{node.name}' ({node.type}) is not a Background; it gives no sky light here")
+    return np.zeros(3)
+
+
+def world_radiance(world, notes):
+    """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse)."""
+    if world is None:
+        return None                  # Cycles renders a scene without a world black, too
+    vis = getattr(world, "cycles_visibility", None)
+    if vis is not None and not vis.diffuse:
+        notes.append("world: not visible to diffuse rays; no sky light")
+        return None
+    nt = _world_tree(world)
+    if nt is None:
+        c = _rgb(world.color)
+        return c if np.any(c > 0) else None
+    out = _output_node(nt, "OUTPUT_WORLD")
+    if out is None:
+        notes.append("world: no World Output node; no sky light")
+        return None
+    node, _ = _follow(out.inputs.get("Surface"))
+    if node is None:
+        return None
+    c = _world_shader(node, notes)
+    if np.any(c < 0):
+        notes.append(f"world: negative radiance ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) taken as 0")
+    c = np.maximum(c, 0.0)
     return c if np.any(c > 0) else None
 
 
@@ -196,8 +238,59 @@ def _image_mean(image, projection="EQUIRECTANGULAR"):
     return px.reshape(-1, 3).mean(axis=0)
 
 
+def _view_layer_of(scene):
+    import bpy
+
+    ctx = getattr(bpy.context, "view_layer", None)
+    if getattr(bpy.context, "scene", None) == scene and ctx is not None:
+        return ctx
+    return scene.view_layers[0]
+
+
+def _render_light_items(dg, notes):
+    """(object, matrix) of every light a render shows: what Cycles sees, not what the viewport
+    shows. The viewport depsgraph gives evaluated lights and instances; lights hidden in the
+    viewport but visible to renders are added from the view layer; lights the viewport shows but
+    renders do not (``hide_render``, a collection disabled in renders) are dropped."""
+    view_layer = dg.view_layer
+    visible = {o.as_pointer(): o for o in render_visible_objects(view_layer, {"LIGHT"})}
+    layer_objects = {o.as_pointer() for o in view_layer.objects}
+    items, seen = [], set()
+    for inst in dg.object_instances:
+        ob = inst.instance_object if inst.is_instance else inst.object
+        if ob is None or ob.type != "LIGHT":
+            continue
+        key = ob.original.as_pointer()
+        if inst.is_instance:
+            if ob.original.hide_render:
+                continue
+            parent = inst.parent
+            if (parent is not None and parent.original.as_pointer() in layer_objects
+                    and not is_render_visible(parent.original, view_layer)):
+                continue                  # its instancer is not rendered
+        else:
+            if key not in visible:
+                continue
+            seen.add(key)
+        items.append((ob, np.array(inst.matrix_world, dtype=np.float64)))
+    for key, ob in visible.items():
+        if key in seen:
+            continue
+        ev = ob.evaluated_get(dg)          # hidden with H: still evaluated; disabled: the original
+        if not getattr(ev, "is_evaluated", False):
+            n = unevaluated_note(ob)
+            if n or ob.data.animation_data is not None:
+                notes.append(f"light '{ob.name}': {n or 'disabled in viewports; light animation not applied'}")
+        items.append((ev, world_matrix(ob, dg)))
+    return items
+
+
 def read_lights(depsgraph_or_scene):
     """(lights, world, notes) for a depsgraph (evaluated, instances included) or a scene.
+
+    Lights are taken by their *render* visibility, as Cycles does: a light hidden in the viewport
+    (H, or disabled in viewports, or in a collection hidden there) still lights the bake; one in a
+    collection that is excluded or disabled in renders, or with ``hide_render``, does not.
 
     ``lights``: list of core light objects; ``world``: (3,) radiance or None; ``notes``: what was
     approximated or left out.
@@ -206,18 +299,11 @@ def read_lights(depsgraph_or_scene):
     if hasattr(depsgraph_or_scene, "object_instances"):
         dg = depsgraph_or_scene
         scene = dg.scene_eval if hasattr(dg, "scene_eval") else dg.scene
-        items = []
-        for inst in dg.object_instances:
-            ob = inst.instance_object if inst.is_instance else inst.object
-            if ob is None or ob.type != "LIGHT":
-                continue
-            if getattr(ob.original, "hide_render", False):
-                continue
-            items.append((ob, np.array(inst.matrix_world, dtype=np.float64)))
+        items = _render_light_items(dg, notes)
     else:
         scene = depsgraph_or_scene
-        items = [(ob, np.array(ob.matrix_world, dtype=np.float64)) for ob in scene.objects
-                 if ob.type == "LIGHT" and not ob.hide_render]
+        items = [(ob, np.array(ob.matrix_world, dtype=np.float64))
+                 for ob in render_visible_objects(_view_layer_of(scene), {"LIGHT"})]
     for ob, M in items:
         light = light_from_object(ob, M, notes)
         if light is not None:
