@@ -161,6 +161,7 @@ def test_enable_disable_enable_leaves_nothing_behind(addon, empty_scene):
     for cls in ("OBJECT_OT_radiosity_bake", "OBJECT_OT_radiosity_clear", "RENDER_PT_radiosity_bake",
                 "VIEW3D_PT_radiosity_bake", "RadiositySettings"):
         assert not hasattr(bpy.types, cls), cls
+    assert not [n for n in dir(bpy.types) if "_PT_radiosity_" in n]    # the sub-panels too
     assert pkg._cli_handle is None
     enable_addon()
     assert ADDON_MODULE in bpy.context.preferences.addons
@@ -341,7 +342,7 @@ def test_material_reading(addon, empty_scene):
     sub(addon, "blender.operators")  # registered
     from io import StringIO  # noqa: F401  (reports go to the operator; check the job directly)
     bake = sub(addon, "blender.bake")
-    job = bake.BakeJob.prepare(bpy.context, [bpy.context.active_object], bake.BakeOptions())
+    job = bake.BakeJob.prepare(bpy.context, [bpy.context.active_object], bake.BakeSettings())
     assert any("viewport colour" in n for n in job.notes)
     assert "Approximated:" in sub(addon, "blender.operators")._notes_line(job.notes)
 
@@ -441,7 +442,7 @@ def test_cancel_leaves_scene_unchanged_and_stages_are_printed(addon, empty_scene
     bake = sub(addon, "blender.bake")
     core_progress = importlib.import_module(ADDON_MODULE + ".hemicube_radiosity.core.progress")
     n_obj, n_mesh = len(bpy.data.objects), len(bpy.data.meshes)
-    job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeOptions(bake.BakeSettings(**BAKE)))
+    job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeSettings(**BAKE))
     calls = []
 
     def cancelled():
@@ -520,9 +521,9 @@ def _modal_run(addon, bpy, objs, cancel_first):
     for name in ("_work", "_progress", "_finish", "_cleanup", "_report_done"):
         setattr(op, name, types.MethodType(getattr(cls, name), op))
     bake.clear_session_cache()  # earlier tests baked this geometry: make the form factors run
-    op._job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeOptions(bake.BakeSettings(**BAKE)))
+    op._job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeSettings(**BAKE))
     op._cancel = threading.Event()
-    op._state = {"stage": "patches", "fraction": 0.0, "message": "", "error": None, "cancelled": False}
+    op._state = ops.worker_state()
     op._timer = object()
     op._thread = threading.Thread(target=op._work)
     if cancel_first:

@@ -23,7 +23,7 @@ def sub(addon, name):
 def run(addon, argv):
     """The registered command's handler (what ``blender -c hemicube_radiosity`` calls)."""
     out, err = io.StringIO(), io.StringIO()
-    rc = sub(addon, "cli").main(argv, in_blender=True, out=out, err=err)
+    rc = sub(addon, "blender.cli").main(argv, in_blender=True, out=out, err=err)
     return rc, out.getvalue(), err.getvalue()
 
 
@@ -175,9 +175,11 @@ def test_gltf_input_and_objects_option(addon, empty_scene, tmp_path):
 
 
 def test_cli_errors_one_line_on_stderr(addon, cornell_blend, tmp_path):
-    rc, out, err = run(addon, ["bake", str(tmp_path / "missing.blend")])
+    rc, out, err = run(addon, ["bake", str(tmp_path / "missing.blend"), "-o", str(tmp_path / "x.glb")])
     assert rc == 1 and err.count("\n") == 1 and err.startswith("hemicube_radiosity: error: input file not found")
-    rc, out, err = run(addon, ["bake", cornell_blend, "--objects", "Nope", *BAKE_ARGS])
+    rc, out, err = run(addon, ["bake", cornell_blend])   # would bake and write nothing
+    assert rc == 2 and err.startswith("hemicube_radiosity: error: nothing would be written") and err.count("\n") == 1
+    rc, out, err = run(addon, ["bake", cornell_blend, "--objects", "Nope", "-o", str(tmp_path / "x.glb"), *BAKE_ARGS])
     assert rc == 1 and err == "hemicube_radiosity: error: no object named 'Nope' in the input\n"
     rc, out, err = run(addon, ["bake", cornell_blend, "-o", str(tmp_path / "x.fbx")])
     assert rc == 2 and "unsupported output" in err and err.count("\n") == 1
@@ -192,10 +194,11 @@ def test_cli_errors_one_line_on_stderr(addon, cornell_blend, tmp_path):
 def test_registered_command_and_python_m(addon, tmp_path):
     blender = sub(addon, "blender")
     assert blender._cli_handle is not None
-    assert blender.cli_command(["bake", str(tmp_path / "none.glb")]) == 1
+    assert blender.cli_command(["bake", str(tmp_path / "none.glb"), "-o", str(tmp_path / "x.glb")]) == 1
     # python -m with the bpy module, in a fresh process: real exit status and stderr line
     env = dict(os.environ, PYTHONPATH=ROOT)
-    p = subprocess.run([sys.executable, "-m", "hemicube_radiosity", "bake", str(tmp_path / "none.obj")],
+    p = subprocess.run([sys.executable, "-m", "hemicube_radiosity", "bake", str(tmp_path / "none.obj"),
+                        "-o", str(tmp_path / "x.glb")],
                        cwd=str(tmp_path), env=env, capture_output=True, text=True, timeout=120)
     assert p.returncode == 1
     assert p.stderr.strip().splitlines()[-1].startswith("hemicube_radiosity: error: input file not found")

@@ -19,7 +19,7 @@ _cli_handle = None
 
 def cli_command(argv):
     """``blender -b -c hemicube_radiosity bake ...``: returns the exit code, never exits."""
-    from ..cli import main
+    from .cli import main
 
     return main(list(argv), in_blender=True)
 

@@ -4,83 +4,28 @@
 ``BakeJob.prepare`` reads the scene (main thread, bpy), ``job.run`` runs the pure-NumPy core (any
 thread, no bpy; progress/cancel hooks), ``job.write`` writes Blender data (main thread). A
 cancelled or failed ``run`` leaves the scene exactly as it was: nothing is written before
-``write``.
+``write``. Settings are the core's :class:`BakeSettings` (``core/settings.py``); user-facing
+problems are :class:`core.errors.RadiosityError`.
 """
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
-from dataclasses import dataclass, field
 
 import bpy
 
 from ..core.cache import FormFactorCache
-from ..core.patches import PatchError
-from ..core.pipeline import BakeSettings, bake
+from ..core.errors import RadiosityError
+from ..core.pipeline import STAGES, BakeSettings, bake
+from ..core.rays import clear_ray_cache, embree_available
 from . import read, write
 
-__all__ = ["BakeOptions", "BakeJob", "BakeError", "StagePrinter", "resolve_objects", "other_meshes",
-           "session_cache", "clear_session_cache",
-           "METHOD_ITEMS", "SOLVER_ITEMS", "OUTPUT_ITEMS"]
+__all__ = ["BakeJob", "StagePrinter", "resolve_objects", "other_meshes", "session_cache",
+           "clear_session_cache", "STAGE_NAMES"]
 
-METHOD_ITEMS = (
-    ("HEMICUBE", "Hemi-cube", "Rasterise a hemi-cube per patch in NumPy (the paper's method)"),
-    ("EMBREE", "Embree", "Cast rays through the hemi-cube pixel centres with Embree (needs embreex)"),
-    ("EMBREE_STOCHASTIC", "Embree (stochastic)", "Cosine-weighted random rays with Embree"),
-)
-DIRECT_ITEMS = (
-    ("EXACT", "Exact", "Closed-form irradiance from each emitter times the visible fraction from "
-     "shadow rays, at patch centres and again at every vertex (sharp shadows)"),
-    ("HEMICUBE", "Hemi-cube", "The paper's way: emitted light goes through the form factors too"),
-)
-SOLVER_ITEMS = (
-    ("GAUSS_SEIDEL", "Gauss-Seidel", "Gathering, in-place sweeps"),
-    ("JACOBI", "Jacobi", "Gathering, whole-vector sweeps"),
-    ("PROGRESSIVE", "Progressive", "Shooting: the patch with most unshot power first"),
-)
-OUTPUT_ITEMS = (
-    ("COPY", "Baked Copy", "New objects with the patch mesh in a 'Radiosity' collection; "
-     "originals are hidden, never modified"),
-    ("IN_PLACE", "In Place", "Write the colour attribute on the original meshes (modifies them)"),
-)
-
-
-class BakeError(RuntimeError):
-    """A user-facing problem; the message names the object where there is one."""
-
-
-@dataclass
-class BakeOptions:
-    settings: BakeSettings = field(default_factory=BakeSettings)
-    output_mode: str = "COPY"           # COPY | IN_PLACE
-    attribute_name: str = "Radiosity"
-    exposure: float = 0.0               # stops: values written are radiance * 2**exposure
-    include_others: bool = True         # other visible meshes occlude/emit, are not written
-    use_lights: bool = True             # lamps and the world light the scene (as in Cycles)
-    cache_dir: str = ""                 # also keep form factors on disk here ("" = memory only)
-
-    @classmethod
-    def from_props(cls, p):
-        """From the add-on's property group or the operator (same property names)."""
-        s = BakeSettings(
-            patch_size="auto" if p.auto_size else (float(p.patch_size) if p.patch_size > 0 else None),
-            resolution=int(p.resolution),
-            method=p.method.lower(),
-            rays_per_patch=int(p.rays_per_patch),
-            solver=p.solver.lower(),
-            tolerance=float(p.tolerance),
-            max_iterations=int(p.max_iterations),
-        )
-        if hasattr(s, "direct"):
-            s.direct = p.direct.lower()
-            s.direct_samples = int(p.direct_samples)
-        # in place, the user's faces are the output: a finer detail size has nowhere to go
-        s.element_size = ("auto" if p.auto_size else float(p.element_size) if p.element_size > 0 else None)
-        if p.output_mode == "IN_PLACE":
-            s.element_size = None
-        s.gather_rays = int(p.gather_rays)
-        return cls(s, p.output_mode, p.attribute_name, float(p.exposure), bool(p.include_others),
-                   bool(p.use_lights), bpy.path.abspath(p.cache_dir) if p.cache_dir else "")
+# every stage a bake reports, in order: the core's, then the Blender layer's
+STAGE_NAMES = ("read",) + tuple(name for name, _ in STAGES) + ("write",)
 
 
 _SESSION_CACHE = {}
@@ -97,7 +42,9 @@ def session_cache(directory=""):
 
 
 def clear_session_cache():
+    """Forget cached form factors, transports and ray scenes (the add-on is disabled)."""
     _SESSION_CACHE.clear()
+    clear_ray_cache()
 
 
 def _source_of(ob):
@@ -121,13 +68,12 @@ def resolve_objects(objects):
 
 
 def other_meshes(context, baked):
-    """Visible meshes that are not baked. A visible baked copy stands for its (hidden) source,
-    so a partial re-bake still sees the rest of the scene's geometry and materials."""
+    """Meshes a render shows that are not baked (what the render sees is what the bake uses,
+    whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
+    partial re-bake still sees the rest of the scene's geometry and materials."""
     names = {o.name for o in baked}
     out = []
-    for o in context.view_layer.objects:
-        if o.type != "MESH" or not o.visible_get():
-            continue
+    for o in read.render_visible_objects(context.view_layer, {"MESH"}):
         src = _source_of(o)
         if src is None or src.type != "MESH" or src.name in names:
             continue
@@ -141,8 +87,7 @@ class StagePrinter:
     message and duration), and for long stages a line with % and ETA at most every ``interval``
     seconds. Call :meth:`finish` after the last stage."""
 
-    NAMES = {"patches": "patches", "form_factors": "form factors", "solve": "solve",
-             "direct": "direct light", "write": "write"}
+    NAMES = {"form_factors": "form factors", "direct": "direct light"}
 
     def __init__(self, stream=None, interval=5.0, prefix="radiosity"):
         self.stream = stream or sys.stdout
@@ -175,9 +120,9 @@ class StagePrinter:
 
 
 class BakeJob:
-    def __init__(self, scene_input, options):
+    def __init__(self, scene_input, settings: BakeSettings):
         self.scene_input = scene_input
-        self.options = options
+        self.settings = settings
         self.cache = None
         self.result = None
         self.written = []
@@ -185,70 +130,56 @@ class BakeJob:
         self.timings = {}
 
     @classmethod
-    def prepare(cls, context, objects, options: BakeOptions, cache=None):
+    def prepare(cls, context, objects, settings: BakeSettings | None = None, cache=None):
         """Read the scene. ``objects``: the selection (non-mesh objects are ignored)."""
-        try:
-            options.settings.validate()
-        except ValueError as ex:
-            raise BakeError(str(ex)) from None
-        if options.settings.method.startswith("embree"):
-            from ..core.embree_ff import embree_available
-
-            if not embree_available():
-                raise BakeError("the Embree method needs the 'embreex' Python package; "
-                                "install it or choose Hemi-cube")
+        settings = settings or BakeSettings()
+        settings.validate()
+        if settings.method.startswith("embree") and not embree_available():
+            raise RadiosityError("the Embree method needs the 'embreex' Python package; "
+                                 "install it or choose Hemi-cube")
         targets = resolve_objects(objects)
         if not targets:
-            raise BakeError("no mesh object selected")
-        others = other_meshes(context, targets) if options.include_others else []
+            raise RadiosityError("no mesh object selected")
+        others = other_meshes(context, targets) if settings.include_others else []
         depsgraph = context.evaluated_depsgraph_get()
         t = time.perf_counter()
-        try:
-            scene_input = read.read_scene(depsgraph, targets, others)
-        except read.ReadError as ex:
-            raise BakeError(str(ex)) from None
+        scene_input = read.read_scene(depsgraph, targets, others)
         light_notes = []
-        if options.use_lights:
+        if settings.use_lights:
             from .lights import read_lights
 
             lights, world, light_notes = read_lights(depsgraph)
             scene_input.lights, scene_input.world = tuple(lights), world
-        job = cls(scene_input, options)
+        job = cls(scene_input, settings)
         job.notes += light_notes
-        job.cache = cache if cache is not None else session_cache(options.cache_dir)
+        job.cache = cache if cache is not None else session_cache(settings.cache_dir)
         job.timings["read"] = time.perf_counter() - t
         return job
 
     def run(self, progress=None, cancelled=None):
         """The core bake; no bpy calls (safe in a worker thread). Raises core Cancelled."""
-        try:
-            self.result = bake(self.scene_input.meshes, self.options.settings, progress=progress,
-                               cancelled=cancelled, lights=self.scene_input.lights,
-                               world=self.scene_input.world, cache=self.cache)
-        except PatchError as ex:
-            raise BakeError(str(ex)) from None
+        self.result = bake(self.scene_input.meshes, self.settings, progress=progress,
+                           cancelled=cancelled, lights=self.scene_input.lights,
+                           world=self.scene_input.world, cache=self.cache)
         self.notes += list(self.result.notes)
         self.timings.update(self.result.timings)
         return self.result
 
     def write(self, context, progress=None):
         t = time.perf_counter()
-        o = self.options
+        s = self.settings
         if progress:
             progress("write", 0.0, "writing")
-        try:
-            if o.output_mode == "IN_PLACE":
-                self.written, notes = write.write_in_place(context, self.scene_input, self.result,
-                                                           o.attribute_name, o.exposure)
-                self.notes += notes
-            else:
-                self.written = write.write_copies(context, self.scene_input, self.result,
-                                                  o.attribute_name, o.exposure)
-        except write.WriteError as ex:
-            raise BakeError(str(ex)) from None
+        if s.output_mode == "in_place":
+            self.written, notes = write.write_in_place(context, self.scene_input, self.result,
+                                                       s.attribute_name, s.exposure)
+            self.notes += notes
+        else:
+            self.written = write.write_copies(context, self.scene_input, self.result,
+                                              s.attribute_name, s.exposure)
         self.timings["write"] = time.perf_counter() - t
         if progress:
-            progress("write", 1.0, f"{len(self.written)} object(s), attribute '{o.attribute_name}'")
+            progress("write", 1.0, f"{len(self.written)} object(s), attribute '{s.attribute_name}'")
             if hasattr(progress, "finish"):
                 progress.finish()
         return self.written
@@ -259,3 +190,41 @@ class BakeJob:
         return (f"Radiosity: {len(r.patches)} patches{detail}, {r.form_factors.nnz} form factors "
                 f"({r.form_factor_source}), {r.solution.iterations} iterations, residual "
                 f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s")
+
+    def report(self, **extra) -> dict:
+        """Everything a pipeline wants to know about the bake, JSON-ready: the settings as used
+        ('auto' sizes in scene units), every stage's time, counts, convergence, energy balance,
+        objects, notes, plus ``extra``."""
+        r = self.result
+        rep = {
+            "settings": dataclasses.asdict(r.settings),
+            "timings": {k: float(v) for k, v in self.timings.items()},
+            "patches": int(len(r.patches)),
+            "elements": int(len(r.elements)),
+            "nonzeros": int(r.form_factors.nnz),
+            "iterations": int(r.solution.iterations),
+            "residual": float(r.solution.residual),
+            "converged": bool(r.solution.converged),
+            "energy": _jsonable(r.solution.energy),
+            "form_factor_source": r.form_factor_source,
+            "objects": [o.name for o in self.scene_input.objects if o.bake],
+            "occluders": [o.name for o in self.scene_input.objects if not o.bake],
+            "written": [o.name for o in self.written],
+            "notes": list(self.notes),
+        }
+        rep.update(extra)
+        return rep
+
+
+def _jsonable(x):
+    import numpy as np
+
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return x.tolist()
+    if isinstance(x, np.generic):
+        return x.item()
+    return x

@@ -18,18 +18,26 @@ import threading
 
 import bpy
 
+from ..core.errors import RadiosityError
 from ..core.progress import Cancelled
-from .bake import BakeError, BakeJob, BakeOptions, StagePrinter
-from .props import SETTING_NAMES, setting_annotations
+from .bake import BakeJob, StagePrinter
+from .props import SETTING_NAMES, setting_annotations, to_settings
 from . import write
 
 __all__ = ["OBJECT_OT_radiosity_bake", "OBJECT_OT_radiosity_clear", "classes"]
 
 # Share of the progress bar per stage (form factors dominate).
-_STAGE_SPAN = {"patches": (0.0, 0.05), "form_factors": (0.05, 0.85), "direct": (0.85, 0.87),
-               "solve": (0.87, 0.97), "write": (0.97, 1.0)}
+_STAGE_SPAN = {"patches": (0.0, 0.05), "form_factors": (0.05, 0.7), "direct": (0.7, 0.78),
+               "solve": (0.78, 0.82), "vertices": (0.82, 0.97), "write": (0.97, 1.0)}
 _PASS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
          "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
+
+
+def worker_state():
+    """What the worker thread tells the modal loop: stage, fraction and message of the progress;
+    a user-facing ``error`` line, or a ``bug`` (any other exception, raised on the main thread)."""
+    return {"stage": "patches", "fraction": 0.0, "message": "", "error": None, "bug": None,
+            "cancelled": False}
 
 
 def _notes_line(notes, limit=6):
@@ -52,7 +60,7 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         return context.mode == "OBJECT"
 
     # -- settings
-    def _options(self, context):
+    def _settings(self, context):
         s = getattr(context.scene, "hemicube_radiosity", None)
         explicit = {n for n in SETTING_NAMES if self.properties.is_property_set(n)}
         for name in SETTING_NAMES:
@@ -61,7 +69,7 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         # a script that passes a size means that size, not the automatic one
         if "auto_size" not in explicit and explicit & {"patch_size", "element_size"}:
             self.auto_size = False
-        return BakeOptions.from_props(self)
+        return to_settings(self)
 
     def _report_done(self, job):
         line = _notes_line(job.notes)
@@ -73,10 +81,10 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
     def execute(self, context):
         printer = StagePrinter()
         try:
-            job = BakeJob.prepare(context, context.selected_objects, self._options(context))
+            job = BakeJob.prepare(context, context.selected_objects, self._settings(context))
             job.run(progress=printer)
             job.write(context, progress=printer)
-        except BakeError as ex:
+        except RadiosityError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         except Cancelled:
@@ -90,13 +98,12 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         if bpy.app.background or context.window is None:
             return self.execute(context)
         try:
-            self._job = BakeJob.prepare(context, context.selected_objects, self._options(context))
-        except BakeError as ex:
+            self._job = BakeJob.prepare(context, context.selected_objects, self._settings(context))
+        except RadiosityError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         self._cancel = threading.Event()
-        self._state = {"stage": "patches", "fraction": 0.0, "message": "", "error": None,
-                       "cancelled": False}
+        self._state = worker_state()
         self._thread = threading.Thread(target=self._work, name="radiosity-bake", daemon=True)
         wm = context.window_manager
         self._timer = wm.event_timer_add(0.1, window=context.window)
@@ -113,10 +120,10 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
             self._job.run(progress=self._progress, cancelled=self._cancel.is_set)
         except Cancelled:
             self._state["cancelled"] = True
-        except BakeError as ex:
+        except RadiosityError as ex:
             self._state["error"] = str(ex)
-        except Exception as ex:  # a bug: tell the user instead of dying silently in a thread
-            self._state["error"] = f"{type(ex).__name__}: {ex}"
+        except Exception as ex:  # a bug: raised again on the main thread, with its traceback
+            self._state["bug"] = ex
 
     def modal(self, context, event):
         if event.type == "ESC" and event.value == "PRESS":
@@ -149,12 +156,14 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         if st["cancelled"]:
             self.report({"WARNING"}, "Radiosity bake cancelled; the scene is unchanged")
             return {"CANCELLED"}
+        if st["bug"] is not None:
+            raise st["bug"]
         if st["error"]:
             self.report({"ERROR"}, st["error"])
             return {"CANCELLED"}
         try:
             self._job.write(context)
-        except BakeError as ex:
+        except RadiosityError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
         self._report_done(self._job)

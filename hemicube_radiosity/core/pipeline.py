@@ -92,6 +92,7 @@ class BakeContext:
         self.stage = name
         t = time.perf_counter()
         stage(self)
+        self.say(1.0)
         self.timings[name] = time.perf_counter() - t
         self.check()
 
