@@ -42,10 +42,9 @@ def methods(baseline=None):
     out = [("numpy", hemicube_form_factors)]
     if baseline:
         out.append(("base", load_baseline(baseline)))
-    try:
-        from hemicube_radiosity.core.embree_ff import embree_available, embree_hemicube_form_factors
-    except ImportError:
-        return out
+    from hemicube_radiosity.core.embree_ff import embree_hemicube_form_factors
+    from hemicube_radiosity.core.rays import embree_available
+
     if embree_available():
         out.append(("embree", embree_hemicube_form_factors))
     return out

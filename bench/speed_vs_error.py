@@ -229,10 +229,10 @@ def settings_of(c):
     for k in ("direct", "direct_samples", "element_size", "gather_rays"):
         if k in c:
             kw[k] = c[k]
-    return pipeline.BakeSettings(patch_size=c["patch_size"], resolution=c.get("resolution", 64),
-                                 method=c["method"], rays_per_patch=c.get("rays", 512),
-                                 solver=c.get("solver", "gauss_seidel"), tolerance=1e-4,
-                                 max_iterations=500, **kw)
+    return pipeline.BakeSettings.from_mapping(dict(
+        kw, patch_size=c["patch_size"], resolution=c.get("resolution", 64), method=c["method"],
+        rays_per_patch=c.get("rays", 512), solver=c.get("solver", "gauss_seidel"), tolerance=1e-4,
+        max_iterations=500))
 
 
 def run_ours(sc, cand, pts, owner, normals, writer, cache=None):

@@ -42,13 +42,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.lights import AreaLight, PointLight, SpotLight, SunLight
-from .read import _follow, is_render_visible, render_visible_objects, unevaluated_note, world_matrix
+from .read import follow, rgb, is_render_visible, render_visible_objects, unevaluated_note, world_matrix
 
 __all__ = ["read_lights", "light_from_object", "world_radiance"]
-
-
-def _rgb(v):
-    return np.array([float(v[0]), float(v[1]), float(v[2])])
 
 
 def _output_node(nt, kind):
@@ -61,13 +57,13 @@ def _input_value(node, name, notes, what, default):
     if s is None:
         return default
     if s.is_linked:
-        src, out = _follow(s)
+        src, out = follow(s)
         if src is not None and src.type in ("RGB", "VALUE"):
             v = out.default_value
-            return _rgb(v) if s.type == "RGBA" else float(v)
+            return rgb(v) if s.type == "RGBA" else float(v)
         notes.append(f"{what}: '{name}' of '{node.name}' is driven by nodes; its unlinked value was used")
     v = s.default_value
-    return _rgb(v) if s.type == "RGBA" else float(v)
+    return rgb(v) if s.type == "RGBA" else float(v)
 
 
 def _light_node_factor(data, notes, what):
@@ -77,7 +73,7 @@ def _light_node_factor(data, notes, what):
     out = _output_node(data.node_tree, "OUTPUT_LIGHT")
     if out is None:
         return np.zeros(3)
-    node, _ = _follow(out.inputs.get("Surface"))
+    node, _ = follow(out.inputs.get("Surface"))
     if node is None:
         return np.zeros(3)
     if node.type != "EMISSION":
@@ -101,9 +97,9 @@ def light_from_object(ob, matrix_world, notes):
     if data.type == "AREA" and data.cycles.is_portal:
         notes.append(f"{what}: a portal, not a light; left out")
         return None
-    color = _rgb(data.color)
+    color = rgb(data.color)
     if getattr(data, "use_temperature", False):
-        color = color * _rgb(data.temperature_color)
+        color = color * rgb(data.temperature_color)
     color = color * _light_node_factor(data, notes, what)
     energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
     if energy < 0 or np.any(color < 0):
@@ -161,13 +157,13 @@ def _world_color(node, notes):
     """Constant Color x Strength of a Background (or Emission) node in a world."""
     strength = _input_value(node, "Strength", notes, "world", 1.0)
     cs = node.inputs["Color"]
-    src, _ = _follow(cs)
+    src, _ = follow(cs)
     if src is not None and src.type == "TEX_ENVIRONMENT" and src.image is not None:
         c = _image_mean(src.image, src.projection)
         notes.append(f"world: environment texture '{src.image.name}' replaced by its average colour "
                      f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is modelled")
     elif src is not None and src.type not in ("RGB",):
-        c = _rgb(cs.default_value)
+        c = rgb(cs.default_value)
         notes.append(f"world: colour of '{node.name}' comes from '{src.name}' ({src.type}), which is not "
                      f"read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) as a "
                      "constant sky")
@@ -184,7 +180,7 @@ def _world_shader(node, notes, depth=0):
     if t in ("BACKGROUND", "EMISSION"):
         return _world_color(node, notes)
     if t in ("MIX_SHADER", "ADD_SHADER"):
-        parts = [_world_shader(_follow(s)[0], notes, depth + 1)
+        parts = [_world_shader(follow(s)[0], notes, depth + 1)
                  for s in [s for s in node.inputs if s.type == "SHADER"][:2]]
         while len(parts) < 2:
             parts.append(np.zeros(3))
@@ -206,13 +202,13 @@ def world_radiance(world, notes):
         return None
     nt = _world_tree(world)
     if nt is None:
-        c = _rgb(world.color)
+        c = rgb(world.color)
         return c if np.any(c > 0) else None
     out = _output_node(nt, "OUTPUT_WORLD")
     if out is None:
         notes.append("world: no World Output node; no sky light")
         return None
-    node, _ = _follow(out.inputs.get("Surface"))
+    node, _ = follow(out.inputs.get("Surface"))
     if node is None:
         return None
     c = _world_shader(node, notes)

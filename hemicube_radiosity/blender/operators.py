@@ -61,10 +61,10 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
 
     # -- settings
     def _settings(self, context):
-        s = getattr(context.scene, "hemicube_radiosity", None)
+        s = context.scene.hemicube_radiosity
         explicit = {n for n in SETTING_NAMES if self.properties.is_property_set(n)}
         for name in SETTING_NAMES:
-            if s is not None and name not in explicit:
+            if name not in explicit:
                 setattr(self, name, getattr(s, name))
         # a script that passes a size means that size, not the automatic one
         if "auto_size" not in explicit and explicit & {"patch_size", "element_size"}:

@@ -18,7 +18,7 @@ borders) is a hard edge: each side gets its own vertex copies and colours do not
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
 seen from the front in world space.
 
-What the render sees (issue 10): ``render_visible_objects(view_layer)`` lists the objects a
+What the render sees: ``render_visible_objects(view_layer)`` lists the objects a
 render shows (not ``hide_render``, in a collection neither excluded nor disabled in renders),
 whatever the viewport shows; an object disabled in viewports is not evaluated by the viewport
 depsgraph, so it is read without modifiers and placed by ``world_matrix`` (noted). Viewport and
@@ -26,8 +26,8 @@ render modifier settings that differ are noted. An emission colour at strength 0
 emission are no light, as in Cycles (a Principled BSDF clamps it; an Emission node's negative light,
 which Cycles does subtract, is not modelled), each with a note naming the material.
 
-Seam for lamps and world (issue 4): :class:`SceneInput` carries ``lights`` and ``world`` that a
-later ``read_lights`` fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
+:class:`SceneInput` carries ``lights`` and ``world`` that ``blender.lights.read_lights``
+fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
 """
 from __future__ import annotations
 
@@ -68,7 +68,7 @@ class ObjectSource:
 @dataclass
 class SceneInput:
     objects: list
-    lights: tuple = ()        # filled by issue 4's read_lights
+    lights: tuple = ()        # core.lights objects, filled by blender.lights.read_lights
     world: object = None
 
     @property
@@ -80,8 +80,8 @@ class SceneInput:
 
 
 # ----------------------------------------------------------------------------- materials
-def _rgb(socket):
-    v = socket.default_value
+def rgb(v):
+    """(3,) float64 of a colour value (a socket's default, a light's colour) or of a float."""
     try:
         return np.array([float(v[0]), float(v[1]), float(v[2])])
     except TypeError:  # a float socket
@@ -103,11 +103,11 @@ def _value(node, notes, *names, default=0.0, color=True):
     if s.is_linked:
         notes.append(f"{node.name} '{s.name}' is linked (texture/nodes); used its unlinked value")
     if color:
-        return _rgb(s)
+        return rgb(s.default_value)
     return float(s.default_value)
 
 
-def _follow(socket):
+def follow(socket):
     """The node and output socket feeding ``socket``, skipping reroutes; (None, None) if unlinked
     (or the link or the node feeding it is muted)."""
     while socket is not None and socket.is_linked:
@@ -174,7 +174,7 @@ def _shader(node, out_socket, mat, notes, depth=0):
         shaders = [s for s in node.inputs if s.type == "SHADER"]
         parts = []
         for s in shaders[:2]:
-            n2, o2 = _follow(s)
+            n2, o2 = follow(s)
             parts.append(_shader(n2, o2, mat, notes, depth + 1) if n2 is not None else (zero, zero))
         while len(parts) < 2:
             parts.append((zero, zero))
@@ -225,7 +225,7 @@ def material_rho_emission(mat):
                 notes.append(f"material '{mat.name}' has no output node; used its viewport colour")
                 rho, em = np.array(mat.diffuse_color[:3], float), zero
             else:
-                node, sock = _follow(out.inputs["Surface"])
+                node, sock = follow(out.inputs["Surface"])
                 if node is None:
                     notes.append(f"material '{mat.name}' has nothing connected to Surface; black")
                     rho, em = zero, zero

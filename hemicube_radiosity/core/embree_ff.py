@@ -29,7 +29,6 @@ from .hemicube import pixel_directions, pixel_weights, receiver_frames, receiver
 from .patches import PatchSet
 from .progress import Ticker
 from .rays import embree_scene, import_embreex
-from .rays import EmbreeUnavailable, embree_available  # compat: pipeline/blender switch to core.rays
 from .sparse import CSR
 
 __all__ = ["embree_hemicube_form_factors", "embree_stochastic_form_factors", "hemicube_directions"]

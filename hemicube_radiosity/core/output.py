@@ -13,6 +13,8 @@ Embree) or interpolated bilinearly (:mod:`.interpolate`).
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from .cache import cache_key, cached
@@ -30,8 +32,6 @@ __all__ = ["meshes_key", "output_elements", "vertex_stage"]
 
 def meshes_key(meshes) -> bytes:
     """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
-    import hashlib
-
     h = hashlib.sha256()
     for m in meshes:
         for a in (m.verts, m.face_offsets, m.face_indices):

@@ -6,6 +6,8 @@ A form-factor matrix F is stored as CSR: row i holds the patches j that receiver
 """
 from __future__ import annotations
 
+import ast
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -124,8 +126,6 @@ class CSR:
 
     @classmethod
     def load(cls, path) -> "CSR":
-        import ast
-
         with np.load(path, allow_pickle=False) as z:
             return cls(z["indptr"], z["indices"], z["data"], tuple(int(s) for s in z["shape"]),
                        ast.literal_eval(str(z["meta"])), z["sky"] if "sky" in z.files else None)

@@ -54,6 +54,17 @@ def exposure(F) -> np.ndarray:
     return np.where(np.diff(F.indptr) == 0, 1.0, e)
 
 
+def _boundary_interior_pairs(polys, boundary, interior):
+    """(K, 2) unique pairs (boundary vertex, interior vertex) that share a patch."""
+    k = polys.shape[1]
+    pv = polys[:, :, None].repeat(k, 2).ravel()
+    qv = polys[:, None, :].repeat(k, 1).ravel()
+    ok = (pv >= 0) & (qv >= 0) & (pv != qv)
+    pv, qv = pv[ok], qv[ok]
+    ok = boundary[pv] & interior[qv]
+    return np.unique(np.stack([pv[ok], qv[ok]], 1), axis=0)
+
+
 def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np.ndarray:
     """(V, 3) radiosity per patch vertex from (N, 3) patch radiosities ``B``.
 
@@ -76,16 +87,7 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np
     if not extrapolate:
         return avg
     boundary = boundary_vertices(polys, V) & (cnt > 0)
-    interior = ~boundary & (cnt > 0)
-    # pairs (boundary vertex, interior vertex) that share a patch
-    k = polys.shape[1]
-    pv = polys[:, :, None].repeat(k, 2)
-    qv = polys[:, None, :].repeat(k, 1)
-    pv, qv = pv.ravel(), qv.ravel()
-    ok = (pv >= 0) & (qv >= 0) & (pv != qv)
-    pv, qv = pv[ok], qv[ok]
-    ok = boundary[pv] & interior[qv]
-    pairs = np.unique(np.stack([pv[ok], qv[ok]], 1), axis=0)
+    pairs = _boundary_interior_pairs(polys, boundary, ~boundary & (cnt > 0))
     if pairs.size == 0:
         return avg
     bv, iv = pairs[:, 0], pairs[:, 1]
