@@ -55,9 +55,10 @@ def _source_of(ob):
     return ob
 
 
-def resolve_objects(objects):
-    """Mesh objects to bake from a selection: baked copies map to their sources, no duplicates."""
-    out, seen = [], set()
+def _mesh_sources(objects, skip=()):
+    """The distinct mesh objects that ``objects`` stand for (a baked copy stands for its
+    source), in order, leaving out the names in ``skip``."""
+    out, seen = [], set(skip)
     for ob in objects:
         ob = _source_of(ob)
         if ob is None or ob.type != "MESH" or ob.name in seen:
@@ -67,19 +68,17 @@ def resolve_objects(objects):
     return out
 
 
+def resolve_objects(objects):
+    """Mesh objects to bake from a selection: baked copies map to their sources, no duplicates."""
+    return _mesh_sources(objects)
+
+
 def other_meshes(context, baked):
     """Meshes a render shows that are not baked (what the render sees is what the bake uses,
     whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
     partial re-bake still sees the rest of the scene's geometry and materials."""
-    names = {o.name for o in baked}
-    out = []
-    for o in read.render_visible_objects(context.view_layer, {"MESH"}):
-        src = _source_of(o)
-        if src is None or src.type != "MESH" or src.name in names:
-            continue
-        names.add(src.name)
-        out.append(src)
-    return out
+    return _mesh_sources(read.render_visible_objects(context.view_layer, {"MESH"}),
+                         {o.name for o in baked})
 
 
 class StagePrinter:
