@@ -359,6 +359,10 @@ def _area(light, x, n, rng, samples, occ, eps):
     return _shade(x, n, E0, pts, w, None, occ, eps)
 
 
+# light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps) -> (P,) W/m^2
+KERNELS = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area}
+
+
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
                      receivers=None, points=None, normals=None, _occ=None, _index=0):
     """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``).
@@ -374,8 +378,7 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
     out = np.zeros(N)
     scale = float(np.linalg.norm(np.ptp(patches.verts, axis=0))) or 1.0
     eps = 1e-5 * scale
-    kind = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area}
-    fn = kind.get(type(light))
+    fn = KERNELS.get(type(light))
     if fn is None:
         raise TypeError(f"unknown light type {type(light).__name__}")
     samples = max(1, int(samples))
@@ -385,7 +388,7 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         rng = np.random.default_rng([seed, _index, s])
         # a light with Blender's 'Shadow' switch off shines through everything
         out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples,
-                      occ if getattr(light, "cast_shadows", True) else None, eps)
+                      occ if light.cast_shadows else None, eps)
     return out
 
 
