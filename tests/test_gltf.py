@@ -1,4 +1,6 @@
-"""Baked glTF: COLOR_0 parsed back from the file (struct + json) equals the baked attribute."""
+"""Baked glTF: _RADIANCE parsed back from the file (struct + json) equals the baked attribute,
+COLOR_0 is it through the view transform, and each view transform gives the 8-bit pixels that
+Blender's own view of that name gives."""
 from __future__ import annotations
 
 import importlib
@@ -7,6 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import corner_data, read_gltf
+from hemicube_radiosity.core.gltf_post import VIEW_TRANSFORMS, display_linear, srgb_encode, tone_map_gltf
 
 
 def sub(addon, name):
@@ -19,16 +22,17 @@ def corners(ob, attr="Radiosity"):
     return np.stack([p[:, 0], p[:, 2], -p[:, 1]], 1), col
 
 
-def gltf_vertices(doc, accessor, object_name):
-    """World positions and COLOR_0 of every vertex of node ``object_name``."""
+def gltf_vertices(doc, accessor, object_name, attribute="_RADIANCE"):
+    """World positions and ``attribute`` (RGB) of every vertex of node ``object_name``."""
     node = next(n for n in doc["nodes"] if n.get("name") == object_name)
     mesh_index = node["mesh"]
     pos, col = [], []
     for prim in doc["meshes"][mesh_index]["primitives"]:
-        acc = doc["accessors"][prim["attributes"]["COLOR_0"]]
-        assert acc["componentType"] == 5126 and not acc.get("normalized", False)   # float, not clamped
+        acc = doc["accessors"][prim["attributes"][attribute]]
+        assert acc["componentType"] == 5126 and not acc.get("normalized", False)   # float
+        assert acc["type"] == "VEC3"
         pos.append(accessor(prim["attributes"]["POSITION"]))
-        col.append(accessor(prim["attributes"]["COLOR_0"])[:, :3])
+        col.append(accessor(prim["attributes"][attribute]))
     pos = np.concatenate(pos)
     # node transform (translation/rotation/scale) to world
     if "matrix" in node:
@@ -71,9 +75,10 @@ def baked_cornell(addon):
 
 
 @pytest.mark.parametrize("ext", [".glb", ".gltf"])
-def test_color0_equals_baked_attribute(addon, baked_cornell, tmp_path, ext):
+def test_radiance_equals_baked_attribute_and_color0_is_it_clamped(addon, baked_cornell, tmp_path, ext):
     path = sub(addon, "blender.gltf").export_gltf(tmp_path / f"cornell{ext}", baked_cornell)
     doc, accessor = read_gltf(path)
+    assert doc["asset"]["extras"]["hemicube_radiosity"]["view_transform"] == "standard"
     assert "KHR_materials_unlit" in doc.get("extensionsUsed", [])
     for mat in doc["materials"]:
         assert "KHR_materials_unlit" in mat.get("extensions", {})
@@ -83,10 +88,68 @@ def test_color0_equals_baked_attribute(addon, baked_cornell, tmp_path, ext):
         gpos, gcol = gltf_vertices(doc, accessor, ob.name)
         bpos, bcol = corners(ob)
         assert_colors_match(gpos, gcol, bpos, bcol)
-    # HDR: the light's radiance 12 is written as is
+        # standard view transform: COLOR_0 is the same vertices' radiance clamped to 0..1
+        cpos, ccol = gltf_vertices(doc, accessor, ob.name, "COLOR_0")
+        np.testing.assert_array_equal(cpos, gpos)
+        np.testing.assert_allclose(ccol, np.clip(gcol, 0.0, 1.0), rtol=1e-6, atol=1e-7)
+    # HDR: the light's radiance 12 is kept in _RADIANCE; COLOR_0 is 1
     light = next(o for o in baked_cornell if o.name.startswith("Light"))
     _, lcol = gltf_vertices(doc, accessor, light.name)
     np.testing.assert_allclose(lcol, 12.0, rtol=1e-6)
+    _, lc0 = gltf_vertices(doc, accessor, light.name, "COLOR_0")
+    np.testing.assert_array_equal(lc0, 1.0)
+    # rewriting again changes nothing (a file already done is left alone)
+    before = open(path, "rb").read()
+    assert tone_map_gltf(path, "agx")["primitives"] == 0
+    assert open(path, "rb").read() == before
+
+
+def test_agx_export_keeps_radiance_and_maps_color0_below_white(addon, baked_cornell, tmp_path):
+    path = sub(addon, "blender.gltf").export_gltf(tmp_path / "agx.glb", baked_cornell, view_transform="agx")
+    doc, accessor = read_gltf(path)
+    assert doc["asset"]["extras"]["hemicube_radiosity"]["view_transform"] == "agx"
+    for ob in baked_cornell:
+        _, rad = gltf_vertices(doc, accessor, ob.name)
+        _, col = gltf_vertices(doc, accessor, ob.name, "COLOR_0")
+        np.testing.assert_allclose(col, display_linear(rad, "agx"), atol=1e-6)
+    light = next(o for o in baked_cornell if o.name.startswith("Light"))
+    _, lc0 = gltf_vertices(doc, accessor, light.name, "COLOR_0")
+    assert 0.8 < lc0.min() and lc0.max() < 1.0          # 12 is bright but not clipped in AgX
+
+
+# view transform -> (Blender's view, max mean |difference| and max |difference| in 8-bit levels)
+BLENDER_VIEWS = {"standard": ("Standard", 0.01, 1), "khronos_neutral": ("Khronos PBR Neutral", 0.6, 8),
+                 "agx": ("AgX", 4.5, 50)}
+
+
+@pytest.mark.parametrize("view_transform", VIEW_TRANSFORMS)
+def test_view_transform_gives_blenders_pixels(empty_scene, tmp_path, view_transform):
+    """Blender's colour management (OCIO) turns HDR linear pixels into 8-bit sRGB with the view
+    transform; a viewer shows COLOR_0 = display_linear(x) as srgb_encode(display_linear(x)).
+    Standard is exact (Blender's Standard view is clip + the sRGB OETF); Khronos PBR Neutral is a
+    LUT of the same formula in Blender; our AgX is a fit of Blender's AgX LUT."""
+    bpy = empty_scene
+    scene = bpy.context.scene
+    rng = np.random.default_rng(1)
+    x = np.concatenate([np.exp2(rng.uniform(-8, 4, (3000, 1))) * rng.uniform(0, 1, (3000, 3)),
+                        np.exp2(np.linspace(-10, 4, 400))[:, None] * np.ones(3)])
+    im = bpy.data.images.new("hdr", 100, len(x) // 100, float_buffer=True, alpha=True)
+    im.pixels.foreach_set(np.concatenate([x, np.ones((len(x), 1))], 1).astype(np.float32).ravel())
+    blender_view, mean_tol, max_tol = BLENDER_VIEWS[view_transform]
+    scene.view_settings.view_transform = blender_view
+    scene.view_settings.look = "None"
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_depth = "8"
+    im.save_render(str(tmp_path / "view.png"), scene=scene)
+    png = bpy.data.images.load(str(tmp_path / "view.png"))
+    px = np.empty(len(x) * 4, np.float32)
+    png.pixels.foreach_get(px)
+    got = np.round(px.reshape(-1, 4)[:, :3] * 255)
+    want = np.round(srgb_encode(display_linear(x, view_transform)) * 255)
+    d = np.abs(got - want)
+    assert d.mean() <= mean_tol and d.max() <= max_tol, (d.mean(), d.max())
 
 
 def test_in_place_bake_exports_its_attribute_not_white(addon, empty_scene, tmp_path):

@@ -2,9 +2,14 @@
 """Baked glTF export through Blender's own exporter, with the options that keep the bake.
 
 * COLOR_0 comes from the active colour attribute (the bake sets its attribute active), as float
-  VEC3, HDR values as written (not clamped). ``export_vertex_color='ACTIVE'`` is used because the
-  default 'MATERIAL' mode writes COLOR_0 only when the material reads the attribute and
-  ``export_all_vertex_colors`` (on by default) would add a white COLOR_0 for materials that don't.
+  VEC3. ``export_vertex_color='ACTIVE'`` is used because the default 'MATERIAL' mode writes
+  COLOR_0 only when the material reads the attribute and ``export_all_vertex_colors`` (on by
+  default) would add a white COLOR_0 for materials that don't.
+* Blender writes the attribute's HDR values (a lamp's 12.0), which glTF forbids in COLOR_0. The
+  written file is then rewritten by ``core/gltf_post.py`` ``tone_map_gltf``: COLOR_0 becomes the
+  values through the view transform (linear, 0..1; 'standard' = clamp, so a viewer shows what
+  Blender's Standard view shows) and the HDR values stay as the custom attribute ``_RADIANCE``.
+  The colour attribute in Blender is not changed. See docs/gltf.md.
 * The baked-copy material (colour attribute wired into the output) exports as
   ``KHR_materials_unlit`` with a white base colour, so viewers show the baked lighting as is.
 * Objects baked in place keep their own materials, which do not read the attribute: the exporter
@@ -18,6 +23,8 @@ from __future__ import annotations
 import os
 
 import bpy
+
+from ..core.gltf_post import tone_map_gltf
 
 __all__ = ["export_gltf", "EXPORT_OPTIONS"]
 
@@ -61,8 +68,10 @@ def _stand_in(ob):
     return tmp
 
 
-def export_gltf(filepath, objects, **overrides):
-    """Write ``objects`` (and nothing else) to ``filepath`` (.glb binary, .gltf separate)."""
+def export_gltf(filepath, objects, view_transform="standard", **overrides):
+    """Write ``objects`` (and nothing else) to ``filepath`` (.glb binary, .gltf separate), with
+    COLOR_0 through ``view_transform`` (a choice of the ``view_transform`` setting) and the HDR
+    bake as ``_RADIANCE``; ``overrides``: options of Blender's glTF exporter."""
     filepath = os.path.abspath(os.fspath(filepath))
     fmt = "GLB" if filepath.lower().endswith(".glb") else "GLTF_SEPARATE"
     os.makedirs(os.path.dirname(filepath), exist_ok=True)
@@ -98,4 +107,5 @@ def export_gltf(filepath, objects, **overrides):
         for o in view_layer.objects:
             o.select_set(o in before)
         view_layer.objects.active = active
+    tone_map_gltf(filepath, view_transform)
     return filepath

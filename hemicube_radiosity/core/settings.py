@@ -161,6 +161,15 @@ class BakeSettings:
         namespace, Blender's property group or operator. Missing fields keep their defaults;
         enum values may be upper case (Blender's); a size of 0 means None; the panel's
         ``auto_size`` switch, where present, turns every size to 'auto' (on) or to its length
+    view_transform: str = setting(
+        "standard", "glTF View Transform", "How exported glTF maps the HDR bake into COLOR_0 "
+        "(0..1, linear); the HDR values stay in _RADIANCE", "output", choices=(
+            ("standard", "Standard", "Clamp to 0..1: a viewer shows what Blender's Standard view "
+             "shows"),
+            ("khronos_neutral", "Khronos PBR Neutral", "The Khronos PBR Neutral tone mapper, as "
+             "Blender's view of that name"),
+            ("agx", "AgX", "An AgX-like curve (the fit three.js and Filament use); close to "
+             "Blender's AgX view, not identical")))
         (off)."""
         get = mapping.get if isinstance(mapping, dict) else (lambda k, d=None: getattr(mapping, k, d))
         auto = get(AUTO_SWITCH, None)
