@@ -37,6 +37,7 @@ import numpy as np
 
 from ..core.patches import MeshInput
 from ..core.errors import RadiosityError
+from . import shading
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
            "read_scene", "weld_corners", "RHO_MAX", "render_visible_objects", "is_render_visible",
@@ -63,6 +64,9 @@ class ObjectSource:
     bake: bool                # False: occluder/emitter only, nothing is written for it
     eval_counts: tuple        # (vertices, loops, polygons) of the evaluated mesh
     notes: list = field(default_factory=list)   # what was approximated, one short line each
+    corner_rho: np.ndarray = None       # (L, 3) reflectance at every mesh.face_indices corner
+    corner_emission: np.ndarray = None  # (L, 3) emitted radiance there (mesh.face_rho/_emission
+                                        # are their per-face means)
 
 
 @dataclass
@@ -246,6 +250,69 @@ def material_rho_emission(mat):
     return rho, em, notes
 
 
+# notes of material_rho_emission that a Cycles evaluation makes moot (it reads what they name)
+_FIXED_BY_CYCLES = ("is linked (texture/nodes)", "by the viewport colour", "ignored (diffuse only)")
+
+
+def _corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
+    """(corner_rho (L,3), corner_emission (L,3), notes) in the order of ``corner_loop``.
+
+    Plain materials give their :func:`material_rho_emission` value at every corner; a material
+    that :func:`.shading.classify` sends to Cycles gives Cycles' value: one per material
+    ('constant'), or the object's baked corners ('corners')."""
+    L = corner_loop.size
+    corner_rho, corner_em = np.empty((L, 3)), np.empty((L, 3))
+    baked = shaded.corners.get(name)
+    notes = []
+    if baked is not None and baked[0].shape[0] != L:
+        notes.append("Cycles' corner colours did not match the mesh read; used per-material values")
+        baked = None
+    for k, m in enumerate(mats):
+        sel = corner_mat == k
+        rho, em, n = material_rho_emission(m)
+        kind, why = shaded.kinds.get(m.original.name_full if m is not None else None, ("plain", []))
+        label = f"material '{m.name}'" if m is not None else ""
+        if kind != "plain" and shaded.failed:
+            n.append(f"{label}: {shaded.failed}; its unlinked values used")
+        elif kind == "constant" and m.original.name_full in shaded.materials:
+            n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
+            c_rho, c_em = shaded.materials[m.original.name_full]
+            if np.any(np.abs(c_rho - rho) > 0.005 * np.maximum(rho, 1e-3)):
+                n.append(f"{label}: diffuse reflectance {_fmt(c_rho)} as Cycles evaluates it (its "
+                         f"colour {_fmt(rho)}; the specular layer, metallic or transmission reflect "
+                         "the rest, which is not baked)")
+            rho, em = _clean(c_rho, c_em, label, n)
+        elif kind == "corners" and baked is not None:
+            n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
+            n += [f"{label}: {w}, evaluated by Cycles at the corners" for w in why]
+            r, e = _clean(baked[0][corner_loop[sel]], baked[1][corner_loop[sel]], label, n)
+            corner_rho[sel], corner_em[sel] = r, e
+            if k in used:
+                notes += [s for s in n if s not in notes]
+            continue
+        elif kind == "corners":
+            n.append(f"{label}: not evaluated by Cycles; its unlinked values used")
+        corner_rho[sel], corner_em[sel] = rho, em
+        if k in used:
+            notes += [s for s in n if s not in notes]
+    return corner_rho, corner_em, notes
+
+
+def _fmt(c):
+    return "(" + ", ".join(f"{x:.3g}" for x in c) + ")"
+
+
+def _clean(rho, em, label, notes):
+    """Cycles' values made what the solve needs: emission >= 0, reflectance in [0, RHO_MAX]."""
+    if np.any(em < 0):
+        notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
+                     "subtracts light there, this bake takes it as no light")
+        em = np.maximum(em, 0.0)
+    if np.any(rho > RHO_MAX + 1e-6) or np.any(rho < 0):
+        notes.append(f"{label}: reflectivity up to {float(np.max(rho)):.3g} clipped to [0, {RHO_MAX}]")
+    return np.clip(rho, 0.0, RHO_MAX), em
+
+
 # ----------------------------------------------------------------------------- welding
 def _union(n, i, j):
     """Connected-component labels of n nodes joined by pairs (i, j): hook + pointer jumping."""
@@ -425,8 +492,10 @@ def _newell(verts, corner_vertex, poly_start, poly_total):
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
-def read_object(obj, depsgraph, bake=True) -> ObjectSource:
-    """One mesh object, evaluated (modifiers applied), in world space."""
+def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
+    """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
+    :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
+    object alone)."""
     if obj.type != "MESH":
         raise ReadError(f"'{obj.name}' is not a mesh object")
     ob_eval = obj.evaluated_get(depsgraph)
@@ -454,25 +523,27 @@ def read_object(obj, depsgraph, bake=True) -> ObjectSource:
     pos = np.arange(lv.size) - ps[loop_face]
     corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
     offsets = np.concatenate([[0], np.cumsum(pt)])
-    used = set(np.unique(mi).tolist())
-    table, notes = [], _render_notes(obj, ob_eval)
-    for k, m in enumerate(mats):
-        rho, em, n = material_rho_emission(m)
-        table.append((rho, em))
-        if k in used:
-            notes += [s for s in n if s not in notes]
-    rho = np.array([table[k][0] for k in mi]).reshape(F, 3)
-    em = np.array([table[k][1] for k in mi]).reshape(F, 3)
+    if shaded is None:
+        shaded = shading.shade([obj], depsgraph)
+    notes = _render_notes(obj, ob_eval)
+    corner_rho, corner_em, mat_notes = _corner_materials(obj.name, mats, mi[loop_face], corner_loop,
+                                                          shaded, set(np.unique(mi).tolist()))
+    notes += [s for s in mat_notes if s not in notes]
+    rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
+    em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name)
-    return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes)
+    return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
+                        corner_rho, corner_em)
 
 
 def read_scene(depsgraph, objects, others=()) -> SceneInput:
-    """``objects`` are baked; ``others`` take part as occluders/emitters only."""
-    out = [read_object(o, depsgraph, True) for o in objects]
+    """``objects`` are baked; ``others`` take part as occluders/emitters only. The materials that
+    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`)."""
+    shaded = shading.shade(list(objects) + list(others), depsgraph)
+    out = [read_object(o, depsgraph, True, shaded) for o in objects]
     for o in others:
         try:
-            out.append(read_object(o, depsgraph, False))
+            out.append(read_object(o, depsgraph, False, shaded))
         except ReadError:
             continue  # an occluder without faces simply does not occlude
     return SceneInput(out)
