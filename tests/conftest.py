@@ -10,12 +10,23 @@ tests never see (or write) the developer's own preferences and extensions.
   source folder), enabled with ``addon_utils.enable(..., handle_error=<raise>)``. Returns the
   add-on's package module (``bl_ext.<repo>.hemicube_radiosity.hemicube_radiosity``).
 * ``empty_scene``: ``bpy.ops.wm.read_homefile(use_empty=True)`` before the test; returns bpy.
+* ``extension_wheels``: the embreex wheels ``blender_manifest.toml`` lists, downloaded into
+  ``wheels/`` by ``make wheels`` when missing (session); returns their paths.
+* ``node_tree(material_or_world)``: its node tree on every Blender (4.x makes new materials and
+  worlds without one).
+
+Blender 4.2's bpy module crashes at interpreter exit once the glTF exporter has run (the same
+workaround as ``python -m hemicube_radiosity``): :func:`pytest_unconfigure` leaves with pytest's
+own exit status there, after everything is printed.
 """
 from __future__ import annotations
 
 import importlib
 import os
+import subprocess
+import sys
 import tempfile
+import tomllib
 
 import numpy as np
 import pytest
@@ -74,6 +85,48 @@ def addon(bpy_module):
 def empty_scene(bpy_module):
     bpy_module.ops.wm.read_homefile(use_empty=True)
     return bpy_module
+
+
+def node_tree(idblock):
+    """The node tree of a material or world: Blender 4.x makes new ones with ``use_nodes`` off and
+    no tree; 5.0 always has one (and deprecates ``use_nodes``, so it is not touched there)."""
+    if idblock.node_tree is None:
+        idblock.use_nodes = True
+    return idblock.node_tree
+
+
+def manifest_wheels():
+    with open(os.path.join(ROOT, "blender_manifest.toml"), "rb") as f:
+        return [os.path.join(ROOT, w) for w in tomllib.load(f).get("wheels", [])]
+
+
+@pytest.fixture(scope="session")
+def extension_wheels():
+    wheels = manifest_wheels()
+    if not all(os.path.isfile(w) for w in wheels):
+        p = subprocess.run(["make", "-s", "wheels", f"WHEEL_PY={sys.executable}"], cwd=ROOT,
+                           capture_output=True, text=True, timeout=600)
+        assert p.returncode == 0, "make wheels failed:\n" + p.stdout + p.stderr
+    return wheels
+
+
+_exit_status = None
+
+
+def pytest_sessionfinish(session, exitstatus):
+    global _exit_status
+    _exit_status = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    bpy = sys.modules.get("bpy")
+    if _exit_status is None or bpy is None or "io_scene_gltf2" not in sys.modules:
+        return
+    if bpy.app.version < (4, 5, 0):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(_exit_status)
 
 
 def read_gltf(path):

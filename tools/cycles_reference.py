@@ -60,6 +60,7 @@ import hashlib
 import json
 import os
 import time
+import sys
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -329,6 +330,19 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
 
 # ----------------------------------------------------------------------------- scene helpers
 # Small bpy builders shared by the Cycles comparison tests and tools/lighting_pictures.py.
+def not_in_this_blender(what):
+    """A case needs a property this Blender version lacks (e.g. a light's ``use_temperature``
+    before 4.5): a skip under pytest, an error elsewhere."""
+    import bpy
+
+    msg = f"Blender {bpy.app.version_string}: {what}"
+    if "pytest" in sys.modules:
+        import pytest
+
+        pytest.skip(msg)
+    raise AttributeError(msg)
+
+
 def new_empty_scene():
     """An empty scene without a world; returns the scene. (``read_homefile``, not
     ``read_factory_settings``: the latter resets the preferences and so disables the add-on and
@@ -341,9 +355,18 @@ def new_empty_scene():
     return scene
 
 
+def node_tree(idblock):
+    """The node tree of a material or world, switching nodes on where Blender made it without one
+    (4.x: ``materials.new`` / ``worlds.new`` give ``use_nodes`` off and no tree; 5.0 always has
+    one and deprecates ``use_nodes``, so it is left alone there)."""
+    if idblock.node_tree is None:
+        idblock.use_nodes = True
+    return idblock.node_tree
+
+
 def bare_node_tree(material):
     """(node tree, output node) of ``material`` with every node but the material output removed."""
-    nt = material.node_tree
+    nt = node_tree(material)
     for n in list(nt.nodes):
         if n.type != "OUTPUT_MATERIAL":
             nt.nodes.remove(n)
@@ -402,6 +425,9 @@ def add_light(kind, location, rotation=(0.0, 0.0, 0.0), name=None, scene=None, *
 
     scene = scene or bpy.context.scene
     data = bpy.data.lights.new(name or kind.lower(), kind)
+    missing = sorted(k for k in props if not hasattr(data, k))
+    if missing:
+        not_in_this_blender(f"a {kind.lower()} light has no {', '.join(missing)}")
     for k, v in props.items():
         setattr(data, k, v)
     ob = bpy.data.objects.new(name or kind.lower(), data)
@@ -417,7 +443,7 @@ def set_world(color=(1.0, 1.0, 1.0), strength=1.0, scene=None):
 
     scene = scene or bpy.context.scene
     w = bpy.data.worlds.new("world")
-    bg = next(n for n in w.node_tree.nodes if n.type == "BACKGROUND")
+    bg = next(n for n in node_tree(w).nodes if n.type == "BACKGROUND")
     bg.inputs["Color"].default_value = (*color, 1.0)
     bg.inputs["Strength"].default_value = float(strength)
     scene.world = w
