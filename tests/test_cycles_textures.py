@@ -295,6 +295,30 @@ def test_plain_materials_need_no_cycles():
     ob = floor(2, d)
     s = shading.shade([ob], bpy.context.evaluated_depsgraph_get())
     assert not s.corners and not s.materials and s.seconds == 0.0
+    # a constant from an RGB node: one Cycles value for the material, not per corner
+    m, nt, g = material("G", "ShaderNodeBsdfGlossy")
+    rgb = nt.nodes.new("ShaderNodeRGB")
+    nt.links.new(rgb.outputs[0], g.inputs["Color"])
+    kind, notes = shading.classify(m)
+    assert kind == "constant" and any("Glossy BSDF" in n and "diffuse pass" in n for n in notes), notes
+
+
+def test_cycles_failure_falls_back_with_a_note(monkeypatch):
+    """Without a Cycles bake (an add-on build without Cycles, a refused bake) the reader keeps
+    its own values and says so, naming the material."""
+    cr.new_empty_scene()
+    m, nt, p = material("Floor", **{"Base Color": (0.6, 0.5, 0.4, 1.0)})
+    nt.links.new(nt.nodes.new("ShaderNodeTexChecker").outputs[0], p.inputs["Base Color"])
+    ob = floor(2, m)
+
+    def refuse(*a, **k):
+        raise RuntimeError("Cycles is not available\nmore")
+
+    monkeypatch.setattr(shading, "evaluate", refuse)
+    src = reader.read_object(ob, bpy.context.evaluated_depsgraph_get())
+    np.testing.assert_allclose(src.corner_rho, np.tile([0.6, 0.5, 0.4], (16, 1)))
+    assert any("'Floor'" in n and "Cycles could not evaluate" in n and "not available" in n
+               for n in src.notes), src.notes
 
 
 if __name__ == "__main__":

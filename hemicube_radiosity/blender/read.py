@@ -26,6 +26,14 @@ render modifier settings that differ are noted. An emission colour at strength 0
 emission are no light, as in Cycles (a Principled BSDF clamps it; an Emission node's negative light,
 which Cycles does subtract, is not modelled), each with a note naming the material.
 
+Materials: plain colour values are read from the nodes (:func:`material_rho_emission`). Where
+that is not what Cycles renders (colours from textures, colour attributes or other nodes; a
+Principled BSDF, whose specular layer, metallic and transmission take light from its diffuse
+lobe), ``shading.shade`` has Cycles bake its diffuse albedo and emission, per corner or per
+material, on temporary copies. :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission``
+for every corner of ``mesh.face_indices``; the mesh's ``face_rho`` / ``face_emission`` are their
+per-face means.
+
 :class:`SceneInput` carries ``lights`` and ``world`` that ``blender.lights.read_lights``
 fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
 """
@@ -277,6 +285,7 @@ def _corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
         elif kind == "constant" and m.original.name_full in shaded.materials:
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
             c_rho, c_em = shaded.materials[m.original.name_full]
+            n += [f"{label}: {w}" for w in why]
             if np.any(np.abs(c_rho - rho) > 0.005 * np.maximum(rho, 1e-3)):
                 n.append(f"{label}: diffuse reflectance {_fmt(c_rho)} as Cycles evaluates it (its "
                          f"colour {_fmt(rho)}; the specular layer, metallic or transmission reflect "

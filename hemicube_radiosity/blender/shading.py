@@ -98,6 +98,9 @@ def describe(node, socket=None):
     return f"nodes ({node.bl_label})"
 
 
+_RANK = {"plain": 0, "constant": 1, "corners": 2}
+
+
 def classify(mat):
     """('plain' | 'constant' | 'corners', notes) of a material: whether and how Cycles must
     evaluate it (module docstring). ``notes`` say what is read from Cycles and why."""
@@ -106,7 +109,12 @@ def classify(mat):
     out = _output_node(mat)
     if out is None:
         return "plain", []
-    kind, notes, seen = "plain", [], set()
+    kind, notes, seen, unknown = "plain", [], set(), []
+
+    def need(k):
+        nonlocal kind
+        kind = k if _RANK[k] > _RANK[kind] else kind
+
     stack = [out.inputs["Surface"]]
     while stack:
         node, sock = _source(stack.pop())
@@ -115,15 +123,15 @@ def classify(mat):
         seen.add(node.name)
         if sock is not None and sock.type != "SHADER":
             if node.type not in ("RGB", "VALUE"):       # a colour wired into the output: emission
-                kind = "corners"
+                need("corners")
                 notes.append(f"Surface colour from {describe(node)}")
             continue
         if node.type == "GROUP":
-            kind = "corners"
+            need("corners")
             notes.append(f"shader from {describe(node)}")
             continue
-        if node.type == "BSDF_PRINCIPLED" and kind == "plain":
-            kind = "constant"
+        if node.type == "BSDF_PRINCIPLED":
+            need("constant")
         for s in node.inputs:
             if s.type == "SHADER":
                 stack.append(s)
@@ -133,11 +141,16 @@ def classify(mat):
             src, _ = _source(s)
             if src is None:
                 continue
-            kind = "corners"
+            if src.type in ("RGB", "VALUE"):            # a constant, but not the socket's own value
+                need("constant")
+                continue
+            need("corners")
             notes.append(f"{node.name} '{s.name}' from {describe(src)}")
-        if node.type not in _KNOWN and kind != "plain":
-            notes.append(f"'{node.name}' ({node.bl_label}) reflects no diffuse light in Cycles' "
-                         "diffuse pass; its light is not baked")
+        if node.type not in _KNOWN:
+            unknown.append(node)
+    if kind != "plain":
+        notes += [f"'{n.name}' is not a Diffuse or Principled BSDF: only what Cycles' diffuse pass "
+                  "takes from it is baked" for n in unknown]
     return kind, notes
 
 
