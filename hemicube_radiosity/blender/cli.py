@@ -9,20 +9,35 @@ bake INPUT [-o OUTPUT ...] [--objects NAME ...] [bake settings]
     extension; ``--report`` and ``--patches`` are the .json and .npz outputs by another name.
 demo [--output-dir DIR]
     Builds the Cornell box, bakes it, writes DIR/cornell.glb, DIR/cornell.png and a report.
+batch FILE ... --out-dir DIR [-j N] [--format glb] [--force] [bake settings]
+    Bakes every FILE in its own worker process (``bake FILE -o DIR/NAME.glb --report
+    DIR/NAME.json``), N at a time; one line per file, a table at the end, exit status 1 if any
+    failed. A file whose content and settings are unchanged since its last successful bake is
+    skipped (the key is kept in its report) unless --force. See ``docs/pipeline.md``.
 
 The bake settings' options are generated from the core schema (``core/settings.py``): every
 setting has one, named ``--field-name`` unless the schema says otherwise.
-Errors: exit status 1 (2 for bad arguments) and one line ``hemicube_radiosity: error: ...``.
+Errors: exit status 1 (2 for bad arguments) and one line ``hemicube_radiosity: error: ...``;
+a bad argument prints the command's usage line before its ``... error: ...`` line.
+``-q``: nothing on stdout (not even Blender's own lines), errors only on stderr.
 """
 from __future__ import annotations
 
 import argparse
+import concurrent.futures
+import contextlib
+import dataclasses
+import hashlib
+import json
 import os
+import subprocess
 import sys
+import threading
 import time
 
 import bpy
 
+from .. import __version__
 from ..core.errors import RadiosityError
 from ..core.settings import BakeSettings, schema
 from .bake import BakeJob, StagePrinter
@@ -36,16 +51,19 @@ INPUT_EXT = (".blend", ".obj", ".gltf", ".glb")
 
 
 class CLIError(RadiosityError):
-    """A user error on the command line: printed as one line, exit status ``status``."""
+    """A user error on the command line: printed as one line, exit status ``status``; ``usage``
+    (argparse's errors) is printed on the line before."""
 
-    def __init__(self, message, status=1):
+    def __init__(self, message, status=1, usage=None, prog=PROG):
         super().__init__(message)
         self.status = status
+        self.usage = usage
+        self.prog = prog
 
 
 class _Parser(argparse.ArgumentParser):
-    def error(self, message):  # never sys.exit from inside Blender
-        raise CLIError(f"{self.prog}: {message}", status=2)
+    def error(self, message):  # never sys.exit from inside Blender: main() prints it
+        raise CLIError(message, status=2, usage=self.format_usage().strip(), prog=self.prog)
 
 
 def _size(text):
@@ -83,7 +101,8 @@ def add_setting_options(p):
 def build_parser():
     p = _Parser(prog=PROG, description="Hemi-cube radiosity baking with Blender (bpy).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    b = sub.add_parser("bake", help="bake a scene file", description="Bake a .blend/.obj/.gltf/.glb.")
+    b = sub.add_parser("bake", help="bake a scene file", description="Bake a .blend/.obj/.gltf/.glb.",
+                       usage="%(prog)s INPUT [-o OUTPUT ...] [options]  (--help lists them)")
     b.add_argument("input", metavar="INPUT", help="scene file: " + ", ".join(INPUT_EXT))
     b.add_argument("-o", "--output", action="append", default=[], metavar="OUTPUT",
                    help="file to write, by extension: " + "; ".join(
@@ -92,7 +111,8 @@ def build_parser():
                    help="objects to bake (default: every visible mesh); other visible meshes "
                         "still occlude and emit unless --no-others")
     m = sub.add_parser("demo", help="bake the Cornell box demo and render a preview",
-                       description="Build the Cornell box, bake it, write cornell.glb and cornell.png.")
+                       description="Build the Cornell box, bake it, write cornell.glb and cornell.png.",
+                       usage="%(prog)s [--output-dir DIR] [options]  (--help lists them)")
     m.add_argument("--output-dir", default=os.path.join("demo", "out"), metavar="DIR")
     m.add_argument("--render-size", type=int, default=512, metavar="PX", help="PNG size (default %(default)s)")
     m.add_argument("--samples", type=int, default=16, help="Cycles samples for the PNG (default %(default)s)")
@@ -100,9 +120,43 @@ def build_parser():
     for q in (b, m):
         q.add_argument("--report", metavar="REPORT.json", help="write the bake report (a .json output)")
         q.add_argument("--patches", metavar="PATCHES.npz", help="write per-patch arrays (a .npz output)")
-        q.add_argument("-q", "--quiet", action="store_true", help="no progress lines on stdout")
+    t = sub.add_parser("batch", help="bake many files, one worker process each",
+                       description="Bake every FILE in its own process (python -m hemicube_radiosity "
+                                   "bake, or Blender itself inside Blender), N at a time, into "
+                                   "DIR/NAME.FORMAT with DIR/NAME.json as its report. Unchanged files "
+                                   "(same content, same settings) are skipped unless --force.",
+                       usage="%(prog)s FILE [FILE ...] --out-dir DIR [-j N] [options]  (--help lists them)")
+    t.add_argument("files", nargs="+", metavar="FILE", help="scene files: " + ", ".join(INPUT_EXT))
+    t.add_argument("--out-dir", required=True, metavar="DIR", help="where NAME.FORMAT and NAME.json go")
+    t.add_argument("-j", "--jobs", type=_positive_int, default=_cpu_count(), metavar="N",
+                   help="files baked at once (default: the number of cores, %(default)s here)")
+    t.add_argument("--format", choices=BATCH_FORMATS, default="glb", type=str.lower,
+                   help="output format (default %(default)s)")
+    t.add_argument("--force", action="store_true", help="bake even the files whose last bake is current")
+    t.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                   help="stop a file's worker after this long and count the file as failed")
+    for q in (b, m, t):
+        q.add_argument("-q", "--quiet", action="store_true",
+                       help="print nothing on stdout (no stage lines, notes or Blender output); errors only")
         add_setting_options(q)
     return p
+
+
+def _positive_int(text):
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def _cpu_count():
+    try:
+        return len(os.sched_getaffinity(0)) or 1
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
 
 
 # ----------------------------------------------------------------------------- helpers
@@ -233,6 +287,250 @@ def cmd_demo(args, out):
     return job
 
 
+# ----------------------------------------------------------------------------- batch
+BATCH_FORMATS = ("glb", "gltf", "blend")
+
+
+def setting_argv(args):
+    """The bake-setting options of ``args`` as command-line words: only those that differ from
+    the schema's defaults, so a worker parses exactly the settings the batch was given."""
+    words = []
+    for s in schema():
+        v = getattr(args, s.name)
+        if v == s.default:
+            continue
+        flag = s.meta.get("cli", "--" + s.name.replace("_", "-"))
+        words += [flag] if s.type is bool else [flag, str(v)]
+    return words
+
+
+def worker_command(bake_argv):
+    """(argv, env) of a fresh process that runs ``bake`` with ``bake_argv``.
+
+    With the bpy module (``python -m hemicube_radiosity``): this Python, ``-m
+    hemicube_radiosity``, the folder holding this package first on PYTHONPATH (so the worker runs
+    this very code from any directory). Inside Blender (``bpy.app.binary_path`` is set;
+    ``sys.executable`` is then Blender's bundled Python, which cannot import bpy): Blender
+    itself, ``-b ... -c hemicube_radiosity bake``, with this add-on enabled by ``--addons``.
+    Extensions in the default user repository are found under ``--factory-startup`` (no user
+    add-ons or preferences in the worker); one in another repository needs the user preferences
+    that define that repository, so those are kept."""
+    env = dict(os.environ)
+    blender = bpy.app.binary_path
+    if blender:
+        addon = __package__.rsplit(".", 2)[0]          # bl_ext.<repo>.hemicube_radiosity
+        repo = addon.split(".")[1] if addon.startswith("bl_ext.") else None
+        factory = ["--factory-startup"] if repo == "user_default" else []
+        return [blender, "--background", *factory, "--addons", addon, "-c", PROG, "bake", *bake_argv], env
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
+    return [sys.executable, "-m", PROG, "bake", *bake_argv], env
+
+
+def batch_key(path, settings, fmt):
+    """What decides whether a file's last bake is current: its content, the settings, the output
+    format and the add-on's version. (sha256 hex of both, the input's own sha256)"""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    content = h.hexdigest()
+    recipe = json.dumps({"input": content, "settings": dataclasses.asdict(settings), "format": fmt,
+                         "version": __version__}, sort_keys=True)
+    return hashlib.sha256(recipe.encode()).hexdigest(), content
+
+
+@dataclasses.dataclass
+class BatchItem:
+    input: str
+    output: str
+    report: str
+    log: str
+    status: str = "pending"          # ok, skipped, failed
+    seconds: float = 0.0
+    message: str = ""
+    patches: int | None = None
+
+    @property
+    def name(self):
+        return os.path.basename(self.input)
+
+
+def _last_report(item):
+    try:
+        with open(item.report, encoding="utf-8") as f:
+            return json.load(f)
+    except (OSError, ValueError):
+        return None
+
+
+def _error_line(text):
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    errors = [ln for ln in lines if ": error: " in ln]
+    if errors:
+        return errors[-1].split(": error: ", 1)[1]
+    return lines[-1].strip() if lines else ""
+
+
+class _Workers:
+    """The running worker processes, so that an interrupted batch stops them all."""
+
+    def __init__(self):
+        self.lock = threading.Lock()
+        self.procs = set()
+        self.stopping = False
+
+    def run(self, argv, env, timeout):
+        with self.lock:
+            if self.stopping:
+                return None, "", "stopped"
+            p = subprocess.Popen(argv, env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                 stderr=subprocess.PIPE, text=True, errors="replace")
+            self.procs.add(p)
+        try:
+            out, err = p.communicate(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            out, err = p.communicate()
+            err += f"\n{PROG}: error: stopped after {timeout:g} s (--timeout)\n"
+        finally:
+            with self.lock:
+                self.procs.discard(p)
+        return p.returncode, out, err
+
+    def stop(self):
+        with self.lock:
+            self.stopping = True
+            for p in self.procs:
+                p.kill()
+
+
+def _bake_one(item, key, content, settings_words, workers, timeout):
+    t = time.perf_counter()
+    argv, env = worker_command([item.input, "-o", item.output, "--report", item.report, *settings_words])
+    rc, out, err = workers.run(argv, env, timeout)
+    item.seconds = time.perf_counter() - t
+    rep = _last_report(item) if rc == 0 else None
+    if rc == 0 and rep is not None and os.path.exists(item.output):
+        rep["batch"] = {"key": key, "input_sha256": content, "input": item.input, "seconds": item.seconds}
+        tmp = f"{item.report}.partial-{os.getpid()}-{threading.get_ident()}"
+        with open(tmp, "w", encoding="utf-8") as f:
+            json.dump(rep, f, indent=2)
+        os.replace(tmp, item.report)
+        item.status, item.patches = "ok", rep.get("patches")
+        if os.path.exists(item.log):
+            os.remove(item.log)
+        return item
+    item.status = "failed"
+    if rc is None:
+        item.message = "not started (batch interrupted)"
+        return item
+    why = _error_line(err) or _error_line(out)
+    if rc < 0:
+        why = f"worker killed by signal {-rc}" + (f" ({why})" if why else "")
+    elif rc == 0:
+        why = f"the worker wrote no {os.path.basename(item.output)} or report"
+    item.message = why or f"worker exit status {rc}"
+    with open(item.log, "w", encoding="utf-8") as f:
+        f.write(f"$ {subprocess.list2cmdline(argv)}\n# exit status {rc}\n{out}\n{err}")
+    return item
+
+
+def _plan(args):
+    """One BatchItem per input, checked for clashing output names before any work."""
+    out_dir = os.path.abspath(args.out_dir)
+    items, seen = [], {}
+    for f in args.files:
+        stem = os.path.splitext(os.path.basename(f))[0]
+        if stem.lower() in seen:
+            raise CLIError(f"{f} and {seen[stem.lower()]} would both write {stem}.{args.format} in "
+                           f"{args.out_dir}: rename one or bake them in two batches", 2)
+        seen[stem.lower()] = f
+        base = os.path.join(out_dir, stem)
+        items.append(BatchItem(os.path.abspath(f), f"{base}.{args.format}", f"{base}.json", f"{base}.log"))
+    return out_dir, items
+
+
+def cmd_batch(args, out, err):
+    t_start = time.perf_counter()
+    settings = _settings(args)
+    out_dir, items = _plan(args)
+    os.makedirs(out_dir, exist_ok=True)
+    words = setting_argv(args)
+    todo = []
+    for it in items:
+        ext = os.path.splitext(it.input)[1].lower()
+        if ext not in INPUT_EXT:
+            it.status, it.message = "failed", f"unsupported input: expected one of {', '.join(INPUT_EXT)}"
+            continue
+        if it.input == it.output:
+            it.status, it.message = "failed", "the output would overwrite the input: use another --out-dir"
+            continue
+        try:
+            key, content = batch_key(it.input, settings, args.format)
+        except OSError as ex:
+            it.status, it.message = "failed", ("input file not found" if isinstance(ex, FileNotFoundError)
+                                               else f"cannot read it: {ex.strerror or ex}")
+            continue
+        last = None if args.force else _last_report(it)
+        if last and last.get("batch", {}).get("key") == key and os.path.exists(it.output):
+            it.status, it.message, it.patches = "skipped", "unchanged since its last bake", last.get("patches")
+            continue
+        todo.append((it, key, content))
+
+    lock = threading.Lock()
+    done = [0]
+
+    def line(it):
+        with lock:
+            done[0] += 1
+            if not args.quiet:
+                what = f"  {it.message}" if it.status != "ok" else f"  -> {os.path.basename(it.output)}"
+                print(f"[{done[0]}/{len(items)}] {it.status:<7} {it.name}  {it.seconds:.1f} s{what}",
+                      file=out, flush=True)
+
+    for it in items:
+        if it.status != "pending":
+            line(it)
+    workers = _Workers()
+    if todo:
+        jobs = min(args.jobs, len(todo))
+        if not args.quiet:
+            print(f"radiosity: baking {len(todo)} of {len(items)} files, {jobs} at a time, into {out_dir}",
+                  file=out, flush=True)
+        pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
+        try:
+            futures = [pool.submit(_bake_one, it, key, content, words, workers, args.timeout)
+                       for it, key, content in todo]
+            for fut in concurrent.futures.as_completed(futures):
+                line(fut.result())
+        except BaseException:  # Ctrl-C (or Blender stopping us): end every worker, then go
+            workers.stop()
+            raise
+        finally:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    failed = [it for it in items if it.status == "failed"]
+    if not args.quiet:
+        _batch_table(items, out, time.perf_counter() - t_start)
+    for it in failed:
+        log = f" (log: {it.log})" if os.path.exists(it.log) else ""
+        print(f"{PROG}: error: {it.input}: {it.message}{log}", file=err, flush=True)
+    return 1 if failed else 0
+
+
+def _batch_table(items, out, seconds):
+    w = max(len("file"), *(len(it.name) for it in items))
+    print(f"\n{'file':<{w}}  {'status':<7}  {'time s':>7}  {'patches':>7}  output / reason", file=out)
+    for it in items:
+        what = it.output if it.status != "failed" else it.message
+        patches = "" if it.patches is None else str(it.patches)
+        print(f"{it.name:<{w}}  {it.status:<7}  {it.seconds:>7.1f}  {patches:>7}  {what}", file=out)
+    counts = {k: sum(it.status == k for it in items) for k in ("ok", "skipped", "failed")}
+    print(f"radiosity: {counts['ok']} baked, {counts['skipped']} skipped, {counts['failed']} failed "
+          f"in {seconds:.1f} s", file=out, flush=True)
+
+
 def _cache(settings):
     """A command-line run keeps form factors on disk only when asked (``--cache DIR``)."""
     if not settings.cache_dir:
@@ -240,6 +538,46 @@ def _cache(settings):
     from ..core.cache import FormFactorCache
 
     return FormFactorCache(settings.cache_dir)
+
+
+@contextlib.contextmanager
+def _silenced_stdout(active):
+    """With ``-q``: the process's stdout (file descriptor 1) goes to the null device, so that
+    Blender's own lines (``Read blend``, the glTF exporter's log) are gone too. stderr is kept."""
+    try:
+        fd = sys.stdout.fileno() if active else None
+    except (AttributeError, OSError, ValueError):
+        fd = None
+    if fd is None:
+        yield
+        return
+    sys.stdout.flush()
+    saved = os.dup(fd)
+    null = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(null, fd)
+    os.close(null)
+    try:
+        yield
+    finally:
+        sys.stdout.flush()
+        _flush_c_stdio()
+        os.dup2(saved, fd)
+        os.close(saved)
+
+
+def _flush_c_stdio():
+    """fflush(NULL): what Blender printed through C stdio, before fd 1 changes or the process ends."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError, TypeError):  # no C library handle (Windows)
+        pass
+
+
+COMMANDS = {"bake": lambda args, out, err: cmd_bake(args, out) and 0,
+            "demo": lambda args, out, err: cmd_demo(args, out) and 0,
+            "batch": cmd_batch}
 
 
 def main(argv=None, in_blender=False, out=None, err=None):
@@ -252,10 +590,14 @@ def main(argv=None, in_blender=False, out=None, err=None):
             args = build_parser().parse_args(argv)
         except SystemExit as ex:  # --help
             return int(ex.code or 0)
-        (cmd_bake if args.command == "bake" else cmd_demo)(args, out)
-        return 0
+        with _silenced_stdout(args.quiet and out in (sys.stdout, sys.__stdout__)):
+            return COMMANDS[args.command](args, out, err)
+    except CLIError as ex:
+        msg, status, usage, prog = str(ex), ex.status, ex.usage, ex.prog
     except RadiosityError as ex:
-        msg, status = str(ex), getattr(ex, "status", 1)
+        msg, status, usage, prog = str(ex), 1, None, PROG
     msg = msg.strip().splitlines()[0] if msg.strip() else "failed"
-    print(f"{PROG}: error: {msg}", file=err, flush=True)
+    if usage:
+        print(usage, file=err)
+    print(f"{prog}: error: {msg}", file=err, flush=True)
     return status
