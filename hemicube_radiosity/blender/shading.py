@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Shaded", "classify", "shade", "evaluate"]
+__all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate"]
 
 ATTRIBUTE = "_hr_shading"
 SCENE = "_hr_shading"
@@ -154,6 +154,28 @@ def classify(mat):
     return kind, notes
 
 
+def may_emit(mat):
+    """False when no shader of ``mat`` can emit (no Emission node, Principled Emission Strength
+    0 and unlinked, no node group, no colour wired into the output): its EMIT bake is all zero."""
+    out = _output_node(mat) if mat is not None else None
+    if out is None:
+        return False
+    stack, seen = [out.inputs["Surface"]], set()
+    while stack:
+        node, sock = _source(stack.pop())
+        if node is None or node.name in seen:
+            continue
+        seen.add(node.name)
+        if (sock is not None and sock.type != "SHADER") or node.type in ("EMISSION", "GROUP"):
+            return True
+        if node.type == "BSDF_PRINCIPLED":
+            st = node.inputs.get("Emission Strength")
+            if st is not None and (st.is_linked or st.default_value != 0):
+                return True
+        stack += [s for s in node.inputs if s.type == "SHADER"]
+    return False
+
+
 # ----------------------------------------------------------------------------- Cycles bakes
 def _configure(scene):
     scene.render.engine = "CYCLES"
@@ -207,9 +229,10 @@ def _quad_mesh(materials):
     return me
 
 
-def evaluate(objects, depsgraph, constants=()):
+def evaluate(objects, depsgraph, constants=(), emit=True):
     """Bake albedo and emission of ``objects`` (original mesh objects) at every corner of their
     evaluated meshes, and of the ``constants`` materials on a quad each, in one temporary scene.
+    ``emit`` False: no material can emit, the EMIT bake is skipped (zeros).
 
     Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
@@ -258,7 +281,7 @@ def evaluate(objects, depsgraph, constants=()):
         vl.objects.active = obs[0]
         t = time.perf_counter()
         rho = _bake(scene, obs, "DIFFUSE", {"COLOR"})
-        em = _bake(scene, obs, "EMIT", set())
+        em = _bake(scene, obs, "EMIT", set()) if emit else [np.zeros_like(r) for r in rho]
         seconds = time.perf_counter() - t
         corners, materials = {}, {}
         for (name, ob), r, e in zip(made_obs, rho, em):
@@ -286,7 +309,7 @@ def shade(objects, depsgraph) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
     ones that need it, in one batch. Never raises for a Cycles problem: ``failed`` says why."""
     out = Shaded()
-    need, constants = [], {}
+    need, constants, emit = [], {}, False
     for obj in objects:
         if obj.type != "MESH":
             continue
@@ -301,6 +324,7 @@ def shade(objects, depsgraph) -> Shaded:
             if m.name_full not in out.kinds:
                 out.kinds[m.name_full] = classify(m)
             kind = out.kinds[m.name_full][0]
+            emit |= kind != "plain" and may_emit(m)
             corners |= kind == "corners"
             if kind == "constant":
                 constants[m.name_full] = m
@@ -309,7 +333,7 @@ def shade(objects, depsgraph) -> Shaded:
     if not need and not constants:
         return out
     try:
-        out.corners, out.materials, out.seconds = evaluate(need, depsgraph, constants.values())
+        out.corners, out.materials, out.seconds = evaluate(need, depsgraph, constants.values(), emit)
     except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
         out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
     return out
