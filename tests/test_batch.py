@@ -8,6 +8,7 @@ import importlib
 import io
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -175,3 +176,45 @@ def test_worker_gets_the_settings_it_was_given(addon):
     cmd, env = c.worker_command(["x.blend"])
     assert cmd[:4] == [sys.executable, "-m", "hemicube_radiosity", "bake"]
     assert os.path.realpath(env["PYTHONPATH"].split(os.pathsep)[0]) == os.path.realpath(ROOT)
+
+
+FLAMENCO_STUBS = """
+const tasks = [];
+const author = {
+    Task: (name, type) => ({ name, type, commands: [], addCommand(c) { this.commands.push(c); } }),
+    Command: (name, params) => ({ name, params }),
+};
+const job = { settings: SETTINGS, addTask: (t) => tasks.push(t) };
+compileJob(job);
+console.log(JSON.stringify({ label: JOB_TYPE.label, keys: JOB_TYPE.settings.map((s) => s.key), tasks }));
+"""
+
+
+@pytest.mark.skipif(shutil.which("node") is None, reason="Node.js runs the Flamenco job script")
+def test_flamenco_job_type_sends_the_batch_command(addon, tmp_path):
+    """The job compiler script in docs/pipeline.md, run under Node with stand-ins for Flamenco's
+    author/job objects: one blender task per file, each a command line the CLI parses."""
+    doc = open(os.path.join(ROOT, "docs", "pipeline.md"), encoding="utf-8").read()
+    (script,) = re.findall(r"```javascript\n(.*?)```", doc, re.S)
+    settings = {"blendfile": "/farm/shots/a.blend", "extra_files": " /farm/shots/b.obj ; ",
+                "out_dir": "/farm/out", "format": "glb", "bake_args": "--patch-size 0.25  --gather-rays 16",
+                "force": True}
+    js = tmp_path / "job.js"
+    js.write_text(script + FLAMENCO_STUBS.replace("SETTINGS", json.dumps(settings)))
+    p = subprocess.run(["node", str(js)], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    got = json.loads(p.stdout)
+    assert got["label"] == "Hemi-cube Radiosity Bake" and "blendfile" in got["keys"]
+    assert [t["name"] for t in got["tasks"]] == ["radiosity-a.blend", "radiosity-b.obj"]
+    parser = cli(addon).build_parser()
+    for task, file in zip(got["tasks"], ["/farm/shots/a.blend", "/farm/shots/b.obj"]):
+        assert task["type"] == "blender"
+        (cmd,) = task["commands"]
+        c = cmd["params"]
+        assert cmd["name"] == "blender-render" and c["exe"] == "{blender}" and c["exeArgs"] == "{blenderArgs}"
+        # what Blender gets after its own options: -c hemicube_radiosity <argv>
+        assert c["argsBefore"][:2] == ["-c", "hemicube_radiosity"]
+        args = parser.parse_args([*c["argsBefore"][2:], c["blendfile"], *c["args"]])
+        assert args.command == "batch" and args.files == [file] and args.out_dir == "/farm/out"
+        assert args.jobs == 1 and args.format == "glb" and args.force
+        assert args.patch_size == 0.25 and args.gather_rays == 16
