@@ -131,6 +131,8 @@ def case_principled_parts():
     part, and a red Principled of roughness 1, IOR 1.45 with a coat, side by side (faces by x)."""
     cr.new_empty_scene()
     mats = [bpy.data.materials.new("Default")]            # Blender's own default node tree
+    if mats[0].node_tree is None:
+        mats[0].use_nodes = True                          # Blender < 5
     mats.append(material("Metal", Metallic=1.0)[0])
     mats.append(material("Glass", **{"Transmission Weight": 1.0})[0])
     mats.append(material("Coated", **{"Base Color": (0.8, 0.2, 0.1, 1.0), "Roughness": 1.0, "IOR": 1.45,

@@ -259,7 +259,8 @@ def material_rho_emission(mat):
 
 
 # notes of material_rho_emission that a Cycles evaluation makes moot (it reads what they name)
-_FIXED_BY_CYCLES = ("is linked (texture/nodes)", "by the viewport colour", "ignored (diffuse only)")
+_FIXED_BY_CYCLES = ("is linked (texture/nodes)", "by the viewport colour", "ignored (diffuse only)",
+                    "has no nodes; used its viewport colour")
 
 
 def _corner_materials(name, mats, corner_mat, corner_loop, shaded, used):

@@ -108,6 +108,9 @@ def classify(mat):
         return "plain", []
     out = _output_node(mat)
     if out is None:
+        if mat.node_tree is None or not getattr(mat, "use_nodes", True):
+            # Blender < 5 without nodes: Cycles renders a Principled BSDF of the viewport colour
+            return "constant", []
         return "plain", []
     kind, notes, seen, unknown = "plain", [], set(), []
 
