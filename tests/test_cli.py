@@ -138,9 +138,18 @@ def test_obj_input_closed_box_furnace(addon, tmp_path):
                                                      (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)])
         + "usemtl grey\nf 1 2 3 4\nf 5 8 7 6\nf 1 5 6 2\nf 2 6 7 3\nf 3 7 8 4\nf 4 8 5 1\n")
     rc, out, err = run(addon, ["bake", str(tmp_path / "room.obj"), "--patches", str(tmp_path / "p.npz"),
-                               "-o", str(tmp_path / "room.glb"), "--patch-size", "0.25", "--resolution", "32"])
+                               "-o", str(tmp_path / "room.glb"), "--patch-size", "0.25", "--resolution", "32",
+                               "--report", str(tmp_path / "r.json")])
     assert rc == 0, err
     z = np.load(tmp_path / "p.npz")
+    import bpy
+
+    if bpy.app.version < (4, 5, 0) and not z["emission"].any():
+        # Blender 4.2's OBJ importer gives Ke as Emission Color at Emission Strength 0 (4.5 and 5.0:
+        # strength 1): no light, in Cycles too. The bake says so instead of going dark silently.
+        notes = json.loads((tmp_path / "r.json").read_text())["notes"]
+        assert any("grey" in n and "strength" in n for n in notes), notes
+        pytest.skip(f"Blender {bpy.app.version_string}: the OBJ importer leaves Ke at emission strength 0")
     np.testing.assert_allclose(z["reflectance"], 0.5, atol=1e-6)
     np.testing.assert_allclose(z["emission"], 0.5, atol=1e-6)
     np.testing.assert_allclose(z["radiosity"], 1.0, atol=2e-3)

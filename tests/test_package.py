@@ -47,7 +47,9 @@ BAKE = textwrap.dedent("""
     print(json.dumps({"rc": rc, "enabled": addon_utils.check(module)[1], "cli": cli.__file__, "embreex": embreex.__file__,
                       "site": os.path.join(bpy.utils.user_resource("EXTENSIONS", path=".local"), "lib",
                                            "python3.11", "site-packages"),
-                      "repo": bpy.utils.user_resource("EXTENSIONS", path="user_default")}))
+                      "repo": bpy.utils.user_resource("EXTENSIONS", path="user_default")}), flush=True)
+    if bpy.app.version < (4, 5, 0):   # 4.2's bpy crashes at exit after a glTF export (docs/pipeline.md)
+        os._exit(0)
 """)
 
 
