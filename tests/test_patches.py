@@ -126,3 +126,74 @@ def test_bad_input_names_object_and_problem(bad, message):
     with pytest.raises(PatchError, match=message) as e:
         build_patches(m, 0.5)
     assert "Wall.001" in str(e.value)
+
+
+def scaled_room(scale, float32=False):
+    """closed_box of side ``scale`` (uneven emission so the radiosities vary over the room)."""
+    from hemicube_radiosity.core.scenes import closed_box
+
+    m = closed_box((scale, 1.3 * scale, 0.8 * scale), rho=(0.6, 0.5, 0.4), emission=(0.0, 0.0, 0.0))[0]
+    m.face_emission[5] = (2.0, 2.0, 2.0)             # one wall lights the room
+    if float32:                                       # what Blender hands over
+        m.verts = m.verts.astype(np.float32)
+    return [m]
+
+
+@pytest.mark.parametrize("float32", [False, True])
+def test_same_patches_at_any_scale(float32):
+    # 1 mm cut at 0.125 mm measured 8.0000004 patches in float32 and was cut 9 x 9
+    counts = {s: build_patches(scaled_room(s, float32), 0.125 * s) for s in (1e-3, 1.0, 1e3)}
+    ref = counts[1.0]
+    assert len(ref) == 2 * (8 * 11 + 8 * 7 + 11 * 7)
+    for s, ps in counts.items():
+        assert len(ps) == len(ref) and len(ps.verts) == len(ref.verts), s
+        np.testing.assert_allclose(ps.areas / s ** 2, ref.areas, rtol=1e-5)
+        np.testing.assert_allclose(ps.centers / s, ref.centers, rtol=0, atol=1e-6)
+
+
+def test_same_patches_far_from_the_origin():
+    # float32 rounding grows with the coordinates, not with the edge: the count must not change
+    m = box((1000.0, 1000.0, 1000.0), (1001.0, 1001.0, 1001.0), inward=True)
+    m.verts = m.verts.astype(np.float32)
+    assert len(build_patches(m, 0.125)) == 6 * 64
+
+
+def test_tiny_mesh_keeps_its_faces_and_concave_stays_concave():
+    # no absolute area floor or convexity epsilon: a micrometre L-shape cuts like a metre one
+    L = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [1, 1, 0], [1, 2, 0], [0, 2, 0]], float)
+    for s in (1e-6, 1.0, 1e6):
+        ps = build_patches(MeshInput.from_faces(L * s, [[0, 1, 2, 3, 4, 5]]), 0.5 * s)
+        assert len(ps) == len(build_patches(MeshInput.from_faces(L, [[0, 1, 2, 3, 4, 5]]), 0.5))
+        assert ps.areas.sum() == pytest.approx(3.0 * s * s, rel=1e-12)
+        assert not np.any((ps.centers[:, 0] > s) & (ps.centers[:, 1] > s))
+
+
+def _bakes(scales):
+    from hemicube_radiosity.core.pipeline import BakeSettings, bake
+
+    return {s: bake(scaled_room(s, float32=True), BakeSettings(patch_size=0.125 * s, element_size=None))
+            for s in scales}
+
+
+def _assert_same(res, atol_rel):
+    ref = res[1.0]
+    scale = np.abs(ref.solution.B).max()
+    for s, r in res.items():
+        assert r.solution.B.shape == ref.solution.B.shape, s
+        np.testing.assert_allclose(r.solution.B, ref.solution.B, rtol=0, atol=atol_rel * scale, err_msg=str(s))
+        np.testing.assert_allclose(r.vertex_radiosity, ref.vertex_radiosity, rtol=0, atol=atol_rel * scale,
+                                   err_msg=str(s))
+
+
+def test_bake_is_scale_invariant():
+    # powers of two scale every float exactly: the bake must then be the same to round-off;
+    # at 1e-3 and 1e3 the float32 rounding of the corners differs, and the form factors move by
+    # whole pixels where a patch edge falls exactly on a pixel centre (measured 5e-4 of max B)
+    _assert_same(_bakes((2.0 ** -10, 1.0, 2.0 ** 10)), 1e-6)
+    _assert_same(_bakes((1e-3, 1.0, 1e3)), 2e-3)
+
+
+@pytest.mark.xfail(reason="hemicube/embree pixel ties: a 1-ulp change of a corner flips a pixel "
+                          "(F entry 0.002) on this axis-aligned room; not in core/patches.py", strict=False)
+def test_bake_is_scale_invariant_to_1e4_at_decimal_scales():
+    _assert_same(_bakes((1e-3, 1.0, 1e3)), 1e-4)

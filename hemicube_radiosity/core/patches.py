@@ -146,7 +146,9 @@ def _is_convex(p: np.ndarray) -> bool:
         n += np.array([(a[1] - b[1]) * (a[2] + b[2]), (a[2] - b[2]) * (a[0] + b[0]), (a[0] - b[0]) * (a[1] + b[1])])
     e = np.roll(p, -1, axis=0) - p
     turn = np.cross(e, np.roll(e, -1, axis=0)) @ n
-    return bool(np.all(turn >= -1e-12 * max(1.0, float(np.abs(turn).max(initial=0)))))
+    # relative to the largest turn (a length^4): an absolute floor would call a concave
+    # millimetre-sized polygon convex
+    return bool(np.all(turn >= -1e-12 * float(np.abs(turn).max(initial=0))))
 
 
 def _ear_clip(p: np.ndarray) -> list:
@@ -310,11 +312,18 @@ def _edge_segments(verts, polys, patch_size):
     face_edges[valid] = inv
     flipped = np.zeros((F, 4), bool)
     flipped[valid] = (a > b)[valid]
-    length = np.linalg.norm(verts[edges[:, 1]] - verts[edges[:, 0]], axis=1)
+    va, vb = verts[edges[:, 0]], verts[edges[:, 1]]
+    length = np.linalg.norm(vb - va, axis=1)
     if patch_size is None or patch_size <= 0:
         n = np.ones(len(edges), dtype=np.int64)
     else:
-        n = np.maximum(1, np.ceil(length / patch_size - 1e-9)).astype(np.int64)
+        # An edge a whisker longer than k patches gets k segments, not k + 1. The whisker is
+        # relative: coordinates often come in float32 (Blender), whose rounding is ~6e-8 of the
+        # coordinates' magnitude, so a 1 mm edge cut at 0.125 mm measures 8.0000004 patches.
+        # Scaling the scene or moving it away from the origin must not change the count.
+        mag = np.maximum(np.abs(va).max(axis=1), np.abs(vb).max(axis=1))
+        slack = 1e-6 * np.maximum(length, mag)
+        n = np.maximum(1, np.ceil((length - slack) / patch_size)).astype(np.int64)
     q = np.flatnonzero(~tri)
     t = np.flatnonzero(tri)
     for _ in range(len(edges) + 1):
@@ -437,12 +446,14 @@ def _compact(verts, polys):
     return verts[used], np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
 
 
-def build_patches(meshes, patch_size=None, min_area=1e-12) -> PatchSet:
+def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
     """Cut source meshes into patches of edge length about ``patch_size`` (world units).
 
     ``patch_size`` None or <= 0 keeps every triangle/quad as one patch (n-gons are still split).
     Triangles become n*n triangles, quads an nu*nv grid; n-gons are split first (convex: quads
-    around the centre; concave: ear clipping). Faces with area below ``min_area`` are dropped.
+    around the centre; concave: ear clipping). Faces with area below ``min_area`` are dropped;
+    None (default) means 1e-12 of the squared size (bounding-box diagonal) of each mesh, so the
+    same scene in millimetres or kilometres keeps the same patches.
     Raises :class:`PatchError` naming the object when the input is unusable.
     """
     if isinstance(meshes, MeshInput):
@@ -471,7 +482,11 @@ def build_patches(meshes, patch_size=None, min_area=1e-12) -> PatchSet:
         src = src[parent]
         v, p = _compact(v, p)
         c, nrm, a = _poly_geometry(v, p)
-        keep = a > min_area
+        if min_area is None:
+            span = np.ptp(np.asarray(mesh.verts, float), axis=0) if len(mesh.verts) else np.zeros(3)
+            keep = a > 1e-12 * float(span @ span)
+        else:
+            keep = a > min_area
         if not np.any(keep):
             raise PatchError(f"{mesh.name!r}: every face has zero area")
         p, c, nrm, a, src = p[keep], c[keep], nrm[keep], a[keep], src[keep]
