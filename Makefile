@@ -23,7 +23,7 @@ define ensure_venv
 @if ! $(1)/bin/python -c 'import sys; assert sys.version_info[:2] == (3, 11)' 2>/dev/null; then \
 	if [ -e $(1) ]; then echo "make: $(1) is broken or not Python 3.11: rebuilding it"; rm -rf $(1); fi; \
 	if ! "$(PYTHON)" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' 2>/dev/null; then \
-		echo "make: Python 3.11 is needed (bpy exists for 3.11 only); '$(PYTHON)' is $$("$(PYTHON)" --version 2>&1 || echo missing). Run: make PYTHON=/path/to/python3.11 $(MAKECMDGOALS)" >&2; \
+		echo "make: Python 3.11 is needed (bpy exists for 3.11 only); '$(PYTHON)' is $$("$(PYTHON)" --version 2>/dev/null || echo "not found"). Run: make PYTHON=/path/to/python3.11 $(MAKECMDGOALS)" >&2; \
 		exit 1; \
 	fi; \
 	echo "make: creating $(1) with $(PYTHON)"; \
