@@ -176,6 +176,11 @@ def test_worker_gets_the_settings_it_was_given(addon):
     cmd, env = c.worker_command(["x.blend"])
     assert cmd[:4] == [sys.executable, "-m", "hemicube_radiosity", "bake"]
     assert os.path.realpath(env["PYTHONPATH"].split(os.pathsep)[0]) == os.path.realpath(ROOT)
+    # inside Blender: Blender itself runs the registered command of this very add-on
+    cmd, env = c.worker_command(["x.blend", "-o", "x.glb"], blender="/opt/blender/blender")
+    addon_module = addon.__name__.rsplit(".", 1)[0]          # bl_ext.<repo>.hemicube_radiosity
+    assert cmd == ["/opt/blender/blender", "--background", "--addons", addon_module,
+                   "-c", "hemicube_radiosity", "bake", "x.blend", "-o", "x.glb"]
 
 
 FLAMENCO_STUBS = """

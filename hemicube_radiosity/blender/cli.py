@@ -304,7 +304,7 @@ def setting_argv(args):
     return words
 
 
-def worker_command(bake_argv):
+def worker_command(bake_argv, blender=None):
     """(argv, env) of a fresh process that runs ``bake`` with ``bake_argv``.
 
     With the bpy module (``python -m hemicube_radiosity``): this Python, ``-m
@@ -314,9 +314,10 @@ def worker_command(bake_argv):
     itself, ``-b ... -c hemicube_radiosity bake``, with this add-on enabled by ``--addons``.
     Extensions in the default user repository are found under ``--factory-startup`` (no user
     add-ons or preferences in the worker); one in another repository needs the user preferences
-    that define that repository, so those are kept."""
+    that define that repository, so those are kept. ``blender``: the executable to use instead of
+    ``bpy.app.binary_path`` (tests)."""
     env = dict(os.environ)
-    blender = bpy.app.binary_path
+    blender = bpy.app.binary_path if blender is None else blender
     if blender:
         addon = __package__.rsplit(".", 2)[0]          # bl_ext.<repo>.hemicube_radiosity
         repo = addon.split(".")[1] if addon.startswith("bl_ext.") else None
