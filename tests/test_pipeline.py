@@ -214,7 +214,7 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
 def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
     from hemicube_radiosity.core.patches import PatchError
 
-    with pytest.raises(PatchError, match=r"cuts the scene into \d+ patches, more than the limit of 500"):
+    with pytest.raises(PatchError, match=r"makes \d+ patches, more than the limit of 500"):
         bake(cornell_box(), BakeSettings(patch_size=0.1, max_patches=500))
 
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import jittered_grid, polygon_form_factors
+from .geometry import group_form_factors, jittered_grid, polygon_form_factors
 from .patches import PatchSet
 
 __all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
@@ -54,6 +54,22 @@ def _emitter_samples(corners, samples, rng):
     return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
 
 
+def _group_samples(corners, areas, groups, samples, rng):
+    """(G, S, 3) points spread over each group of emitter patches by area: S strata of the
+    group's total area, each a random point on the patch it falls in (bilinear map)."""
+    G = int(groups.max()) + 1
+    order = np.argsort(groups, kind="stable")
+    cum = np.cumsum(areas[order])
+    start = np.searchsorted(groups[order], np.arange(G))
+    before = np.where(start > 0, cum[start - 1], 0.0)
+    total = np.bincount(groups, weights=areas, minlength=G)
+    t = before[:, None] + total[:, None] * (np.arange(samples)[None] + rng.uniform(0, 1, (G, samples))) / samples
+    k = order[np.minimum(np.searchsorted(cum, t.ravel(), side="right"), len(cum) - 1)].reshape(G, samples)
+    u, v = rng.uniform(0, 1, (2, G, samples, 1))
+    c = corners[k]                                                        # (G, S, 4, 3)
+    return (1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :] + u * v * c[..., 2, :] + (1 - u) * v * c[..., 3, :]
+
+
 def _visible_fraction(scene, origins, targets):
     """(r,) fraction of the segments origins (r,3) -> targets (r,S,3) that nothing blocks."""
     S = targets.shape[1]
@@ -64,7 +80,7 @@ def _visible_fraction(scene, origins, targets):
 
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
-                      seed=0, refine=3, chunk_rays=1 << 20, ticker=None) -> np.ndarray:
+                      seed=0, refine=3, chunk_rays=1 << 20, ticker=None, groups=None) -> np.ndarray:
     """(P, M) float32 ``T[p, m] = F(x_p -> e_m) * V(x_p, e_m)``: how much of emitter patch m's
     radiance arrives at point p. Geometry only, so a change of emission strength or colour is
     ``T @ L`` and needs no rays.
@@ -74,11 +90,15 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     rays per point and emitter patch (stratified over the patch, seeded); where they disagree
     (a penumbra) ``refine * samples`` more are cast, so soft shadow edges are not noisy while
     fully lit or fully shadowed points cost only ``samples``.
+    ``groups``: (M,) int, emitter patches that shine as one (a lamp modelled as many faces):
+    T is then (P, G), F summed over each group's patches and ``samples`` rays spread over the
+    whole group by area, so the cost follows the lamps, not their faces.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     em = np.asarray(emitters, dtype=np.int64)
-    T = np.zeros((len(points), em.size), dtype=np.float32)
+    units = em.size if groups is None else int(np.max(groups, initial=-1)) + 1
+    T = np.zeros((len(points), units), dtype=np.float32)
     if em.size == 0 or len(points) == 0:
         return T
     corners = patches.corners()[em]
@@ -87,13 +107,27 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     rng = np.random.default_rng(seed)
     # sample points lifted off the emitter a hair: a shadow ray that ends exactly on a surface
     # would graze it at float32 precision (a wall lighting the floor at their shared edge)
-    ys = _emitter_samples(corners, samples, rng) + eps * patches.normals[em][:, None, :]  # (M, S, 3)
+    if groups is None:
+        def draw(count):
+            return _emitter_samples(corners, count, rng) + eps * patches.normals[em][:, None, :]
+    else:
+        groups = np.asarray(groups, dtype=np.int64)
+        lift = np.zeros((units, 3))
+        np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
+        lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
+
+        def draw(count):
+            return _group_samples(corners, patches.areas[em], groups, count, rng) + lift[:, None, :]
+    ys = draw(samples)                                                    # (units, S, 3)
     S = ys.shape[1]
-    step = max(1, min(len(points), chunk_rays // max(em.size * S, 1), 4096))
+    step = max(1, min(len(points), chunk_rays // max(units * S, 1), 4096))
     for s in range(0, len(points), step):
         x = points[s:s + step]
         nx = normals[s:s + step]
-        F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
+        if groups is None:
+            F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
+        else:
+            F = group_form_factors(x, nx, corners, groups, patches.normals[em])  # (p, G)
         if scene is not None:
             vis = np.zeros(F.shape)
             pi, mi = np.nonzero(F > 0)
@@ -103,7 +137,7 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
                 # penumbra: where some rays pass and some do not, cast ``refine`` times more
                 part = (v > 0) & (v < 1)
                 if refine > 0 and part.any():
-                    extra = _emitter_samples(corners, refine * S, rng) + eps * patches.normals[em][:, None, :]
+                    extra = draw(refine * S)
                     v[part] = (v[part] + refine * _visible_fraction(scene, o[part], extra[mi[part]])) / (1 + refine)
                 vis[pi, mi] = v
             F = F * vis

@@ -33,6 +33,8 @@ class DirectLight:
 
     ``emitters`` (M,) ids of emissive patches; ``samples`` shadow rays per point and emitting
     patch (``settings.direct_samples`` shared between the patches an emitting face was cut into);
+    ``groups`` (M,) or None: emitting patches of one cluster (small faces grouped) shine as one,
+    with ``samples`` rays spread over the cluster;
     ``lights`` core.lights objects with ``light_samples`` / ``light_seed`` for their shadow rays.
     The emitters' part goes through a transport matrix that depends on geometry only, cached in
     ``cache``: a new emission strength or colour is a matrix product, no rays.
@@ -46,21 +48,35 @@ class DirectLight:
     light_seed: int = 0
     cancelled: object = None
     cache: object = None
+    groups: np.ndarray | None = None
     _scene: object = field(default=None, repr=False)
 
     @classmethod
-    def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None):
+    def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None, clusters=None):
         """The exact direct light for ``settings``, or None when it is off or there is none."""
         emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
         if settings.direct == "hemicube" or (emitters.size == 0 and not lights):
             return None
-        samples = settings.direct_samples
-        if emitters.size:
+        samples, groups = settings.direct_samples, None
+        if emitters.size and clusters is not None:
+            groups = np.unique(clusters.of[emitters], return_inverse=True)[1].reshape(-1)
+        elif emitters.size:
             face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
             per_face = np.unique(face, return_counts=True)[1].max()
             samples = max(1, int(settings.direct_samples) // int(per_face))
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
-                   settings.light_seed, cancelled, cache)
+                   settings.light_seed, cancelled, cache, groups)
+
+    def emitted(self) -> np.ndarray:
+        """(M, 3) radiance of each column of the transport: per emitting patch, or the
+        area-weighted mean of each group."""
+        L = self.patches.emission[self.emitters]
+        if self.groups is None:
+            return L
+        a = self.patches.areas[self.emitters]
+        G = int(self.groups.max()) + 1
+        return np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
+            / np.bincount(self.groups, weights=a, minlength=G)[:, None]
 
     def scene(self):
         """The shadow-ray scene, built once and only if a ray is cast."""
@@ -77,12 +93,13 @@ class DirectLight:
             key = None
             if self.cache is not None:
                 pts = np.ascontiguousarray(points, dtype=np.float64)
-                key = cache_key(self.patches.geometry_key() + em.tobytes() + pts.tobytes(),
+                grouped = b"" if self.groups is None else self.groups.tobytes()
+                key = cache_key(self.patches.geometry_key() + em.tobytes() + grouped + pts.tobytes(),
                                 ("direct", where, self.samples))
             T = cached(self.cache if key else None, key, lambda: emitter_transport(
                 self.patches, points, normals, em, scene=self.scene(), samples=self.samples,
-                ticker=Ticker(None, self.cancelled)))
-            D += apply_transport(T, self.patches.emission[em])
+                ticker=Ticker(None, self.cancelled), groups=self.groups))
+            D += apply_transport(T, self.emitted())
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
                                    cancelled=self.cancelled, samples=self.light_samples,
@@ -90,9 +107,10 @@ class DirectLight:
         return D
 
 
-def source_term(patches: PatchSet, F, *, direct_irradiance=None, world=None) -> np.ndarray:
+def source_term(patches, F, *, direct_irradiance=None, world=None) -> np.ndarray:
     """S = emission + rho * H_direct / pi + rho * sky * L_world  (radiance units, (N, 3)).
 
+    ``patches``: anything with ``rho`` and ``emission`` (N, 3) (a PatchSet or Clusters);
     ``direct_irradiance`` (N,3) W/m^2 from lamps; ``world`` (3,) constant world radiance seen by
     the part of each hemisphere that sees no surface (``F.sky``).
     """
@@ -108,15 +126,18 @@ def source_term(patches: PatchSet, F, *, direct_irradiance=None, world=None) -> 
 
 def direct_stage(ctx) -> None:
     """Fill ``ctx.direct`` (the exact plan or None), ``ctx.direct_patch`` (radiance arriving at
-    the patch centres, exact path), ``ctx.irradiance`` (N, 3) and the solve's source ``ctx.source``."""
-    p, s = ctx.patches, ctx.settings
-    ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache)
+    the patch centres, exact path), ``ctx.irradiance`` (N, 3) at the patch centres and the
+    solve's source ``ctx.source`` (per unknown: a cluster takes its patches' area-weighted mean)."""
+    p, s, u = ctx.patches, ctx.settings, ctx.unknowns
+    ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters)
     if ctx.direct is None:
         if ctx.lights:
             ctx.say(0.0, f"{len(ctx.lights)} lights")
             ctx.irradiance = direct_irradiance(p, ctx.lights, cancelled=ctx.cancelled,
                                                samples=s.light_samples, seed=s.light_seed)
-        ctx.source = source_term(p, ctx.form_factors, direct_irradiance=ctx.irradiance, world=ctx.world)
+        ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
+        if ctx.irradiance is not None:
+            ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi
         return
     # direct light (emitters and lamps) arrives by the exact path; the solve carries only
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
@@ -124,7 +145,7 @@ def direct_stage(ctx) -> None:
                  f"{len(ctx.lights)} lamps")
     ctx.direct_patch = ctx.direct.at(p.centers, p.normals, "centres")
     ctx.irradiance = np.pi * ctx.direct_patch
-    ctx.source = (source_term(p, ctx.form_factors, world=ctx.world) - p.emission
-                  + p.rho * ctx.direct_patch)
+    ctx.source = (source_term(u, ctx.form_factors, world=ctx.world) - u.emission
+                  + ctx.to_unknowns(p.rho * ctx.direct_patch))
     if not embree_available():
         ctx.notes.append("Embree is not available: shadow rays use the slower NumPy BVH")

@@ -58,14 +58,22 @@ def hemicube_directions(resolution: int):
 # Shared driver
 
 
-def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled):
+def _receivers(patches, clusters):
+    """(n, centres (n,3), normals (n,3), column of every patch (N,) or None) of the receivers:
+    the patches themselves, or their clusters (then a hit on a patch counts for its cluster)."""
+    if clusters is None:
+        return len(patches), patches.centers, patches.normals, None
+    return len(clusters), clusters.centers, clusters.normals, np.asarray(clusters.of, np.int64)
+
+
+def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled, clusters=None):
     """Cast every receiver's rays (built by ``local_dirs_fn(batch) -> (B, K, 3) world dirs,
     (B, K) weights``) and accumulate F rows and sky. Returns the CSR arrays (indptr, indices
     int32, data float32) and sky: batches come in receiver order and each is reduced to sorted
     unique (row, column) entries, so the rows are assembled as they come, without a global sort
     (whose temporaries peaked at several times the size of F)."""
     scene = embree_scene(patches)
-    n = len(patches)
+    n, centres, normals, column = _receivers(patches, clusters)
     eps = 1e-5 * scene.scale
     per_batch = max(1, RAYS_PER_BATCH // max(1, rays_per_receiver))
     ticker = Ticker(progress, cancelled)
@@ -78,7 +86,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         B = len(batch)
         dirs, w = local_dirs_fn(batch)                                   # (B,K,3), (B,K)
         K = dirs.shape[1]
-        origin = patches.centers[batch] + eps * patches.normals[batch]
+        origin = centres[batch] + eps * normals[batch]
         o = np.repeat(origin, K, axis=0)
         pid, _ = scene.intersect(o, dirs.reshape(-1, 3))
         w = w.reshape(-1)
@@ -88,6 +96,8 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         hit = ~miss
         pid_h, rid_h, w_h = pid[hit], rid[hit], w[hit]
         front = np.einsum("ij,ij->i", dirs.reshape(-1, 3)[hit], patches.normals[pid_h]) < 0
+        if column is not None:
+            pid_h = column[pid_h]
         ok = front & (pid_h != batch[rid_h])
         key = rid_h[ok] * n + pid_h[ok]
         uk, inv = np.unique(key, return_inverse=True)
@@ -107,7 +117,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
 
 
 def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
-                                 receivers=None, progress=None, cancelled=None) -> CSR:
+                                 receivers=None, progress=None, cancelled=None, clusters=None) -> CSR:
     """Form factors from rays through the hemi-cube pixel centres, weighted by the same delta
     form factors as the rasteriser (``core/hemicube.py``), in the same hemi-cube orientation
     (``rotate_seed``: None keeps the fixed frame, an int turns each receiver's hemi-cube about
@@ -115,19 +125,22 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
 
     ``receivers``: patch ids whose rows are computed (others stay empty). ``progress(f)`` is
     called now and then; ``cancelled()`` is polled between batches (raises ``Cancelled``).
+    ``clusters``: receivers are these clusters of the patches, and F is over clusters (see
+    :func:`.hemicube.hemicube_form_factors`).
     Raises :class:`.rays.EmbreeUnavailable` when embreex cannot be imported.
     """
     import_embreex()
-    n = len(patches)
-    recv = receiver_ids(len(patches), receivers)
+    n, _, normals, _ = _receivers(patches, clusters)
+    recv = receiver_ids(n, receivers)
     local, weights = hemicube_directions(resolution)
-    frames = receiver_frames(patches.normals, rotate_seed)
+    frames = receiver_frames(normals, rotate_seed)
 
     def dirs_fn(batch):
         d = np.einsum("kc,bcj->bkj", local, frames[batch])  # local (x,y,z) -> x u + y v + z n
         return d, np.broadcast_to(weights, (len(batch), weights.size))
 
-    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled)
+    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled,
+                                         clusters)
     meta = {"method": "embree", "resolution": int(resolution), "rotate_seed": rotate_seed,
             "n_patches": n, "n_receivers": int(recv.size), "rays_per_receiver": int(weights.size)}
     F = CSR(indptr, cols, vals, (n, n), meta)
@@ -140,7 +153,7 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
 
 
 def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, seed=0,
-                                   receivers=None, progress=None, cancelled=None) -> CSR:
+                                   receivers=None, progress=None, cancelled=None, clusters=None) -> CSR:
     """Form factors from ``rays_per_patch`` cosine-distributed rays per receiver, each worth
     1/rays_per_patch (F_ij is the fraction of them whose first hit is the front of patch j).
 
@@ -153,10 +166,10 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
     k = int(rays_per_patch)
     if k < 1:
         raise ValueError(f"rays_per_patch must be >= 1, got {rays_per_patch}")
-    n = len(patches)
-    recv = receiver_ids(len(patches), receivers)
+    n, _, normals, _ = _receivers(patches, clusters)
+    recv = receiver_ids(n, receivers)
     angles = np.random.default_rng([seed, 0x5eed]).uniform(0, 2 * np.pi, n)
-    frames = tangent_frames(patches.normals, angles)
+    frames = tangent_frames(normals, angles)
 
     def dirs_fn(batch):
         # one stream per receiver id, so rows do not depend on the batch or receiver set
@@ -166,7 +179,7 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
         d = np.einsum("bkc,bcj->bkj", local, frames[batch])
         return d, np.full((len(batch), k), 1.0 / k)
 
-    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled)
+    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled, clusters)
     meta = {"method": "embree_stochastic", "rays_per_patch": k, "seed": seed,
             "n_patches": n, "n_receivers": int(recv.size)}
     F = CSR(indptr, cols, vals, (n, n), meta)

@@ -19,16 +19,17 @@ from .sparse import CSR
 __all__ = ["compute_form_factors", "receivers_needed", "form_factor_stage"]
 
 
-def receivers_needed(patches: PatchSet) -> np.ndarray:
-    """Patches whose rows of F matter: a patch that reflects nothing (rho = 0 in every band,
+def receivers_needed(patches) -> np.ndarray:
+    """Patches (or clusters) whose rows of F matter: a patch that reflects nothing (rho = 0 in every band,
     e.g. a pure emitter) has B = S whatever it sees, so its hemi-cube is never drawn."""
     return np.flatnonzero(patches.rho.max(axis=1) > 0)
 
 
 def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progress=None,
-                         cancelled=None) -> CSR:
-    """F for ``patches`` by ``settings.method`` (rows only for ``receivers``, default all)."""
-    kw = dict(receivers=receivers, progress=progress, cancelled=cancelled)
+                         cancelled=None, clusters=None) -> CSR:
+    """F for ``patches`` (or their ``clusters``, every patch drawn) by ``settings.method`` (rows
+    only for ``receivers``, default all)."""
+    kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters)
     if settings.method == "hemicube":
         return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed, **kw)
     if settings.method == "embree":
@@ -41,11 +42,14 @@ def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progres
 def form_factor_stage(ctx) -> None:
     """Fill ``ctx.form_factors`` and ``ctx.form_factor_source`` ('computed' or 'cached')."""
     patches, cache = ctx.patches, ctx.cache
-    key = cache_key(patches.geometry_key(), ctx.settings.form_factor_key()) if cache is not None else None
+    key = None
+    if cache is not None:
+        grouping = b"" if ctx.clusters is None else np.ascontiguousarray(ctx.clusters.of).tobytes()
+        key = cache_key(patches.geometry_key() + grouping, ctx.settings.form_factor_key())
     F = cache.get(key) if cache is not None else None
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:
-        recv = receivers_needed(patches)
+        recv = receivers_needed(ctx.unknowns)
         started = time.perf_counter()
 
         def progress(fr):
@@ -54,7 +58,7 @@ def form_factor_stage(ctx) -> None:
             ctx.say(fr, f"{100 * fr:.0f}%  ETA {eta:.1f} s")
 
         F = compute_form_factors(patches, ctx.settings, receivers=recv, progress=progress,
-                                 cancelled=ctx.cancelled)
+                                 cancelled=ctx.cancelled, clusters=ctx.clusters)
         F.meta.setdefault("receivers", int(recv.size))
         if cache is not None:
             cache.put(key, F)

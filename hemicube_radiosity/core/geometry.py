@@ -204,3 +204,146 @@ def polygon_form_factors(points, normals, polys, poly_normals=None):
         h = np.einsum("pmj,mj->pm", points[:, None, :] - centre[None], np.asarray(poly_normals, float))
         F = np.where(h > 1e-9 * np.maximum(size, 1e-300)[None, :], F, 0.0)
     return F
+
+
+def _boundary_edges(polys, groups):
+    """Directed boundary edges of each group of polygons: (E, 2, 3) endpoints and (E,) group,
+    sorted by group. An edge shared by two polygons of a group (walked both ways) cancels."""
+    M, K = polys.shape[:2]
+    a = polys.reshape(M * K, 3)
+    b = np.roll(polys, -1, axis=1).reshape(M * K, 3)
+    g = np.repeat(groups, K)
+    keep = np.any(a != b, axis=1)
+    a, b, g = a[keep], b[keep], g[keep]
+    # endpoints as exact coordinates (shared corners are the same vertex, bit for bit)
+    pts = np.concatenate([a, b])
+    _, ib = np.unique(pts, axis=0, return_inverse=True)
+    ib = ib.reshape(-1)
+    va, vb = ib[:len(a)], ib[len(a):]
+    lo, hi = np.minimum(va, vb), np.maximum(va, vb)
+    sign = np.where(va < vb, 1, -1)
+    key = np.stack([g, lo, hi], axis=1)
+    uk, inv = np.unique(key, axis=0, return_inverse=True)
+    net = np.bincount(inv.reshape(-1), weights=sign, minlength=len(uk))
+    first = np.full(len(uk), -1)
+    first[inv.reshape(-1)[::-1]] = np.arange(len(inv))[::-1]
+    out = np.flatnonzero(net != 0)
+    e = first[out]
+    fwd = (net[out] > 0) == (sign[e] > 0)
+    ea = np.where(fwd[:, None], a[e], b[e])
+    eb = np.where(fwd[:, None], b[e], a[e])
+    order = np.argsort(uk[out, 0], kind="stable")
+    return np.stack([ea, eb], axis=1)[order], uk[out, 0][order]
+
+
+def group_form_factors(points, normals, polys, groups, poly_normals):
+    """(P, G) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
+    ``normals`` to groups of front-facing polygons (``polys`` (M, K, 3), ``groups`` (M,) in
+    0..G-1, ``poly_normals`` (M, 3)): the sum of :func:`polygon_form_factors` over each group.
+
+    A group in front of a point is one surface to Lambert's contour integral: only its boundary
+    edges count (shared edges cancel), clipped to the point's horizon and closed along it where
+    the group crosses the horizon, so the cost follows the group's outline, not how many faces
+    it was modelled with. Pairs where the point is in front of part of the group only (a curved
+    group), or whose crossings do not pair up, are summed face by face.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    polys = np.asarray(polys, dtype=np.float64)
+    groups = np.asarray(groups, dtype=np.int64)
+    pn = np.asarray(poly_normals, dtype=np.float64)
+    P, G = len(points), int(groups.max()) + 1
+    edges, eg = _boundary_edges(polys, groups)
+    rel_a = edges[None, :, 0] - points[:, None]                             # (P, E, 3)
+    term = _edge_terms(rel_a, edges[None, :, 1] - points[:, None], normals)
+    F = np.zeros((P, G))
+    np.add.at(F.T, eg, term.T)
+    F = np.abs(F) / (2 * np.pi)
+    # where the contour does not stand for the group: some corner at or below the horizon, or
+    # the point not in front of every polygon of the group
+    below = np.zeros((P, G), bool)
+    h = np.einsum("pec,pc->pe", rel_a, normals)
+    np.logical_or.at(below.T, eg, (h <= 0).T)
+    n_front, count = _in_front(points, polys, groups, pn, G)
+    F[n_front == 0] = 0.0
+    partial = (n_front > 0) & (n_front < count[None])
+    for g in np.flatnonzero((below & ~partial & (n_front > 0)).any(axis=0)):
+        p = np.flatnonzero(below[:, g] & ~partial[:, g] & (n_front[:, g] > 0))
+        F[p, g], ok = _clipped_contour(points[p], normals[p], edges[eg == g], pn[groups == g].mean(axis=0))
+        partial[p[~ok], g] = True
+    for g in np.flatnonzero(partial.any(axis=0)):
+        p = np.flatnonzero(partial[:, g])
+        m = np.flatnonzero(groups == g)
+        F[p, g] = polygon_form_factors(points[p], normals[p], polys[m], pn[m]).sum(axis=1)
+    return F
+
+
+def _in_front(points, polys, groups, pn, G):
+    """(P, G) how many polygons of each group have the point in front of their plane (by more
+    than round-off), and (G,) how many polygons each group has. A planar group (one plane for
+    all its polygons) is tested once, a curved one polygon by polygon."""
+    centre = polys.mean(axis=1)
+    size = np.maximum(np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1), 1e-300)
+    count = np.bincount(groups, minlength=G)
+    first = np.searchsorted(np.sort(groups), np.arange(G))
+    rep = np.argsort(groups, kind="stable")[first]                        # a polygon of each group
+    planar = np.ones(G, bool)
+    off = np.abs(np.einsum("mj,mj->m", centre - centre[rep][groups], pn[rep][groups]))
+    bent = (np.abs(pn - pn[rep][groups]).max(axis=1) > 1e-9) | (off > 1e-9 * size)
+    planar[groups[bent]] = False
+    n_front = np.zeros((len(points), G))
+    h = np.einsum("pj,gj->pg", points, pn[rep]) - np.einsum("gj,gj->g", centre[rep], pn[rep])
+    n_front[:, planar] = (h[:, planar] > 1e-9 * size[rep][planar]) * count[planar]
+    curved = np.flatnonzero(~planar[groups])
+    if curved.size:
+        f = np.einsum("pmj,mj->pm", points[:, None, :] - centre[curved][None], pn[curved]) > 1e-9 * size[curved][None]
+        np.add.at(n_front.T, groups[curved], f.T)
+    return n_front, count
+
+
+def _clipped_contour(x, n, edges, plane_normal):
+    """Form factors (P,) from points ``x`` with normals ``n`` to the part above their horizons
+    of the planar region bounded by the directed ``edges`` (E, 2, 3), by the contour integral
+    over its boundary clipped to the horizon, closed along the horizon: the crossings are sorted
+    along the line where the horizon meets the region's plane and paired (exit -> entry).
+    Returns (F, ok): ok False where the crossings do not pair up (then F is not valid)."""
+    a = edges[None, :, 0] - x[:, None]
+    b = edges[None, :, 1] - x[:, None]
+    ha = np.einsum("pec,pc->pe", a, n)
+    hb = np.einsum("pec,pc->pe", b, n)
+    ia, ib = ha > 0, hb > 0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(ia != ib, ha / (ha - hb), 0.0)
+    q = a + t[..., None] * (b - a)                                        # the crossing, if any
+    ca = np.where((ia & ib)[..., None] | (ia & ~ib)[..., None], a, q)    # clipped edge start
+    cb = np.where((ia & ib)[..., None] | (~ia & ib)[..., None], b, q)    # clipped edge end
+    keep = ia | ib
+    total = np.where(keep, _edge_terms(ca, cb, n), 0.0).sum(axis=1)
+    exits, entries = ia & ~ib, ~ia & ib
+    crossing = exits | entries
+    d = np.cross(n, plane_normal)
+    key = np.where(crossing, np.einsum("pec,pc->pe", q, d), np.inf)
+    order = np.argsort(key, axis=1)
+    k = crossing.sum(axis=1)
+    qs = np.take_along_axis(q, order[..., None], axis=1)
+    out = np.take_along_axis(exits, order, axis=1)
+    E = edges.shape[0]
+    first, second = np.arange(0, E - 1, 2), np.arange(1, E, 2)
+    pair = second[None] < k[:, None]                                      # (P, E//2)
+    ex, ey = out[:, first], out[:, second]
+    ok = (k % 2 == 0) & np.all(~pair | (ex != ey), axis=1)
+    qa, qb = qs[:, first], qs[:, second]
+    start = np.where(ex[..., None], qa, qb)                               # from the exit ...
+    end = np.where(ex[..., None], qb, qa)                                 # ... to the entry
+    total += np.where(pair, _edge_terms(start, end, n), 0.0).sum(axis=1)
+    return np.abs(total) / (2 * np.pi), ok
+
+
+def _edge_terms(a, b, n):
+    """Lambert's contour terms angle(a, b) * n . unit(a x b) of edges a -> b (.., E, 3) seen
+    from the origin, with the receivers' normals ``n`` (P, 3)."""
+    c = np.cross(a, b)
+    cn = np.linalg.norm(c, axis=-1)
+    theta = np.arctan2(cn, np.einsum("pec,pec->pe", a, b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(cn > 0, theta * np.einsum("pec,pc->pe", c, n) / cn, 0.0)

@@ -162,11 +162,13 @@ class _Scene:
 
     verts (V, 3) float32, centred; corner_ids (N, 4) int64 (triangles repeat corner 2) and
     its transpose corners_t (4, N);
-    normals (N, 3) float64; plane (N,) float64 ``n . c`` (centred); eyes (N, 3) float64 (centred,
-    offset along the normal); near (float32); weights (3 R^2,) pixel delta form factors.
+    normals (N, 3) float64; plane (N,) float64 ``n . c`` (centred); eyes (K, 3) float64 (centred,
+    offset along the receivers' normals); near (float32); weights (3 R^2,) pixel delta form
+    factors; item_of (N,) the receiver (cluster) each drawn patch belongs to, or None when every
+    patch is its own receiver (K = N).
     """
 
-    def __init__(self, patches, resolution):
+    def __init__(self, patches, resolution, clusters=None):
         verts = np.asarray(patches.verts, dtype=np.float64)
         lo, hi = verts.min(axis=0), verts.max(axis=0)
         origin = 0.5 * (lo + hi)
@@ -179,7 +181,9 @@ class _Scene:
         self.corners_t = np.ascontiguousarray(self.corner_ids.T)         # (4, N)
         self.normals = np.asarray(patches.normals, dtype=np.float64)
         self.plane = np.einsum("ij,ij->i", self.normals, patches.centers - origin)
-        self.eyes = patches.centers - origin + EYE_OFFSET * scale * self.normals
+        rc, rn = (patches.centers, self.normals) if clusters is None else (clusters.centers, clusters.normals)
+        self.eyes = rc - origin + EYE_OFFSET * scale * rn
+        self.item_of = None if clusters is None else np.asarray(clusters.of, dtype=np.int64)
         self.near = np.float32(NEAR * scale)
         self.weights = pixel_weights(resolution)
 
@@ -669,7 +673,10 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     c0 = word & np.uint32(0xFF)
     whole = (word == c0 * np.uint32(0x01010101)) & (c0 >= 9)
     visible = (word & np.uint32(0x08080808)) != 0
-    visible[np.arange(B), recv] = False
+    if scene.item_of is None:
+        visible[np.arange(B), recv] = False
+    else:                                     # a cluster does not see its own pieces
+        visible &= scene.item_of[None, :] != recv[:, None]
     whole &= visible
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
@@ -724,13 +731,15 @@ def _empty_key(n):
     return (np.int64(0x7F800000) << 32) | np.int64(n + 1)
 
 
-def _resolve(keys, weights, n):
-    """Sum pixel weights per visible front-facing patch.
+def _resolve(keys, weights, n, item_of=None):
+    """Sum pixel weights per visible front-facing patch (or its receiver ``item_of``, of n).
 
     Returns F rows (B, n) float64 and sky (B,) float64.
     """
     B = len(keys)
     bins = keys & _ID_MASK
+    if item_of is not None:                   # drawn piece -> its cluster; back face, sky stay last
+        bins = np.concatenate([item_of, [n, n + 1]])[bins]
     bins += (np.arange(B) * (n + 2))[:, None]
     rows = np.bincount(bins.ravel(), weights=np.tile(weights, B), minlength=B * (n + 2))
     rows = rows.reshape(B, n + 2)
@@ -756,7 +765,7 @@ def _batch_size(n, resolution, requested):
 
 
 def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None, receivers=None,
-                          progress=None, cancelled=None, batch=None) -> CSR:
+                          progress=None, cancelled=None, batch=None, clusters=None) -> CSR:
     """Form-factor matrix F by the hemi-cube, one rasterised hemi-cube per receiver.
 
     Parameters
@@ -777,6 +786,10 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     batch : int or None
         Receivers per NumPy pass; None picks one whose arrays stay small (tens of MB) and
         mostly in cache.
+    clusters : core.clusters.Clusters or None
+        Receivers are these K clusters of the patches (their eye points and normals), and every
+        patch is drawn with its cluster's id: F is (K, K) over clusters while visibility sees
+        every patch. None: every patch is its own receiver.
 
     Returns
     -------
@@ -787,11 +800,11 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     """
     R = int(resolution)
     delta_form_factors(R)  # validates the resolution
-    n = len(patches)
+    n = len(patches) if clusters is None else len(clusters)
     recv = receiver_ids(n, receivers)
-    scene = _Scene(patches, R)
-    frames = receiver_frames(patches.normals, rotate_seed)
-    B = _batch_size(n, R, batch)
+    scene = _Scene(patches, R, clusters)
+    frames = receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
+    B = _batch_size(len(patches), R, batch)
     ticker = Ticker(progress, cancelled)
     ticker.tick(0, recv.size, force=True)
     sky = np.zeros(n, dtype=np.float32)
@@ -800,7 +813,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     for lo in range(0, recv.size, B):
         ids = recv[lo:lo + B]
         keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
-        rows, sky_b = _resolve(keys, scene.weights, n)
+        rows, sky_b = _resolve(keys, scene.weights, n, scene.item_of)
         r, c = np.nonzero(rows)
         counts[ids + 1] = np.bincount(r, minlength=ids.size)
         cols_l.append(c.astype(np.int32))

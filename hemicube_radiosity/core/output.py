@@ -82,6 +82,8 @@ def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v):
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
                          "instead of gathering it")
+    if elements is ctx.patches:               # faces already finer than the detail size
+        return rest_v
     owner_v = np.zeros(len(elements.verts), np.int64)
     for c in range(4):
         on = elements.polys[:, c] >= 0
@@ -93,6 +95,8 @@ def _cut_elements(ctx) -> PatchSet:
     s = ctx.settings
     ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
     elements = output_elements(ctx.meshes, s, ctx.cache)
+    if elements.geometry_key() == ctx.patches.geometry_key():
+        return ctx.patches                    # the input is finer than the detail: its own faces
     if len(elements) > s.max_elements:
         raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
                              f"output elements, more than the limit of {s.max_elements}: use a "
@@ -103,14 +107,16 @@ def _cut_elements(ctx) -> PatchSet:
 def vertex_stage(ctx) -> None:
     """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts."""
     patches = ctx.patches
-    weights = exposure(ctx.form_factors)
+    weights = ctx.to_patches(exposure(ctx.form_factors))
     ctx.elements = patches
     if ctx.direct is None:
-        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.solution.B, weights=weights)
+        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.to_patches(ctx.solution.B), weights=weights)
         return
     # direct light again at every output vertex (sharp shadows, exact falloff); only the
-    # smoother light reflected more than once comes from the patches, as in the paper
-    rest_v = vertex_radiosity(patches, ctx.reflected - patches.rho * ctx.direct_patch, weights=weights)
+    # smoother light reflected more than once comes from the patches (or their clusters), as in
+    # the paper
+    rest = ctx.reflected - ctx.to_unknowns(patches.rho * ctx.direct_patch)
+    rest_v = vertex_radiosity(patches, ctx.to_patches(rest), weights=weights)
     if ctx.settings.uses_elements():
         ctx.elements = _cut_elements(ctx)
         xv, nv, rho_v = vertex_frames(ctx.elements)

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .cache import FormFactorCache
+from .clusters import Clusters, group_pieces
 from .direct_light import DirectLight, direct_stage, source_term
 from .errors import SettingsError
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
@@ -30,7 +31,8 @@ __all__ = ["BakeSettings", "BakeContext", "BakeResult", "bake", "STAGES", "compu
 
 @dataclass
 class BakeResult:
-    """``patches`` are what was solved (``solution.B`` per patch, total radiosity); ``elements``
+    """``patches`` are the pieces of surface that were drawn and lit; ``solution.B`` is per
+    patch, or per cluster where small faces were grouped (``clusters``); ``elements``
     is the output mesh (the patches themselves unless ``element_size`` cut it finer) and
     ``vertex_radiosity`` (V, 3) is per ``elements.verts``. ``source`` (N, 3) is the solve's source
     term and ``direct_irradiance`` (N, 3) W/m^2 the direct light at the patch centres (or None)."""
@@ -46,10 +48,22 @@ class BakeResult:
     notes: list = field(default_factory=list)
     elements: PatchSet | None = None
     settings: BakeSettings | None = None      # as used: 'auto' sizes resolved to world units
+    clusters: Clusters | None = None          # small faces grouped: solution.B is per cluster
 
     def __post_init__(self):
         if self.elements is None:
             self.elements = self.patches
+
+    @property
+    def unknowns(self) -> int:
+        """How many patches were solved for (clusters, or the patches themselves)."""
+        return len(self.patches if self.clusters is None else self.clusters)
+
+    @property
+    def patch_radiosity(self) -> np.ndarray:
+        """(N, 3) radiosity of every patch (its cluster's, where faces were grouped)."""
+        B = self.solution.B
+        return B if self.clusters is None else self.clusters.spread(B)
 
 
 @dataclass
@@ -67,6 +81,7 @@ class BakeContext:
     timings: dict = field(default_factory=dict)
     notes: list = field(default_factory=list)
     patches: PatchSet | None = None
+    clusters: Clusters | None = None          # small faces grouped: the solve's unknowns
     form_factors: CSR | None = None
     form_factor_source: str = ""
     direct: DirectLight | None = None        # exact direct light, or None ('hemicube' mode)
@@ -77,6 +92,20 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
+
+    @property
+    def unknowns(self):
+        """What the solve is for: the clusters, or the patches themselves (both have centers,
+        normals, areas, rho, emission, owner)."""
+        return self.patches if self.clusters is None else self.clusters
+
+    def to_unknowns(self, per_patch):
+        """(K, ...) area-weighted mean per cluster of a per-patch array (itself without clusters)."""
+        return per_patch if self.clusters is None else self.clusters.mean(per_patch, self.patches.areas)
+
+    def to_patches(self, per_unknown):
+        """(N, ...) per patch of a per-unknown array."""
+        return per_unknown if self.clusters is None else self.clusters.spread(per_unknown)
 
     def say(self, fraction, message=""):
         """Report progress of the running stage."""
@@ -99,26 +128,31 @@ class BakeContext:
     def result(self) -> BakeResult:
         return BakeResult(self.patches, self.form_factors, self.solution, self.vertex_radiosity,
                           self.timings, self.form_factor_source, self.source, self.irradiance,
-                          self.notes, self.elements, self.settings)
+                          self.notes, self.elements, self.settings, self.clusters)
 
 
 def patch_stage(ctx) -> None:
-    """Fill ``ctx.patches`` (unless given): the meshes cut to ``settings.patch_size``."""
+    """Fill ``ctx.patches`` (unless given): the meshes cut to ``settings.patch_size``, and
+    ``ctx.clusters``: small faces grouped into patches of about that size (None: none grouped)."""
     s = ctx.settings
     ctx.say(0.0, "cutting meshes into patches")
     if ctx.patches is None:
         ctx.patches = build_patches(ctx.meshes, s.patch_size)
-    if len(ctx.patches) > s.max_patches:
-        raise PatchError(f"a patch size of {s.patch_size} cuts the scene into {len(ctx.patches)} "
-                         f"patches, more than the limit of {s.max_patches}: use a larger patch size "
-                         "(and a detail size for sharp output)")
-    ctx.say(1.0, f"{len(ctx.patches)} patches")
+    if s.group_faces:
+        ctx.clusters = group_pieces(ctx.patches, s.patch_size, s.group_angle)
+    n = len(ctx.unknowns)
+    if n > s.max_patches:
+        raise PatchError(f"a patch size of {s.patch_size} makes {n} patches, more than the limit "
+                         f"of {s.max_patches}: use a larger patch size (and a detail size for "
+                         "sharp output)" + ("" if s.group_faces else ", or group small faces"))
+    grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
+    ctx.say(1.0, f"{n} patches{grouped}")
 
 
 def solve_stage(ctx) -> None:
     """Fill ``ctx.solution``: B = S + rho F B per band (:func:`.solve.solve`). On the exact
     direct path the solve carries reflected light only; the solution reports B = E + R."""
-    s, p = ctx.settings, ctx.patches
+    s, p = ctx.settings, ctx.unknowns
     computed = np.zeros(len(p), bool)
     computed[receivers_needed(p)] = True
     ctx.say(0.0, s.solver)

@@ -9,7 +9,7 @@ import numpy as np
 
 from .patches import MeshInput
 
-__all__ = ["quad", "box", "closed_box", "cornell_box", "parallel_squares", "perpendicular_squares",
+__all__ = ["quad", "box", "closed_box", "cornell_box", "parallel_squares", "perpendicular_squares", "tessellate",
            "CORNELL_RED", "CORNELL_GREEN", "CORNELL_WHITE"]
 
 # Reflectances of the Cornell box (Goral et al. 1984 measured spectra folded to RGB, commonly used)
@@ -105,3 +105,41 @@ def cornell_box(size=2.0, light_size=0.5, light_radiance=12.0) -> list:
     tall = box((0.53 * s, 0.5 * s, 0), (0.83 * s, 0.8 * s, 0.6 * s), w, bottom=False,
                rotate_z=np.radians(17), name="TallBlock")
     return [floor, ceiling, back, left, right, light, short, tall]
+
+
+def tessellate(meshes, n, triangles=True) -> list:
+    """The same scene modelled densely: every quad face cut into ``n`` x ``n`` quads (each split
+    into two triangles with ``triangles``), sharing vertices inside a face as a modeller's mesh
+    does; other faces are kept. Materials per face are carried over."""
+    out = []
+    for m in meshes:
+        verts, faces, rho, em = [], [], [], []
+        base = 0
+        for f in range(len(m.face_offsets) - 1):
+            idx = m.face_indices[m.face_offsets[f]:m.face_offsets[f + 1]]
+            c = np.asarray(m.verts, float)[idx]
+            if len(idx) != 4:
+                verts.append(c)
+                faces.append(list(range(base, base + len(idx))))
+                rho.append(m.face_rho[f]), em.append(m.face_emission[f])
+                base += len(idx)
+                continue
+            t = np.linspace(0.0, 1.0, n + 1)
+            u, v = np.meshgrid(t, t, indexing="ij")
+            u, v = u.ravel()[:, None], v.ravel()[:, None]
+            verts.append((1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + u * v * c[2] + (1 - u) * v * c[3])
+            i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+            a = base + (i * (n + 1) + j).ravel()
+            b, d = a + (n + 1), a + 1
+            e = b + 1
+            quads = np.stack([a, b, e, d], 1)
+            if triangles:
+                new = np.concatenate([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]]).tolist()
+            else:
+                new = quads.tolist()
+            faces += new
+            rho += [m.face_rho[f]] * len(new)
+            em += [m.face_emission[f]] * len(new)
+            base += (n + 1) ** 2
+        out.append(MeshInput.from_faces(np.concatenate(verts), faces, np.array(rho), np.array(em), m.name))
+    return out

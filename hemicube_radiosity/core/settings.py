@@ -109,6 +109,14 @@ class BakeSettings:
         "baked mesh; auto: a third of the patch size). Direct light is exact at every vertex; "
         "bounced light comes from the patches", "patches", size=True, manual=0.08, min=0.0,
         soft_max=10.0, precision=3, unit="LENGTH")
+    group_faces: bool = setting(True, "Group Small Faces", "Faces smaller than the patch size (a "
+                                "dense mesh) are grouped into patches of about the patch size, so "
+                                "the solve follows how the light varies, not how finely the mesh "
+                                "is modelled; direct light and the output stay on every face",
+                                "patches", cli="--no-group-faces")
+    group_angle: float = setting(30.0, "Grouping Angle", "Faces whose normals differ by more "
+                                 "than this many degrees are not grouped into one patch",
+                                 "patches", min=1.0, max=90.0)
     max_patches: int = setting(20000, "Max Patches", "Stop with an error before cutting more "
                                "patches (form factors grow with their square)", "patches",
                                min=1, soft_max=100000)
@@ -153,14 +161,6 @@ class BakeSettings:
     exposure: float = setting(0.0, "Exposure", "Stops: written values are radiance x 2^exposure "
                               "(0 keeps radiance units, nothing is clamped)", "output",
                               soft_min=-10.0, soft_max=10.0)
-
-    # ------------------------------------------------------------------ construction
-    @classmethod
-    def from_mapping(cls, mapping) -> "BakeSettings":
-        """Settings from anything with the fields as keys or attributes: a dict, argparse's
-        namespace, Blender's property group or operator. Missing fields keep their defaults;
-        enum values may be upper case (Blender's); a size of 0 means None; the panel's
-        ``auto_size`` switch, where present, turns every size to 'auto' (on) or to its length
     view_transform: str = setting(
         "standard", "glTF View Transform", "How exported glTF maps the HDR bake into COLOR_0 "
         "(0..1, linear); the HDR values stay in _RADIANCE", "output", choices=(
@@ -170,6 +170,14 @@ class BakeSettings:
              "Blender's view of that name"),
             ("agx", "AgX", "An AgX-like curve (the fit three.js and Filament use); close to "
              "Blender's AgX view, not identical")))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_mapping(cls, mapping) -> "BakeSettings":
+        """Settings from anything with the fields as keys or attributes: a dict, argparse's
+        namespace, Blender's property group or operator. Missing fields keep their defaults;
+        enum values may be upper case (Blender's); a size of 0 means None; the panel's
+        ``auto_size`` switch, where present, turns every size to 'auto' (on) or to its length
         (off)."""
         get = mapping.get if isinstance(mapping, dict) else (lambda k, d=None: getattr(mapping, k, d))
         auto = get(AUTO_SWITCH, None)

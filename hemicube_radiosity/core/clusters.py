@@ -1,0 +1,183 @@
+"""Patches above faces: small pieces grouped into the patches the radiosity equation is solved for.
+
+A wall modelled as 10,000 triangles is lit like a wall of four quads, so it should cost like one.
+:func:`build_patches` never makes a piece larger than its input face; here the *small* pieces
+are grouped into clusters of about the patch size:
+
+* the same object and the same material (reflectivity and emission, or ``material`` ids),
+* normals within ``max_angle`` of each other (a curved surface becomes several clusters, each
+  nearly planar: the pieces' normals are binned on the cube map, cells ``max_angle`` wide),
+* the same cell of a world grid of the patch size, and connected through shared vertices.
+
+Only whole input faces (and pieces much smaller than the patch size) are grouped: pieces that
+:func:`build_patches` cut from a coarse face already have the patch size and each stay a patch of
+their own, so a scene modelled coarsely solves exactly as before. The pieces remain the geometry: hemi-cubes
+draw every piece with its cluster's id (visibility sees the real surfaces), direct light and the
+output are evaluated on the pieces; only the unknowns of the solve are the clusters.
+
+Units: world units for positions and sizes, radiance for emission; areas are sums over pieces.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .patches import PatchSet
+
+__all__ = ["Clusters", "group_pieces", "DEFAULT_MAX_ANGLE"]
+
+DEFAULT_MAX_ANGLE = 30.0       # degrees: normal spread allowed within one cluster
+
+
+@dataclass
+class Clusters:
+    """K solve patches made of P pieces (a :class:`PatchSet`).
+
+    of:       (P,) int64 cluster of each piece.
+    centers:  (K, 3) float64 eye points: the centre of the cluster's piece nearest its centroid
+              (on the surface even when the cluster is curved).
+    normals:  (K, 3) float64 unit, area-weighted mean of the pieces' normals.
+    areas:    (K,) float64 total area.
+    rho:      (K, 3) float64 area-weighted mean reflectivity.
+    emission: (K, 3) float64 area-weighted mean emitted radiance.
+    owner:    (K,) int32 object of the cluster.
+    """
+
+    of: np.ndarray
+    centers: np.ndarray
+    normals: np.ndarray
+    areas: np.ndarray
+    rho: np.ndarray
+    emission: np.ndarray
+    owner: np.ndarray
+
+    def __len__(self) -> int:
+        return int(len(self.areas))
+
+    @property
+    def sizes(self) -> np.ndarray:
+        """(K,) pieces per cluster."""
+        return np.bincount(self.of, minlength=len(self))
+
+    def mean(self, per_piece, piece_areas) -> np.ndarray:
+        """(K, ...) area-weighted mean over each cluster's pieces of a (P, ...) array."""
+        a = np.asarray(per_piece, dtype=np.float64)
+        w = np.asarray(piece_areas, dtype=np.float64).reshape((-1,) + (1,) * (a.ndim - 1))
+        out = np.zeros((len(self),) + a.shape[1:])
+        np.add.at(out, self.of, a * w)
+        return out / self.areas.reshape((-1,) + (1,) * (a.ndim - 1))
+
+    def spread(self, per_cluster) -> np.ndarray:
+        """(P, ...) each piece's cluster value."""
+        return np.asarray(per_cluster)[self.of]
+
+    def with_materials(self, pieces: PatchSet) -> "Clusters":
+        """The same grouping with reflectivity and emission read again from ``pieces``."""
+        return Clusters(self.of, self.centers, self.normals, self.areas,
+                        self.mean(pieces.rho, pieces.areas), self.mean(pieces.emission, pieces.areas),
+                        self.owner)
+
+
+def _small(pieces: PatchSet, size) -> np.ndarray:
+    """(P,) pieces that are whole input faces (not cut to the patch size) or whose every edge is
+    shorter than half ``size``: those are grouped; pieces cut from a coarse face already have the
+    patch size."""
+    face = pieces.owner.astype(np.int64) * (1 << 32) + pieces.source_face
+    whole = np.unique(face, return_inverse=True, return_counts=True)
+    uncut = whole[2][whole[1].reshape(-1)] == 1
+    c = pieces.corners()
+    edges = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
+    return uncut | (edges < 0.5 * size)
+
+
+def _normal_bins(normals, max_angle):
+    """(P,) int64 cube-map cell of each normal, cells about ``max_angle`` degrees wide."""
+    axis = np.abs(normals).argmax(axis=1)
+    sign = np.take_along_axis(normals, axis[:, None], axis=1)[:, 0] >= 0
+    face = axis * 2 + sign
+    uv = np.zeros((len(normals), 2))
+    for a in range(3):
+        sel = axis == a
+        others = [k for k in range(3) if k != a]
+        uv[sel] = normals[sel][:, others] / np.abs(normals[sel, a])[:, None]
+    step = np.tan(np.radians(max_angle))
+    cells = int(np.ceil(2.0 / step))
+    ij = np.clip(np.floor((uv + 1.0) / step), 0, cells - 1).astype(np.int64)
+    return (face * cells + ij[:, 0]) * cells + ij[:, 1]
+
+
+def _components(keys, polys):
+    """(P,) label of each piece's connected component (through shared vertices) among pieces
+    of equal key: label propagation with pointer jumping, all edges at once."""
+    p, c = np.nonzero(polys >= 0)
+    v = polys[p, c]
+    # pieces meeting at a vertex, within the same key: link consecutive ones
+    order = np.lexsort((p, keys[p], v))
+    v, p = v[order], p[order]
+    same = (v[1:] == v[:-1]) & (keys[p][1:] == keys[p][:-1])
+    a, b = p[:-1][same], p[1:][same]
+    label = np.arange(len(keys))
+    while True:
+        m = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, m)
+        np.minimum.at(new, b, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            return label
+        label = new
+
+
+def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None) -> Clusters | None:
+    """Group ``pieces`` into clusters of about ``size`` (see the module docstring); None when no
+    two pieces would be grouped (every patch is its own piece).
+
+    ``material``: (P,) int material id per piece (default: equal reflectivity and emission)."""
+    if not size or len(pieces) == 0:
+        return None
+    small = _small(pieces, size)
+    if small.sum() < 2:
+        return None
+    if material is None:
+        material = np.unique(np.hstack([pieces.rho, pieces.emission]), axis=0, return_inverse=True)[1]
+    lo = pieces.verts.min(axis=0)
+    cell = np.floor((pieces.centers - lo) / size).astype(np.int64)
+    parts = np.stack([pieces.owner.astype(np.int64), np.asarray(material, np.int64).reshape(-1),
+                      _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)
+    # a piece that is not small keys on its own index: it stays alone
+    parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
+    key = np.unique(parts, axis=0, return_inverse=True)[1].reshape(-1)
+    label = _components(key, pieces.polys)
+    of = np.unique(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
+    if of.max() + 1 == len(pieces):
+        return None
+    return _make(pieces, of)
+
+
+def _make(pieces: PatchSet, of) -> Clusters:
+    K = int(of.max()) + 1
+    a = pieces.areas
+    areas = np.bincount(of, weights=a, minlength=K)
+    single = np.bincount(of, minlength=K) == 1
+
+    def mean(x):
+        s = np.stack([np.bincount(of, weights=a * x[:, k], minlength=K) for k in range(x.shape[1])], 1)
+        return s / areas[:, None]
+
+    centroid = mean(pieces.centers)
+    n = mean(pieces.normals)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    # eye point: the centre of the piece nearest the centroid, so a curved cluster's eye is on it
+    d = np.linalg.norm(pieces.centers - centroid[of], axis=1)
+    order = np.lexsort((d, of))
+    first = order[np.r_[0, np.flatnonzero(np.diff(of[order])) + 1]]
+    centers = pieces.centers[first]
+    # a cluster of one piece is that piece exactly
+    solo = np.flatnonzero(single)
+    piece_of_solo = first[solo]
+    n[solo] = pieces.normals[piece_of_solo]
+    rho, em = mean(pieces.rho), mean(pieces.emission)
+    rho[solo], em[solo] = pieces.rho[piece_of_solo], pieces.emission[piece_of_solo]
+    areas[solo] = a[piece_of_solo]
+    return Clusters(of, centers, n, areas, rho, em, pieces.owner[first].astype(np.int32))
