@@ -29,7 +29,7 @@ __all__ = ["EXPORTERS", "export", "check_output"]
 
 
 def _glb(path, job, report):
-    export_gltf(path, job.written)
+    export_gltf(path, job.written, view_transform=job.settings.view_transform)
 
 
 def _blend(path, job, report):
