@@ -61,7 +61,7 @@ def _mesh_sources(objects, skip=()):
     out, seen = [], set(skip)
     for ob in objects:
         ob = _source_of(ob)
-        if ob is None or ob.type != "MESH" or ob.name in seen:
+        if ob is None or ob.type not in read.GEOMETRY_TYPES or ob.name in seen:
             continue
         seen.add(ob.name)
         out.append(ob)
@@ -69,7 +69,8 @@ def _mesh_sources(objects, skip=()):
 
 
 def resolve_objects(objects):
-    """Mesh objects to bake from a selection: baked copies map to their sources, no duplicates."""
+    """Objects to bake from a selection (meshes, and text, curves, surfaces and metaballs, read as
+    the meshes Blender evaluates them to): baked copies map to their sources, no duplicates."""
     return _mesh_sources(objects)
 
 
@@ -77,7 +78,7 @@ def other_meshes(context, baked):
     """Meshes a render shows that are not baked (what the render sees is what the bake uses,
     whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
     partial re-bake still sees the rest of the scene's geometry and materials."""
-    return _mesh_sources(read.render_visible_objects(context.view_layer, {"MESH"}),
+    return _mesh_sources(read.render_visible_objects(context.view_layer, read.GEOMETRY_TYPES),
                          {o.name for o in baked})
 
 
@@ -130,7 +131,9 @@ class BakeJob:
 
     @classmethod
     def prepare(cls, context, objects, settings: BakeSettings | None = None, cache=None):
-        """Read the scene. ``objects``: the selection (non-mesh objects are ignored)."""
+        """Read the scene. ``objects``: the selection (objects that are not geometry are ignored).
+        Raises :class:`RadiosityError` before any work when the result could not be written as
+        the settings ask (:func:`.read.check_writable`)."""
         settings = settings or BakeSettings()
         settings.validate()
         if settings.method.startswith("embree") and not embree_available():
@@ -138,7 +141,8 @@ class BakeJob:
                                  "install it or choose Hemi-cube")
         targets = resolve_objects(objects)
         if not targets:
-            raise RadiosityError("no mesh object selected")
+            raise RadiosityError("no mesh object selected (select meshes, text, curves or metaballs)")
+        write_notes = read.check_writable(targets, settings)   # refuse now, not after the work
         others = other_meshes(context, targets) if settings.include_others else []
         depsgraph = context.evaluated_depsgraph_get()
         t = time.perf_counter()
@@ -150,7 +154,7 @@ class BakeJob:
             lights, world, light_notes = read_lights(depsgraph)
             scene_input.lights, scene_input.world = tuple(lights), world
         job = cls(scene_input, settings)
-        job.notes += light_notes
+        job.notes += write_notes + light_notes
         job.cache = cache if cache is not None else session_cache(settings.cache_dir)
         job.timings["read"] = time.perf_counter() - t
         return job

@@ -49,11 +49,20 @@ from . import shading
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
            "read_scene", "weld_corners", "RHO_MAX", "render_visible_objects", "is_render_visible",
-           "world_matrix"]
+           "world_matrix", "GEOMETRY_TYPES", "check_writable"]
 
 RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
 COPLANAR_COS = float(np.cos(1e-3))
 DEFAULT_RHO = (0.8, 0.8, 0.8)
+
+# Object types a render draws as surfaces: meshes, and text, curves, surfaces and metaballs, which
+# are read as the mesh Blender evaluates them to (a text object is geometry to an artist). A curve
+# without bevel, extrusion or fill (a guide), or a metaball whose surface belongs to its family's
+# base object, has no faces: it is left out with a note.
+GEOMETRY_TYPES = frozenset({"MESH", "FONT", "CURVE", "SURFACE", "META"})
+_TYPE_NAMES = {"FONT": "text", "CURVE": "curve", "SURFACE": "surface", "META": "metaball"}
+# attribute names Blender keeps for itself (fixed type and domain) on every mesh
+_RESERVED_ATTRIBUTES = frozenset({"position", "material_index", "sharp_face", "sharp_edge"})
 
 
 class ReadError(RadiosityError, ValueError):
@@ -82,13 +91,14 @@ class SceneInput:
     objects: list
     lights: tuple = ()        # core.lights objects, filled by blender.lights.read_lights
     world: object = None
+    skipped: list = field(default_factory=list)   # notes of objects left out ("name: why")
 
     @property
     def meshes(self):
         return [o.mesh for o in self.objects]
 
     def notes(self):
-        return [f"{o.name}: {n}" for o in self.objects for n in o.notes]
+        return list(self.skipped) + [f"{o.name}: {n}" for o in self.objects for n in o.notes]
 
 
 # ----------------------------------------------------------------------------- materials
@@ -166,7 +176,7 @@ def _shader(node, out_socket, mat, notes, depth=0):
         if strength < 0 and np.any(em > 0):
             # Cycles clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
             notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light (as in Cycles)")
-            strength = 0.0
+            return rho, zero
         _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
         return rho, em * strength
     if t == "BSDF_DIFFUSE":
@@ -179,7 +189,7 @@ def _shader(node, out_socket, mat, notes, depth=0):
             # the solve needs emission >= 0
             notes.append(f"{node.name} Strength {strength:g} is negative: Cycles subtracts light there, "
                          "this bake takes it as no light")
-            strength = 0.0
+            return zero, zero
         _note_unlit(node, em, strength, "Color", "Strength", notes)
         return zero, em * strength
     if t in ("MIX_SHADER", "ADD_SHADER"):
@@ -247,6 +257,13 @@ def material_rho_emission(mat):
                     notes += [f"material '{mat.name}': {s}" for s in sub]
     rho = np.asarray(rho, float)
     em = np.asarray(em, float)
+    where = f" in '{mat.name}'" if mat is not None else ""
+    for what, v in (("reflectivity", rho), ("emission", em)):
+        if not np.all(np.isfinite(v)):
+            notes.append(f"{what} {_fmt(v)} is not a number{where}: taken as 0 there, as Cycles "
+                         "does; fix the value")
+    rho = np.where(np.isfinite(rho), rho, 0.0)
+    em = np.where(np.isfinite(em), em, 0.0)
     if np.any(em < 0):
         notes.append(f"negative emission {tuple(np.round(em, 3))} taken as no light"
                      + (f" in '{mat.name}'" if mat is not None else ""))
@@ -313,12 +330,18 @@ def _fmt(c):
 
 
 def _clean(rho, em, label, notes):
-    """Cycles' values made what the solve needs: emission >= 0, reflectance in [0, RHO_MAX]."""
+    """Cycles' values made what the solve needs: finite, emission >= 0, reflectance in [0, RHO_MAX]."""
+    if not (np.all(np.isfinite(rho)) and np.all(np.isfinite(em))):
+        notes.append(f"{label}: Cycles evaluates it to a value that is not a number at some corners; "
+                     "taken as 0 there")
+        rho = np.where(np.isfinite(rho), rho, 0.0)
+        em = np.where(np.isfinite(em), em, 0.0)
     if np.any(em < 0):
         notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
                      "subtracts light there, this bake takes it as no light")
         em = np.maximum(em, 0.0)
     if np.any(rho > RHO_MAX + 1e-6) or np.any(rho < 0):
+        notes[:] = [s for s in notes if not (s.startswith("reflectivity (") and "clipped to" in s)]
         notes.append(f"{label}: reflectivity up to {float(np.max(rho)):.3g} clipped to [0, {RHO_MAX}]")
     return np.clip(rho, 0.0, RHO_MAX), em
 
@@ -506,10 +529,13 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
     :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
     object alone)."""
-    if obj.type != "MESH":
-        raise ReadError(f"'{obj.name}' is not a mesh object")
+    if obj.type not in GEOMETRY_TYPES:
+        raise ReadError(f"'{obj.name}' is not a mesh object (it is a {obj.type.lower()})")
     ob_eval = obj.evaluated_get(depsgraph)
     me = ob_eval.to_mesh()
+    if me is None:
+        raise ReadError(f"'{obj.name}' has no faces: Blender gives no mesh for this "
+                        f"{_TYPE_NAMES.get(obj.type, 'object')}")
     try:
         co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
         counts = (len(me.vertices), len(me.loops), len(me.polygons))
@@ -517,8 +543,18 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     finally:
         ob_eval.to_mesh_clear()
     if ps.size == 0:
-        raise ReadError(f"'{obj.name}' has no faces")
+        raise ReadError(f"'{obj.name}' has no faces" + _no_faces_why(obj))
+    used = np.zeros(len(co), bool)
+    used[lv] = True
+    bad = np.flatnonzero(used & ~np.all(np.isfinite(co), axis=1))
+    if bad.size:
+        raise ReadError(f"'{obj.name}': {bad.size} vertex position(s) are not finite (NaN or "
+                        f"infinity), first vertex {int(bad[0])}: fix or delete them")
     M = world_matrix(obj, depsgraph)
+    if not np.all(np.isfinite(M)):
+        raise ReadError(f"'{obj.name}': its transform is not finite (NaN or infinity in location, "
+                        "rotation or scale)")
+    co[~used] = 0.0      # loose vertices are not read; a NaN there must not spread
     verts_w = co @ M[:3, :3].T + M[:3, 3]
     det = float(np.linalg.det(M[:3, :3]))
     if abs(det) < 1e-300:
@@ -550,10 +586,66 @@ def read_scene(depsgraph, objects, others=()) -> SceneInput:
     """``objects`` are baked; ``others`` take part as occluders/emitters only. The materials that
     Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`)."""
     shaded = shading.shade(list(objects) + list(others), depsgraph)
-    out = [read_object(o, depsgraph, True, shaded) for o in objects]
+    out, skipped = [], []
+    for o in objects:
+        try:
+            out.append(read_object(o, depsgraph, True, shaded))
+        except ReadError as ex:
+            if o.type == "MESH" or "has no faces" not in str(ex):
+                raise
+            # a guide curve, a metaball whose surface is its family's: nothing to bake here
+            skipped.append(f"{ex}; left out")
+    if objects and not any(s.bake for s in out):
+        raise ReadError(skipped[0].rsplit(";", 1)[0] if len(skipped) == 1 else
+                        "none of the selected objects has faces: "
+                        + ", ".join(repr(o.name) for o in objects))
     for o in others:
         try:
             out.append(read_object(o, depsgraph, False, shaded))
         except ReadError:
             continue  # an occluder without faces simply does not occlude
-    return SceneInput(out)
+    return SceneInput(out, skipped=skipped)
+
+
+def _no_faces_why(obj):
+    """Why a non-mesh object evaluated to no faces, for its error line or note."""
+    if obj.type in ("CURVE", "FONT"):
+        return " (a curve without bevel, extrusion or fill makes no surface)" if obj.type == "CURVE" else ""
+    if obj.type == "META":
+        return " (a metaball's surface belongs to its family's base object, the one without a number)"
+    return ""
+
+
+def check_writable(objects, settings):
+    """Raise :class:`ReadError` naming the object when the bake's result could not be written
+    the way ``settings`` asks, before any work (so a refused bake changes nothing); returns the
+    notes to add (an existing colour attribute replaced in place)."""
+    name = settings.attribute_name
+    if not name.strip():
+        raise ReadError("the attribute name is empty: give the colour attribute a name")
+    if name.startswith(".") or name in _RESERVED_ATTRIBUTES:
+        raise ReadError(f"the attribute name '{name}' is one Blender keeps for itself; choose another")
+    notes = []
+    if settings.output_mode != "in_place":
+        return notes
+    for ob in objects:
+        if ob.type != "MESH":
+            raise ReadError(f"'{ob.name}' is a {_TYPE_NAMES.get(ob.type, ob.type.lower())} object: "
+                            "in place writes to a mesh; bake it as a copy (Output: Baked Copy)")
+        lib = ob.library or ob.data.library
+        if lib is not None or ob.override_library is not None:
+            where = f" from library '{lib.name}'" if lib is not None else " (a library override)"
+            raise ReadError(f"'{ob.name}' is linked{where}, read-only here: bake it as a copy "
+                            "(Output: Baked Copy), or make it local to bake in place")
+        me = ob.data
+        attr = me.attributes.get(name)
+        if attr is None:
+            continue
+        if me.color_attributes.get(name) is None:
+            raise ReadError(f"mesh '{me.name}' of '{ob.name}' already has a non-colour attribute "
+                            f"named '{name}' ({attr.data_type} on {attr.domain.lower()}s): choose "
+                            "another attribute name, or rename or remove it")
+        if (attr.data_type, attr.domain) != ("FLOAT_COLOR", "CORNER"):
+            notes.append(f"{ob.name}: its colour attribute '{name}' ({attr.data_type} on "
+                         f"{attr.domain.lower()}s) is replaced by the bake's (FLOAT_COLOR on corners)")
+    return notes
