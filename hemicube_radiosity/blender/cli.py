@@ -41,8 +41,8 @@ from .. import __version__
 from ..core.errors import RadiosityError
 from ..core.settings import BakeSettings, schema
 from .bake import BakeJob, StagePrinter
-from .export import EXPORTERS, check_output, export
-from .read import render_visible_objects
+from .export import EXPORTERS, check_output, export, operator_error_reason
+from .read import GEOMETRY_TYPES, render_visible_objects
 
 __all__ = ["main", "build_parser", "CLIError"]
 
@@ -187,22 +187,22 @@ def load_input(path):
         else:
             bpy.ops.import_scene.gltf(filepath=path)
     except RuntimeError as ex:
-        reason = str(ex).strip().splitlines()[0] if str(ex).strip() else "unreadable"
-        raise CLIError(f"cannot read {path}: {reason}") from None
+        raise CLIError(f"cannot read {path}: {operator_error_reason(ex, path)} (is it a complete, "
+                       f"undamaged {ext} file?)") from None
 
 
-def _select_objects(names):
+def _select_objects(names, input_path="the input"):
     if not names:
-        objs = render_visible_objects(bpy.context.view_layer, {"MESH"})
+        objs = render_visible_objects(bpy.context.view_layer, GEOMETRY_TYPES)
         if not objs:
-            raise CLIError("no mesh objects that a render shows in the input")
+            raise CLIError(f"no mesh objects that a render shows in {input_path}")
         return objs
     out = []
     for n in names:
         o = bpy.data.objects.get(n)
         if o is None:
             raise CLIError(f"no object named {n!r} in the input")
-        if o.type != "MESH":
+        if o.type not in GEOMETRY_TYPES:
             raise CLIError(f"{n!r} is not a mesh object (it is a {o.type.lower()})")
         out.append(o)
     return out
@@ -253,9 +253,14 @@ def cmd_bake(args, out):
     outputs = _outputs(args)
     if not outputs and not args.report:
         raise CLIError("nothing would be written: give -o OUTPUT (" + ", ".join(EXPORTERS) + ")", 2)
+    source = os.path.realpath(args.input)
+    for p in (*outputs, args.report):
+        if p and os.path.realpath(p) == source:
+            raise CLIError(f"the output {p} would overwrite the input: write to another file", 2)
     load_input(args.input)
     t_loaded = time.perf_counter()
-    job = BakeJob.prepare(bpy.context, _select_objects(args.objects), settings, cache=_cache(settings))
+    objects = _select_objects(args.objects, os.path.abspath(args.input))
+    job = BakeJob.prepare(bpy.context, objects, settings, cache=_cache(settings))
     job.timings["load"] = t_loaded - t_start
     _bake_and_write(job, args, outputs, out, t_start, input=os.path.abspath(args.input))
     return job

@@ -11,13 +11,17 @@ and scripts.
 =========  ==========================================================================
 
 A single-file output is written under a temporary name beside the target and renamed when
-complete, so a failed write (a full disk) never leaves a half-written file under the final name.
+complete (a ``.gltf`` and its ``.bin``: in a temporary folder beside it, moved out when both are
+complete), so a failed write (a full disk) never leaves a half-written file under the final name;
+the failure is one :class:`RadiosityError` line naming the file.
 To add a format: one writer function and one row in :data:`EXPORTERS` (and its test).
 """
 from __future__ import annotations
 
 import json
 import os
+import re
+import shutil
 
 import bpy
 import numpy as np
@@ -25,7 +29,7 @@ import numpy as np
 from ..core.errors import RadiosityError
 from .gltf import export_gltf
 
-__all__ = ["EXPORTERS", "export", "check_output"]
+__all__ = ["EXPORTERS", "export", "check_output", "operator_error_reason"]
 
 
 def _glb(path, job, report):
@@ -68,23 +72,80 @@ def check_output(path):
     return ext
 
 
+def operator_error_reason(ex, path=None):
+    """One line saying why a Blender operator (an importer, an exporter, save) failed: its
+    ``RuntimeError`` text without the ``Error:`` prefix, or, when a Python importer/exporter
+    crashed, the last line of the traceback it carries (``OSError: [Errno 28] No space left on
+    device`` -> ``No space left on device``). ``path`` is left out of the reason (the caller's
+    line names it once)."""
+    lines = [ln.strip() for ln in str(ex).strip().splitlines() if ln.strip()]
+    lines = [ln for ln in lines if not ln.startswith("Location:")]
+    if not lines:
+        return "failed"
+    line = lines[-1] if "Traceback (most recent call last)" in lines[0] else lines[0]
+    for prefix in ("Error:", "Python:"):
+        if line.startswith(prefix):
+            line = line[len(prefix):].strip()
+    if "Error: " in line and line.split("Error: ", 1)[0].replace(".", "").isidentifier():
+        kind, line = line.split("Error: ", 1)          # OSError: ..., TypeError: ...
+        if kind not in ("OS", "IO", "FileNotFound", "Permission", "IsADirectory"):
+            line = f"{kind}Error: {line}"
+    line = re.sub(r"^\[Errno \d+\]\s*", "", line)
+    if path is not None:
+        for quoted in (f'"{path}"', f"'{path}'", path):
+            line = line.replace(f" in file {quoted}", "").replace(f" {quoted}", "")
+        # Blender's "Loading X failed: Failed to read blend file X: <why>": keep <why>
+        line = line.rsplit("failed: ", 1)[-1].rsplit(": ", 1)[-1] if "failed: " in line else line
+    return line.strip() or "failed"
+
+
+def _fail(path, ex):
+    reason = ex.strerror if isinstance(ex, OSError) and ex.strerror else operator_error_reason(ex)
+    return RadiosityError(f"could not write {path}: {reason}")
+
+
 def export(path, job, report=None) -> str:
     """Write ``job``'s result to ``path`` in the format its extension names; returns the absolute
-    path. ``report``: the dict a ``.json`` output holds (default ``job.report()``)."""
+    path. ``report``: the dict a ``.json`` output holds (default ``job.report()``).
+
+    Nothing is left under the final name unless the write completed: a single file is written as
+    ``NAME.partial-PID.EXT`` and renamed; a ``.gltf`` and its ``.bin`` are written into a
+    temporary folder beside the target and moved out (the ``.bin`` first, the ``.gltf`` last)
+    when both are complete. A full disk, a missing permission or a failing exporter is one
+    :class:`RadiosityError` line naming the file."""
     writer, _, single_file = EXPORTERS[check_output(path)]
     path = os.path.abspath(path)
-    os.makedirs(os.path.dirname(path), exist_ok=True)
+    try:
+        os.makedirs(os.path.dirname(path), exist_ok=True)
+    except OSError as ex:
+        raise _fail(path, ex) from None
     if not single_file:
-        writer(path, job, report)
-        return path
+        return _export_folder(writer, path, job, report)
     stem, ext = os.path.splitext(path)
     tmp = f"{stem}.partial-{os.getpid()}{ext}"
     try:
         writer(tmp, job, report)
         os.replace(tmp, path)
-    except OSError as ex:
-        raise RadiosityError(f"could not write {path}: {ex.strerror or ex}") from None
+    except (OSError, RuntimeError) as ex:   # RuntimeError: Blender's exporter or save failed
+        raise _fail(path, ex) from None
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+    return path
+
+
+def _export_folder(writer, path, job, report):
+    """A multi-file output (.gltf + .bin): written in a temporary folder, then moved in place."""
+    folder, name = os.path.split(path)
+    tmp_dir = os.path.join(folder, f".{name}.partial-{os.getpid()}")
+    try:
+        os.makedirs(tmp_dir, exist_ok=True)
+        writer(os.path.join(tmp_dir, name), job, report)
+        files = sorted(os.listdir(tmp_dir), key=lambda f: f == name)   # the .gltf last
+        for f in files:
+            os.replace(os.path.join(tmp_dir, f), os.path.join(folder, f))
+    except (OSError, RuntimeError) as ex:
+        raise _fail(path, ex) from None
+    finally:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
     return path
