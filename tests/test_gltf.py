@@ -117,6 +117,16 @@ def test_agx_export_keeps_radiance_and_maps_color0_below_white(addon, baked_corn
     assert 0.8 < lc0.min() and lc0.max() < 1.0          # 12 is bright but not clipped in AgX
 
 
+def test_element_copies_have_no_texcoords(addon, baked_cornell, tmp_path):
+    """Element-mesh copies (the Cornell box's walls, cut finer) have no UV maps: none is written."""
+    assert all(len(o.data.uv_layers) == 0 for o in baked_cornell)
+    path = sub(addon, "blender.gltf").export_gltf(tmp_path / "cornell_uv.glb", baked_cornell)
+    doc, _ = read_gltf(path)
+    for mesh in doc["meshes"]:
+        for prim in mesh["primitives"]:
+            assert "COLOR_0" in prim["attributes"] and "TEXCOORD_0" not in prim["attributes"]
+
+
 # view transform -> (Blender's view, max mean |difference| and max |difference| in 8-bit levels)
 BLENDER_VIEWS = {"standard": ("Standard", 0.01, 1), "khronos_neutral": ("Khronos PBR Neutral", 0.6, 8),
                  "agx": ("AgX", 4.5, 50)}
@@ -182,3 +192,8 @@ def test_in_place_bake_exports_its_attribute_not_white(addon, empty_scene, tmp_p
     assert floor.data.materials[0].name == "Plain" and len(bpy.data.meshes) == 2
     assert bcol.max() > 0.05 and np.ptp(bcol) > 0.01
     assert_colors_match(gpos, gcol, bpos, bcol)
+    # the plane's UV map is exported (texcoords are on when a mesh has UVs), unless turned off
+    assert all("TEXCOORD_0" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])
+    path = sub(addon, "blender.gltf").export_gltf(tmp_path / "floor_no_uv.glb", [floor], export_texcoords=False)
+    doc, _ = read_gltf(path)
+    assert not any("TEXCOORD_0" in p["attributes"] for m in doc["meshes"] for p in m["primitives"])

@@ -16,6 +16,9 @@
   would then write COLOR_0 as clamped 16-bit RGBA, and a lit material would be multiplied by
   the baked light a second time. Such objects are exported through a temporary stand-in (a copy
   of the mesh with the bake material, under the object's name), removed again afterwards.
+* UVs: ``export_texcoords`` is None ('auto') by default: TEXCOORD_n are written when an exported
+  mesh has UV maps (a baked copy that keeps the user's topology keeps their UVs, so a pipeline can
+  multiply a texture by the baked light at run time), and left out otherwise.
 Options missing from an older exporter are skipped.
 """
 from __future__ import annotations
@@ -35,7 +38,7 @@ EXPORT_OPTIONS = dict(
     export_vertex_color="ACTIVE",
     export_all_vertex_colors=False,
     export_active_vertex_color_when_no_material=True,
-    export_texcoords=False,
+    export_texcoords=None,     # auto: on when an exported mesh has UV maps
     export_normals=True,
     export_yup=True,
     export_extras=False,
@@ -76,7 +79,10 @@ def export_gltf(filepath, objects, view_transform="standard", **overrides):
     fmt = "GLB" if filepath.lower().endswith(".glb") else "GLTF_SEPARATE"
     os.makedirs(os.path.dirname(filepath), exist_ok=True)
     names = set(bpy.ops.export_scene.gltf.get_rna_type().properties.keys())
-    opts = {k: v for k, v in {**EXPORT_OPTIONS, **overrides}.items() if k in names}
+    opts = {**EXPORT_OPTIONS, **overrides}
+    if opts.get("export_texcoords") is None:
+        opts["export_texcoords"] = any(o.type == "MESH" and len(o.data.uv_layers) > 0 for o in objects)
+    opts = {k: v for k, v in opts.items() if k in names}
     view_layer = bpy.context.view_layer
     before = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
