@@ -1,13 +1,23 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Core result -> Blender data: baked copies, or the attribute written in place.
 
-Copy mode (default, non-destructive): one new object per baked object, holding the patch mesh
-(the object's patches in its own local space, same world matrix), a FLOAT_COLOR corner attribute
-(set as active and render colour) with the vertex radiosities, and a material that shows that
-attribute (the colour wired straight into the output: Cycles/EEVEE render it as emission, the glTF
-exporter writes KHR_materials_unlit). Copies live in the "Radiosity" collection; each remembers
-its source in ``obj["radiosity_source"]``. The originals are hidden (viewport and render), never
-deleted or edited. Re-baking an object removes its previous copy first.
+Copy mode (default, non-destructive): one new object per baked object (same world matrix), a
+FLOAT_COLOR corner attribute (set as active and render colour) with the vertex radiosities, and a
+material that shows that attribute (the colour wired straight into the output: Cycles/EEVEE render
+it as emission, the glTF exporter writes KHR_materials_unlit). Its mesh is either
+
+* the user's own mesh, as evaluated (modifiers applied, in the evaluated mesh's local space), when
+  the bake did not cut the object's faces: every source face gave at most max(1, corners - 2)
+  output elements (a quad may be split into two triangles) and every face corner is an element
+  vertex. Topology, UV maps, custom normals, sharp edges and other attributes are kept (each
+  material slot shows the bake material; the UVs stay for a texture multiplied at run time);
+  ``obj["radiosity_mesh"] == "source"``;
+* otherwise the element mesh (the object's output elements in its own local space, rebuilt from
+  the bake's arrays: no UVs or attributes of the user's), ``obj["radiosity_mesh"] == "elements"``.
+
+Copies live in the "Radiosity" collection; each remembers its source in
+``obj["radiosity_source"]``. The originals are hidden (viewport and render), never deleted or
+edited. Re-baking an object removes its previous copy first.
 
 In-place mode: the attribute goes on the original mesh, one value per face corner: the vertex
 radiosity at that corner (where patches are finer than faces, the detail inside a face is lost;
@@ -28,6 +38,7 @@ __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write
 
 COLLECTION_NAME = "Radiosity"
 SOURCE_KEY = "radiosity_source"
+MESH_KIND_KEY = "radiosity_mesh"     # on a copy: "source" (the user's topology) or "elements"
 MATERIAL_PREFIX = "Radiosity Bake"
 
 
@@ -142,26 +153,20 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     coll = _collection(scene)
     mat = baked_material(attribute_name)
     scale = 2.0 ** float(exposure)
+    depsgraph = context.evaluated_depsgraph_get()
     out = []
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
             continue
-        local, loop_vert, starts, colors, _ = patch_mesh_arrays(
-            result.elements, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
-        me = bpy.data.meshes.new(f"{src.name}.radiosity")
-        me.vertices.add(len(local))
-        me.vertices.foreach_set("co", local.astype(np.float32).ravel())
-        me.loops.add(len(loop_vert))
-        me.loops.foreach_set("vertex_index", loop_vert.astype(np.int32))
-        me.polygons.add(len(starts))
-        me.polygons.foreach_set("loop_start", starts.astype(np.int32))
-        me.update(calc_edges=True)
-        _set_color_attribute(me, attribute_name, colors * scale)
-        me.materials.append(mat)
+        me = _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat)
+        kind = "source" if me is not None else "elements"
+        if me is None:
+            me = _element_mesh(result, oi, src, attribute_name, scale, mat)
         me[SOURCE_KEY] = src.name
         ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
         ob.matrix_world = _matrix(src.matrix_world)
         ob[SOURCE_KEY] = src.name
+        ob[MESH_KIND_KEY] = kind
         coll.objects.link(ob)
         orig = bpy.data.objects.get(src.name)
         if orig is not None:
@@ -181,6 +186,68 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
         src_active = active.name if active is not None else None
         vl.objects.active = next((o for o in out if o[SOURCE_KEY] == src_active), out[0])
     return out
+
+
+def _element_mesh(result, oi, src, attribute_name, scale, mat):
+    """A new mesh of object ``oi``'s output elements (local space), with the attribute."""
+    local, loop_vert, starts, colors, _ = patch_mesh_arrays(
+        result.elements, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
+    me = bpy.data.meshes.new(f"{src.name}.radiosity")
+    me.vertices.add(len(local))
+    me.vertices.foreach_set("co", local.astype(np.float32).ravel())
+    me.loops.add(len(loop_vert))
+    me.loops.foreach_set("vertex_index", loop_vert.astype(np.int32))
+    me.polygons.add(len(starts))
+    me.polygons.foreach_set("loop_start", starts.astype(np.int32))
+    me.update(calc_edges=True)
+    _set_color_attribute(me, attribute_name, colors * scale)
+    me.materials.append(mat)
+    return me
+
+
+def faces_uncut(P, oi, src):
+    """True when the bake kept object ``oi``'s faces as its output: every source face gave at
+    most max(1, corners - 2) elements (a quad split into two triangles is not cut)."""
+    sizes = np.diff(src.mesh.face_offsets)
+    per_face = np.bincount(P.source_face[P.owner == oi].astype(np.int64), minlength=sizes.size)
+    return per_face.size == sizes.size and bool(np.all(per_face <= np.maximum(1, sizes - 2)))
+
+
+def _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat):
+    """A copy of the user's evaluated mesh carrying the attribute, or None where the bake cut the
+    object's faces finer (or the evaluated mesh is no longer the one that was read)."""
+    P = result.elements
+    if not faces_uncut(P, oi, src):
+        return None
+    vids = _corner_vertices(P, oi, src)
+    if np.any(vids < 0):
+        return None
+    obj = bpy.data.objects.get(src.name)
+    if obj is None or obj.type != "MESH":
+        return None
+    try:
+        me = bpy.data.meshes.new_from_object(obj.evaluated_get(depsgraph),
+                                             preserve_all_data_layers=True, depsgraph=depsgraph)
+    except RuntimeError:
+        return None
+    if (len(me.vertices), len(me.loops), len(me.polygons)) != tuple(src.eval_counts) or \
+            len(me.loops) != src.corner_loop.size:
+        bpy.data.meshes.remove(me)            # the scene changed since it was read
+        return None
+    me.name = f"{src.name}.radiosity"
+    loop_rgb = np.zeros((len(me.loops), 3))
+    loop_rgb[src.corner_loop] = result.vertex_radiosity[vids]
+    try:
+        _set_color_attribute(me, attribute_name, loop_rgb * scale)
+    except WriteError:                        # a non-colour attribute of that name: keep it
+        bpy.data.meshes.remove(me)
+        return None
+    # every slot shows the bake (material indices, hence the user's slot layout, are kept)
+    slots = max(1, len(me.materials))
+    me.materials.clear()
+    for _ in range(slots):
+        me.materials.append(mat)
+    return me
 
 
 def _matrix(m):
@@ -223,25 +290,40 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
     return written, notes
 
 
-def _corner_values(P, oi, src, vertex_radiosity):
-    """Vertex radiosity at every source-face corner (order of src.mesh.face_indices)."""
+def _corner_vertices(P, oi, src):
+    """Element vertex at every source-face corner (order of src.mesh.face_indices): the vertex of
+    one of that face's elements at exactly the corner's position; -1 where there is none."""
     sel = np.flatnonzero(P.owner == oi)
     polys = P.polys[sel]
     faces = np.repeat(P.source_face[sel].astype(np.int64), 4)
-    vids = polys.reshape(-1)
+    vids = polys.reshape(-1).astype(np.int64)
     ok = vids >= 0
     faces, vids = faces[ok], vids[ok]
-    pos = P.verts[vids]
-    table = {}
-    for f, v, p in zip(faces.tolist(), vids.tolist(), map(bytes, pos)):
-        table[(f, p)] = v
     m = src.mesh
     sizes = np.diff(m.face_offsets)
     cf = np.repeat(np.arange(sizes.size), sizes)
     cpos = np.asarray(m.verts, float)[m.face_indices]
-    out = np.zeros((cf.size, 3))
-    for k, (f, p) in enumerate(zip(cf.tolist(), map(bytes, cpos))):
-        v = table.get((f, p))
-        if v is not None:
-            out[k] = vertex_radiosity[v]
+    keys = np.concatenate([_face_position_keys(faces, P.verts[vids]), _face_position_keys(cf, cpos)])
+    _, label = np.unique(keys, return_inverse=True)
+    label = label.reshape(-1)
+    table = np.full(label.max() + 1 if label.size else 0, -1, np.int64)
+    table[label[:vids.size]] = vids
+    return table[label[vids.size:]]
+
+
+def _face_position_keys(faces, pos):
+    """One bytes key per (face, exact float64 position) row, for exact matching."""
+    a = np.empty((len(faces), 4), np.float64)
+    a[:, 0] = faces
+    a[:, 1:] = pos
+    return np.ascontiguousarray(a).view(np.dtype((np.void, 32))).reshape(-1)
+
+
+def _corner_values(P, oi, src, vertex_radiosity):
+    """Vertex radiosity at every source-face corner (order of src.mesh.face_indices); 0 where no
+    element vertex is at the corner."""
+    vids = _corner_vertices(P, oi, src)
+    out = np.zeros((vids.size, 3))
+    found = vids >= 0
+    out[found] = vertex_radiosity[vids[found]]
     return out
