@@ -187,7 +187,7 @@ def load_input(path):
         else:
             bpy.ops.import_scene.gltf(filepath=path)
     except RuntimeError as ex:
-        raise CLIError(f"cannot read {path}: {operator_error_reason(ex, path)} (is it a complete, "
+        raise CLIError(f"cannot read {path}: {operator_error_reason(ex, path, 'importer')} (is it a complete, "
                        f"undamaged {ext} file?)") from None
 
 

@@ -72,7 +72,7 @@ def check_output(path):
     return ext
 
 
-def operator_error_reason(ex, path=None):
+def operator_error_reason(ex, path=None, what="operator"):
     """One line saying why a Blender operator (an importer, an exporter, save) failed: its
     ``RuntimeError`` text without the ``Error:`` prefix, or, when a Python importer/exporter
     crashed, the last line of the traceback it carries (``OSError: [Errno 28] No space left on
@@ -82,14 +82,17 @@ def operator_error_reason(ex, path=None):
     lines = [ln for ln in lines if not ln.startswith("Location:")]
     if not lines:
         return "failed"
-    line = lines[-1] if "Traceback (most recent call last)" in lines[0] else lines[0]
+    crashed = "Traceback (most recent call last)" in lines[0]
+    line = lines[-1] if crashed else lines[0]
     for prefix in ("Error:", "Python:"):
         if line.startswith(prefix):
             line = line[len(prefix):].strip()
     if "Error: " in line and line.split("Error: ", 1)[0].replace(".", "").isidentifier():
         kind, line = line.split("Error: ", 1)          # OSError: ..., TypeError: ...
         if kind not in ("OS", "IO", "FileNotFound", "Permission", "IsADirectory"):
-            line = f"{kind}Error: {line}"
+            line = f"Blender's {what} stopped ({kind}Error: {line})"
+    elif crashed:
+        line = f"Blender's {what} stopped ({line})"
     line = re.sub(r"^\[Errno \d+\]\s*", "", line)
     if path is not None:
         for quoted in (f'"{path}"', f"'{path}'", path):
@@ -100,7 +103,8 @@ def operator_error_reason(ex, path=None):
 
 
 def _fail(path, ex):
-    reason = ex.strerror if isinstance(ex, OSError) and ex.strerror else operator_error_reason(ex)
+    reason = (ex.strerror if isinstance(ex, OSError) and ex.strerror
+              else operator_error_reason(ex, what="exporter"))
     return RadiosityError(f"could not write {path}: {reason}")
 
 
