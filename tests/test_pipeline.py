@@ -259,3 +259,15 @@ def test_automatic_sizes_follow_the_scene_scale():
     assert len(build_patches(small, rs.patch_size)) == len(build_patches(big, rb.patch_size))
     r = bake(big, BakeSettings(resolution=16, gather_rays=0))
     assert r.settings.patch_size == pytest.approx(rb.patch_size) and len(r.elements) > 4 * len(r.patches)
+
+
+@pytest.mark.parametrize("kw", [dict(patch_size=0.2, element_size=None), dict(patch_size=0.4, element_size=0.1),
+                                dict(patch_size=0.4, element_size=0.1, gather_rays=0),
+                                dict(patch_size=0.2, element_size=None, direct="hemicube")],
+                         ids=["patches", "gathered", "interpolated", "paper"])
+def test_lighting_pass_in_the_furnace_is_the_incoming_radiance(kw):
+    """Closed room, E = 1, rho = 0.5: B = 2 everywhere, and the light arriving everywhere is the
+    radiance of what is seen, 2 (emission and the surface's own colour left out)."""
+    r = bake(closed_box(size=(1.0, 1.3, 0.8), rho=(0.5,) * 3, emission=(1.0,) * 3),
+             BakeSettings(**kw, output_pass="lighting", tolerance=1e-8, max_iterations=2000))
+    np.testing.assert_allclose(r.vertex_radiosity, 2.0, rtol=2e-3)

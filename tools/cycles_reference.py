@@ -70,10 +70,13 @@ __all__ = ["CyclesBake", "configure_cycles", "bake_vertex_radiance", "bake_secon
            "diffuse_material", "mesh_object", "grid_arrays", "add_light", "set_world"]
 
 # Outgoing diffuse radiance B = E + rho H / pi (COMBINED) or rho H / pi only (DIFFUSE).
+# LIGHTING: the Diffuse bake without Color: the light arriving, irradiance / pi.
 PASS_FILTERS = {
     "COMBINED": {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"},
     "DIFFUSE": {"DIRECT", "INDIRECT", "COLOR"},
+    "LIGHTING": {"DIRECT", "INDIRECT"},
 }
+BAKE_TYPES = {"LIGHTING": "DIFFUSE"}
 ATTRIBUTE = "_cycles_reference_bake"
 
 
@@ -178,7 +181,8 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     with bpy.context.temp_override(scene=scene, view_layer=view_layer,
                                    active_object=objects[0], object=objects[0],
                                    selected_objects=objects, selected_editable_objects=objects):
-        res = bpy.ops.object.bake(type=mode, pass_filter=PASS_FILTERS[mode], target="VERTEX_COLORS",
+        res = bpy.ops.object.bake(type=BAKE_TYPES.get(mode, mode), pass_filter=PASS_FILTERS[mode],
+                                  target="VERTEX_COLORS",
                                   use_clear=True)
     seconds = time.perf_counter() - t
     if "FINISHED" not in res:

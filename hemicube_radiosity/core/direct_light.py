@@ -24,7 +24,7 @@ from .patches import PatchSet
 from .progress import Ticker
 from .rays import embree_available, occluder
 
-__all__ = ["DirectLight", "direct_stage", "source_term"]
+__all__ = ["DirectLight", "direct_stage", "source_term", "turned_around"]
 
 
 @dataclass
@@ -49,6 +49,7 @@ class DirectLight:
     cancelled: object = None
     cache: object = None
     groups: np.ndarray | None = None
+    two_sided: bool = False
     _scene: object = field(default=None, repr=False)
 
     @classmethod
@@ -65,7 +66,17 @@ class DirectLight:
             per_face = np.unique(face, return_counts=True)[1].max()
             samples = max(1, int(settings.direct_samples) // int(per_face))
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
-                   settings.light_seed, cancelled, cache, groups)
+                   settings.light_seed, cancelled, cache, groups, settings.two_sided_emission)
+
+    def _transport(self, points, normals):
+        """The emitters' transport to ``points``: their fronts, plus their backs when two-sided
+        (the same faces turned around, so the front-only tests and shadow-ray offsets apply)."""
+        def transport(patches):
+            return emitter_transport(patches, points, normals, self.emitters, scene=self.scene(),
+                                     samples=self.samples, ticker=Ticker(None, self.cancelled),
+                                     groups=self.groups)
+        T = transport(self.patches)
+        return T + transport(turned_around(self.patches)) if self.two_sided else T
 
     def emitted(self) -> np.ndarray:
         """(M, 3) radiance of each column of the transport: per emitting patch, or the
@@ -95,16 +106,47 @@ class DirectLight:
                 pts = np.ascontiguousarray(points, dtype=np.float64)
                 grouped = b"" if self.groups is None else self.groups.tobytes()
                 key = cache_key(self.patches.geometry_key() + em.tobytes() + grouped + pts.tobytes(),
-                                ("direct", where, self.samples))
-            T = cached(self.cache if key else None, key, lambda: emitter_transport(
-                self.patches, points, normals, em, scene=self.scene(), samples=self.samples,
-                ticker=Ticker(None, self.cancelled), groups=self.groups))
+                                ("direct", where, self.samples, self.two_sided))
+            T = cached(self.cache if key else None, key, lambda: self._transport(points, normals))
             D += apply_transport(T, self.emitted())
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
                                    cancelled=self.cancelled, samples=self.light_samples,
                                    seed=self.light_seed) / np.pi
         return D
+
+
+def patch_average(patches: PatchSet, n, light_at) -> np.ndarray:
+    """(N, 3) area-weighted mean over n x n points of every patch of ``light_at(points, normals,
+    where) -> (P, 3)`` (n = 1: at the centres). The points are the centres of an n x n grid of
+    the patch's bilinear map (a triangle is a quad with two corners equal), weighted by the map's
+    area there."""
+    if n <= 1:
+        return light_at(patches.centers, patches.normals, "centres")
+    t = (np.arange(n) + 0.5) / n
+    u, v = [a.ravel()[None, :, None] for a in np.meshgrid(t, t, indexing="ij")]   # (1, n^2, 1)
+    c = patches.corners()[:, None]                                                  # (N, 1, 4, 3)
+    c0, c1, c2, c3 = c[:, :, 0], c[:, :, 1], c[:, :, 2], c[:, :, 3]
+    x = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3  # (N, n^2, 3)
+    du = (1 - v) * (c1 - c0) + v * (c2 - c3)
+    dv = (1 - u) * (c3 - c0) + u * (c2 - c1)
+    w = np.linalg.norm(np.cross(du, dv), axis=-1)                                   # (N, n^2)
+    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    N, K = x.shape[:2]
+    nrm = np.repeat(patches.normals, K, axis=0)
+    D = light_at(x.reshape(N * K, 3), nrm, f"patch-points-{n}").reshape(N, K, 3)
+    return np.einsum("nk,nkc->nc", w, D)
+
+
+def turned_around(patches: PatchSet) -> PatchSet:
+    """The same patches facing the other way: corners in reverse order, normals negated."""
+    polys = patches.polys.copy()
+    tri = polys[:, 3] < 0
+    polys[~tri] = polys[~tri][:, ::-1]
+    polys[tri, :3] = polys[tri, 2::-1]
+    return PatchSet(patches.verts, polys, patches.centers, -patches.normals, patches.areas,
+                    patches.rho, patches.emission, patches.owner, patches.source_face,
+                    list(patches.object_names))
 
 
 def source_term(patches, F, *, direct_irradiance=None, world=None) -> np.ndarray:
@@ -131,6 +173,9 @@ def direct_stage(ctx) -> None:
     p, s, u = ctx.patches, ctx.settings, ctx.unknowns
     ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters)
     if ctx.direct is None:
+        if s.two_sided_emission and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
+            ctx.notes.append("emitters light their front only with the paper's direct light "
+                             "('hemicube'); 'exact' lights both sides as Cycles does")
         if ctx.lights:
             ctx.say(0.0, f"{len(ctx.lights)} lights")
             ctx.irradiance = direct_irradiance(p, ctx.lights, cancelled=ctx.cancelled,
@@ -143,7 +188,7 @@ def direct_stage(ctx) -> None:
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
     ctx.say(0.0, f"exact direct light: {ctx.direct.emitters.size} emitting patches, "
                  f"{len(ctx.lights)} lamps")
-    ctx.direct_patch = ctx.direct.at(p.centers, p.normals, "centres")
+    ctx.direct_patch = patch_average(p, s.patch_light_points, ctx.direct.at)
     ctx.irradiance = np.pi * ctx.direct_patch
     ctx.source = (source_term(u, ctx.form_factors, world=ctx.world) - u.emission
                   + ctx.to_unknowns(p.rho * ctx.direct_patch))

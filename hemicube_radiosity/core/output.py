@@ -74,14 +74,17 @@ def _gathered(ctx, elements, rest_v, xv, nv):
     return apply_gather(G, G.sky, R_v, ctx.world)
 
 
-def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v):
-    """Light reflected more than once arriving at element vertices, times their reflectivity:
-    gathered (Embree) or the patch solution's bilinear interpolation."""
+def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None):
+    """Light reflected more than once arriving at element vertices, times their reflectivity
+    (with ``in_v``, the patches' incoming indirect light at their vertices: as it arrives, for
+    the lighting-only pass): gathered (Embree) or the patch solution's bilinear interpolation."""
     if ctx.settings.gather_rays > 0 and embree_available():
-        return rho_v * _gathered(ctx, elements, rest_v, xv, nv)
+        gathered = _gathered(ctx, elements, rest_v, xv, nv)
+        return gathered if in_v is not None else rho_v * gathered
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
                          "instead of gathering it")
+    rest_v = rest_v if in_v is None else in_v
     if elements is ctx.patches:               # faces already finer than the detail size
         return rest_v
     owner_v = np.zeros(len(elements.verts), np.int64)
@@ -104,24 +107,40 @@ def _cut_elements(ctx) -> PatchSet:
     return elements
 
 
+def _incoming(reflected, rho):
+    """(N, 3) light arriving that leaves as ``reflected``: reflected / rho (0 where rho is 0)."""
+    return np.where(rho > 0, reflected / np.where(rho > 0, rho, 1.0), 0.0)
+
+
 def vertex_stage(ctx) -> None:
-    """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts."""
-    patches = ctx.patches
+    """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts:
+    radiosity, or with ``output_pass='lighting'`` the light arriving (direct + indirect, as
+    radiance: irradiance / pi) without the surface's own colour or emission."""
+    patches, u = ctx.patches, ctx.unknowns
+    lighting = ctx.settings.output_pass == "lighting"
     weights = ctx.to_patches(exposure(ctx.form_factors))
     ctx.elements = patches
     if ctx.direct is None:
-        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.to_patches(ctx.solution.B), weights=weights)
+        B = _incoming(ctx.solution.B - u.emission, u.rho) if lighting else ctx.solution.B
+        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.to_patches(B), weights=weights)
         return
     # direct light again at every output vertex (sharp shadows, exact falloff); only the
     # smoother light reflected more than once comes from the patches (or their clusters), as in
     # the paper
     rest = ctx.reflected - ctx.to_unknowns(patches.rho * ctx.direct_patch)
     rest_v = vertex_radiosity(patches, ctx.to_patches(rest), weights=weights)
+    in_v = None
+    if lighting:
+        in_v = vertex_radiosity(patches, ctx.to_patches(_incoming(rest, u.rho)), weights=weights)
     if ctx.settings.uses_elements():
         ctx.elements = _cut_elements(ctx)
         xv, nv, rho_v = vertex_frames(ctx.elements)
-        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v)
+        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v)
     else:
         xv, nv, rho_v = vertex_frames(patches)
+        rest_v = rest_v if in_v is None else in_v
     D_vert = ctx.direct.at(xv, nv, "vertices")
-    ctx.vertex_radiosity = vertex_radiosity(ctx.elements, ctx.elements.emission) + rho_v * D_vert + rest_v
+    if lighting:
+        ctx.vertex_radiosity = D_vert + rest_v
+    else:
+        ctx.vertex_radiosity = vertex_radiosity(ctx.elements, ctx.elements.emission) + rho_v * D_vert + rest_v

@@ -28,7 +28,7 @@ import numpy as np
 from .errors import SettingsError
 
 __all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES",
-           "OUTPUT_MODES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
+           "OUTPUT_MODES", "OUTPUT_PASSES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
 
 AUTO_PATCHES_PER_DIAGONAL = 14.0   # 'auto' patch size: the scene's bounding-box diagonal / 14
 AUTO_ELEMENTS_PER_PATCH = 3.0      # 'auto' detail size: a third of the patch size
@@ -48,6 +48,13 @@ DIRECT_MODES = (
     ("exact", "Exact", "Closed-form irradiance from each emitter times the visible fraction from "
      "shadow rays, at patch centres and again at every vertex (sharp shadows)"),
     ("hemicube", "Hemi-cube", "The paper's way: emitted light goes through the form factors too"),
+)
+OUTPUT_PASSES = (
+    ("radiosity", "Radiosity", "Light leaving the surface: emission plus reflected light, the "
+     "surface's colour included (Cycles' Diffuse bake with Color)"),
+    ("lighting", "Lighting Only", "Light arriving at the surface, direct and indirect, without "
+     "the surface's own colour (Cycles' Diffuse bake without Color): for textures multiplied at "
+     "run time. Bounced light keeps the colours of the surfaces it came from"),
 )
 OUTPUT_MODES = (
     ("copy", "Baked Copy", "New objects in a 'Radiosity' collection carry the result; "
@@ -139,6 +146,16 @@ class BakeSettings:
     # -- light
     direct: str = setting("exact", "Direct Light", "How light from emitters reaches the surfaces",
                           "light", choices=DIRECT_MODES)
+    two_sided_emission: bool = setting(True, "Two-Sided Emitters", "Emissive faces light both "
+                                       "sides, as Cycles' Emission shader does (a lamp panel just "
+                                       "under a ceiling lights the ceiling too); off: the front "
+                                       "only, the paper's model. Needs exact direct light",
+                                       "light", cli="--one-sided-emission")
+    patch_light_points: int = setting(2, "Light Points per Patch", "Direct light for the solve "
+                                      "is averaged over n x n points of each patch (1: its centre "
+                                      "only, the paper's way; more: a patch next to a bright lamp "
+                                      "gets its share of it, not all or nothing)", "light",
+                                      min=1, max=8)
     direct_samples: int = setting(16, "Shadow Rays", "Shadow rays per point and emitting face "
                                   "(exact direct light)", "light", min=1, soft_max=1024)
     light_samples: int = setting(16, "Lamp Shadow Rays", "Shadow rays per point for lamps with a "
@@ -156,6 +173,8 @@ class BakeSettings:
     max_iterations: int = setting(200, "Max Iterations", "Give up after this many sweeps (or "
                                   "shots)", "solver", min=1, soft_max=10000)
     # -- output
+    output_pass: str = setting("radiosity", "Pass", "What the colour attribute holds", "output",
+                               choices=OUTPUT_PASSES)
     attribute_name: str = setting("Radiosity", "Attribute", "Name of the FLOAT_COLOR corner "
                                   "attribute", "output", cli="--attribute", maxlen=63)
     exposure: float = setting(0.0, "Exposure", "Stops: written values are radiance x 2^exposure "
