@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from .geometry import group_form_factors, jittered_grid, polygon_form_factors
+from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 
 __all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
@@ -80,7 +81,8 @@ def _visible_fraction(scene, origins, targets):
 
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
-                      seed=0, refine=3, chunk_rays=1 << 20, ticker=None, groups=None) -> np.ndarray:
+                      seed=0, refine=3, chunk_rays=1 << 20, ticker=None, groups=None,
+                      workers=1) -> np.ndarray:
     """(P, M) float32 ``T[p, m] = F(x_p -> e_m) * V(x_p, e_m)``: how much of emitter patch m's
     radiance arrives at point p. Geometry only, so a change of emission strength or colour is
     ``T @ L`` and needs no rays.
@@ -93,6 +95,9 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     ``groups``: (M,) int, emitter patches that shine as one (a lamp modelled as many faces):
     T is then (P, G), F summed over each group's patches and ``samples`` rays spread over the
     whole group by area, so the cost follows the lamps, not their faces.
+    ``workers``: threads computing chunks of points at once (0 = every core, 1 = serial); T is
+    bit-identical for any count. ``ticker`` is polled after every chunk (serial) or window of
+    ``2 * workers`` chunks.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -121,29 +126,50 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     ys = draw(samples)                                                    # (units, S, 3)
     S = ys.shape[1]
     step = max(1, min(len(points), chunk_rays // max(units * S, 1), 4096))
-    for s in range(0, len(points), step):
+
+    def first_pass(s):
+        """Form factors of chunk ``s`` and the visible fraction from the first ``samples`` rays:
+        (s, F, pi, mi, o, v, penumbra) with F unshadowed (p, units)."""
         x = points[s:s + step]
         nx = normals[s:s + step]
         if groups is None:
             F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
         else:
             F = group_form_factors(x, nx, corners, groups, patches.normals[em])  # (p, G)
-        if scene is not None:
-            vis = np.zeros(F.shape)
-            pi, mi = np.nonzero(F > 0)
-            if pi.size:
-                o = x[pi] + eps * nx[pi]                                  # (r, 3)
-                v = _visible_fraction(scene, o, ys[mi])
-                # penumbra: where some rays pass and some do not, cast ``refine`` times more
-                part = (v > 0) & (v < 1)
-                if refine > 0 and part.any():
-                    extra = draw(refine * S)
-                    v[part] = (v[part] + refine * _visible_fraction(scene, o[part], extra[mi[part]])) / (1 + refine)
-                vis[pi, mi] = v
-            F = F * vis
-        T[s:s + step] = F
+        if scene is None:
+            return s, F, None, None, None, None, None
+        pi, mi = np.nonzero(F > 0)
+        o = x[pi] + eps * nx[pi]                                          # (r, 3)
+        v = _visible_fraction(scene, o, ys[mi]) if pi.size else np.zeros(0)
+        # penumbra: where some rays pass and some do not, cast ``refine`` times more
+        part = (v > 0) & (v < 1)
+        return s, F, pi, mi, o, v, part if refine > 0 and part.any() else None
+
+    def second_pass(job):
+        (s, F, pi, mi, o, v, part), extra = job
+        if scene is None:
+            return s, F
+        if part is not None:
+            v[part] = (v[part] + refine * _visible_fraction(scene, o[part], extra[mi[part]])) / (1 + refine)
+        vis = np.zeros(F.shape)
+        vis[pi, mi] = v
+        return s, F * vis
+
+    # Chunks are independent but for ``draw``, which takes the penumbra's extra sample points
+    # from one random stream: a window of chunks runs its first pass on ``workers`` threads, then
+    # the draws are made here in chunk order (the order of the serial loop, so T is the same for
+    # any worker count), then the refinement runs on the threads.
+    workers = resolve_workers(workers)
+    starts = list(range(0, len(points), step))
+    window = 1 if workers <= 1 else 2 * workers
+    for w in range(0, len(starts), window):
+        firsts = list(ordered_map(first_pass, starts[w:w + window], workers))
+        jobs = [(f, draw(refine * S) if f[6] is not None else None) for f in firsts]
+        for s, F in ordered_map(second_pass, jobs, workers):
+            T[s:s + step] = F
         if ticker is not None:
-            ticker.tick(s + len(x), len(points))
+            last = starts[min(w + window, len(starts)) - 1]
+            ticker.tick(min(last + step, len(points)), len(points))
     return T
 
 

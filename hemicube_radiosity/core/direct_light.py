@@ -50,6 +50,7 @@ class DirectLight:
     cache: object = None
     groups: np.ndarray | None = None
     two_sided: bool = False
+    workers: int = 1                          # threads for the transport (settings.workers)
     _scene: object = field(default=None, repr=False)
 
     @classmethod
@@ -66,7 +67,8 @@ class DirectLight:
             per_face = np.unique(face, return_counts=True)[1].max()
             samples = max(1, int(settings.direct_samples) // int(per_face))
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
-                   settings.light_seed, cancelled, cache, groups, settings.two_sided_emission)
+                   settings.light_seed, cancelled, cache, groups, settings.two_sided_emission,
+                   workers=settings.workers)
 
     def _transport(self, points, normals):
         """The emitters' transport to ``points``: their fronts, plus their backs when two-sided
@@ -74,7 +76,7 @@ class DirectLight:
         def transport(patches):
             return emitter_transport(patches, points, normals, self.emitters, scene=self.scene(),
                                      samples=self.samples, ticker=Ticker(None, self.cancelled),
-                                     groups=self.groups)
+                                     groups=self.groups, workers=self.workers)
         T = transport(self.patches)
         return T + transport(turned_around(self.patches)) if self.two_sided else T
 

@@ -22,11 +22,14 @@ All rays of a batch of receivers go to Embree in one ``scene.run`` call, on the 
 """
 from __future__ import annotations
 
+from contextlib import closing
+
 import numpy as np
 
 from .geometry import cosine_directions, stratified_unit_square, tangent_frames
 from .hemicube import pixel_directions, pixel_weights, receiver_frames, receiver_ids
 from .patches import PatchSet
+from .parallel import ordered_map, resolve_workers
 from .progress import Ticker
 from .rays import embree_scene, import_embreex
 from .sparse import CSR
@@ -66,12 +69,14 @@ def _receivers(patches, clusters):
     return len(clusters), clusters.centers, clusters.normals, np.asarray(clusters.of, np.int64)
 
 
-def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled, clusters=None):
+def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancelled, clusters=None,
+               workers=1):
     """Cast every receiver's rays (built by ``local_dirs_fn(batch) -> (B, K, 3) world dirs,
     (B, K) weights``) and accumulate F rows and sky. Returns the CSR arrays (indptr, indices
     int32, data float32) and sky: batches come in receiver order and each is reduced to sorted
     unique (row, column) entries, so the rows are assembled as they come, without a global sort
-    (whose temporaries peaked at several times the size of F)."""
+    (whose temporaries peaked at several times the size of F). ``workers`` threads cast batches
+    at once (:func:`.parallel.ordered_map`: still assembled in receiver order, so bit-identical)."""
     scene = embree_scene(patches)
     n, centres, normals, column = _receivers(patches, clusters)
     eps = 1e-5 * scene.scale
@@ -81,8 +86,8 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
     counts = np.zeros(n, dtype=np.int64)
     cols_l, vals_l = [], []
     ticker.tick(0, len(recv), force=True)
-    for start in range(0, len(recv), per_batch):
-        batch = recv[start:start + per_batch]
+
+    def cast(batch):
         B = len(batch)
         dirs, w = local_dirs_fn(batch)                                   # (B,K,3), (B,K)
         K = dirs.shape[1]
@@ -92,7 +97,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         w = w.reshape(-1)
         rid = np.repeat(np.arange(B), K)
         miss = pid < 0
-        sky[batch] += np.bincount(rid[miss], weights=w[miss], minlength=B)
+        sky_b = np.bincount(rid[miss], weights=w[miss], minlength=B)
         hit = ~miss
         pid_h, rid_h, w_h = pid[hit], rid[hit], w[hit]
         front = np.einsum("ij,ij->i", dirs.reshape(-1, 3)[hit], patches.normals[pid_h]) < 0
@@ -102,10 +107,21 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         key = rid_h[ok] * n + pid_h[ok]
         uk, inv = np.unique(key, return_inverse=True)
         vals = np.bincount(inv.reshape(-1), weights=w_h[ok], minlength=uk.size)
-        counts[batch] = np.bincount(uk // n, minlength=B)
-        cols_l.append((uk % n).astype(np.int32))
-        vals_l.append(vals.astype(np.float32))
-        ticker.tick(start + B, len(recv))
+        return (batch, sky_b, np.bincount(uk // n, minlength=B), (uk % n).astype(np.int32),
+                vals.astype(np.float32))
+
+    if len(recv):
+        scene.intersect(centres[recv[:1]], normals[recv[:1]])  # commit the scene before threads share it
+    done = 0
+    batches = (recv[start:start + per_batch] for start in range(0, len(recv), per_batch))
+    with closing(ordered_map(cast, batches, resolve_workers(workers))) as results:
+        for batch, sky_b, cnt, cols, vals in results:
+            sky[batch] += sky_b
+            counts[batch] = cnt
+            cols_l.append(cols)
+            vals_l.append(vals)
+            done += len(batch)
+            ticker.tick(done, len(recv))
     indptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(counts, out=indptr[1:])
     cat = (lambda l, dt: np.concatenate(l) if l else np.zeros(0, dt))
@@ -117,7 +133,8 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
 
 
 def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
-                                 receivers=None, progress=None, cancelled=None, clusters=None) -> CSR:
+                                 receivers=None, progress=None, cancelled=None, clusters=None,
+                                 workers=1) -> CSR:
     """Form factors from rays through the hemi-cube pixel centres, weighted by the same delta
     form factors as the rasteriser (``core/hemicube.py``), in the same hemi-cube orientation
     (``rotate_seed``: None keeps the fixed frame, an int turns each receiver's hemi-cube about
@@ -126,7 +143,8 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
     ``receivers``: patch ids whose rows are computed (others stay empty). ``progress(f)`` is
     called now and then; ``cancelled()`` is polled between batches (raises ``Cancelled``).
     ``clusters``: receivers are these clusters of the patches, and F is over clusters (see
-    :func:`.hemicube.hemicube_form_factors`).
+    :func:`.hemicube.hemicube_form_factors`). ``workers``: threads casting batches of receivers
+    (0 = every core, 1 = serial); rows are bit-identical for any count.
     Raises :class:`.rays.EmbreeUnavailable` when embreex cannot be imported.
     """
     import_embreex()
@@ -140,7 +158,7 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
         return d, np.broadcast_to(weights, (len(batch), weights.size))
 
     indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, weights.size, progress, cancelled,
-                                         clusters)
+                                         clusters, workers)
     meta = {"method": "embree", "resolution": int(resolution), "rotate_seed": rotate_seed,
             "n_patches": n, "n_receivers": int(recv.size), "rays_per_receiver": int(weights.size)}
     F = CSR(indptr, cols, vals, (n, n), meta)
@@ -153,7 +171,8 @@ def embree_hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_see
 
 
 def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, seed=0,
-                                   receivers=None, progress=None, cancelled=None, clusters=None) -> CSR:
+                                   receivers=None, progress=None, cancelled=None, clusters=None,
+                                 workers=1) -> CSR:
     """Form factors from ``rays_per_patch`` cosine-distributed rays per receiver, each worth
     1/rays_per_patch (F_ij is the fraction of them whose first hit is the front of patch j).
 
@@ -179,7 +198,8 @@ def embree_stochastic_form_factors(patches: PatchSet, rays_per_patch=512, *, see
         d = np.einsum("bkc,bcj->bkj", local, frames[batch])
         return d, np.full((len(batch), k), 1.0 / k)
 
-    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled, clusters)
+    indptr, cols, vals, sky = _cast_rows(patches, recv, dirs_fn, k, progress, cancelled, clusters,
+                                         workers)
     meta = {"method": "embree_stochastic", "rays_per_patch": k, "seed": seed,
             "n_patches": n, "n_receivers": int(recv.size)}
     F = CSR(indptr, cols, vals, (n, n), meta)

@@ -28,8 +28,9 @@ def receivers_needed(patches) -> np.ndarray:
 def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progress=None,
                          cancelled=None, clusters=None) -> CSR:
     """F for ``patches`` (or their ``clusters``, every patch drawn) by ``settings.method`` (rows
-    only for ``receivers``, default all)."""
-    kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters)
+    only for ``receivers``, default all), on ``settings.workers`` threads (the same F for any)."""
+    kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters,
+              workers=getattr(settings, "workers", 1))
     if settings.method == "hemicube":
         return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed, **kw)
     if settings.method == "embree":

@@ -10,9 +10,12 @@ that hit the back of a patch see nothing.
 """
 from __future__ import annotations
 
+from contextlib import closing
+
 import numpy as np
 
 from .geometry import cosine_directions, jittered_grid, tangent_frames
+from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 from .sparse import CSR
 
@@ -64,7 +67,7 @@ def surface_values(params, polys, vertex_values, pid, y):
 
 
 def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
-                  chunk_rays=1 << 20, ticker=None):
+                  chunk_rays=1 << 20, ticker=None, workers=1):
     """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
@@ -72,7 +75,8 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
     point: one jittered-grid cosine pattern (seeded) shared by every point, in the point's
     normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
-    a relight reuses it.
+    a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
+    1 = serial); G is bit-identical for any count.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -89,7 +93,8 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
     rows, cols, vals = [], [], []
     sky = np.zeros(P)
-    for s in range(0, P, step):
+
+    def cast(s):
         x, n = points[s:s + step], normals[s:s + step]
         m = len(x)
         frames = tangent_frames(n)                                                # (m, 3, 3) rows u, v, n
@@ -98,16 +103,24 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
         pid, tfar = scene.intersect(o, d)
         pid = np.asarray(pid)
         hit = pid >= 0
-        sky[s:s + m] = (~hit).reshape(m, R).mean(axis=1)
+        sky_s = (~hit).reshape(m, R).mean(axis=1)
         f = np.flatnonzero(hit)
         f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]          # front faces only
         y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
         ids, w = surface_weights(params, patches.polys, pid[f], y)
-        rows.append(np.repeat(s + f // R, 4))
-        cols.append(ids.ravel())
-        vals.append(w.ravel() / R)
-        if ticker is not None:
-            ticker.tick(s + m, P)
+        return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R
+
+    if P:
+        scene.intersect(points[:1], normals[:1])  # commit the scene before threads share it
+    # chunks in point order whatever the worker count: G is bit-identical
+    with closing(ordered_map(cast, range(0, P, step), resolve_workers(workers))) as results:
+        for s, m, sky_s, r, c, w in results:
+            sky[s:s + m] = sky_s
+            rows.append(r)
+            cols.append(c)
+            vals.append(w)
+            if ticker is not None:
+                ticker.tick(s + m, P)
     cat = (lambda a: np.concatenate(a) if a else np.zeros(0))
     G = CSR.from_coo(cat(rows).astype(np.int64), cat(cols).astype(np.int64), cat(vals), (P, V),
                      {"rays": R, "seed": seed})

@@ -41,12 +41,14 @@ at once (so a row does not depend on which receivers are asked for).
 from __future__ import annotations
 
 import sys
+from contextlib import closing
 
 import numpy as np
 
 from .deltaff import delta_form_factors
 from .geometry import tangent_frames
 from .patches import PatchSet
+from .parallel import ordered_map, resolve_workers
 from .progress import Ticker
 from .sparse import CSR
 
@@ -765,7 +767,7 @@ def _batch_size(n, resolution, requested):
 
 
 def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None, receivers=None,
-                          progress=None, cancelled=None, batch=None, clusters=None) -> CSR:
+                          progress=None, cancelled=None, batch=None, clusters=None, workers=1) -> CSR:
     """Form-factor matrix F by the hemi-cube, one rasterised hemi-cube per receiver.
 
     Parameters
@@ -790,6 +792,10 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
         Receivers are these K clusters of the patches (their eye points and normals), and every
         patch is drawn with its cluster's id: F is (K, K) over clusters while visibility sees
         every patch. None: every patch is its own receiver.
+    workers : int
+        Threads drawing batches of receivers at once (:func:`.parallel.resolve_workers`: 0 = every
+        core, 1 = in the calling thread). Batches are assembled in receiver order, so F is
+        bit-identical for any count; ``progress`` and ``cancelled`` stay on the calling thread.
 
     Returns
     -------
@@ -810,16 +816,25 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     sky = np.zeros(n, dtype=np.float32)
     counts = np.zeros(n + 1, dtype=np.int64)
     cols_l, vals_l = [], []
-    for lo in range(0, recv.size, B):
-        ids = recv[lo:lo + B]
+
+    def rows_of(ids):
         keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
         rows, sky_b = _resolve(keys, scene.weights, n, scene.item_of)
         r, c = np.nonzero(rows)
-        counts[ids + 1] = np.bincount(r, minlength=ids.size)
-        cols_l.append(c.astype(np.int32))
-        vals_l.append(rows[r, c].astype(np.float32))
-        sky[ids] = sky_b
-        ticker.tick(lo + ids.size, recv.size)
+        return ids, np.bincount(r, minlength=ids.size), c.astype(np.int32), \
+            rows[r, c].astype(np.float32), sky_b
+
+    batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
+    done = 0
+    # batches in receiver order whatever the worker count: F is bit-identical
+    with closing(ordered_map(rows_of, batches, resolve_workers(workers))) as results:
+        for ids, cnt, cols, vals, sky_b in results:
+            counts[ids + 1] = cnt
+            cols_l.append(cols)
+            vals_l.append(vals)
+            sky[ids] = sky_b
+            done += ids.size
+            ticker.tick(done, recv.size)
     indices = np.concatenate(cols_l) if cols_l else np.zeros(0, np.int32)
     data = np.concatenate(vals_l) if vals_l else np.zeros(0, np.float32)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}

@@ -65,7 +65,7 @@ def _gathered(ctx, elements, rest_v, xv, nv):
 
     def make():
         G, sky = gather_matrix(patches, xv, nv, embree_scene(patches), rays=ctx.settings.gather_rays,
-                               ticker=Ticker(None, ctx.cancelled))
+                               ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers)
         G.sky = sky
         return G
 
