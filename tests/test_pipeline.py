@@ -271,3 +271,34 @@ def test_lighting_pass_in_the_furnace_is_the_incoming_radiance(kw):
     r = bake(closed_box(size=(1.0, 1.3, 0.8), rho=(0.5,) * 3, emission=(1.0,) * 3),
              BakeSettings(**kw, output_pass="lighting", tolerance=1e-8, max_iterations=2000))
     np.testing.assert_allclose(r.vertex_radiosity, 2.0, rtol=2e-3)
+
+
+@pytest.mark.parametrize("gather_rays", [64, 0])
+def test_corner_colours_reach_the_output_vertices(gather_rays):
+    """A texture seen at the corners (MeshInput.corner_rho / corner_emission): a plane under a
+    uniform white world sends back rho at each vertex (the sky is all it sees), and an emissive
+    corner colour is the vertex's emission, while the solve uses the faces' means."""
+    from hemicube_radiosity.core.patches import MeshInput
+    from hemicube_radiosity.core.scenes import quad, tessellate
+
+    plane = tessellate([quad([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)])], 12, triangles=False)[0]
+    pos = plane.verts[plane.face_indices]
+    checker = ((np.floor(pos[:, 0] * 4) + np.floor(pos[:, 1] * 4)) % 2)[:, None]
+    corner_rho = 0.2 + 0.6 * checker * np.array([1.0, 0.5, 0.25])
+    face = np.repeat(np.arange(len(plane.face_offsets) - 1), 4)
+    rho = np.stack([np.bincount(face, weights=corner_rho[:, k]) / 4 for k in range(3)], 1)
+    textured = MeshInput(plane.verts, plane.face_offsets, plane.face_indices, rho, plane.face_emission,
+                         "plane", corner_rho, None)
+    r = bake([textured], BakeSettings(patch_size=0.5, element_size=0.2, gather_rays=gather_rays),
+             world=np.array([1.0, 1.0, 1.0]))
+    assert r.elements is r.patches                 # the plane's own faces are the output
+    want = np.zeros((len(r.elements.verts), 3))
+    # each output vertex: the mean of its corners' reflectance (corners of one vertex agree here
+    # unless the vertex lies on a checker edge)
+    p, c = np.nonzero(r.elements.polys >= 0)
+    key = {tuple(x): v for x, v in zip(pos.round(9), corner_rho)}
+    for v in np.unique(r.elements.polys[p, c]):
+        want[v] = key[tuple(r.elements.verts[v].round(9))]
+    inside = np.all((r.elements.verts[:, :2] * 4) % 1 > 1e-6, axis=1)   # off the checker's edges
+    assert inside.sum() > 50
+    np.testing.assert_allclose(r.vertex_radiosity[inside], want[inside], rtol=1e-6 if gather_rays else 0.1)

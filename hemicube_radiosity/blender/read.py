@@ -525,6 +525,14 @@ def _newell(verts, corner_vertex, poly_start, poly_total):
     return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
 
 
+def _within_faces(corner, offsets, per_face):
+    """``corner`` where it varies within a face (a texture), else None (the faces say it all)."""
+    if corner is None or not len(per_face):
+        return None
+    spread = np.abs(corner - np.repeat(per_face, np.diff(offsets), axis=0)).max()
+    return corner if spread > 1e-6 else None
+
+
 def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
     :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
@@ -577,7 +585,8 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     notes += [s for s in mat_notes if s not in notes]
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
-    mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name)
+    mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
+                     _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em))
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 

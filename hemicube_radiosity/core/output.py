@@ -54,6 +54,45 @@ def output_elements(meshes, settings, cache=None) -> PatchSet:
     return el.with_materials(rho, em)
 
 
+def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
+    """(N, 4, 3) ``which`` ('rho' or 'emission') at every corner of the output ``elements``: the
+    source mesh's corner value (``MeshInput.corner_<which>``) where an element corner is a corner
+    of its source face, the element's own (per-face) value elsewhere; None when no mesh has
+    corner values."""
+    if meshes is None or all(getattr(m, "corner_" + which) is None for m in meshes):
+        return None
+    keys, vals = [], []
+    for oi, m in enumerate(meshes):
+        sizes = np.diff(m.face_offsets)
+        face = np.repeat(np.arange(sizes.size), sizes)
+        v = getattr(m, "corner_" + which)
+        v = np.asarray(getattr(m, "face_" + which), float)[face] if v is None else np.asarray(v, float)
+        pos = np.asarray(m.verts, float)[m.face_indices]
+        keys.append(np.column_stack([np.full(face.size, oi), face, pos]))
+        vals.append(v)
+    keys, vals = np.concatenate(keys), np.concatenate(vals)
+    polys = np.where(elements.polys < 0, elements.polys[:, 2:3], elements.polys)
+    ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
+                         elements.verts[polys.reshape(-1)]], axis=1)
+    _, inv = np.unique(np.concatenate([keys, ek]), axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    slot = np.full(inv.max() + 1, -1)
+    slot[inv[:len(keys)]] = np.arange(len(keys))
+    found = slot[inv[len(keys):]]
+    own = np.repeat(np.asarray(getattr(elements, which), float), 4, axis=0)
+    out = np.where((found >= 0)[:, None], vals[np.maximum(found, 0)], own)
+    return out.reshape(len(elements), 4, 3)
+
+
+def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:
+    """(V, 3) mean over each vertex's element corners of a (N, 4, 3) per-corner array."""
+    p, c = np.nonzero(elements.polys >= 0)
+    v = elements.polys[p, c]
+    V = len(elements.verts)
+    cnt = np.maximum(np.bincount(v, minlength=V), 1)
+    return np.stack([np.bincount(v, weights=per_corner[p, c, k], minlength=V) for k in range(3)], 1) / cnt[:, None]
+
+
 def _gathered(ctx, elements, rest_v, xv, nv):
     """Reflected light R at element vertices by a final gather over the patch solution (the
     gather's ray hits cached as a matrix): (V, 3), before the elements' reflectivity."""
@@ -121,8 +160,13 @@ def vertex_stage(ctx) -> None:
     weights = ctx.to_patches(exposure(ctx.form_factors))
     ctx.elements = patches
     if ctx.direct is None:
-        B = _incoming(ctx.solution.B - u.emission, u.rho) if lighting else ctx.solution.B
+        textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
+        B = _incoming(ctx.solution.B - u.emission, u.rho) if lighting or textured else ctx.solution.B
         ctx.vertex_radiosity = vertex_radiosity(patches, ctx.to_patches(B), weights=weights)
+        if textured:                          # each vertex its own colour times the light there
+            _, _, rho_v = vertex_frames(patches)
+            ctx.vertex_radiosity = _with_corner_colours(ctx, vertex_radiosity(patches, patches.emission),
+                                                        rho_v, ctx.vertex_radiosity, 0.0)
         return
     # direct light again at every output vertex (sharp shadows, exact falloff); only the
     # smoother light reflected more than once comes from the patches (or their clusters), as in
@@ -142,5 +186,20 @@ def vertex_stage(ctx) -> None:
     D_vert = ctx.direct.at(xv, nv, "vertices")
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
-    else:
-        ctx.vertex_radiosity = vertex_radiosity(ctx.elements, ctx.elements.emission) + rho_v * D_vert + rest_v
+        return
+    E_v = vertex_radiosity(ctx.elements, ctx.elements.emission)
+    ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v)
+
+
+def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v):
+    """E_v + rho_v * light_v + reflected_v, with the source meshes' corner colours (a texture)
+    where they have them: emission and reflectivity per vertex, and the light reflected more
+    than once (``reflected_v``, made with the faces' reflectivity ``rho_v``) rescaled to it."""
+    rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
+    if rho_c is not None:
+        textured = vertex_mean(ctx.elements, rho_c)
+        reflected_v = reflected_v * np.where(rho_v > 0, textured / np.where(rho_v > 0, rho_v, 1.0), 1.0)
+        rho_v = textured
+    if em_c is not None:
+        E_v = vertex_mean(ctx.elements, em_c)
+    return E_v + rho_v * light_v + reflected_v

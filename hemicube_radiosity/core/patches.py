@@ -37,6 +37,9 @@ class MeshInput:
     face_rho:     (F, 3) diffuse reflectivity per face, each in [0, 1).
     face_emission:(F, 3) emitted radiance per face, >= 0.
     name:         object name, used in error messages and reports.
+    corner_rho, corner_emission: (L, 3) or None, the same at every face corner (in
+                  ``face_indices`` order) where they vary within a face (a texture); the output's
+                  vertices take them, the solve the per-face values.
     """
 
     verts: np.ndarray
@@ -45,6 +48,8 @@ class MeshInput:
     face_rho: np.ndarray
     face_emission: np.ndarray
     name: str = "mesh"
+    corner_rho: np.ndarray | None = None
+    corner_emission: np.ndarray | None = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):
