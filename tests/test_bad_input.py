@@ -170,8 +170,6 @@ def test_core_material_values_out_of_range_are_named(rho, em, match):
         build_patches([MeshInput.from_faces(QUAD, [(0, 1, 2, 3)], rho=rho, emission=em, name="M")])
 
 
-@pytest.mark.xfail(strict=True, reason="core/pipeline.py patch_stage does not estimate form-factor "
-                   "memory/time before the form-factor stage (only max_patches); see the report")
 def test_core_form_factor_memory_is_estimated_before_the_work():
     """A scene whose form factors would not fit: refused in the patches stage with the estimate
     and a setting that helps, before any form factor is computed (cancelled() stops the bake at

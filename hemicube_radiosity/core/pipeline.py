@@ -145,8 +145,22 @@ def patch_stage(ctx) -> None:
         raise PatchError(f"a patch size of {s.patch_size} makes {n} patches, more than the limit "
                          f"of {s.max_patches}: use a larger patch size (and a detail size for "
                          "sharp output)" + ("" if s.group_faces else ", or group small faces"))
+    gb = form_factor_gb(n, s)
+    if gb > s.max_memory_gb:
+        size = s.patch_size or 0.0
+        hint = (f": use a larger patch size (now {size:.3g}; {2 * size:.3g} needs about "
+                f"{form_factor_gb(n / 4, s):.2g} GB)") if size else ": set a patch size"
+        raise PatchError(f"{n} patches need about {gb:.2g} GB of form factors, more than the "
+                         f"memory budget of {s.max_memory_gb:g} GB{hint}")
     grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
-    ctx.say(1.0, f"{n} patches{grouped}")
+    ctx.say(1.0, f"{n} patches{grouped}; form factors at most {1024 * gb:.0f} MB")
+
+
+def form_factor_gb(n, settings) -> float:
+    """Upper bound of F's memory for ``n`` patches in GB: a row holds at most one entry per
+    hemi-cube pixel (or ray) and per patch, 8 bytes each (float32 value, int32 column)."""
+    per_row = settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
+    return n * min(n, per_row) * 8 / 2 ** 30
 
 
 def solve_stage(ctx) -> None:
@@ -159,11 +173,13 @@ def solve_stage(ctx) -> None:
     sol = solve(ctx.form_factors, p.rho, ctx.source, s.solver, s.tolerance, s.max_iterations,
                 areas=p.areas, cancelled=ctx.cancelled, computed=computed,
                 progress=lambda fr: ctx.say(fr, ""))
-    ctx.say(1.0, f"{sol.iterations} iterations, residual {sol.residual:.2e}"
+    bound = sol.error_bound
+    ctx.say(1.0, f"{sol.iterations} iterations, residual {sol.residual:.2e}, error below {bound:.1e}"
             + ("" if sol.converged else " (NOT converged: raise max iterations)"))
     if not sol.converged:
-        ctx.notes.append(f"solver stopped after {sol.iterations} iterations without reaching "
-                         f"tolerance {s.tolerance:g}")
+        ctx.notes.append(f"solver stopped after {sol.iterations} iterations with a relative error "
+                         f"up to {bound:.1e}, above the tolerance {s.tolerance:g}: raise max "
+                         "iterations")
     if ctx.direct is not None:
         ctx.reflected = sol.B
         sol = replace(sol, B=sol.B + p.emission, extra={**sol.extra, "reflected_only": True})

@@ -127,6 +127,10 @@ class BakeSettings:
     max_patches: int = setting(20000, "Max Patches", "Stop with an error before cutting more "
                                "patches (form factors grow with their square)", "patches",
                                min=1, soft_max=100000)
+    max_memory_gb: float = setting(8.0, "Memory Budget", "Stop before the form factors would "
+                                   "need more than this many GB (estimated from the patch count "
+                                   "and the hemi-cube's pixels)", "patches", min=0.01,
+                                   soft_max=64.0)
     max_elements: int = setting(400000, "Max Details", "Stop with an error before cutting more "
                                 "output elements", "patches", min=1, soft_max=4000000)
     # -- form factors

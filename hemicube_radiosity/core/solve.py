@@ -23,7 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .progress import Ticker
+from .errors import RadiosityError
 from .sparse import CSR
+
+
+class SolveError(RadiosityError, ValueError):
+    """The equation cannot be solved as given (a reflectivity of 1 or more, a non-finite value):
+    a user-facing problem of the scene, one line."""
 
 __all__ = ["Solution", "solve", "residual", "energy_balance", "gain", "error_bound", "SOLVERS"]
 
@@ -58,20 +64,20 @@ def _check(F: CSR, rho, source):
             raise ValueError(f"{name} must have shape ({n}, 3), got {a.shape}")
         if not np.all(np.isfinite(a)):
             i = int(np.flatnonzero(~np.all(np.isfinite(a), axis=1))[0])
-            raise ValueError(f"{name} of patch {i} is not finite: {tuple(a[i])}")
+            raise SolveError(f"{name} of patch {i} is not finite: {tuple(a[i])}")
     bad = (rho < 0) | (rho >= 1)
     if bad.any():
         i, b = (int(x[0]) for x in np.nonzero(bad))
-        raise ValueError(f"reflectivity of patch {i} band {'RGB'[b]} is {rho[i, b]:g}; "
+        raise SolveError(f"reflectivity of patch {i} band {'RGB'[b]} is {rho[i, b]:g}; "
                          "it must be in [0, 1) (rho >= 1 creates energy and the solve diverges)")
     if (source < 0).any():
         i, b = (int(x[0]) for x in np.nonzero(source < 0))
-        raise ValueError(f"source of patch {i} band {'RGB'[b]} is negative ({source[i, b]:g})")
+        raise SolveError(f"source of patch {i} band {'RGB'[b]} is negative ({source[i, b]:g})")
     rs = F.row_sums()
     gain = rho * rs[:, None]
     if (gain >= 1).any():
         i = int(np.argmax(gain.max(axis=1)))
-        raise ValueError(f"patch {i}: reflectivity x form-factor row sum = {gain[i].max():.4f} >= 1; "
+        raise SolveError(f"patch {i}: reflectivity x form-factor row sum = {gain[i].max():.4f} >= 1; "
                          "the form factors are inconsistent (row sum > 1) and the solve would diverge")
     return rho, source
 
