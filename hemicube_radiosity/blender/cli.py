@@ -79,10 +79,15 @@ def _size(text):
     return v
 
 
+def _flag(s):
+    """The command-line option of setting ``s``: ``--field-name`` unless the schema names another."""
+    return s.meta.get("cli", "--" + s.name.replace("_", "-"))
+
+
 def add_setting_options(p):
     """One option per setting of the core schema, with its default, choices and help."""
     for s in schema():
-        flag = s.meta.get("cli", "--" + s.name.replace("_", "-"))
+        flag = _flag(s)
         help = s.help.replace("%", "%%")
         if s.type is bool:
             action = "store_false" if s.default else "store_true"
@@ -143,6 +148,7 @@ def build_parser():
 
 
 def _positive_int(text):
+    """A count argument: a whole number >= 1."""
     try:
         v = int(text)
     except ValueError:
@@ -304,7 +310,7 @@ def setting_argv(args):
         v = getattr(args, s.name)
         if v == s.default:
             continue
-        flag = s.meta.get("cli", "--" + s.name.replace("_", "-"))
+        flag = _flag(s)
         words += [flag] if s.type is bool else [flag, str(v)]
     return words
 
@@ -457,12 +463,10 @@ def _plan(args):
     return out_dir, items
 
 
-def cmd_batch(args, out, err):
-    t_start = time.perf_counter()
-    settings = _settings(args)
-    out_dir, items = _plan(args)
-    os.makedirs(out_dir, exist_ok=True)
-    words = setting_argv(args)
+def _batch_todo(items, settings, args):
+    """The items to bake, as (item, key, input sha256). The others get their status here: failed
+    (unsupported input, output over the input, unreadable input) or skipped (the last bake is
+    current: same key and its output still there; never with --force)."""
     todo = []
     for it in items:
         ext = os.path.splitext(it.input)[1].lower()
@@ -483,39 +487,54 @@ def cmd_batch(args, out, err):
             it.status, it.message, it.patches = "skipped", "unchanged since its last bake", last.get("patches")
             continue
         todo.append((it, key, content))
+    return todo
 
-    lock = threading.Lock()
-    done = [0]
 
-    def line(it):
-        with lock:
-            done[0] += 1
-            if not args.quiet:
+class _ProgressLines:
+    """Prints ``[n/total] status name seconds ...`` for each finished item (not with -q), from
+    any thread; n counts the items finished so far."""
+
+    def __init__(self, total, out, quiet):
+        self.lock = threading.Lock()
+        self.done = 0
+        self.total = total
+        self.out = out
+        self.quiet = quiet
+
+    def __call__(self, it):
+        with self.lock:
+            self.done += 1
+            if not self.quiet:
                 what = f"  {it.message}" if it.status != "ok" else f"  -> {os.path.basename(it.output)}"
-                print(f"[{done[0]}/{len(items)}] {it.status:<7} {it.name}  {it.seconds:.1f} s{what}",
-                      file=out, flush=True)
+                print(f"[{self.done}/{self.total}] {it.status:<7} {it.name}  {it.seconds:.1f} s{what}",
+                      file=self.out, flush=True)
 
-    for it in items:
-        if it.status != "pending":
-            line(it)
+
+def _run_workers(todo, words, args, out_dir, line, out):
+    """Bake every (item, key, content) of ``todo`` in its own worker, ``args.jobs`` at a time,
+    calling ``line(item)`` as each one ends. An interruption (Ctrl-C, or Blender stopping us)
+    ends every running worker before it goes on."""
     workers = _Workers()
-    if todo:
-        jobs = min(args.jobs, len(todo))
-        if not args.quiet:
-            print(f"radiosity: baking {len(todo)} of {len(items)} files, {jobs} at a time, into {out_dir}",
-                  file=out, flush=True)
-        pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
-        try:
-            futures = [pool.submit(_bake_one, it, key, content, words, workers, args.timeout)
-                       for it, key, content in todo]
-            for fut in concurrent.futures.as_completed(futures):
-                line(fut.result())
-        except BaseException:  # Ctrl-C (or Blender stopping us): end every worker, then go
-            workers.stop()
-            raise
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
+    jobs = min(args.jobs, len(todo))
+    if not args.quiet:
+        print(f"radiosity: baking {len(todo)} of {line.total} files, {jobs} at a time, into {out_dir}",
+              file=out, flush=True)
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=jobs)
+    try:
+        futures = [pool.submit(_bake_one, it, key, content, words, workers, args.timeout)
+                   for it, key, content in todo]
+        for fut in concurrent.futures.as_completed(futures):
+            line(fut.result())
+    except BaseException:
+        workers.stop()
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
 
+
+def _batch_status(items, args, out, err, t_start):
+    """The closing table (not with -q) and one error line on ``err`` per failed file (with its
+    log, if one was kept); the exit status: 1 if any file failed, else 0."""
     failed = [it for it in items if it.status == "failed"]
     if not args.quiet:
         _batch_table(items, out, time.perf_counter() - t_start)
@@ -523,6 +542,23 @@ def cmd_batch(args, out, err):
         log = f" (log: {it.log})" if os.path.exists(it.log) else ""
         print(f"{PROG}: error: {it.input}: {it.message}{log}", file=err, flush=True)
     return 1 if failed else 0
+
+
+def cmd_batch(args, out, err):
+    """``batch``: bake every FILE in a worker process (module docstring); the exit status."""
+    t_start = time.perf_counter()
+    settings = _settings(args)
+    out_dir, items = _plan(args)
+    os.makedirs(out_dir, exist_ok=True)
+    words = setting_argv(args)
+    todo = _batch_todo(items, settings, args)
+    line = _ProgressLines(len(items), out, args.quiet)
+    for it in items:
+        if it.status != "pending":
+            line(it)
+    if todo:
+        _run_workers(todo, words, args, out_dir, line, out)
+    return _batch_status(items, args, out, err, t_start)
 
 
 def _batch_table(items, out, seconds):

@@ -31,6 +31,7 @@ DIFFUSE bake we compare with, use normal incidence).
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -101,6 +102,22 @@ def describe(node, socket=None):
 _RANK = {"plain": 0, "constant": 1, "corners": 2}
 
 
+def _shader_nodes(out):
+    """Every node feeding the Surface of material output ``out``, once each, depth first, as
+    (node, the output socket it feeds through). The walk follows the SHADER inputs of shader
+    nodes; it does not enter a node group, nor a node whose colour or value feeds a shader input
+    (the Surface itself)."""
+    stack, seen = [out.inputs["Surface"]], set()
+    while stack:
+        node, sock = _source(stack.pop())
+        if node is None or node.name in seen:
+            continue
+        seen.add(node.name)
+        yield node, sock
+        if (sock is None or sock.type == "SHADER") and node.type != "GROUP":
+            stack += [s for s in node.inputs if s.type == "SHADER"]
+
+
 def classify(mat):
     """('plain' | 'constant' | 'corners', notes) of a material: whether and how Cycles must
     evaluate it (module docstring). ``notes`` say what is read from Cycles and why."""
@@ -112,18 +129,13 @@ def classify(mat):
             # Blender < 5 without nodes: Cycles renders a Principled BSDF of the viewport colour
             return "constant", []
         return "plain", []
-    kind, notes, seen, unknown = "plain", [], set(), []
+    kind, notes, unknown = "plain", [], []
 
     def need(k):
         nonlocal kind
         kind = k if _RANK[k] > _RANK[kind] else kind
 
-    stack = [out.inputs["Surface"]]
-    while stack:
-        node, sock = _source(stack.pop())
-        if node is None or node.name in seen:
-            continue
-        seen.add(node.name)
+    for node, sock in _shader_nodes(out):
         if sock is not None and sock.type != "SHADER":
             if node.type not in ("RGB", "VALUE"):       # a colour wired into the output: emission
                 need("corners")
@@ -136,10 +148,7 @@ def classify(mat):
         if node.type == "BSDF_PRINCIPLED":
             need("constant")
         for s in node.inputs:
-            if s.type == "SHADER":
-                stack.append(s)
-                continue
-            if not s.is_linked or s.name in _GEOMETRY_INPUTS or not s.enabled:
+            if s.type == "SHADER" or not s.is_linked or s.name in _GEOMETRY_INPUTS or not s.enabled:
                 continue
             src, _ = _source(s)
             if src is None:
@@ -163,19 +172,13 @@ def may_emit(mat):
     out = _output_node(mat) if mat is not None else None
     if out is None:
         return False
-    stack, seen = [out.inputs["Surface"]], set()
-    while stack:
-        node, sock = _source(stack.pop())
-        if node is None or node.name in seen:
-            continue
-        seen.add(node.name)
+    for node, sock in _shader_nodes(out):
         if (sock is not None and sock.type != "SHADER") or node.type in ("EMISSION", "GROUP"):
             return True
         if node.type == "BSDF_PRINCIPLED":
             st = node.inputs.get("Emission Strength")
             if st is not None and (st.is_linked or st.default_value != 0):
                 return True
-        stack += [s for s in node.inputs if s.type == "SHADER"]
     return False
 
 
@@ -216,6 +219,13 @@ def _original(m):
     return getattr(m, "original", m) if m is not None else None
 
 
+def _assign_materials(me, materials):
+    """Make ``materials`` the material slots of mesh ``me``, in order (slot k: material index k)."""
+    me.materials.clear()
+    for m in materials:
+        me.materials.append(m)
+
+
 def _quad_mesh(materials):
     """One unit quad per material (material index k on face k), 1 m apart."""
     import bpy
@@ -225,11 +235,72 @@ def _quad_mesh(materials):
     faces = [tuple(range(4 * k, 4 * k + 4)) for k in range(n)]
     me = bpy.data.meshes.new(SCENE)
     me.from_pydata(verts, [], faces)
-    for m in materials:
-        me.materials.append(m)
+    _assign_materials(me, materials)
     me.polygons.foreach_set("material_index", np.arange(n, dtype=np.int32))
     me.update()
     return me
+
+
+def _copy_objects(objects, depsgraph, made_obs, made_meshes):
+    """A temporary object per object of ``objects``: a copy of its evaluated mesh with all its
+    attributes, the original materials of its slots, at its world matrix. Appends each mesh to
+    ``made_meshes`` as soon as it exists and (object name, copy) to ``made_obs``, so that the
+    caller removes whatever was made even when a later copy fails."""
+    import bpy
+
+    from .read import world_matrix
+
+    for obj in objects:
+        ob_eval = obj.evaluated_get(depsgraph)
+        me = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=True,
+                                             depsgraph=depsgraph)
+        made_meshes.append(me)
+        _assign_materials(me, [_original(s.material) for s in ob_eval.material_slots])
+        ob = bpy.data.objects.new(SCENE, me)
+        ob.matrix_world = _matrix(world_matrix(obj, depsgraph))
+        made_obs.append((obj.name, ob))
+
+
+def _prepare_bake(scene, obs):
+    """Link ``obs`` into ``scene``, give each mesh the FLOAT_COLOR corner attribute the bakes
+    write (active for baking, the render colour attribute unchanged), select them all and make
+    the first one active."""
+    for ob in obs:
+        scene.collection.objects.link(ob)
+        me = ob.data
+        render = me.color_attributes.default_color_name
+        attr = me.color_attributes.new(ATTRIBUTE, "FLOAT_COLOR", "CORNER")
+        me.color_attributes.active_color = attr
+        if render:                 # an unnamed Color Attribute node keeps reading its layer
+            me.color_attributes.default_color_name = render
+    vl = scene.view_layers[0]
+    for ob in obs:
+        ob.select_set(True, view_layer=vl)
+    vl.objects.active = obs[0]
+
+
+def _split_results(made_obs, rho, em, constants):
+    """The baked corner values by owner: ({object name: (rho, em)}, {material name_full: (rho,
+    em)}); a material's values are the mean over the four corners of its quad."""
+    corners, materials = {}, {}
+    for (name, _), r, e in zip(made_obs, rho, em):
+        if name is not None:
+            corners[name] = (r, e)
+        else:
+            for k, m in enumerate(constants):
+                materials[m.name_full] = (r[4 * k:4 * k + 4].mean(axis=0), e[4 * k:4 * k + 4].mean(axis=0))
+    return corners, materials
+
+
+def _remove(scene, made_obs, made_meshes):
+    """Remove the temporary objects, then their meshes, then the temporary scene."""
+    import bpy
+
+    for _, ob in made_obs:
+        bpy.data.objects.remove(ob)
+    for me in made_meshes:
+        bpy.data.meshes.remove(me)
+    bpy.data.scenes.remove(scene)
 
 
 def evaluate(objects, depsgraph, constants=(), emit=True):
@@ -240,28 +311,13 @@ def evaluate(objects, depsgraph, constants=(), emit=True):
     Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
     """
-    import time
-
     import bpy
-
-    from .read import world_matrix
 
     scene = bpy.data.scenes.new(SCENE)
     made_obs, made_meshes = [], []
     try:
         _configure(scene)
-        for obj in objects:
-            ob_eval = obj.evaluated_get(depsgraph)
-            me = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=True,
-                                                 depsgraph=depsgraph)
-            made_meshes.append(me)
-            mats = [_original(s.material) for s in ob_eval.material_slots]
-            me.materials.clear()
-            for m in mats:
-                me.materials.append(m)
-            ob = bpy.data.objects.new(SCENE, me)
-            ob.matrix_world = _matrix(world_matrix(obj, depsgraph))
-            made_obs.append((obj.name, ob))
+        _copy_objects(objects, depsgraph, made_obs, made_meshes)
         constants = list(constants)
         if constants:
             me = _quad_mesh(constants)
@@ -270,36 +326,14 @@ def evaluate(objects, depsgraph, constants=(), emit=True):
         obs = [ob for _, ob in made_obs]
         if not obs:
             return {}, {}, 0.0
-        for ob in obs:
-            scene.collection.objects.link(ob)
-            me = ob.data
-            render = me.color_attributes.default_color_name
-            attr = me.color_attributes.new(ATTRIBUTE, "FLOAT_COLOR", "CORNER")
-            me.color_attributes.active_color = attr
-            if render:                 # an unnamed Color Attribute node keeps reading its layer
-                me.color_attributes.default_color_name = render
-        vl = scene.view_layers[0]
-        for ob in obs:
-            ob.select_set(True, view_layer=vl)
-        vl.objects.active = obs[0]
+        _prepare_bake(scene, obs)
         t = time.perf_counter()
         rho = _bake(scene, obs, "DIFFUSE", {"COLOR"})
         em = _bake(scene, obs, "EMIT", set()) if emit else [np.zeros_like(r) for r in rho]
         seconds = time.perf_counter() - t
-        corners, materials = {}, {}
-        for (name, ob), r, e in zip(made_obs, rho, em):
-            if name is not None:
-                corners[name] = (r, e)
-            else:
-                for k, m in enumerate(constants):
-                    materials[m.name_full] = (r[4 * k:4 * k + 4].mean(axis=0), e[4 * k:4 * k + 4].mean(axis=0))
-        return corners, materials, seconds
+        return (*_split_results(made_obs, rho, em, constants), seconds)
     finally:
-        for _, ob in made_obs:
-            bpy.data.objects.remove(ob)
-        for me in made_meshes:
-            bpy.data.meshes.remove(me)
-        bpy.data.scenes.remove(scene)
+        _remove(scene, made_obs, made_meshes)
 
 
 def _matrix(M):

@@ -118,13 +118,24 @@ class DirectLight:
         return D
 
 
-def patch_average(patches: PatchSet, n, light_at) -> np.ndarray:
+def patch_average(patches: PatchSet, n, light_at, centre_only=None) -> np.ndarray:
     """(N, 3) area-weighted mean over n x n points of every patch of ``light_at(points, normals,
     where) -> (P, 3)`` (n = 1: at the centres). The points are the centres of an n x n grid of
     the patch's bilinear map (a triangle is a quad with two corners equal), weighted by the map's
-    area there."""
-    if n <= 1:
+    area there. ``centre_only`` (N,) bool: patches taken at their centre whatever n (the faces of
+    a grouped cluster, whose mean over many faces already samples the light)."""
+    if n <= 1 or (centre_only is not None and centre_only.all()):
         return light_at(patches.centers, patches.normals, "centres")
+    if centre_only is not None and centre_only.any():
+        out = np.empty((len(patches), 3))
+        out[centre_only] = light_at(patches.centers[centre_only], patches.normals[centre_only],
+                                    "grouped-centres")
+        rest = np.flatnonzero(~centre_only)
+        sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
+                       patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
+                       patches.source_face[rest], patches.object_names)
+        out[rest] = patch_average(sub, n, light_at)
+        return out
     t = (np.arange(n) + 0.5) / n
     u, v = [a.ravel()[None, :, None] for a in np.meshgrid(t, t, indexing="ij")]   # (1, n^2, 1)
     c = patches.corners()[:, None]                                                  # (N, 1, 4, 3)
@@ -190,7 +201,8 @@ def direct_stage(ctx) -> None:
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
     ctx.say(0.0, f"exact direct light: {ctx.direct.emitters.size} emitting patches, "
                  f"{len(ctx.lights)} lamps")
-    ctx.direct_patch = patch_average(p, s.patch_light_points, ctx.direct.at)
+    grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1
+    ctx.direct_patch = patch_average(p, s.patch_light_points, ctx.direct.at, grouped)
     ctx.irradiance = np.pi * ctx.direct_patch
     ctx.source = (source_term(u, ctx.form_factors, world=ctx.world) - u.emission
                   + ctx.to_unknowns(p.rho * ctx.direct_patch))
