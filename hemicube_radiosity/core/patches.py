@@ -16,6 +16,7 @@ Radiosity quantities (``emission``) are in Blender's radiance units: an emission
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from .errors import RadiosityError
@@ -192,6 +193,125 @@ def _ear_clip(p: np.ndarray) -> list:
     return tris
 
 
+def _check_faces(mesh: MeshInput, verts, idx, sizes):
+    """Raise :class:`PatchError` naming the object when the faces are unusable.
+
+    verts (V, 3) float64, idx (L,) int64 ``face_indices``, sizes (F,) int64 corners per face.
+    """
+    if len(sizes) == 0:
+        raise PatchError(f"{mesh.name!r}: the mesh has no faces")
+    if np.any(sizes < 3):
+        f = int(np.flatnonzero(sizes < 3)[0])
+        raise PatchError(f"{mesh.name!r}: face {f} has fewer than 3 vertices")
+    if idx.size and (idx.min() < 0 or idx.max() >= len(verts)):
+        raise PatchError(f"{mesh.name!r}: a face refers to a vertex that does not exist")
+    if not np.all(np.isfinite(verts)):
+        raise PatchError(f"{mesh.name!r}: vertex positions are not finite (NaN or infinity)")
+
+
+def _small_faces(off, idx, sizes):
+    """The triangles and quads among the faces, as (M, 4) int64 polys (-1 in column 3 for a
+    triangle) and their (M,) int64 face indices; off (F + 1,), idx (L,), sizes (F,) as in
+    :class:`MeshInput`."""
+    polys = np.full((len(sizes), 4), -1, dtype=np.int64)
+    for k in (3, 4):
+        sel = np.flatnonzero(sizes == k)
+        if sel.size:
+            polys[sel, :k] = idx[off[sel][:, None] + np.arange(k)]
+    small = sizes <= 4
+    return polys[small], np.flatnonzero(small)
+
+
+def _fan_convex_ngon(verts, ring, new_verts, midpoint) -> list:
+    """Quads around the centre of the convex n-gon ``ring`` (n,) int64 indices into verts (V, 3).
+
+    The centre and edge midpoints not yet in ``midpoint`` (a dict: sorted source edge (a, b) ->
+    vertex index) are appended to ``new_verts`` (list of (3,) positions, numbered from V on).
+    Returns n quads (centre, midpoint before corner, corner, midpoint after corner) as 4-tuples.
+    """
+    c = len(verts) + len(new_verts)
+    new_verts.append(verts[ring].mean(axis=0))
+    mids = []
+    for i in range(len(ring)):
+        a, b = int(ring[i]), int(ring[(i + 1) % len(ring)])
+        key = (min(a, b), max(a, b))
+        if key not in midpoint:
+            midpoint[key] = len(verts) + len(new_verts)
+            new_verts.append(0.5 * (verts[a] + verts[b]))
+        mids.append(midpoint[key])
+    return [(c, mids[i - 1], int(ring[i]), mids[i]) for i in range(len(ring))]
+
+
+def _split_ngons(verts, off, idx, big, new_verts, midpoint):
+    """Split the faces ``big`` (B,) of more than 4 corners: convex ones with
+    :func:`_fan_convex_ngon` (which fills ``new_verts`` and ``midpoint``), concave ones by ear
+    clipping. Returns the pieces, a list of 4-tuples (-1 last for a triangle), and a list of
+    their source faces."""
+    pieces, src = [], []
+    for f in big:
+        ring = idx[off[f]:off[f + 1]]
+        p = verts[ring]
+        if _is_convex(p):
+            new = _fan_convex_ngon(verts, ring, new_verts, midpoint)
+        else:
+            new = [(int(ring[t[0]]), int(ring[t[1]]), int(ring[t[2]]), -1) for t in _ear_clip(p)]
+        pieces += new
+        src += [f] * len(new)
+    return pieces, src
+
+
+def _ring_with_midpoints(ring, midpoint):
+    """The corner list ``ring`` (k ints) with every n-gon edge midpoint in ``midpoint`` inserted
+    on its edge, or None when no edge of the ring was split."""
+    k = len(ring)
+    split = [midpoint.get((min(ring[i], ring[(i + 1) % k]), max(ring[i], ring[(i + 1) % k])))
+             for i in range(k)]
+    if all(s is None for s in split):
+        return None
+    ring2 = []
+    for i in range(k):
+        ring2.append(ring[i])
+        if split[i] is not None:
+            ring2.append(split[i])
+    return ring2
+
+
+def _recut_ring(verts, ring2, new_verts) -> list:
+    """Cut the polygon ``ring2`` (m ints, into verts (V, 3) then ``new_verts``) without
+    T-junctions: when convex, fan around its centre (appended to ``new_verts``) pairing
+    consecutive ring vertices into quads (a triangle closes an odd ring); else ear clipping.
+    Returns 4-tuples, -1 last for a triangle."""
+    rp = np.concatenate([verts, np.array(new_verts)])[ring2]
+    if not _is_convex(rp):
+        return [(ring2[t[0]], ring2[t[1]], ring2[t[2]], -1) for t in _ear_clip(rp)]
+    c = len(verts) + len(new_verts)
+    new_verts.append(rp.mean(axis=0))
+    m = len(ring2)
+    pieces = [(c, ring2[i], ring2[i + 1], ring2[(i + 2) % m]) for i in range(0, m - 1, 2)]
+    if m % 2:
+        pieces.append((c, ring2[m - 1], ring2[0], -1))
+    return pieces
+
+
+def _mend_t_junctions(verts, polys, src, new_verts, midpoint, pieces, pieces_src):
+    """Re-cut the triangles/quads ``polys`` (M, 4) (source faces ``src`` (M,)) that have an
+    n-gon's edge midpoint on an edge, with :func:`_recut_ring`; their pieces are appended to
+    ``pieces`` and ``pieces_src``. Returns the polys left whole, (M', 4) int64, and their
+    (M',) int64 source faces."""
+    whole = []
+    for poly, s in zip(polys, src):
+        k = 3 if poly[3] < 0 else 4
+        ring2 = _ring_with_midpoints([int(v) for v in poly[:k]], midpoint)
+        if ring2 is None:
+            whole.append((poly, s))
+            continue
+        new = _recut_ring(verts, ring2, new_verts)
+        pieces += new
+        pieces_src += [s] * len(new)
+    return (np.array([p for p, _ in whole], dtype=np.int64).reshape(-1, 4),
+            np.array([s for _, s in whole], dtype=np.int64))
+
+
 def _to_tris_and_quads(mesh: MeshInput):
     """Split n-gons: convex ones into n quads around their centre, concave ones by ear clipping.
 
@@ -202,96 +322,20 @@ def _to_tris_and_quads(mesh: MeshInput):
     off = np.asarray(mesh.face_offsets, dtype=np.int64)
     idx = np.asarray(mesh.face_indices, dtype=np.int64)
     sizes = np.diff(off)
-    F = len(sizes)
-    if F == 0:
-        raise PatchError(f"{mesh.name!r}: the mesh has no faces")
-    if np.any(sizes < 3):
-        f = int(np.flatnonzero(sizes < 3)[0])
-        raise PatchError(f"{mesh.name!r}: face {f} has fewer than 3 vertices")
-    if idx.size and (idx.min() < 0 or idx.max() >= len(verts)):
-        raise PatchError(f"{mesh.name!r}: a face refers to a vertex that does not exist")
-    if not np.all(np.isfinite(verts)):
-        raise PatchError(f"{mesh.name!r}: vertex positions are not finite (NaN or infinity)")
-
-    polys = np.full((F, 4), -1, dtype=np.int64)
-    small = sizes <= 4
-    for k in (3, 4):
-        sel = np.flatnonzero(sizes == k)
-        if sel.size:
-            polys[sel, :k] = idx[off[sel][:, None] + np.arange(k)]
-    out_polys = [polys[small]]
-    out_src = [np.flatnonzero(small)]
-    big = np.flatnonzero(~small)
+    _check_faces(mesh, verts, idx, sizes)
+    polys, src = _small_faces(off, idx, sizes)
+    big = np.flatnonzero(sizes > 4)
     if big.size == 0:
-        return verts, out_polys[0], out_src[0]
-
-    new_verts = []
-    next_v = len(verts)
-    midpoint = {}
-    extra_polys, extra_src = [], []
-    for f in big:
-        ring = idx[off[f]:off[f + 1]]
-        p = verts[ring]
-        if _is_convex(p):
-            c = next_v
-            new_verts.append(p.mean(axis=0))
-            next_v += 1
-            mids = []
-            for i in range(len(ring)):
-                a, b = int(ring[i]), int(ring[(i + 1) % len(ring)])
-                key = (min(a, b), max(a, b))
-                if key not in midpoint:
-                    midpoint[key] = next_v
-                    new_verts.append(0.5 * (verts[a] + verts[b]))
-                    next_v += 1
-                mids.append(midpoint[key])
-            for i in range(len(ring)):
-                extra_polys.append((c, mids[i - 1], int(ring[i]), mids[i]))
-                extra_src.append(f)
-        else:
-            for t in _ear_clip(p):
-                extra_polys.append((int(ring[t[0]]), int(ring[t[1]]), int(ring[t[2]]), -1))
-                extra_src.append(f)
+        return verts, polys, src
+    new_verts, midpoint = [], {}
+    pieces, pieces_src = _split_ngons(verts, off, idx, big, new_verts, midpoint)
     # A convex n-gon's edge midpoint splits the edge for a neighbour that is a triangle or quad too:
     # re-express such neighbours so that no T-junction remains.
     if midpoint:
-        fixed = []
-        for poly, src in zip(out_polys[0], out_src[0]):
-            k = 3 if poly[3] < 0 else 4
-            ring = [int(v) for v in poly[:k]]
-            split = [midpoint.get((min(ring[i], ring[(i + 1) % k]), max(ring[i], ring[(i + 1) % k])))
-                     for i in range(k)]
-            if any(s is not None for s in split):
-                ring2 = []
-                for i in range(k):
-                    ring2.append(ring[i])
-                    if split[i] is not None:
-                        ring2.append(split[i])
-                rp = np.concatenate([verts, np.array(new_verts)])[ring2]
-                if _is_convex(rp):
-                    # fan around the centre as quads again
-                    c = next_v
-                    new_verts.append(rp.mean(axis=0))
-                    next_v += 1
-                    m = len(ring2)
-                    # pair consecutive ring vertices into quads with the centre where possible
-                    for i in range(0, m - 1, 2):
-                        extra_polys.append((c, ring2[i], ring2[i + 1], ring2[(i + 2) % m]))
-                        extra_src.append(src)
-                    if m % 2:
-                        extra_polys.append((c, ring2[m - 1], ring2[0], -1))
-                        extra_src.append(src)
-                else:
-                    for t in _ear_clip(rp):
-                        extra_polys.append((ring2[t[0]], ring2[t[1]], ring2[t[2]], -1))
-                        extra_src.append(src)
-            else:
-                fixed.append((poly, src))
-        out_polys = [np.array([p for p, _ in fixed], dtype=np.int64).reshape(-1, 4)]
-        out_src = [np.array([s for _, s in fixed], dtype=np.int64)]
+        polys, src = _mend_t_junctions(verts, polys, src, new_verts, midpoint, pieces, pieces_src)
     verts = np.concatenate([verts, np.array(new_verts).reshape(-1, 3)])
-    polys = np.concatenate(out_polys + [np.array(extra_polys, dtype=np.int64).reshape(-1, 4)])
-    src = np.concatenate(out_src + [np.array(extra_src, dtype=np.int64)])
+    polys = np.concatenate([polys, np.array(pieces, dtype=np.int64).reshape(-1, 4)])
+    src = np.concatenate([src, np.array(pieces_src, dtype=np.int64)])
     return verts, polys, src
 
 
@@ -347,98 +391,165 @@ def _edge_segments(verts, polys, patch_size):
     return edges, face_edges, flipped, n
 
 
-def _subdivide(verts, polys, patch_size):
-    """Cut triangles/quads into regular grids of patches with shared vertices.
+class _EdgeCuts(NamedTuple):
+    """Every unique edge cut into segments, and the vertices on the cuts.
 
-    Returns new verts, patch polys (P,4), and the parent poly index per patch.
+    edges:      (E, 2) int64 sorted vertex pairs.
+    face_edges: (F, 4) int64 edge id of each poly side (side i runs corner i -> i + 1), -1 for a
+                triangle's fourth.
+    flipped:    (F, 4) bool, the side walks its edge from ``edges[e, 1]`` to ``edges[e, 0]``.
+    n:          (E,) int64 segments per edge (from :func:`_edge_segments`).
+    e_off:      (E + 1,) int64: edge e owns the vertices ``e_off[e] .. e_off[e] + n[e] - 2``, at
+                t = k / n[e], k = 1 .. n[e] - 1, from ``edges[e, 0]``; ``e_off[-1]`` is the next free.
+    """
+
+    edges: np.ndarray
+    face_edges: np.ndarray
+    flipped: np.ndarray
+    n: np.ndarray
+    e_off: np.ndarray
+
+    def vertex(self, face_ids, side, k):
+        """(G,) global index of the k-th vertex (k (G,) in 0..n) walking along side ``side`` of
+        the polys ``face_ids`` (G,) in face order."""
+        e = self.face_edges[face_ids, side]
+        m = self.n[e]
+        flip = self.flipped[face_ids, side]
+        first = np.where(flip, self.edges[e, 1], self.edges[e, 0])
+        last = np.where(flip, self.edges[e, 0], self.edges[e, 1])
+        inner = self.e_off[e] + np.where(flip, m - k, k) - 1
+        return np.where(k == 0, first, np.where(k == m, last, inner))
+
+
+def _cut_edges(verts, polys, patch_size):
+    """Cut the edges of polys (F, 4) over verts (V, 3) for ``patch_size``.
+
+    Returns the :class:`_EdgeCuts` and the positions (e_off[-1] - V, 3) of the vertices inside
+    edges, numbered from V on.
     """
     edges, face_edges, flipped, n = _edge_segments(verts, polys, patch_size)
     V = len(verts)
-    # vertices inside edges: edge e owns n[e]-1 vertices at t = k/n[e], k = 1..n-1 from edges[e,0]
     e_off = V + np.concatenate([[0], np.cumsum(n - 1)])
-    # positions of edge vertices
     e_rep = np.repeat(np.arange(len(edges)), n - 1)
     k_in = np.arange(e_rep.size) - (e_off[e_rep] - V) + 1
     t = (k_in / n[e_rep])[:, None]
     edge_pos = (1 - t) * verts[edges[e_rep, 0]] + t * verts[edges[e_rep, 1]]
-    next_v = int(e_off[-1])
+    return _EdgeCuts(edges, face_edges, flipped, n, e_off), edge_pos
+
+
+def _quad_boundary(cuts, fid, gu, gv):
+    """(G, gu + 1, gv + 1) int64 grid of the quads ``fid`` (G,) with the edge vertices filled in
+    (the inside is left uninitialised); u along side 0 (c0 -> c1), v along side 3 reversed."""
+    G = fid.size
+    grid = np.empty((G, gu + 1, gv + 1), dtype=np.int64)
+    for i in range(gu + 1):
+        grid[:, i, 0] = cuts.vertex(fid, 0, np.full(G, i))          # c0 -> c1
+        grid[:, i, gv] = cuts.vertex(fid, 2, np.full(G, gu - i))    # c2 -> c3 reversed
+    for j in range(gv + 1):
+        grid[:, gu, j] = cuts.vertex(fid, 1, np.full(G, j))         # c1 -> c2
+        grid[:, 0, j] = cuts.vertex(fid, 3, np.full(G, gv - j))     # c3 -> c0 reversed
+    return grid
+
+
+def _cut_quads(verts, polys, cuts, fid, gu, gv, next_v):
+    """Cut the quads ``fid`` (G,), gu segments along sides 0 and 2 and gv along 1 and 3, into
+    gu x gv grids. Returns the bilinear positions (G * (gu-1) * (gv-1), 3) of the new inner
+    vertices, numbered from ``next_v`` quad by quad, and the patches (G * gu * gv, 4)."""
+    G = fid.size
+    grid = _quad_boundary(cuts, fid, gu, gv)
+    ni = (gu - 1) * (gv - 1)
+    pos = np.zeros((0, 3))
+    if ni > 0:
+        c = verts[polys[fid]]  # (G,4,3)
+        uu, vv = np.meshgrid(np.arange(1, gu) / gu, np.arange(1, gv) / gv, indexing="ij")
+        uu = uu.reshape(-1)[None, :, None]
+        vv = vv.reshape(-1)[None, :, None]
+        pos = ((1 - uu) * (1 - vv) * c[:, None, 0] + uu * (1 - vv) * c[:, None, 1]
+               + uu * vv * c[:, None, 2] + (1 - uu) * vv * c[:, None, 3]).reshape(-1, 3)
+        grid[:, 1:gu, 1:gv] = next_v + np.arange(G * ni).reshape(G, gu - 1, gv - 1)
+    p = np.stack([grid[:, :-1, :-1], grid[:, 1:, :-1], grid[:, 1:, 1:], grid[:, :-1, 1:]], axis=-1)
+    return pos, p.reshape(-1, 4)
+
+
+def _triangle_boundary(cuts, fid, g):
+    """(G, g + 1, g + 1) int64 grid of the triangles ``fid`` (G,), vertex (i, j) at
+    c0 + i/g (c1-c0) + j/g (c2-c0), with the edge vertices filled in and -1 elsewhere."""
+    G = fid.size
+    grid = np.full((G, g + 1, g + 1), -1, dtype=np.int64)
+    for i in range(g + 1):
+        grid[:, i, 0] = cuts.vertex(fid, 0, np.full(G, i))              # c0 -> c1
+    for j in range(g + 1):
+        grid[:, g - j, j] = cuts.vertex(fid, 1, np.full(G, j))          # c1 -> c2
+        grid[:, 0, j] = cuts.vertex(fid, 2, np.full(G, g - j))          # c2 -> c0 reversed
+    return grid
+
+
+def _triangle_cells(grid, g):
+    """(G, g * g, 4) the triangles of barycentric grids ``grid`` (G, g + 1, g + 1), -1 last:
+    for each (i, j) the upright cell, then the inverted one beside it where there is one."""
+    G = grid.shape[0]
+    tris = []
+    for i in range(g):
+        for j in range(g - i):
+            tris.append(np.stack([grid[:, i, j], grid[:, i + 1, j], grid[:, i, j + 1],
+                                  np.full(G, -1)], axis=1))
+            if i + j < g - 1:
+                tris.append(np.stack([grid[:, i + 1, j], grid[:, i + 1, j + 1], grid[:, i, j + 1],
+                                      np.full(G, -1)], axis=1))
+    return np.stack(tris, axis=1)
+
+
+def _cut_triangles(verts, polys, cuts, fid, g, next_v):
+    """Cut the triangles ``fid`` (G,), g segments on every side, into g * g triangles each.
+    Returns the positions (G * I, 3) of the I new inner vertices per triangle, numbered from
+    ``next_v`` triangle by triangle, and the patches (G * g * g, 4)."""
+    G = fid.size
+    grid = _triangle_boundary(cuts, fid, g)
+    ii, jj = np.nonzero((np.add.outer(np.arange(g + 1), np.arange(g + 1)) < g)
+                        & (np.arange(g + 1)[:, None] > 0) & (np.arange(g + 1)[None, :] > 0))
+    pos = np.zeros((0, 3))
+    if ii.size:
+        c = verts[polys[fid, :3]]
+        a = (ii / g)[None, :, None]
+        b = (jj / g)[None, :, None]
+        pos = (c[:, None, 0] + a * (c[:, None, 1] - c[:, None, 0])
+               + b * (c[:, None, 2] - c[:, None, 0])).reshape(-1, 3)
+        grid[:, ii, jj] = next_v + np.arange(G * ii.size).reshape(G, ii.size)
+    return pos, _triangle_cells(grid, g).reshape(-1, 4)
+
+
+def _subdivide(verts, polys, patch_size):
+    """Cut triangles/quads into regular grids of patches with shared vertices.
+
+    verts (V, 3), polys (F, 4) with -1 for triangles. Returns new verts (V', 3), patch polys
+    (P, 4), and the parent poly index per patch (P,). Polys are cut in groups of the same grid
+    size, quads first; the new vertices follow in the same order.
+    """
+    cuts, edge_pos = _cut_edges(verts, polys, patch_size)
+    next_v = int(cuts.e_off[-1])
     all_pos = [verts, edge_pos]
     out_polys, out_parent = [], []
-
-    def edge_vertex(face_ids, side, k):
-        """Global index of the k-th vertex (k in 0..n) walking along face edge `side` in face order."""
-        e = face_edges[face_ids, side]
-        m = n[e]
-        first = np.where(flipped[face_ids, side], edges[e, 1], edges[e, 0])
-        last = np.where(flipped[face_ids, side], edges[e, 0], edges[e, 1])
-        inner = e_off[e] + np.where(flipped[face_ids, side], m - k, k) - 1
-        return np.where(k == 0, first, np.where(k == m, last, inner))
-
     tri = polys[:, 3] < 0
-    # ---- quads: grid (nu+1) x (nv+1); u along edge 0 (c0->c1), v along edge 3 reversed (c0->c3)
     q = np.flatnonzero(~tri)
     if q.size:
-        nu = n[face_edges[q, 0]]
-        nv = n[face_edges[q, 1]]
+        nu = cuts.n[cuts.face_edges[q, 0]]
+        nv = cuts.n[cuts.face_edges[q, 1]]
         for (gu, gv) in np.unique(np.stack([nu, nv], 1), axis=0):
             fid = q[(nu == gu) & (nv == gv)]
-            G = fid.size
-            grid = np.empty((G, gu + 1, gv + 1), dtype=np.int64)
-            for i in range(gu + 1):
-                grid[:, i, 0] = edge_vertex(fid, 0, np.full(G, i))          # c0 -> c1
-                grid[:, i, gv] = edge_vertex(fid, 2, np.full(G, gu - i))    # c2 -> c3 reversed
-            for j in range(gv + 1):
-                grid[:, gu, j] = edge_vertex(fid, 1, np.full(G, j))         # c1 -> c2
-                grid[:, 0, j] = edge_vertex(fid, 3, np.full(G, gv - j))     # c3 -> c0 reversed
-            ni = (gu - 1) * (gv - 1)
-            if ni > 0:
-                c = verts[polys[fid]]  # (G,4,3)
-                uu, vv = np.meshgrid(np.arange(1, gu) / gu, np.arange(1, gv) / gv, indexing="ij")
-                uu = uu.reshape(-1)[None, :, None]
-                vv = vv.reshape(-1)[None, :, None]
-                pos = ((1 - uu) * (1 - vv) * c[:, None, 0] + uu * (1 - vv) * c[:, None, 1]
-                       + uu * vv * c[:, None, 2] + (1 - uu) * vv * c[:, None, 3])
-                ids = next_v + np.arange(G * ni).reshape(G, gu - 1, gv - 1)
-                next_v += G * ni
-                all_pos.append(pos.reshape(-1, 3))
-                grid[:, 1:gu, 1:gv] = ids
-            p = np.stack([grid[:, :-1, :-1], grid[:, 1:, :-1], grid[:, 1:, 1:], grid[:, :-1, 1:]], axis=-1)
-            out_polys.append(p.reshape(-1, 4))
+            pos, cells = _cut_quads(verts, polys, cuts, fid, gu, gv, next_v)
+            next_v += len(pos)
+            all_pos.append(pos)
+            out_polys.append(cells)
             out_parent.append(np.repeat(fid, gu * gv))
-    # ---- triangles: barycentric grid with n segments; vertex (i, j): c0 + i/n (c1-c0) + j/n (c2-c0)
     t_ids = np.flatnonzero(tri)
     if t_ids.size:
-        nt = n[face_edges[t_ids, 0]]
+        nt = cuts.n[cuts.face_edges[t_ids, 0]]
         for g in np.unique(nt):
             fid = t_ids[nt == g]
-            G = fid.size
-            grid = np.full((G, g + 1, g + 1), -1, dtype=np.int64)
-            for i in range(g + 1):
-                grid[:, i, 0] = edge_vertex(fid, 0, np.full(G, i))              # c0 -> c1
-            for j in range(g + 1):
-                grid[:, g - j, j] = edge_vertex(fid, 1, np.full(G, j))          # c1 -> c2
-                grid[:, 0, j] = edge_vertex(fid, 2, np.full(G, g - j))          # c2 -> c0 reversed
-            ii, jj = np.nonzero((np.add.outer(np.arange(g + 1), np.arange(g + 1)) < g)
-                                & (np.arange(g + 1)[:, None] > 0) & (np.arange(g + 1)[None, :] > 0))
-            if ii.size:
-                c = verts[polys[fid, :3]]
-                a = (ii / g)[None, :, None]
-                b = (jj / g)[None, :, None]
-                pos = c[:, None, 0] + a * (c[:, None, 1] - c[:, None, 0]) + b * (c[:, None, 2] - c[:, None, 0])
-                ids = next_v + np.arange(G * ii.size).reshape(G, ii.size)
-                next_v += G * ii.size
-                all_pos.append(pos.reshape(-1, 3))
-                grid[:, ii, jj] = ids
-            tris = []
-            for i in range(g):
-                for j in range(g - i):
-                    tris.append(np.stack([grid[:, i, j], grid[:, i + 1, j], grid[:, i, j + 1],
-                                          np.full(G, -1)], axis=1))
-                    if i + j < g - 1:
-                        tris.append(np.stack([grid[:, i + 1, j], grid[:, i + 1, j + 1], grid[:, i, j + 1],
-                                              np.full(G, -1)], axis=1))
-            tp = np.stack(tris, axis=1)  # (G, g*g, 4)
-            out_polys.append(tp.reshape(-1, 4))
+            pos, cells = _cut_triangles(verts, polys, cuts, fid, g, next_v)
+            next_v += len(pos)
+            all_pos.append(pos)
+            out_polys.append(cells)
             out_parent.append(np.repeat(fid, g * g))
     return np.concatenate(all_pos), np.concatenate(out_polys), np.concatenate(out_parent)
 
