@@ -4,12 +4,14 @@
 nothing bounces), baked by Cycles and by us and compared at Cycles' own face corners with the
 harness of tests/test_lighting_cycles.py. Limit: 2% mean relative error.
 
-* worlds: a 4.x "Use Nodes" off world as Blender 5 loads it, Background strength, a mix of two
-  Backgrounds, no world at all, and a colour we cannot read (a note, not silent black);
+* worlds: a 4.x "Use Nodes" off world as Blender 5 loads it (and, on 4.x, as 4.x renders it: its
+  ``world.color``), Background strength, a mix of two Backgrounds, no world at all, and a colour
+  we cannot read (a note, not silent black);
 * lights and meshes by their *render* visibility, not the viewport's (hidden with H, disabled in
   viewports, collections hidden in the viewport or disabled in renders);
 * emission strength 0 with an emission colour (Blender 4.2's OBJ ``Ke``) and negative strengths:
-  what Cycles does, with a note naming the material.
+  no light, with a note naming the material and saying what this version's Cycles does (no light,
+  or negative light: an Emission node, and a Principled BSDF before 5.0).
 
 Run ``python tests/test_cycles_parity.py`` to print the errors per case.
 """
@@ -29,6 +31,7 @@ from hemicube_radiosity.blender.lights import read_lights, world_radiance  # noq
 from test_lighting_cycles import RHO, Comparison, floor_object  # noqa: E402
 
 TOL = 0.02
+BLENDER_5 = bpy.app.version >= (5, 0, 0)
 SAMPLES = 4          # one light, nothing bouncing: every Cycles sample gives the exact value
 MANY_LIGHTS = 512    # several lights (or an emissive mesh next to a lamp): Cycles picks one light
                      # per sample, so the bake is exact only on average (512: ~0.2% off)
@@ -38,9 +41,10 @@ MANY_LIGHTS = 512    # several lights (or an emissive mesh next to a lamp): Cycl
 def versioned_world(color, strength=1.0):
     """A world as Blender 5 loads a 4.x world with "Use Nodes" off (versioning_500.cc,
     ``do_version_world_remove_use_nodes``): the old tree's output made inactive, a new active World
-    Output fed by a Background of the old ``world.color``, both in a frame."""
+    Output fed by a Background of the old ``world.color``, both in a frame. (Before 5.0
+    ``worlds.new`` makes no tree: ``node_tree`` switches nodes on, which gives the same one.)"""
     w = bpy.data.worlds.new("legacy")          # its tree: Background (0.05 grey) -> World Output
-    nt = w.node_tree
+    nt = cr.node_tree(w)
     frame = nt.nodes.new("NodeFrame")
     frame.label = "Versioning: Use Nodes was removed"
     out = nt.nodes.new("ShaderNodeOutputWorld")
@@ -65,6 +69,28 @@ def test_world_use_nodes_off_from_4x_file():
     """0.04 (the old tree's default grey) was read where Cycles renders the world colour."""
     c, w = world_case(lambda: versioned_world((0.5, 0.6, 0.7)))
     assert sum(n.type == "OUTPUT_WORLD" for n in w.node_tree.nodes) == 2
+    np.testing.assert_allclose(c.world, [0.5, 0.6, 0.7], rtol=1e-6)
+    np.testing.assert_allclose(c.cycles.mean(axis=0), RHO * np.array([0.5, 0.6, 0.7]), rtol=1e-4)
+    assert c.error() < TOL
+    assert not [n for n in c.notes if n.startswith("world")]
+
+
+@pytest.mark.skipif(BLENDER_5, reason="Blender 5 has no 'Use Nodes' off: it converts such a world "
+                                      "on load (the test above)")
+def test_world_use_nodes_off_before_blender_5():
+    """What 4.x itself renders for a world with "Use Nodes" off: its ``world.color``, not the
+    tree it keeps (a Background of the 0.05 default grey)."""
+    def setup():
+        w = bpy.data.worlds.new("legacy")
+        cr.node_tree(w)                        # the default tree, then "Use Nodes" off again
+        w.use_nodes = False
+        w.color = (0.5, 0.6, 0.7)
+        bpy.context.scene.world = w
+        return w
+
+    c, w = world_case(setup)
+    bg = next(n for n in w.node_tree.nodes if n.type == "BACKGROUND")
+    assert not w.use_nodes and tuple(bg.inputs["Color"].default_value)[:3] != (0.5, 0.6, 0.7)
     np.testing.assert_allclose(c.world, [0.5, 0.6, 0.7], rtol=1e-6)
     np.testing.assert_allclose(c.cycles.mean(axis=0), RHO * np.array([0.5, 0.6, 0.7]), rtol=1e-4)
     assert c.error() < TOL
@@ -273,13 +299,26 @@ def emission_case(make_material):
 
 @pytest.mark.parametrize("strength", [0.0, -2.0])
 def test_principled_emission_zero_or_negative_is_no_light(strength):
+    """Strength 0 is no light in Cycles. A negative strength is no light in Cycles 5.0 (clamped);
+    Cycles 4.2/4.5 emit negative light there (the panel bakes strength x colour and the floor
+    under it darkens), as from an Emission node: no light here all the same, and the note says
+    which."""
     c = emission_case(lambda: principled_emitter(strength))
     floor = c.owner == 0
-    assert c.error(floor) < TOL
-    assert np.all(np.abs(c.cycles[~floor]) < 1e-6) and np.all(np.abs(c.ours[~floor]) < 1e-6)
+    assert np.all(np.abs(c.ours[~floor]) < 1e-6)
     src = reader.read_object(bpy.data.objects["panel"], bpy.context.evaluated_depsgraph_get())
-    want = "Emission Strength 0" if strength == 0 else "negative"
-    assert any("'glow'" in n and want in n and "no light" in n for n in src.notes), src.notes
+    mine = [n for n in src.notes if "'glow'" in n]
+    if strength == 0 or BLENDER_5:
+        assert c.error(floor) < TOL
+        assert np.all(np.abs(c.cycles[~floor]) < 1e-6)
+        want = "Emission Strength 0" if strength == 0 else "negative: no light (as in Cycles)"
+    else:
+        np.testing.assert_allclose(c.cycles[~floor].mean(axis=0), strength * np.array([1.0, 0.5, 0.25]),
+                                   rtol=1e-4)
+        assert c.cycles[floor].mean() < 0.9 * c.ours[floor].mean()     # Cycles darkens the floor
+        want = "negative: Cycles subtracts light there"
+    assert len(mine) == 1, src.notes                                    # one note, not two
+    assert want in mine[0] and "no light" in mine[0], src.notes
 
 
 def test_emission_node_negative_strength_noted():

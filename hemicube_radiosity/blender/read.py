@@ -23,8 +23,10 @@ render shows (not ``hide_render``, in a collection neither excluded nor disabled
 whatever the viewport shows; an object disabled in viewports is not evaluated by the viewport
 depsgraph, so it is read without modifiers and placed by ``world_matrix`` (noted). Viewport and
 render modifier settings that differ are noted. An emission colour at strength 0 and negative
-emission are no light, as in Cycles (a Principled BSDF clamps it; an Emission node's negative light,
-which Cycles does subtract, is not modelled), each with a note naming the material.
+emission are no light, each with a note naming the material. Strength 0 is no light in Cycles too;
+negative light is not modelled (the solve needs emission >= 0): Cycles subtracts light for an
+Emission node's negative strength, and for a Principled BSDF's before Blender 5.0 (5.0 clamps that
+one to no light, as here).
 
 Materials: plain colour values are read from the nodes (:func:`material_rho_emission`). Where
 that is not what Cycles renders (colours from textures, colour attributes or other nodes; a
@@ -157,6 +159,14 @@ def _note_unlit(node, em, strength, color_name, strength_name, notes):
                      f"{strength_name} 0: no light (as in Cycles); raise the strength to make it glow")
 
 
+def _principled_clamps_negative_emission():
+    """Whether this Blender's Cycles renders a Principled BSDF's negative Emission Strength as no
+    light (5.0) rather than as negative light (4.2, 4.5)."""
+    import bpy
+
+    return bpy.app.version >= (5, 0, 0)
+
+
 def _shader(node, out_socket, mat, notes, depth=0):
     """(rho, emission) of the shader that ``node`` outputs."""
     zero = np.zeros(3)
@@ -174,8 +184,16 @@ def _shader(node, out_socket, mat, notes, depth=0):
         em = _value(node, notes, "Emission Color", "Emission")
         strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
         if strength < 0 and np.any(em > 0):
-            # Cycles clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
-            notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light (as in Cycles)")
+            if _principled_clamps_negative_emission():
+                # Cycles 5.0 clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
+                notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light "
+                             "(as in Cycles)")
+            else:
+                # Cycles 4.x emits negative light there, as from an Emission node (measured on
+                # 4.2.23 and 4.5.15: a strength -2 panel bakes -2 x its colour and takes from the
+                # floor exactly what strength +2 adds); the solve needs emission >= 0
+                notes.append(f"{node.name} Emission Strength {strength:g} is negative: Cycles "
+                             "subtracts light there, this bake takes it as no light")
             return rho, zero
         _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
         return rho, em * strength
@@ -337,8 +355,11 @@ def _clean(rho, em, label, notes):
         rho = np.where(np.isfinite(rho), rho, 0.0)
         em = np.where(np.isfinite(em), em, 0.0)
     if np.any(em < 0):
-        notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
-                     "subtracts light there, this bake takes it as no light")
+        # the node reader has already named the negative strength (an Emission node's, or a
+        # Principled BSDF's before 5.0, whose negative light Cycles bakes too): one note, not two
+        if not any(s.startswith(f"{label}: ") and "is negative" in s for s in notes):
+            notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
+                         "subtracts light there, this bake takes it as no light")
         em = np.maximum(em, 0.0)
     if np.any(rho > RHO_MAX + 1e-6) or np.any(rho < 0):
         notes[:] = [s for s in notes if not (s.startswith("reflectivity (") and "clipped to" in s)]
