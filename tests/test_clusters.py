@@ -23,9 +23,14 @@ def cluster_factor(pieces, clusters, F, src=0, dst=1):
 
 
 def test_coarse_scenes_are_not_grouped():
-    """Pieces cut from coarse faces already have the patch size: no clusters, the same bake."""
-    assert group_pieces(build_patches(scenes.cornell_box(), 0.25), 0.25) is None
-    assert group_pieces(build_patches(scenes.tessellate(scenes.cornell_box(), 1), 0.25), 0.25) is None
+    """Pieces cut from coarse quads already have the patch size: no clusters, the same bake. The
+    same box triangulated is cut into triangles of a quarter of a patch: grouped, it costs what
+    the quads cost."""
+    quads = build_patches(scenes.cornell_box(), 0.25)
+    assert group_pieces(quads, 0.25) is None
+    tris = build_patches(scenes.tessellate(scenes.cornell_box(), 1), 0.25)
+    grouped = group_pieces(tris, 0.25)
+    assert len(tris) > 3 * len(quads) and 0.7 * len(quads) < len(grouped) < 1.1 * len(quads)
 
 
 def test_a_dense_wall_is_solved_as_tens_of_patches_not_thousands_of_faces():

@@ -80,15 +80,14 @@ class Clusters:
 
 
 def _small(pieces: PatchSet, size) -> np.ndarray:
-    """(P,) pieces that are whole input faces (not cut to the patch size) or whose every edge is
-    shorter than half ``size``: those are grouped; pieces cut from a coarse face already have the
-    patch size."""
+    """(P,) pieces that are whole input faces (not cut to the patch size) or smaller than a third
+    of a patch (cut from a face only a little larger than a patch): those are grouped. Pieces cut
+    from a coarse face already have about the patch's area (a quad more than a quarter of it on
+    each side, a triangle half of that) and stay alone."""
     face = pieces.owner.astype(np.int64) * (1 << 32) + pieces.source_face
     whole = np.unique(face, return_inverse=True, return_counts=True)
     uncut = whole[2][whole[1].reshape(-1)] == 1
-    c = pieces.corners()
-    edges = np.linalg.norm(c - np.roll(c, 1, axis=1), axis=2).max(axis=1)
-    return uncut | (edges < 0.5 * size)
+    return uncut | (pieces.areas < size * size / 3)
 
 
 def _normal_bins(normals, max_angle):
