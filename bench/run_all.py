@@ -34,6 +34,7 @@ def main(argv):
         rc |= run(ff, ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "bench_batch.py"), ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "bench_parallel.py"), ["--quick"] if "--quick" in argv else [])
+    rc |= run(os.path.join(HERE, "bench_dense.py"), ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
     return 1 if rc else 0
 
