@@ -73,10 +73,12 @@ class Clusters:
         return np.asarray(per_cluster)[self.of]
 
     def with_materials(self, pieces: PatchSet) -> "Clusters":
-        """The same grouping with reflectivity and emission read again from ``pieces``."""
-        return Clusters(self.of, self.centers, self.normals, self.areas,
-                        self.mean(pieces.rho, pieces.areas), self.mean(pieces.emission, pieces.areas),
-                        self.owner)
+        """The same grouping with reflectivity and emission read again from ``pieces`` (a
+        cluster of one piece takes that piece's values exactly)."""
+        rho, em = self.mean(pieces.rho, pieces.areas), self.mean(pieces.emission, pieces.areas)
+        solo = np.flatnonzero(self.sizes[self.of] == 1)
+        rho[self.of[solo]], em[self.of[solo]] = pieces.rho[solo], pieces.emission[solo]
+        return Clusters(self.of, self.centers, self.normals, self.areas, rho, em, self.owner)
 
 
 def _small(pieces: PatchSet, size) -> np.ndarray:

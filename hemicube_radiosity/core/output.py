@@ -44,14 +44,7 @@ def output_elements(meshes, settings, cache=None) -> PatchSet:
     """The output mesh cut to ``settings.element_size``; its geometry is cached (a relight only
     re-reads reflectivity and emission from the meshes)."""
     key = cache_key(meshes_key(meshes), ("elements", settings.element_size))
-    el = cached(cache, key, lambda: build_patches(meshes, settings.element_size))
-    rho = np.empty((len(el), 3))
-    em = np.empty((len(el), 3))
-    for oi, m in enumerate(meshes):
-        sel = el.owner == oi
-        rho[sel] = np.asarray(m.face_rho, float)[el.source_face[sel]]
-        em[sel] = np.asarray(m.face_emission, float)[el.source_face[sel]]
-    return el.with_materials(rho, em)
+    return cached(cache, key, lambda: build_patches(meshes, settings.element_size)).with_mesh_materials(meshes)
 
 
 def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:

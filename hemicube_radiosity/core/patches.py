@@ -118,6 +118,17 @@ class PatchSet:
             h.update(a.tobytes())
         return h.digest()
 
+    def with_mesh_materials(self, meshes) -> "PatchSet":
+        """A copy whose reflectivity and emission are read again from the source ``meshes``
+        (each patch its source face's), the geometry shared: what a relight needs."""
+        rho = np.empty((len(self), 3))
+        em = np.empty((len(self), 3))
+        for oi, m in enumerate(meshes):
+            sel = self.owner == oi
+            rho[sel] = np.asarray(m.face_rho, float)[self.source_face[sel]]
+            em[sel] = np.asarray(m.face_emission, float)[self.source_face[sel]]
+        return self.with_materials(rho, em)
+
     def with_materials(self, rho=None, emission=None) -> "PatchSet":
         """A copy with new reflectivity/emission and the same geometry (arrays shared)."""
         return PatchSet(

@@ -13,12 +13,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .cache import FormFactorCache
+from .cache import FormFactorCache, cache_key, cached
 from .clusters import Clusters, group_pieces
 from .direct_light import DirectLight, direct_stage, source_term
 from .errors import SettingsError
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
-from .output import output_elements, vertex_stage
+from .output import meshes_key, output_elements, vertex_stage
 from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
 from .settings import BakeSettings
@@ -137,8 +137,12 @@ def patch_stage(ctx) -> None:
     s = ctx.settings
     ctx.say(0.0, "cutting meshes into patches")
     if ctx.patches is None:
-        ctx.patches = build_patches(ctx.meshes, s.patch_size)
-    if s.group_faces:
+        # geometry only, cached: a relight re-reads the materials onto the same patches
+        key = cache_key(meshes_key(ctx.meshes), ("patches", s.patch_size, s.group_faces, s.group_angle))
+        pieces, clusters = cached(ctx.cache, key, lambda: _cut(ctx.meshes, s))
+        ctx.patches = pieces.with_mesh_materials(ctx.meshes)
+        ctx.clusters = None if clusters is None else clusters.with_materials(ctx.patches)
+    elif s.group_faces:
         ctx.clusters = group_pieces(ctx.patches, s.patch_size, s.group_angle)
     n = len(ctx.unknowns)
     if n > s.max_patches:
@@ -154,6 +158,12 @@ def patch_stage(ctx) -> None:
                          f"memory budget of {s.max_memory_gb:g} GB{hint}")
     grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
     ctx.say(1.0, f"{n} patches{grouped}; form factors at most {1024 * gb:.0f} MB")
+
+
+def _cut(meshes, s):
+    """(patches, clusters or None): the meshes cut to the patch size and small faces grouped."""
+    pieces = build_patches(meshes, s.patch_size)
+    return pieces, group_pieces(pieces, s.patch_size, s.group_angle) if s.group_faces else None
 
 
 def form_factor_gb(n, settings) -> float:

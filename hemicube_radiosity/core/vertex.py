@@ -65,6 +65,23 @@ def _boundary_interior_pairs(polys, boundary, interior):
     return np.unique(np.stack([pv[ok], qv[ok]], 1), axis=0)
 
 
+_TOPOLOGY: dict = {}     # id(polys) -> (polys, (boundary, pairs)): a relight reuses the patches'
+
+
+def _topology(polys, V, cnt):
+    """(boundary (V,) bool, pairs (K, 2)) of :func:`vertex_radiosity`: geometry only, so kept
+    for the last few patch arrays (the same ``polys`` object, as a relight's cached patches are)."""
+    hit = _TOPOLOGY.get(id(polys))
+    if hit is not None and hit[0] is polys:
+        return hit[1]
+    boundary = boundary_vertices(polys, V) & (cnt > 0)
+    out = boundary, _boundary_interior_pairs(polys, boundary, ~boundary & (cnt > 0))
+    while len(_TOPOLOGY) >= 8:
+        _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
+    _TOPOLOGY[id(polys)] = (polys, out)
+    return out
+
+
 def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np.ndarray:
     """(V, 3) radiosity per patch vertex from (N, 3) patch radiosities ``B``.
 
@@ -86,8 +103,7 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np
     avg = np.stack([np.bincount(v, weights=wp * B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
     if not extrapolate:
         return avg
-    boundary = boundary_vertices(polys, V) & (cnt > 0)
-    pairs = _boundary_interior_pairs(polys, boundary, ~boundary & (cnt > 0))
+    boundary, pairs = _topology(polys, V, cnt)
     if pairs.size == 0:
         return avg
     bv, iv = pairs[:, 0], pairs[:, 1]
