@@ -47,12 +47,17 @@ def vertex_frames(patches: PatchSet, inset=1e-2):
     return x, n, mean(patches.rho)
 
 
+def _bilinear(c, u, v):
+    """Points ``(u, v)`` in [0, 1]^2 mapped onto quads: ``c`` (..., 4, 3) corners in order, u and
+    v broadcasting against ``c[..., 0, :]``; (..., 3). A triangle repeats its third corner."""
+    return (1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :] + u * v * c[..., 2, :] \
+        + (1 - u) * v * c[..., 3, :]
+
+
 def _emitter_samples(corners, samples, rng):
     """(M, S, 3) stratified points on each emitter patch (bilinear map of jittered grid cells)."""
     u, v = jittered_grid(rng, len(corners), samples)
-    u, v = u[..., None], v[..., None]
-    c = corners[:, None]
-    return (1 - u) * (1 - v) * c[:, :, 0] + u * (1 - v) * c[:, :, 1] + u * v * c[:, :, 2] + (1 - u) * v * c[:, :, 3]
+    return _bilinear(corners[:, None], u[..., None], v[..., None])
 
 
 def _group_samples(corners, areas, groups, samples, rng):
@@ -67,8 +72,7 @@ def _group_samples(corners, areas, groups, samples, rng):
     t = before[:, None] + total[:, None] * (np.arange(samples)[None] + rng.uniform(0, 1, (G, samples))) / samples
     k = order[np.minimum(np.searchsorted(cum, t.ravel(), side="right"), len(cum) - 1)].reshape(G, samples)
     u, v = rng.uniform(0, 1, (2, G, samples, 1))
-    c = corners[k]                                                        # (G, S, 4, 3)
-    return (1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :] + u * v * c[..., 2, :] + (1 - u) * v * c[..., 3, :]
+    return _bilinear(corners[k], u, v)                                # corners[k]: (G, S, 4, 3)
 
 
 def _visible_fraction(scene, origins, targets):
@@ -78,6 +82,97 @@ def _visible_fraction(scene, origins, targets):
     blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
                              np.full(len(origins) * S, 1 - 1e-4))
     return 1 - blocked.reshape(-1, S).mean(axis=1)
+
+
+def _sample_drawer(patches, em, corners, groups, units, eps, rng):
+    """``draw(count)``: (units, count, 3) shadow-ray targets on the emitters (per patch, or
+    spread over each group by area), from the one random stream ``rng``.
+
+    The points are lifted ``eps`` (scene units) off the emitter along its normal (a group's
+    area-weighted mean normal): a shadow ray that ends exactly on a surface would graze it at
+    float32 precision (a wall lighting the floor at their shared edge)."""
+    if groups is None:
+        def draw(count):
+            return _emitter_samples(corners, count, rng) + eps * patches.normals[em][:, None, :]
+        return draw
+    lift = np.zeros((units, 3))
+    np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
+    lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
+
+    def draw(count):
+        return _group_samples(corners, patches.areas[em], groups, count, rng) + lift[:, None, :]
+    return draw
+
+
+class _Transport:
+    """The work of one :func:`emitter_transport` call, in chunks of ``step`` points.
+
+    ``points``, ``normals`` (P, 3) float64; ``corners`` (M, 4, 3) and ``em_normals`` (M, 3) of
+    the emitter patches; ``groups`` (M,) int64 or None; ``eps`` the lift off the surfaces
+    (scene units); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
+    ``samples`` targets per emitter unit, shared by every chunk.
+    """
+
+    def __init__(self, points, normals, corners, em_normals, groups, scene, refine, eps, draw,
+                 samples, chunk_rays):
+        self.points, self.normals, self.corners, self.em_normals = points, normals, corners, em_normals
+        self.groups, self.scene, self.refine, self.eps, self.draw = groups, scene, refine, eps, draw
+        self.ys = draw(samples)                                           # (units, S, 3)
+        self.S = self.ys.shape[1]
+        units = self.ys.shape[0]
+        self.step = max(1, min(len(points), chunk_rays // max(units * self.S, 1), 4096))
+
+    def first_pass(self, s):
+        """Form factors of the chunk starting at point ``s`` and the visible fraction from the
+        first ``samples`` rays: (s, F, pi, mi, o, v, penumbra) with F (p, units) unshadowed,
+        (pi, mi) its nonzero entries, o (r, 3) the ray origins, v (r,) the visible fractions and
+        penumbra (r,) bool where some rays pass and some do not (None: nothing to refine)."""
+        x = self.points[s:s + self.step]
+        nx = self.normals[s:s + self.step]
+        if self.groups is None:
+            F = polygon_form_factors(x, nx, self.corners, self.em_normals)                # (p, M)
+        else:
+            F = group_form_factors(x, nx, self.corners, self.groups, self.em_normals)     # (p, G)
+        if self.scene is None:
+            return s, F, None, None, None, None, None
+        pi, mi = np.nonzero(F > 0)
+        o = x[pi] + self.eps * nx[pi]                                     # (r, 3)
+        v = _visible_fraction(self.scene, o, self.ys[mi]) if pi.size else np.zeros(0)
+        # penumbra: where some rays pass and some do not, cast ``refine`` times more
+        part = (v > 0) & (v < 1)
+        return s, F, pi, mi, o, v, part if self.refine > 0 and part.any() else None
+
+    def second_pass(self, job):
+        """(s, T rows (p, units)) of a chunk from its :meth:`first_pass` and the extra targets
+        (units, refine * S, 3) drawn for its penumbra (None when it has none)."""
+        (s, F, pi, mi, o, v, part), extra = job
+        if self.scene is None:
+            return s, F
+        if part is not None:
+            refine = self.refine
+            v[part] = (v[part] + refine * _visible_fraction(self.scene, o[part], extra[mi[part]])) / (1 + refine)
+        vis = np.zeros(F.shape)
+        vis[pi, mi] = v
+        return s, F * vis
+
+    def run(self, T, workers, ticker):
+        """Fill T (P, units) chunk by chunk on ``workers`` threads (resolved), ticking ``ticker``.
+
+        Chunks are independent but for ``draw``, which takes the penumbra's extra sample points
+        from one random stream: a window of chunks runs its first pass on the threads, then the
+        draws are made here in chunk order (the order of the serial loop, so T is the same for
+        any worker count), then the refinement runs on the threads."""
+        P, step = len(self.points), self.step
+        starts = list(range(0, P, step))
+        window = 1 if workers <= 1 else 2 * workers
+        for w in range(0, len(starts), window):
+            firsts = list(ordered_map(self.first_pass, starts[w:w + window], workers))
+            jobs = [(f, self.draw(self.refine * self.S) if f[6] is not None else None) for f in firsts]
+            for s, F in ordered_map(self.second_pass, jobs, workers):
+                T[s:s + step] = F
+            if ticker is not None:
+                last = starts[min(w + window, len(starts)) - 1]
+                ticker.tick(min(last + step, P), P)
 
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
@@ -106,70 +201,14 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     T = np.zeros((len(points), units), dtype=np.float32)
     if em.size == 0 or len(points) == 0:
         return T
-    corners = patches.corners()[em]
-    scale = float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0
-    eps = 1e-5 * scale
-    rng = np.random.default_rng(seed)
-    # sample points lifted off the emitter a hair: a shadow ray that ends exactly on a surface
-    # would graze it at float32 precision (a wall lighting the floor at their shared edge)
-    if groups is None:
-        def draw(count):
-            return _emitter_samples(corners, count, rng) + eps * patches.normals[em][:, None, :]
-    else:
+    if groups is not None:
         groups = np.asarray(groups, dtype=np.int64)
-        lift = np.zeros((units, 3))
-        np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
-        lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
-
-        def draw(count):
-            return _group_samples(corners, patches.areas[em], groups, count, rng) + lift[:, None, :]
-    ys = draw(samples)                                                    # (units, S, 3)
-    S = ys.shape[1]
-    step = max(1, min(len(points), chunk_rays // max(units * S, 1), 4096))
-
-    def first_pass(s):
-        """Form factors of chunk ``s`` and the visible fraction from the first ``samples`` rays:
-        (s, F, pi, mi, o, v, penumbra) with F unshadowed (p, units)."""
-        x = points[s:s + step]
-        nx = normals[s:s + step]
-        if groups is None:
-            F = polygon_form_factors(x, nx, corners, patches.normals[em])  # (p, M)
-        else:
-            F = group_form_factors(x, nx, corners, groups, patches.normals[em])  # (p, G)
-        if scene is None:
-            return s, F, None, None, None, None, None
-        pi, mi = np.nonzero(F > 0)
-        o = x[pi] + eps * nx[pi]                                          # (r, 3)
-        v = _visible_fraction(scene, o, ys[mi]) if pi.size else np.zeros(0)
-        # penumbra: where some rays pass and some do not, cast ``refine`` times more
-        part = (v > 0) & (v < 1)
-        return s, F, pi, mi, o, v, part if refine > 0 and part.any() else None
-
-    def second_pass(job):
-        (s, F, pi, mi, o, v, part), extra = job
-        if scene is None:
-            return s, F
-        if part is not None:
-            v[part] = (v[part] + refine * _visible_fraction(scene, o[part], extra[mi[part]])) / (1 + refine)
-        vis = np.zeros(F.shape)
-        vis[pi, mi] = v
-        return s, F * vis
-
-    # Chunks are independent but for ``draw``, which takes the penumbra's extra sample points
-    # from one random stream: a window of chunks runs its first pass on ``workers`` threads, then
-    # the draws are made here in chunk order (the order of the serial loop, so T is the same for
-    # any worker count), then the refinement runs on the threads.
-    workers = resolve_workers(workers)
-    starts = list(range(0, len(points), step))
-    window = 1 if workers <= 1 else 2 * workers
-    for w in range(0, len(starts), window):
-        firsts = list(ordered_map(first_pass, starts[w:w + window], workers))
-        jobs = [(f, draw(refine * S) if f[6] is not None else None) for f in firsts]
-        for s, F in ordered_map(second_pass, jobs, workers):
-            T[s:s + step] = F
-        if ticker is not None:
-            last = starts[min(w + window, len(starts)) - 1]
-            ticker.tick(min(last + step, len(points)), len(points))
+    corners = patches.corners()[em]
+    eps = 1e-5 * (float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0)
+    draw = _sample_drawer(patches, em, corners, groups, units, eps, np.random.default_rng(seed))
+    work = _Transport(points, normals, corners, patches.normals[em], groups, scene, refine, eps, draw,
+                      samples, chunk_rays)
+    work.run(T, resolve_workers(workers), ticker)
     return T
 
 

@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import sys
 from contextlib import closing
+from functools import partial
 
 import numpy as np
 
@@ -548,6 +549,17 @@ def _snap_to_pixels(bound, A, rhs, first):
     return col
 
 
+def _fragment_keys(q, ids):
+    """Item-buffer keys of fragments: reciprocal depths ``q`` (...) float32 and ids broadcasting
+    against them (int32) packed as int64 ``((0x7F800000 - bits(q)) << 32) | id``, so the nearer
+    fragment (the larger 1/w) has the smaller key; q is clamped to 1e-30 (positive bits)."""
+    qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
+    frag = np.empty(q.shape + (2,), dtype=np.int32)                   # (high, low) int64 halves
+    np.subtract(np.int32(0x7F800000), qbits, out=frag[..., _HIGH])
+    frag[..., 1 - _HIGH] = ids
+    return frag.view(np.int64)[..., 0]
+
+
 def _draw_points(i, j, px, py, pixel_base, depth, item, keys, R):
     """Depth-test polygons that can cover one pixel centre only, (i, j), into ``keys``.
 
@@ -567,12 +579,7 @@ def _draw_points(i, j, px, py, pixel_base, depth, item, keys, R):
     da, db, dc = depth
     X, Y = X[sel], Y[sel]
     q = da[sel] * X + db[sel] * Y + dc[sel]
-    qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
-    frag = np.empty(q.shape + (2,), dtype=np.int32)
-    np.subtract(np.int32(0x7F800000), qbits, out=frag[..., _HIGH])
-    frag[..., 1 - _HIGH] = item[sel]
-    np.minimum.at(keys, pixel_base[sel] + j[sel] * R + i[sel].astype(np.int64),
-                  frag.view(np.int64)[..., 0])
+    np.minimum.at(keys, pixel_base[sel] + j[sel] * R + i[sel].astype(np.int64), _fragment_keys(q, item[sel]))
 
 
 def _draw_spans(q0, dq, start, ids, n, keys, R):
@@ -593,11 +600,7 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
         L = bounds[ci]
         o = np.arange(L)[:, None]
         q = q0[lo:hi] + dq[lo:hi] * o.astype(np.float32)             # (L, S)
-        qbits = np.maximum(q, np.float32(1e-30)).view(np.int32)
-        frag = np.empty(q.shape + (2,), dtype=np.int32)             # (high, low) int64 halves
-        np.subtract(np.int32(0x7F800000), qbits, out=frag[..., _HIGH])
-        frag[..., 1 - _HIGH] = ids[lo:hi]
-        frag = frag.view(np.int64)[..., 0]
+        frag = _fragment_keys(q, ids[lo:hi])
         pix = start[lo:hi] + o
         if L > _EXACT_SPANS:  # padded class: keep the pixels inside the spans
             inside = o < n[order[lo:hi]]
@@ -813,29 +816,47 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     B = _batch_size(len(patches), R, batch)
     ticker = Ticker(progress, cancelled)
     ticker.tick(0, recv.size, force=True)
+    batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
+    # batches in receiver order whatever the worker count: F is bit-identical
+    rows_of = partial(_batch_rows, scene, frames, n)
+    with closing(ordered_map(rows_of, batches, resolve_workers(workers))) as results:
+        indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
+    meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
+    return CSR(indptr, indices, data, (n, n), meta, sky)
+
+
+def _batch_rows(scene, frames, n, ids):
+    """Rows of F for the receivers ``ids`` (B,) int64, sparse.
+
+    ``frames`` (K, 3, 3) receiver frames; ``n`` receivers in all (K). Returns ids, the entries
+    per row (B,) int64, their columns (E,) int32 and form factors (E,) float32 (row by row,
+    columns ascending), and sky (B,) float64.
+    """
+    keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
+    rows, sky_b = _resolve(keys, scene.weights, n, scene.item_of)
+    r, c = np.nonzero(rows)
+    return ids, np.bincount(r, minlength=ids.size), c.astype(np.int32), \
+        rows[r, c].astype(np.float32), sky_b
+
+
+def _collect_rows(results, n, total, ticker):
+    """Assemble the :func:`_batch_rows` of batches in ascending receiver order into CSR arrays.
+
+    ``total`` receivers are asked for (``ticker`` is ticked with the count done after every
+    batch). Returns indptr (n + 1,) int64, indices (E,) int32, data (E,) float32 and sky (n,)
+    float32; rows not asked for stay empty with sky 0.
+    """
     sky = np.zeros(n, dtype=np.float32)
     counts = np.zeros(n + 1, dtype=np.int64)
     cols_l, vals_l = [], []
-
-    def rows_of(ids):
-        keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
-        rows, sky_b = _resolve(keys, scene.weights, n, scene.item_of)
-        r, c = np.nonzero(rows)
-        return ids, np.bincount(r, minlength=ids.size), c.astype(np.int32), \
-            rows[r, c].astype(np.float32), sky_b
-
-    batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
     done = 0
-    # batches in receiver order whatever the worker count: F is bit-identical
-    with closing(ordered_map(rows_of, batches, resolve_workers(workers))) as results:
-        for ids, cnt, cols, vals, sky_b in results:
-            counts[ids + 1] = cnt
-            cols_l.append(cols)
-            vals_l.append(vals)
-            sky[ids] = sky_b
-            done += ids.size
-            ticker.tick(done, recv.size)
+    for ids, cnt, cols, vals, sky_b in results:
+        counts[ids + 1] = cnt
+        cols_l.append(cols)
+        vals_l.append(vals)
+        sky[ids] = sky_b
+        done += ids.size
+        ticker.tick(done, total)
     indices = np.concatenate(cols_l) if cols_l else np.zeros(0, np.int32)
     data = np.concatenate(vals_l) if vals_l else np.zeros(0, np.float32)
-    meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
-    return CSR(np.cumsum(counts), indices, data, (n, n), meta, sky)
+    return np.cumsum(counts), indices, data, sky

@@ -209,6 +209,76 @@ def _gs_blocks(F, rho_max, size, omega):
     return blocks
 
 
+def _sor_sweep(blocks, rho, S, BT, B32, w):
+    """One over-relaxed block Gauss-Seidel sweep, in place; returns the largest change of a value.
+
+    ``blocks`` from :func:`_gs_blocks`; rho, S (N, 3); BT (bands, N) float64 radiosities,
+    updated block by block; B32 the copy the gathers read (a float32 copy of BT, kept up to
+    date, or BT itself); w the relaxation factor (1 = plain Gauss-Seidel)."""
+    change = 0.0
+    for b0, b1, cols, vals, starts, nonempty in blocks:
+        acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0)
+        old = BT[:, b0:b1].T
+        new = S[b0:b1] + rho[b0:b1] * acc
+        if w != 1.0:
+            new = old + w * (new - old)
+        d = np.abs(new - old).max(initial=0.0)
+        if d > change:
+            change = d
+        BT[:, b0:b1] = new.T
+        if B32 is not BT:
+            B32[:, b0:b1] = new.T
+    return change
+
+
+class _Relaxation:
+    """The relaxation factor ``w`` of :func:`_gauss_seidel` and the row blocks that go with it.
+
+    Given ``omega``, w stays there. With ``omega`` None the first sweeps are plain Gauss-Seidel
+    and :meth:`observe` picks Young's optimum from the ratio of their changes once it settles;
+    then, should the changes grow past 1000 times the smallest since (SOR grows for a while
+    first, then diverges if w is too large), w is halved towards 1 (and dropped to 1 below
+    1.05). ``blocks`` are rebuilt at every change of w (:func:`_gs_blocks` depends on it).
+    """
+
+    def __init__(self, F, rho_max, size, omega):
+        self.F, self.rho_max, self.size = F, rho_max, size
+        self.adaptive = omega is None            # pick omega once, from the first sweeps
+        self.w = 1.0 if self.adaptive else float(omega)
+        self.blocks = _gs_blocks(F, rho_max, size, self.w)
+        self.changes = []                        # absolute: their ratio is the convergence rate
+        self.best = np.inf
+
+    def _set(self, w):
+        self.w = w
+        self.blocks = _gs_blocks(self.F, self.rho_max, self.size, w)
+        self.best = self.changes[-1]
+
+    def observe(self, change):
+        """Record the largest change of a sweep and adapt w from the record."""
+        changes = self.changes
+        changes.append(change)
+        if not self.adaptive:
+            return
+        w = self.w
+        if w == 1.0 and len(changes) >= 3 and changes[-2] > 0:
+            q, qp = changes[-1] / changes[-2], changes[-2] / max(changes[-3], 1e-300)
+            # the ratio settles on mu^2 after a few sweeps (from below: the first ones
+            # are faster); near 1, omega needs it to a fraction of 1 - q
+            if q < 1 and len(changes) >= 4 and (abs(q - qp) <= 0.1 * (1 - q) or len(changes) >= 12):
+                w_new = min(1.95, 2.0 / (1.0 + np.sqrt(1.0 - q)))
+                self.adaptive = w_new > 1.05
+                if self.adaptive:
+                    self._set(float(w_new))
+        elif w > 1.0:
+            self.best = min(self.best, changes[-1])
+            if changes[-1] > 1e3 * self.best:   # diverging: relax less
+                w = 1.0 + 0.5 * (w - 1.0)
+                if w < 1.05:
+                    w, self.adaptive = 1.0, False
+                self._set(w)
+
+
 def _gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None):
     """Gauss-Seidel sweeps over blocks of rows, over-relaxed (SOR): each block is updated at
     once from the newest values of every block before it (block Gauss-Seidel, a Jacobi step
@@ -220,38 +290,21 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None)
     plain Gauss-Seidel, whose change shrinks by about mu^2 per sweep (mu the spectral radius of
     rho F), and then ``omega = 2 / (1 + sqrt(1 - mu^2))`` (Young's optimum). At rho = 0.99 in a
     closed room that is ~1.75 and cuts the sweeps ~9x; in an open room mu is small and omega
-    stays near 1. Should the changes grow (the estimate was wrong), omega is halved towards 1.
+    stays near 1. Should the changes grow (the estimate was wrong), omega is halved towards 1
+    (:class:`_Relaxation`).
 
     Stops when the error bound is below ``tol``: the change of a sweep bounds the residual
     (``|r| <= ((omega - 1) / omega + gamma) max|change|``), and the exact residual (one product
     with F) confirms it before stopping; if the float32 copy of B that the sweeps read limits the
     residual, the sweeps go on in float64. Returns B, sweeps, converged, omega."""
-    n = F.shape[0]
-    size = block or max(1, min(256, n // 32))
-    rho_max = rho.max(axis=1)
-    adaptive = omega is None            # pick omega once, from the first sweeps
-    w = 1.0 if adaptive else float(omega)
-    blocks = _gs_blocks(F, rho_max, size, w)
+    relax = _Relaxation(F, rho.max(axis=1), block or max(1, min(256, F.shape[0] // 32)), omega)
     BT = np.ascontiguousarray(S.T).copy()   # (bands, N): contiguous gathers per band
     B32 = BT.astype(np.float32)             # what the gathers read (half the memory traffic)
-    changes = []
-    best = np.inf
     calib = 0.2          # exact bound / cheap bound, learnt at each exact check
     it, converged = 0, False
     for it in range(1, max_it + 1):
-        change = 0.0
-        for b0, b1, cols, vals, starts, nonempty in blocks:
-            acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0)
-            old = BT[:, b0:b1].T
-            new = S[b0:b1] + rho[b0:b1] * acc
-            if w != 1.0:
-                new = old + w * (new - old)
-            d = np.abs(new - old).max(initial=0.0)
-            if d > change:
-                change = d
-            BT[:, b0:b1] = new.T
-            if B32 is not BT:
-                B32[:, b0:b1] = new.T
+        w = relax.w
+        change = _sor_sweep(relax.blocks, rho, S, BT, B32, w)
         ticker.tick(it, max_it)
         scale = np.abs(BT).max()
         if scale == 0:
@@ -267,28 +320,8 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None)
             if cheap <= tol and B32 is not BT:
                 B32 = BT                    # the float32 copy is the floor: read float64 from now on
             calib = max(exact / max(cheap, 1e-300), 1e-3) * 1.1
-        changes.append(change)       # absolute: its ratio is the convergence rate
-        if adaptive:
-            if w == 1.0 and len(changes) >= 3 and changes[-2] > 0:
-                q, qp = changes[-1] / changes[-2], changes[-2] / max(changes[-3], 1e-300)
-                # the ratio settles on mu^2 after a few sweeps (from below: the first ones
-                # are faster); near 1, omega needs it to a fraction of 1 - q
-                if q < 1 and len(changes) >= 4 and (abs(q - qp) <= 0.1 * (1 - q) or len(changes) >= 12):
-                    w_new = min(1.95, 2.0 / (1.0 + np.sqrt(1.0 - q)))
-                    adaptive = w_new > 1.05
-                    if adaptive:
-                        w = float(w_new)
-                        blocks = _gs_blocks(F, rho_max, size, w)
-                        best = changes[-1]
-            elif w > 1.0:
-                best = min(best, changes[-1])
-                if changes[-1] > 1e3 * best:            # diverging (SOR grows for a while first): relax less
-                    w = 1.0 + 0.5 * (w - 1.0)
-                    if w < 1.05:
-                        w, adaptive = 1.0, False
-                    blocks = _gs_blocks(F, rho_max, size, w)
-                    best = changes[-1]
-    return np.ascontiguousarray(BT.T), it, converged, w
+        relax.observe(change)
+    return np.ascontiguousarray(BT.T), it, converged, relax.w
 
 
 def _jacobi(F, rho, S, tol, max_it, ticker, gamma):
