@@ -233,7 +233,43 @@ def _boundary_edges(polys, groups):
     ea = np.where(fwd[:, None], a[e], b[e])
     eb = np.where(fwd[:, None], b[e], a[e])
     order = np.argsort(uk[out, 0], kind="stable")
-    return np.stack([ea, eb], axis=1)[order], uk[out, 0][order]
+    return _merge_collinear(np.stack([ea, eb], axis=1)[order], uk[out, 0][order])
+
+
+def _merge_collinear(edges, groups, tol=1e-9):
+    """The same boundary with each run of collinear edges (a modeller's grid along a lamp's
+    side) as one edge: (E', 2, 3), (E',). Exact for Lambert's contour integral, which adds up
+    over the pieces of a straight edge; an edge whose end starts no single next edge is kept."""
+    E = len(edges)
+    if E < 2:
+        return edges, groups
+    key = lambda p: (p[0].tobytes(), p[1].tobytes(), p[2].tobytes())
+    starts = {}
+    for i in range(E):
+        starts.setdefault((groups[i], key(edges[i, 0])), []).append(i)
+    d = edges[:, 1] - edges[:, 0]
+    n = np.linalg.norm(d, axis=1, keepdims=True)
+    u = d / np.where(n > 0, n, 1.0)
+    nxt = np.full(E, -1)
+    for i in range(E):
+        cand = starts.get((groups[i], key(edges[i, 1])), [])
+        if len(cand) == 1 and np.linalg.norm(np.cross(u[i], u[cand[0]])) < tol and u[i] @ u[cand[0]] > 0:
+            nxt[i] = cand[0]
+    has_prev = np.zeros(E, bool)
+    has_prev[nxt[nxt >= 0]] = True
+    seen = np.zeros(E, bool)
+    out_e, out_g = [], []
+    for i in list(np.flatnonzero(~has_prev)) + list(range(E)):
+        if seen[i]:
+            continue
+        j = i
+        seen[j] = True
+        while nxt[j] >= 0 and not seen[nxt[j]]:
+            j = nxt[j]
+            seen[j] = True
+        out_e.append((edges[i, 0], edges[j, 1]))
+        out_g.append(groups[i])
+    return np.array(out_e), np.array(out_g)
 
 
 def group_form_factors(points, normals, polys, groups, poly_normals):
