@@ -173,6 +173,11 @@ def test_worker_gets_the_settings_it_was_given(addon):
     assert c.BakeSettings.from_mapping(again) == c.BakeSettings.from_mapping(args)
     assert "--max-patches" not in words and "--no-others" not in words
     assert c.setting_argv(c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o"])) == []
+    # two files at once on this machine's cores share them; a given --workers is kept
+    two = c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2"])
+    assert c.batch_worker_argv(two) == ["--workers", str(max(1, c._cpu_count() // 2))]
+    kept = c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2", "--workers", "3"])
+    assert c.batch_worker_argv(kept) == ["--workers", "3"]
     cmd, env = c.worker_command(["x.blend"])
     assert cmd[:4] == [sys.executable, "-m", "hemicube_radiosity", "bake"]
     assert os.path.realpath(env["PYTHONPATH"].split(os.pathsep)[0]) == os.path.realpath(ROOT)

@@ -315,6 +315,16 @@ def setting_argv(args):
     return words
 
 
+def batch_worker_argv(args):
+    """The settings a batch's workers are given: :func:`setting_argv`, and where several files
+    bake at once and the threads per bake were left to 'every core', the cores shared between
+    them (2 files on 2 cores: one thread each, not four threads fighting for two cores)."""
+    words = setting_argv(args)
+    if args.workers == 0 and args.jobs > 1:
+        words += ["--workers", str(max(1, _cpu_count() // args.jobs))]
+    return words
+
+
 def worker_command(bake_argv, blender=None):
     """(argv, env) of a fresh process that runs ``bake`` with ``bake_argv``.
 
@@ -550,7 +560,7 @@ def cmd_batch(args, out, err):
     settings = _settings(args)
     out_dir, items = _plan(args)
     os.makedirs(out_dir, exist_ok=True)
-    words = setting_argv(args)
+    words = batch_worker_argv(args)
     todo = _batch_todo(items, settings, args)
     line = _ProgressLines(len(items), out, args.quiet)
     for it in items:
