@@ -66,17 +66,23 @@ class _Parser(argparse.ArgumentParser):
         raise CLIError(message, status=2, usage=self.format_usage().strip(), prog=self.prog)
 
 
-def _size(text):
-    """A size argument: 'auto' or a number >= 0."""
-    if text == "auto":
-        return text
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'auto' or a number, got {text!r}") from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be >= 0, got {v:g}")
-    return v
+def _number(kind, lowest, expected, auto=False):
+    """An argparse type: a ``kind`` (int or float) >= ``lowest``, or 'auto' where allowed."""
+    def parse(text):
+        if auto and text == "auto":
+            return text
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {expected}, got {text!r}") from None
+        if v < lowest:
+            raise argparse.ArgumentTypeError(f"must be >= {lowest}, got {v:g}")
+        return v
+    return parse
+
+
+_size = _number(float, 0, "'auto' or a number", auto=True)        # a size: 'auto' or >= 0
+_positive_int = _number(int, 1, "a whole number")                   # a count: >= 1
 
 
 def _flag(s):
@@ -145,17 +151,6 @@ def build_parser():
                        help="print nothing on stdout (no stage lines, notes or Blender output); errors only")
         add_setting_options(q)
     return p
-
-
-def _positive_int(text):
-    """A count argument: a whole number >= 1."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
-    return v
 
 
 def _cpu_count():
