@@ -14,15 +14,17 @@ n x n quads of two triangles, 2 n^2 triangles per quad. For each n, in child pro
   ``result.timings`` per stage, peak resident memory of the child (ru_maxrss, taken right after the
   bake, before bpy is imported), then the add-on's ``read_scene`` and ``write_copies`` timed on the
   same scene built as Blender objects (as bench/speed_vs_error.py does);
-* Cycles: the same tessellated scene as Blender objects (bench/speed_vs_error.build_blender_scene,
-  whose emitter materials follow our bake's emission: front-only with a black back while our
-  patches emit from the front only, since Cycles' Emission is two-sided; plain two-sided once our
-  default is ``two_sided_emission=True``), ``bpy.ops.object.bake`` COMBINED vertex bake at 64 spp,
-  32 bounces (tools/cycles_reference.py); its time and the child's peak memory.
+* Cycles: the same tessellated scene as Blender objects (``build_scene``: the meshes of
+  bench/speed_vs_error.build_blender_scene, with emitters built here as plain two-sided emitters,
+  Diffuse + Emission, as an artist's file has them and as our default ``two_sided_emission=True``
+  bakes them, whatever speed_vs_error's own emitter material is), ``bpy.ops.object.bake`` COMBINED
+  vertex bake at 64 spp, 32 bounces (tools/cycles_reference.py); its time and the child's peak memory.
 
 Error: one high-sample Cycles bake (``--ref-spp``, 1024) of the Cornell box's fixed 0.08 m
 evaluation mesh (bench/scenes_bench.cornell().fine, same surfaces), cached in ``bench/cache/``;
-its vertices are the **probe points** (emitters and never-lit vertices left out). Every
+its vertices are the **probe points** (emitters and never-lit vertices left out, and the ceiling
+within ``LAMP_BAND`` = 0.3 m of the lamp's footprint: lit through the 2 mm gap by the lamp's back, a
+small very bright spot that would dominate the RMS). Every
 tessellation, ours and Cycles 64 spp alike, is evaluated at those same points by
 ``core.interpolate.interpolate_at`` (ours: its output elements and vertex radiosities; Cycles: its
 per-corner colours on the tessellated triangles). Reported: probe RMS relative error (luminance
@@ -70,6 +72,7 @@ FULL_N = (1, 4, 8, 16, 21, 29, 41, 79)
 QUICK_N = (1, 4, 8)
 CYCLES_SPP = 64
 RED_BAND = 0.3          # floor probes within this distance of the red wall (x = 0), m
+LAMP_BAND = 0.3         # ceiling probes within this distance of the lamp's footprint: out of the RMS, m
 BEGIN, END = "<!-- dense-sweep: written by bench/bench_dense.py -->", "<!-- /dense-sweep -->"
 
 
@@ -94,6 +97,27 @@ class _Scene:
 
 def _peak_mb():
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _material(rho, emission, name):
+    """Diffuse ``rho``; an emitter adds an Emission of colour ``emission`` (strength 1) and lights
+    both faces: a plain emitter as an artist's file has it (our default ``two_sided_emission=True``)."""
+    import cycles_reference as cr
+
+    if max(emission) <= 0:
+        return cr.diffuse_material(tuple(rho), 0.0, name=name)
+    return cr.diffuse_material(tuple(rho), 1.0, emission_color=tuple(map(float, emission)), name=name)
+
+
+def build_scene(sc):
+    """speed_vs_error.build_blender_scene with this bench's two-sided emitter materials (until a1b501c
+    speed_vs_error gave Cycles' emitters a black back; the emitters here do not depend on it)."""
+    saved = sve._material
+    sve._material = _material
+    try:
+        return sve.build_blender_scene(sc)
+    finally:
+        sve._material = saved
 
 
 # ----------------------------------------------------------------------------- metrics
@@ -166,7 +190,7 @@ def ours_child(n, probes_path, out_path):
     # the add-on's read and write on the same scene as Blender objects (bpy only now: the peak above is the bake's)
     try:
         import bpy  # noqa: F401
-        scene, objs = sve.build_blender_scene(_Scene(meshes))
+        scene, objs = build_scene(_Scene(meshes))
         w = sve.Writer(objs)
         rec["read_seconds"] = w.read_seconds if w.ok else float("nan")
         rec["write_seconds"] = w(res) if w.ok else float("nan")
@@ -187,7 +211,7 @@ def cycles_child(n, spp, probes_path, out_path):
     meshes = tess(n)
     load0 = os.getloadavg()
     t = time.perf_counter()
-    scene, objs = sve.build_blender_scene(_Scene(meshes))
+    scene, objs = build_scene(_Scene(meshes))
     build_s = time.perf_counter() - t
     before = _peak_mb()
     b = cr.bake_vertex_radiance(objs, samples=spp, seed=sve.CAND_SEED, bounces=sve.BOUNCES, threads=2)
@@ -227,23 +251,30 @@ def make_probes(ref_spp, path):
     import cycles_reference as cr
 
     sc = scenes_bench.cornell()
-    scene, objs = sve.build_blender_scene(sc)
+    scene, objs = build_scene(sc)
+    # the key hashes the meshes and the materials' node trees: two-sided emitters bake a new reference
+    key = cr.cache_key(objs, dict(samples=ref_spp, seed=sve.REF_SEED, mode="COMBINED", bounces=sve.BOUNCES))
     t = time.perf_counter()
     ref = cr.cached_bake(objs, CACHE_DIR, samples=ref_spp, seed=sve.REF_SEED, bounces=sve.BOUNCES, threads=2)
     log(f"reference {ref_spp} spp on {sc.n_fine_faces} faces: {'cached' if ref.cached else 'baked'}"
-        f" (its bake {ref.seconds:.0f} s, {time.perf_counter() - t:.0f} s here)")
+        f" (its bake {ref.seconds:.0f} s, {time.perf_counter() - t:.0f} s here; cache key {key})")
     pts, owner, normals, emitter = scenes_bench.fine_points(sc.fine)
     R = sve.cycles_values(ref, sc)
     Yr = R @ LUMA
     hidden = Yr <= 1e-4 * np.median(Yr[~emitter])
-    mask = ~emitter & ~hidden
     names = [m.name for m in sc.fine]
+    lamp = np.asarray(sc.fine[names.index("Light")].verts, float)
+    lo, hi = lamp[:, :2].min(0), lamp[:, :2].max(0)
+    d_lamp = np.linalg.norm(np.maximum(0.0, np.maximum(lo - pts[:, :2], pts[:, :2] - hi)), axis=1)
+    over_lamp = (owner == names.index("Ceiling")) & (d_lamp < LAMP_BAND)
+    mask = ~emitter & ~hidden & ~over_lamp
     on_floor = owner == names.index("Floor")
     floor = mask & on_floor
     red = floor & (pts[:, 0] < RED_BAND)
     np.savez(path, pts=pts, owner=owner, normals=normals, ref=R, mask=mask, floor=floor, red=red)
     return {"spp": ref_spp, "seconds": ref.seconds, "cached": ref.cached, "faces": sc.n_fine_faces,
             "probes": int(mask.sum()), "floor_probes": int(floor.sum()), "red_probes": int(red.sum()),
+            "over_lamp": int((over_lamp & ~emitter & ~hidden).sum()), "cache_key": key,
             "floor_Y": float(Yr[floor].mean()), "rg": float(R[red, 0].mean() / R[red, 1].mean()),
             # the reference's own noise, from speed_vs_error's fit on this mesh (Cycles RMS ~ spp^-0.54,
             # 0.92% at 4,096 spp): an estimate, not measured here
@@ -342,10 +373,12 @@ def section(res):
          " then the add-on's `read_scene` + `write_copies` on the same scene as Blender objects; Cycles = a COMBINED"
          f" vertex bake of the same tessellated objects at {CYCLES_SPP} spp, 32 bounces, 2 threads"
          " (`tools/cycles_reference.py`). " + EMISSION_TEXT[res.get("emission", "front-only")], "",
-         f"Error: one Cycles bake at {ref['spp']} spp (cached in `bench/cache/`; its bake took {ref['seconds']:.0f} s) of"
+         f"Error: one Cycles bake at {ref['spp']} spp (cached in `bench/cache/`, key {str(ref.get('cache_key'))[:8]}, which hashes the meshes and materials; its bake took {ref['seconds']:.0f} s) of"
          f" the box's fixed 0.08 m evaluation mesh ({ref['faces']:,} faces, `scenes_bench.cornell().fine`). Its vertices are"
          f" the probe points: {ref['probes']:,} probes on floor, walls, ceiling and blocks (emitters and never-lit vertices"
-         f" out), {ref['floor_probes']:,} of them on the floor, {ref['red_probes']} on the floor within {RED_BAND} m of the red"
+         f" out, and {ref.get('over_lamp', 0)} ceiling probes within {LAMP_BAND} m of the lamp's footprint: lit through"
+         " the 2 mm gap by the lamp's back, a small very bright spot that would dominate the RMS),"
+         f" {ref['floor_probes']:,} of them on the floor, {ref['red_probes']} on the floor within {RED_BAND} m of the red"
          " wall. Every tessellation, ours and Cycles alike, is evaluated at the same probes with `interpolate_at` (ours:"
          " output elements and vertex radiosities; Cycles: its corner colours on the tessellated triangles). **probe RMS** ="
          " luminance-weighted RMS / mean luminance, as in the tables above (raw: the reference's own noise,"
@@ -389,8 +422,9 @@ EMISSION_TEXT = {
     "front-only": "Cycles' Emission shader is two-sided while our patches emit from the front only (the default at"
                   " this commit): as in `bench/speed_vs_error.py`, the Cycles emitters get a black back (a Backfacing"
                   " mix), so both light the box the same way.",
-    "two-sided": "Emitters light both faces on both sides: Cycles' plain Emission (as `bench/speed_vs_error.py` builds"
-                 " it) and our default `two_sided_emission=True`.",
+    "two-sided": "Emitters are two-sided, as an artist's file has them: our default `two_sided_emission=True`, and in"
+                 " Cycles a plain Diffuse + Emission material built by this bench (`build_scene`; no black back), so"
+                 " the lamp also lights the ceiling above it through the 2 mm gap.",
 }
 
 
@@ -459,7 +493,7 @@ def main(argv=None):
     ref_spp = args.ref_spp or (256 if args.quick else 1024)
     if args.quick and args.ref_spp is None:   # the full run's reference when it is cached
         import cycles_reference as cr
-        _, objs = sve.build_blender_scene(scenes_bench.cornell())
+        _, objs = build_scene(scenes_bench.cornell())
         key = cr.cache_key(objs, dict(samples=1024, seed=sve.REF_SEED, mode="COMBINED", bounces=sve.BOUNCES))
         if os.path.exists(os.path.join(CACHE_DIR, f"cycles_{key}.npz")):
             ref_spp = 1024
