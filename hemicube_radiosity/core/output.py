@@ -86,24 +86,34 @@ def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:
     return np.stack([np.bincount(v, weights=per_corner[p, c, k], minlength=V) for k in range(3)], 1) / cnt[:, None]
 
 
-def _gathered(ctx, elements, rest_v, xv, nv):
-    """Reflected light R at element vertices by a final gather over the patch solution (the
-    gather's ray hits cached as a matrix): (V, 3), before the elements' reflectivity."""
-    patches = ctx.patches
-    # the patches' reflected radiance R = rho (D + gathered) at their vertices, with the direct
-    # part exact at each vertex so that shadows are not smeared into what is gathered
-    pxv, pnv, prho = vertex_frames(patches)
-    R_v = prho * ctx.direct.at(pxv, pnv, "patch-vertices") + rest_v
+def _gathered(ctx, elements, rest_v, xv, nv, rho_v):
+    """Reflected light R at element vertices by a final gather (the gather's ray hits cached as a
+    matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
+    output mesh itself: the direct part exact at each of its vertices (as fine as the output, so
+    a two-sided lamp's few-centimetre hot spot on a ceiling is not spread over whole patches),
+    the part reflected more than once from the patch solution."""
+    rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
+    R_e = rho_v * ctx.direct.at(xv, nv, "vertices") + rest_e
 
     def make():
-        G, sky = gather_matrix(patches, xv, nv, embree_scene(patches), rays=ctx.settings.gather_rays,
+        G, sky = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
                                ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers)
         G.sky = sky
         return G
 
-    key = cache_key(patches.geometry_key() + elements.geometry_key(), ("gather", ctx.settings.gather_rays))
+    key = cache_key(elements.geometry_key(), ("gather-elements", ctx.settings.gather_rays))
     G = cached(ctx.cache, key, make)
-    return apply_gather(G, G.sky, R_v, ctx.world)
+    return apply_gather(G, G.sky, R_e, ctx.world)
+
+
+def _interpolated(ctx, elements, field_v, xv, nv):
+    """A patch-vertex field (V_patches, 3) at the element vertices ``xv``: bilinear in the
+    patches, each element vertex in its own object's patches."""
+    owner_v = np.zeros(len(elements.verts), np.int64)
+    for c in range(4):
+        on = elements.polys[:, c] >= 0
+        owner_v[elements.polys[on, c]] = elements.owner[on]
+    return interpolate_at(ctx.patches, field_v, xv, owner=owner_v, normals=nv)
 
 
 def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None):
@@ -111,7 +121,7 @@ def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None):
     (with ``in_v``, the patches' incoming indirect light at their vertices: as it arrives, for
     the lighting-only pass): gathered (Embree) or the patch solution's bilinear interpolation."""
     if ctx.settings.gather_rays > 0 and embree_available():
-        gathered = _gathered(ctx, elements, rest_v, xv, nv)
+        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v)
         return gathered if in_v is not None else rho_v * gathered
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
@@ -119,11 +129,7 @@ def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None):
     rest_v = rest_v if in_v is None else in_v
     if elements is ctx.patches:               # faces already finer than the detail size
         return rest_v
-    owner_v = np.zeros(len(elements.verts), np.int64)
-    for c in range(4):
-        on = elements.polys[:, c] >= 0
-        owner_v[elements.polys[on, c]] = elements.owner[on]
-    return interpolate_at(ctx.patches, rest_v, xv, owner=owner_v, normals=nv)
+    return _interpolated(ctx, elements, rest_v, xv, nv)
 
 
 def _cut_elements(ctx) -> PatchSet:
