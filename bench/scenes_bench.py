@@ -8,6 +8,10 @@ Each :class:`BenchScene` holds
   reference (Cycles at high samples) and every candidate are compared at ``fine``'s vertices;
 * ``world``: constant world radiance (3,) or None (black), ``lights``: core.lights lamps (or ()).
 
+Emitters are plain emissive faces: in Cycles (bench/speed_vs_error.build_blender_scene) a Diffuse
+BSDF plus an Emission, which lights both faces, as an artist's file has them; our bakes use the
+default two-sided emission. (Until issue 10 the Cycles emitters had a black back.)
+
 Objects keep their order between ``coarse`` and ``fine`` so owner indices agree.
 """
 from __future__ import annotations
@@ -102,7 +106,9 @@ def cornell() -> BenchScene:
 
 def furnished_room() -> BenchScene:
     """A closed 5 x 4 x 2.6 m room, furniture-like blocks, one small bright ceiling light
-    (0.12 m square, radiance 600): the hard case for hemi-cubes (the light covers few pixels)."""
+    (0.12 m square, radiance 600): the hard case for hemi-cubes (the light covers few pixels).
+    The lamp hangs 5 mm under the ceiling and lights it from its back (two-sided emitter): a small,
+    very bright spot on the ceiling."""
     W, D, H = 5.0, 4.0, 2.6
     room = scenes.box((0, 0, 0), (W, D, H), WHITE, inward=True, name="Room",
                       per_face_rho={"x0": (0.6, 0.45, 0.3), "y1": (0.35, 0.45, 0.6)})

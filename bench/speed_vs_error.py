@@ -144,33 +144,15 @@ def build_blender_scene(sc):
 
 
 def _material(rho, emission, name):
-    """Diffuse ``rho``; an emitter emits from its front only, as a radiosity patch does (Cycles'
-    Emission shader is two-sided: the back of a light just under a ceiling would light the
-    ceiling). The back of an emitter is black."""
-    import bpy
+    """Diffuse ``rho`` plus, on an emitter, an Emission of colour ``emission`` (strength 1): a plain
+    emitter as an artist's file has it, lighting both faces in Cycles, as our bake does by default
+    (``BakeSettings.two_sided_emission``). Until issue 10 the bench gave Cycles' emitters a black back
+    (a Backfacing mix) to match the paper's front-only patches; those references are not comparable."""
     import cycles_reference as cr
 
     if max(emission) <= 0:
         return cr.diffuse_material(tuple(rho), 0.0, name=name)
-    m = bpy.data.materials.new(name)
-    nt, out = cr.bare_node_tree(m)
-    d = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    d.inputs["Color"].default_value = (*rho, 1.0)
-    e = nt.nodes.new("ShaderNodeEmission")
-    e.inputs["Color"].default_value = (*emission, 1.0)
-    e.inputs["Strength"].default_value = 1.0
-    add = nt.nodes.new("ShaderNodeAddShader")
-    nt.links.new(d.outputs[0], add.inputs[0])
-    nt.links.new(e.outputs[0], add.inputs[1])
-    back = nt.nodes.new("ShaderNodeBsdfDiffuse")
-    back.inputs["Color"].default_value = (0.0, 0.0, 0.0, 1.0)
-    geo = nt.nodes.new("ShaderNodeNewGeometry")
-    mix = nt.nodes.new("ShaderNodeMixShader")
-    nt.links.new(geo.outputs["Backfacing"], mix.inputs["Fac"])
-    nt.links.new(add.outputs[0], mix.inputs[1])
-    nt.links.new(back.outputs[0], mix.inputs[2])
-    nt.links.new(mix.outputs[0], out.inputs["Surface"])
-    return m
+    return cr.diffuse_material(tuple(rho), 1.0, emission_color=tuple(map(float, emission)), name=name)
 
 
 def cycles_values(bake, sc):
@@ -684,7 +666,9 @@ def _defaults_text():
     sz = {k: (f"{getattr(d, k)!r}{auto[k]}" if isinstance(getattr(d, k), str) else f"{getattr(d, k):g}")
           for k in auto}
     return (f"method={d.method!r}, resolution={d.resolution}, patch_size={sz['patch_size']}, element_size="
-            f"{sz['element_size']}, gather_rays={d.gather_rays}, solver={d.solver!r}, direct={d.direct!r}")
+            f"{sz['element_size']}, gather_rays={d.gather_rays}, solver={d.solver!r}, direct={d.direct!r}"
+            + "".join(f", {k}={getattr(d, k)!r}" for k in ("two_sided_emission", "patch_light_points")
+                      if hasattr(d, k)))
 
 
 def headline(sc):
@@ -827,7 +811,9 @@ def write_report(results, doc, img_dir):
          " scene cut into patches of the given size, and are evaluated at the evaluation mesh's vertices by"
          " `core.interpolate.interpolate_at` (the paper's bilinear rendering step).",
          f"- Reference: Cycles COMBINED vertex bake (`tools/cycles_reference.py`, emission + direct + indirect"
-         f" diffuse), {BOUNCES} bounces, no clamping/denoising, cached in `bench/cache/`. Candidates use another seed.",
+         f" diffuse), {BOUNCES} bounces, no clamping/denoising, cached in `bench/cache/`. Candidates use another seed."
+         " Materials: Diffuse BSDF of the scene's reflectance; an emitter adds an Emission (strength 1) and lights"
+         " both faces, as an artist's file renders (our bake's default `two_sided_emission=True`).",
          "- Error at the vertices (emitters left out), luminance weights w = (0.2126, 0.7152, 0.0722):"
          " e_v = sqrt(sum_c w_c (x_c - r_c)^2); **RMS** = sqrt(mean e_v^2) / mean(Y_ref); **p95** = 95th"
          " percentile of e_v / max(Y_ref, 0.05 mean Y_ref); **bias** = relative difference of the mean luminance.",
