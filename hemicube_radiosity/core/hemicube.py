@@ -813,13 +813,15 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     recv = receiver_ids(n, receivers)
     scene = _Scene(patches, R, clusters)
     frames = receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
-    B = _batch_size(len(patches), R, batch)
+    workers = resolve_workers(workers)
+    # with several batches drawn at once, smaller ones: the peak memory stays that of one worker
+    B = _batch_size(len(patches), R, batch) if batch is not None else max(1, _batch_size(len(patches), R, None) // workers)
     ticker = Ticker(progress, cancelled)
     ticker.tick(0, recv.size, force=True)
     batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
     # batches in receiver order whatever the worker count: F is bit-identical
     rows_of = partial(_batch_rows, scene, frames, n)
-    with closing(ordered_map(rows_of, batches, resolve_workers(workers))) as results:
+    with closing(ordered_map(rows_of, batches, workers)) as results:
         indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
     return CSR(indptr, indices, data, (n, n), meta, sky)
