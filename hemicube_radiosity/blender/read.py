@@ -167,6 +167,33 @@ def _principled_clamps_negative_emission():
     return bpy.app.version >= (5, 0, 0)
 
 
+def _principled(node, notes):
+    """(rho, emission) of a Principled BSDF read from its values (the fast path; Cycles' own
+    albedo replaces rho when :mod:`.shading` can bake it)."""
+    rho = _value(node, notes, "Base Color")
+    for name in ("Metallic", "Transmission Weight", "Transmission"):
+        s = node.inputs.get(name)
+        if s is not None and (s.is_linked or float(s.default_value) > 0):
+            notes.append(f"{node.name} '{name}' ignored (diffuse only)")
+            break
+    em = _value(node, notes, "Emission Color", "Emission")
+    strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
+    if strength < 0 and np.any(em > 0):
+        if _principled_clamps_negative_emission():
+            # Cycles 5.0 clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
+            notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light "
+                         "(as in Cycles)")
+        else:
+            # Cycles 4.x emits negative light there, as from an Emission node (measured on
+            # 4.2.23 and 4.5.15: a strength -2 panel bakes -2 x its colour and takes from the
+            # floor exactly what strength +2 adds); the solve needs emission >= 0
+            notes.append(f"{node.name} Emission Strength {strength:g} is negative: Cycles "
+                         "subtracts light there, this bake takes it as no light")
+        return rho, np.zeros(3)
+    _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
+    return rho, em * strength
+
+
 def _shader(node, out_socket, mat, notes, depth=0):
     """(rho, emission) of the shader that ``node`` outputs."""
     zero = np.zeros(3)
@@ -175,28 +202,7 @@ def _shader(node, out_socket, mat, notes, depth=0):
         return zero, zero
     t = node.type
     if t == "BSDF_PRINCIPLED":
-        rho = _value(node, notes, "Base Color")
-        for name in ("Metallic", "Transmission Weight", "Transmission"):
-            s = node.inputs.get(name)
-            if s is not None and (s.is_linked or float(s.default_value) > 0):
-                notes.append(f"{node.name} '{name}' ignored (diffuse only)")
-                break
-        em = _value(node, notes, "Emission Color", "Emission")
-        strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
-        if strength < 0 and np.any(em > 0):
-            if _principled_clamps_negative_emission():
-                # Cycles 5.0 clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
-                notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light "
-                             "(as in Cycles)")
-            else:
-                # Cycles 4.x emits negative light there, as from an Emission node (measured on
-                # 4.2.23 and 4.5.15: a strength -2 panel bakes -2 x its colour and takes from the
-                # floor exactly what strength +2 adds); the solve needs emission >= 0
-                notes.append(f"{node.name} Emission Strength {strength:g} is negative: Cycles "
-                             "subtracts light there, this bake takes it as no light")
-            return rho, zero
-        _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
-        return rho, em * strength
+        return _principled(node, notes)
     if t == "BSDF_DIFFUSE":
         return _value(node, notes, "Color"), zero
     if t == "EMISSION":
