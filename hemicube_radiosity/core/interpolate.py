@@ -11,7 +11,7 @@ import numpy as np
 
 from .patches import PatchSet
 
-__all__ = ["locate", "interpolate_at"]
+__all__ = ["interpolate_located", "locate", "interpolate_at"]
 
 
 def _bilinear(c, u, v):
@@ -96,8 +96,13 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
 
 def interpolate_at(patches: PatchSet, vertex_values, points, owner=None, normals=None) -> np.ndarray:
     """Bilinear interpolation of per-vertex values (V, k) at points on the surfaces -> (P, k)."""
+    return interpolate_located(patches, vertex_values, *locate(patches, points, owner, normals))
+
+
+def interpolate_located(patches: PatchSet, vertex_values, idx, uv) -> np.ndarray:
+    """(P, k) per-vertex values (V, k) at points already located (``idx``, ``uv`` of
+    :func:`locate`: geometry only, so a relight can keep them)."""
     vals = np.asarray(vertex_values, dtype=np.float64)
-    idx, uv = locate(patches, points, owner, normals)
     polys = patches.polys[idx].copy()
     tri = polys[:, 3] < 0
     polys[tri, 3] = polys[tri, 2]

@@ -21,7 +21,7 @@ from .cache import cache_key, cached
 from .direct import vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, gather_matrix
-from .interpolate import interpolate_at
+from .interpolate import interpolate_located, locate
 from .patches import PatchSet, build_patches
 from .progress import Ticker
 from .rays import embree_available, embree_scene
@@ -109,11 +109,15 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v):
 def _interpolated(ctx, elements, field_v, xv, nv):
     """A patch-vertex field (V_patches, 3) at the element vertices ``xv``: bilinear in the
     patches, each element vertex in its own object's patches."""
-    owner_v = np.zeros(len(elements.verts), np.int64)
-    for c in range(4):
-        on = elements.polys[:, c] >= 0
-        owner_v[elements.polys[on, c]] = elements.owner[on]
-    return interpolate_at(ctx.patches, field_v, xv, owner=owner_v, normals=nv)
+    def where():
+        owner_v = np.zeros(len(elements.verts), np.int64)
+        for c in range(4):
+            on = elements.polys[:, c] >= 0
+            owner_v[elements.polys[on, c]] = elements.owner[on]
+        return locate(ctx.patches, xv, owner=owner_v, normals=nv)
+
+    key = cache_key(ctx.patches.geometry_key() + elements.geometry_key(), ("located",))
+    return interpolate_located(ctx.patches, field_v, *cached(ctx.cache, key, where))
 
 
 def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None):
