@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from conftest import file_sha256, node_tree, scene_hash
+from test_addon import select
 
 from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings as CoreSettings, bake as core_bake
@@ -46,14 +47,6 @@ def mesh_object(bpy, name, verts, faces, edges=()):
     ob = bpy.data.objects.new(name, me)
     bpy.context.scene.collection.objects.link(ob)
     return ob
-
-
-def select(bpy, objs):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
 
 
 def emitter(bpy, z=1.0, size=1.0, strength=5.0):
