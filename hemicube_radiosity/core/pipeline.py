@@ -15,8 +15,9 @@ import numpy as np
 
 from .cache import FormFactorCache, cache_key, cached
 from .clusters import Clusters, group_pieces
-from .direct_light import DirectLight, direct_stage, source_term
+from .direct_light import DirectLight, direct_stage, patch_average, source_term
 from .errors import SettingsError
+from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .output import meshes_key, output_elements, vertex_stage
 from .patches import PatchError, PatchSet, build_patches
@@ -190,10 +191,100 @@ def solve_stage(ctx) -> None:
         ctx.notes.append(f"solver stopped after {sol.iterations} iterations with a relative error "
                          f"up to {bound:.1e}, above the tolerance {s.tolerance:g}: raise max "
                          "iterations")
+    energy = scene_energy(ctx, sol.energy, computed) if sol.energy else sol.energy
     if ctx.direct is not None:
         ctx.reflected = sol.B
         sol = replace(sol, B=sol.B + p.emission, extra={**sol.extra, "reflected_only": True})
-    ctx.solution = sol
+    ctx.solution = replace(sol, energy=energy)
+
+
+def lamp_power(light) -> np.ndarray:
+    """(3,) what a lamp sends out, in the balance's units (radiance x area: watts / pi), or
+    None for a sun (unbounded: it is counted as what reaches the patches). Point: P; spot: P
+    times its cone's share of the sphere, ``(1 - cos(size/2)) (1 - blend/2) / 2`` (Cycles'
+    smoothstep integrates to half the blend band); area: P (one-sided). A point or spot with a
+    radius and soft falloff is counted by its far field (the disk model gives a little less
+    near it)."""
+    if isinstance(light, SunLight):
+        return None
+    share = 1.0
+    if isinstance(light, SpotLight):
+        share = 0.5 * (1 - np.cos(0.5 * light.spot_size)) * (1 - 0.5 * light.spot_blend)
+    return light.power_w * share * np.asarray(light.color, float) / np.pi
+
+
+def _suns_at(ctx):
+    """(N, 3) radiance arriving from the suns alone at the patches, sampled exactly as the
+    direct light was (same points, seed and ray streams: the other lamps are kept in the list,
+    dark and without shadow rays), or None without a sun."""
+    s, p = ctx.settings, ctx.patches
+    if not any(isinstance(li, SunLight) for li in ctx.lights):
+        return None
+    only = [li if isinstance(li, SunLight) else replace(li, power_w=0.0, cast_shadows=False)
+            for li in ctx.lights]
+
+    def at(points=None, normals=None, where=""):
+        return direct_irradiance(p, only, points=points, normals=normals, samples=s.light_samples,
+                                 seed=s.light_seed, cancelled=ctx.cancelled) / np.pi
+    if ctx.direct is None:
+        return at()
+    grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1
+    return patch_average(p, s.patch_light_points, at, grouped)
+
+
+def scene_energy(ctx, solved: dict, computed) -> dict:
+    """The whole scene's power balance per band, radiance x area (x pi for watts):
+    ``emitted = absorbed + escaped``, where the solve's own balance (``solved``, kept under
+    'solve') counts only what goes through F.
+
+    What is counted: emitted is the emissive faces' light (both sides when two-sided, on the
+    exact path; what the solve emits on the 'hemicube' path), the lamps' power
+    (:func:`lamp_power`) and, for the unbounded sources (suns, the world), the light they deliver
+    to the patches. Light arriving directly (``ctx.direct_patch``, or the lamps' irradiance on
+    the 'hemicube' path) is absorbed at (1 - rho) and reflected into the solve; what the direct
+    light does not deliver to any patch's front escapes (through openings into the world, or
+    onto back faces), as does what the solve's rows do not see. 'direct' holds the direct
+    light's own emitted / received / absorbed / escaped; ``imbalance`` is relative, as in
+    :func:`.solve.energy_balance` (the direct part balances by construction: its escape is
+    measured as what did not arrive, checked against closed forms in tests/test_hard_cases.py)."""
+    p, u = ctx.patches, ctx.unknowns
+    a = p.areas[:, None]
+    zero = np.zeros(3)
+    if ctx.direct is not None:
+        D = ctx.direct_patch
+        e = p.emission.max(axis=1) > 0
+        sides = 2.0 if ctx.direct.two_sided else 1.0
+        surf = sides * (a[e] * p.emission[e]).sum(axis=0)
+    else:
+        D = zero[None] if ctx.irradiance is None else ctx.irradiance / np.pi
+        surf = zero
+    lamps = [lamp_power(li) for li in ctx.lights]
+    lamps = sum((w for w in lamps if w is not None), zero)
+    sun = _suns_at(ctx)
+    sun = zero if sun is None else (a * sun).sum(axis=0)
+    world = zero
+    if ctx.world is not None and np.any(np.asarray(ctx.world) > 0) and ctx.form_factors.sky is not None:
+        sky = np.where(computed, ctx.form_factors.sky, 0.0)
+        world = (u.areas * sky).sum() * np.asarray(ctx.world, float)
+    if world.any():
+        world_reflected = (u.areas[:, None] * u.rho * np.where(computed, ctx.form_factors.sky, 0.0)[:, None]
+                           * np.asarray(ctx.world, float)).sum(axis=0)
+    else:
+        world_reflected = zero
+    recv = (a * D).sum(axis=0) + world
+    absorbed = (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
+    emitted = surf + lamps + sun + world
+    direct = {"emitted": emitted, "received": recv, "absorbed": absorbed, "escaped": emitted - recv}
+    # the 'hemicube' path's emitters are the solve's own source
+    own = zero if ctx.direct is not None else (u.areas[:, None] * u.emission).sum(axis=0)
+    total = {"emitted": emitted + own,
+             "absorbed": absorbed + np.asarray(solved["absorbed"]),
+             "escaped": direct["escaped"] + np.asarray(solved["escaped"])}
+    miss = np.abs(total["emitted"] - total["absorbed"] - total["escaped"])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        imb = np.where(total["emitted"] > 0, miss / total["emitted"], 0.0)
+    return {**{k: v.tolist() for k, v in total.items()}, "imbalance": float(np.max(imb)),
+            "direct": {k: v.tolist() for k, v in direct.items()}, "solve": solved}
 
 
 STAGES = (("patches", patch_stage), ("form_factors", form_factor_stage), ("direct", direct_stage),
