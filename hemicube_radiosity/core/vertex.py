@@ -18,7 +18,7 @@ import numpy as np
 
 from .patches import PatchSet
 
-__all__ = ["vertex_radiosity", "exposure", "boundary_vertices"]
+__all__ = ["vertex_radiosity", "exposure", "boundary_vertices", "BURIED"]
 
 
 def _incidence(polys):
@@ -42,16 +42,33 @@ def boundary_vertices(polys, n_verts) -> np.ndarray:
     return on
 
 
-def exposure(F) -> np.ndarray:
+def exposure(F, areas=None) -> np.ndarray:
     """(N,) how much of each patch's hemisphere sees front faces or the sky: row sum + sky.
 
     A patch whose centre lies under a block standing on it sees only back faces (exposure 0):
-    its value says nothing about the exposed rest of the patch. Rows that were not computed
-    (empty) count as fully exposed."""
+    its value says nothing about the exposed rest of the patch. An empty row is either a row
+    that was not computed (a patch that reflects nothing, e.g. a lamp) or a patch buried in a
+    solid, which sees nothing. With ``areas`` they are told apart by reciprocity: others see a
+    lamp (its row sum from the computed rows, ``sum_j A_j F_ji / A_i``, is what it would see),
+    while a buried patch is seen only through the odd pixel leaking past the solid's edges
+    (measured up to 1.2% of its hemisphere, beside a block sunk 10 cm): below ``BURIED`` it counts as buried (0), else as exposed (1).
+    Without ``areas`` every empty row counts as exposed. (Counting them all as exposed gave a
+    floor patch wholly under a block the weight of an open one: the vertices it shares with
+    open floor took half its zero.)"""
     rs = F.row_sums()
     sky = np.zeros_like(rs) if F.sky is None else np.asarray(F.sky, float)
     e = np.clip(rs + sky, 0.0, 1.0)
-    return np.where(np.diff(F.indptr) == 0, 1.0, e)
+    empty = np.diff(F.indptr) == 0
+    if areas is None or not empty.any():
+        return np.where(empty, 1.0, e)
+    areas = np.asarray(areas, dtype=np.float64)
+    w = F.data.astype(np.float64) * areas[F.row_ids()]
+    seen = np.bincount(F.indices, weights=w, minlength=F.shape[1])[:F.shape[0]] / np.maximum(areas, 1e-300)
+    return np.where(empty, (seen >= BURIED).astype(np.float64), e)
+
+
+#: An empty row whose reciprocal row sum is below this is a buried patch (:func:`exposure`).
+BURIED = 0.05
 
 
 def _boundary_interior_pairs(polys, boundary, interior):
