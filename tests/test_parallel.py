@@ -1,20 +1,27 @@
 """Both cores (issue 9): form factors, the emitters' transport, the final gather and the whole bake
 are bit-identical with one worker and with two, and cancelling stops the workers.
 
-Batches are made small here (module constants and chunk sizes) so that two workers really share
-many batches of these small scenes. No timings are asserted: bench/bench_parallel.py measures.
+Form factors run on forked worker processes where :func:`parallel.processes_available` (Linux),
+on threads elsewhere; both paths are checked here (``parallel.PROCESSES`` switched off for the
+threads). Batches are made small (module constants and chunk sizes) so that two workers really
+share many batches of these small scenes. No timings are asserted: bench/bench_parallel.py
+measures.
 """
+import multiprocessing
+import os
+import sys
 import threading
 
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import embree_ff, hemicube, scenes
+from hemicube_radiosity.core import embree_ff, hemicube, parallel, scenes
 from hemicube_radiosity.core.clusters import group_pieces
 from hemicube_radiosity.core.direct import emitter_transport, vertex_frames
 from hemicube_radiosity.core.gather import gather_matrix
 from hemicube_radiosity.core.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.parallel import cpu_count, ordered_map, resolve_workers
+from hemicube_radiosity.core.parallel import (cpu_count, ordered_map, processes_available,
+                                               resolve_workers)
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.progress import Cancelled, Ticker
@@ -22,6 +29,16 @@ from hemicube_radiosity.core.rays import embree_available, embree_scene
 from hemicube_radiosity.core.settings import BakeSettings
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
+needs_fork = pytest.mark.skipif(not processes_available(), reason="no 'fork' worker processes here")
+
+
+@pytest.fixture(params=["processes", "threads"])
+def pool_kind(request, monkeypatch):
+    """Run a test with worker processes (where there are any) and with threads only."""
+    if request.param == "processes" and not processes_available():
+        pytest.skip("no 'fork' worker processes here")
+    monkeypatch.setattr(parallel, "PROCESSES", request.param == "processes")
+    return request.param
 
 
 def same_csr(a, b):
@@ -75,17 +92,114 @@ def test_ordered_map_stops_its_threads_when_the_consumer_stops():
     assert len(started) < 20                                   # at most a few batches ahead
 
 
+def test_processes_on_linux_only_where_fork_is():
+    if sys.platform.startswith("linux"):
+        assert processes_available()                # the form-factor tests below fork here
+    else:                                           # macOS, Windows: threads (no fork of Blender)
+        assert not processes_available()
+
+
+@needs_fork
+def test_ordered_map_processes_keep_order_and_inherit_fn():
+    big = np.arange(200_000, dtype=np.int64)            # held by the closure, never pickled
+
+    def f(i):
+        return os.getpid(), int(big[i * 1000]), parallel._IN_WORKER
+
+    out = list(ordered_map(f, range(60), 2, processes=True))
+    assert [v for _, v, _ in out] == [i * 1000 for i in range(60)]
+    pids = {p for p, _, _ in out}
+    assert os.getpid() not in pids and 1 <= len(pids) <= 2
+    assert all(w for _, _, w in out)                    # nested maps there run serially
+    assert multiprocessing.active_children() == []     # the workers were joined
+    # one worker: no process, the caller's own loop
+    assert {p for p, _, _ in ordered_map(f, range(5), 1, processes=True)} == {os.getpid()}
+
+
+@needs_fork
+def test_ordered_map_processes_raise_the_error_at_its_turn():
+    seen = []
+
+    def f(i):
+        if i == 7:
+            raise ValueError(f"bad item {i}")
+        return i
+
+    with pytest.raises(ValueError, match="bad item 7"):
+        for i in ordered_map(f, range(40), 2, processes=True):
+            seen.append(i)
+    assert seen == list(range(7))
+    assert multiprocessing.active_children() == []
+
+
+@needs_fork
+def test_ordered_map_processes_are_terminated_when_the_consumer_stops():
+    """A cancelled map does not wait for the batches that are running: here they would sleep for
+    ten minutes, so the test returns only because the workers were terminated."""
+    import time
+
+    def f(i):
+        if i >= 3:
+            time.sleep(600)
+        return os.getpid()
+
+    pids = set()
+    with pytest.raises(Cancelled):
+        for k, pid in enumerate(ordered_map(f, range(1000), 2, processes=True)):
+            pids.add(pid)
+            if k == 2:
+                raise Cancelled("cancelled")
+    assert pids and multiprocessing.active_children() == []
+    for pid in pids:                                    # gone, and reaped
+        with pytest.raises(ProcessLookupError):
+            os.kill(pid, 0)
+
+
+@needs_fork
+def test_form_factor_workers_start_nothing_inside_blender(box, monkeypatch):
+    """Inside Blender ``sys.executable`` is the Blender binary and the modal operator bakes in a
+    thread: the workers are forks of the caller (nothing is executed, not even a resource
+    tracker), so a bake from a worker thread with an executable that does not exist still works."""
+    import bpy  # noqa: F401  (the add-on's process has it loaded; the workers never touch it)
+    monkeypatch.setattr(sys, "executable", "/nonexistent/blender")
+    F1 = hemicube_form_factors(box, 16, batch=3, workers=1)
+    out = {}
+
+    def bake_in_thread():
+        out["F"] = hemicube_form_factors(box, 16, batch=3, workers=2)
+
+    t = threading.Thread(target=bake_in_thread)
+    t.start()
+    t.join()
+    assert same_csr(F1, out["F"])
+    assert multiprocessing.active_children() == []
+
+
+def test_ordered_map_processes_fall_back_to_threads(monkeypatch):
+    monkeypatch.setattr(parallel, "PROCESSES", False)
+    assert not processes_available()
+    names = set()
+
+    def f(i):
+        names.add((os.getpid(), threading.current_thread().name))
+        return -i
+
+    assert list(ordered_map(f, range(30), 2, processes=True)) == [-i for i in range(30)]
+    assert {p for p, _ in names} == {os.getpid()}
+    assert threading.current_thread().name not in {n for _, n in names}
+
+
 # ------------------------------------------------------------------ form factors
 
 @pytest.mark.parametrize("rotate", [None, 5])
-def test_hemicube_identical_with_two_workers(box, rotate):
+def test_hemicube_identical_with_two_workers(box, rotate, pool_kind):
     kw = dict(rotate_seed=rotate, batch=3)
     F1 = hemicube_form_factors(box, 16, workers=1, **kw)
     F2 = hemicube_form_factors(box, 16, workers=2, **kw)
     assert same_csr(F1, F2) and F1.nnz > 0
 
 
-def test_hemicube_clusters_and_receivers_identical_with_two_workers():
+def test_hemicube_clusters_and_receivers_identical_with_two_workers(pool_kind):
     p = build_patches(scenes.tessellate(scenes.cornell_box(), 4), None)
     c = group_pieces(p, 0.5, 30.0)
     recv = np.arange(0, len(c), 2)
@@ -95,7 +209,7 @@ def test_hemicube_clusters_and_receivers_identical_with_two_workers():
 
 
 @needs_embree
-def test_embree_identical_with_two_workers(box, monkeypatch):
+def test_embree_identical_with_two_workers(box, monkeypatch, pool_kind):
     monkeypatch.setattr(embree_ff, "RAYS_PER_BATCH", 3 * 16 * 16 * 4)    # 4 receivers a batch
     for fn, arg in ((embree_ff.embree_hemicube_form_factors, 16),
                     (embree_ff.embree_stochastic_form_factors, 64)):
@@ -105,7 +219,7 @@ def test_embree_identical_with_two_workers(box, monkeypatch):
 
 
 @pytest.mark.parametrize("method", ["hemicube", pytest.param("embree", marks=needs_embree)])
-def test_cancel_mid_way_stops_with_two_workers(box, method, monkeypatch):
+def test_cancel_mid_way_stops_with_two_workers(box, method, monkeypatch, pool_kind):
     monkeypatch.setattr(embree_ff, "RAYS_PER_BATCH", 3 * 16 * 16 * 2)
     polls = []
     seen = []
@@ -120,10 +234,11 @@ def test_cancel_mid_way_stops_with_two_workers(box, method, monkeypatch):
     with pytest.raises(Cancelled):
         fn(box, 16, progress=seen.append, cancelled=cancelled, workers=2, **kw)
     assert threading.active_count() == before
+    assert multiprocessing.active_children() == []             # no worker outlives the cancel
     assert seen and seen[-1] < 1.0                               # progress came, then it stopped
 
 
-def test_progress_reaches_one_with_two_workers(box):
+def test_progress_reaches_one_with_two_workers(box, pool_kind):
     seen = []
     hemicube_form_factors(box, 16, batch=2, workers=2, progress=seen.append)
     assert seen[0] == 0.0 and seen[-1] == 1.0 and seen == sorted(seen)
@@ -166,7 +281,7 @@ def test_gather_identical_with_two_workers(box):
 # ------------------------------------------------------------------ the whole bake
 
 @pytest.mark.parametrize("method", ["hemicube", pytest.param("embree", marks=needs_embree)])
-def test_bake_identical_with_two_workers(method, monkeypatch):
+def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
     monkeypatch.setattr(hemicube, "PATCHES_PER_BATCH", 1 << 10)       # a few receivers a batch
     monkeypatch.setattr(embree_ff, "RAYS_PER_BATCH", 1 << 13)
     s = dict(patch_size=0.5, element_size=0.25, resolution=16, method=method,

@@ -76,7 +76,10 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
     int32, data float32) and sky: batches come in receiver order and each is reduced to sorted
     unique (row, column) entries, so the rows are assembled as they come, without a global sort
     (whose temporaries peaked at several times the size of F). ``workers`` threads cast batches
-    at once (:func:`.parallel.ordered_map`: still assembled in receiver order, so bit-identical)."""
+    at once (:func:`.parallel.ordered_map`: still assembled in receiver order, so bit-identical).
+    Threads, not the rasteriser's worker processes: Embree traverses without the GIL, so two
+    threads already cast ~1.8-2x as fast as one, and processes measured no faster (their rows
+    are pickled back; bench/bench_parallel.py, docs/performance.md 'Both cores')."""
     scene = embree_scene(patches)
     n, centres, normals, column = _receivers(patches, clusters)
     eps = 1e-5 * scene.scale

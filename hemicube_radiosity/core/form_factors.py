@@ -28,7 +28,9 @@ def receivers_needed(patches) -> np.ndarray:
 def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progress=None,
                          cancelled=None, clusters=None) -> CSR:
     """F for ``patches`` (or their ``clusters``, every patch drawn) by ``settings.method`` (rows
-    only for ``receivers``, default all), on ``settings.workers`` threads (the same F for any)."""
+    only for ``receivers``, default all), with ``settings.workers`` workers (the same F for any
+    count): the hemi-cube on forked processes where there are any, Embree on threads
+    (:mod:`.parallel`)."""
     kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters,
               workers=getattr(settings, "workers", 1))
     if settings.method == "hemicube":

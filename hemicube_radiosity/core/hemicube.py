@@ -796,8 +796,9 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
         patch is drawn with its cluster's id: F is (K, K) over clusters while visibility sees
         every patch. None: every patch is its own receiver.
     workers : int
-        Threads drawing batches of receivers at once (:func:`.parallel.resolve_workers`: 0 = every
-        core, 1 = in the calling thread). Batches are assembled in receiver order, so F is
+        Workers drawing batches of receivers at once (:func:`.parallel.resolve_workers`: 0 = every
+        core, 1 = in the calling thread): forked processes on Linux, threads elsewhere
+        (:func:`.parallel.ordered_map`). Batches are assembled in receiver order, so F is
         bit-identical for any count; ``progress`` and ``cancelled`` stay on the calling thread.
 
     Returns
@@ -821,7 +822,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
     # batches in receiver order whatever the worker count: F is bit-identical
     rows_of = partial(_batch_rows, scene, frames, n)
-    with closing(ordered_map(rows_of, batches, workers)) as results:
+    with closing(ordered_map(rows_of, batches, workers, processes=True)) as results:
         indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
     return CSR(indptr, indices, data, (n, n), meta, sky)

@@ -1,27 +1,56 @@
 """Batches of independent work on several cores, results in the order they were asked for.
 
-Threads, not processes (measured by ``bench/bench_parallel.py``, issue 9):
-NumPy releases the GIL inside its array loops, so the rasteriser's batches of receivers
-(:mod:`.hemicube`) and the closed-form parts of the direct light run on both cores from one
-``ThreadPoolExecutor``. A thread needs nothing Blender does not already allow (the modal operator
-runs the bake in a worker thread), whereas a process inside Blender would be a fork of Blender
-or a spawn of its bundled Python (``sys.executable`` there), which has no ``embreex`` unless
-installed into it and must rebuild the scene and the Embree BVH.
-
 :func:`ordered_map` is the one driver every stage uses: the caller keeps its loop over batches
 and its :class:`.progress.Ticker` (progress and cancellation stay on the calling thread, polled
 between batches), results arrive in batch order, so any result assembled from them is
 bit-identical whatever the worker count, and at most ``2 * workers`` batches are in flight
-(memory stays that of a few batches). With one worker nothing is threaded: the batches run in the
-caller's thread, one by one, as before.
+(memory stays that of a few batches). With one worker nothing runs elsewhere: the batches run in
+the caller's thread, one by one, as before.
+
+Two ways to run the batches (issue 9, measured by ``bench/bench_parallel.py``):
+
+* **Threads** (the default). Enough where the heavy calls release the GIL: Embree's form-factor
+  rays run ~1.8-2x as fast on two threads, and processes measured no faster there.
+* **Forked processes** (``processes=True``: the hemi-cube rasteriser, :mod:`.hemicube`). Its
+  many small NumPy operations hold the GIL much of the time, so two threads drew only 1.1-1.3x
+  as fast as one. On Linux the workers are ``fork()``-ed from the caller when the map starts, so
+  they inherit ``fn`` and everything it holds (the patch geometry, the frames) without a copy or
+  a pickle: only the items (receiver ids) go to them and only the results (sparse rows) come
+  back. Nothing is imported or started anew: no Blender, no ``bpy`` (inside Blender
+  ``sys.executable`` is the Blender binary, which the 'spawn' and 'forkserver' methods would
+  run), no resource tracker; a worker runs only ``fn``, with one BLAS thread. Where 'fork' is
+  not available or not safe (Windows, macOS), in a daemonic process, inside a worker, when the
+  fork itself fails (no memory) or when :data:`PROCESSES` is False, the same call runs on
+  threads.
+
+When the consumer stops early (:class:`.progress.Cancelled` raised in its loop, or ``close()``)
+the batches not yet started are dropped; threads finish the batch they are in, worker
+processes are terminated at once. Either way nothing outlives the call.
 """
 from __future__ import annotations
 
+import ctypes
+import itertools
+import multiprocessing
 import os
+import signal
+import sys
+import warnings
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures.process import BrokenProcessPool
 
-__all__ = ["resolve_workers", "ordered_map", "cpu_count"]
+from .errors import RadiosityError
+
+__all__ = ["resolve_workers", "ordered_map", "cpu_count", "processes_available", "PROCESSES"]
+
+#: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
+#: for a host where forking misbehaves).
+PROCESSES = True
+
+_TASKS: dict = {}              # token -> fn of the process maps running now (inherited by fork)
+_TOKENS = itertools.count()
+_IN_WORKER = False             # True inside a forked worker: its own maps run serially
 
 
 def cpu_count() -> int:
@@ -35,7 +64,7 @@ def cpu_count() -> int:
 
 
 def resolve_workers(workers) -> int:
-    """Worker threads for a ``workers`` setting: 0 or None = every CPU (:func:`cpu_count`),
+    """Workers for a ``workers`` setting: 0 or None = every CPU (:func:`cpu_count`),
     1 = serial, n = n. Negative values are an error."""
     if workers is None:
         return 1
@@ -45,37 +74,138 @@ def resolve_workers(workers) -> int:
     return cpu_count() if w == 0 else w
 
 
-def ordered_map(fn, items, workers=1, *, in_flight=None):
+def processes_available() -> bool:
+    """True where ``ordered_map(..., processes=True)`` forks worker processes: Linux with the
+    'fork' start method, :data:`PROCESSES` on, not inside a daemonic process or a worker."""
+    if not PROCESSES or _IN_WORKER or not sys.platform.startswith("linux"):
+        return False
+    if "fork" not in multiprocessing.get_all_start_methods():
+        return False
+    return not multiprocessing.current_process().daemon
+
+
+def ordered_map(fn, items, workers=1, *, in_flight=None, processes=False):
     """Yield ``fn(item)`` for every item, in the order of ``items``.
 
-    ``workers`` <= 1: in the calling thread, lazily (exactly the serial loop). Otherwise on a
-    pool of ``workers`` threads with at most ``in_flight`` (default ``2 * workers``) items
-    submitted ahead of the one being yielded. When the consumer stops early (an exception such
-    as :class:`.progress.Cancelled` raised in its loop, or ``close()``), batches not yet started
-    are dropped and the running ones are waited for before the exception goes on, so no thread
-    outlives the call. An exception in ``fn`` is raised at that item's turn.
+    ``workers`` <= 1 (or inside a worker process): in the calling thread, lazily (exactly the
+    serial loop). Otherwise on ``workers`` threads, or with ``processes=True`` on ``workers``
+    forked processes where :func:`processes_available` (threads elsewhere), with at most
+    ``in_flight`` (default ``2 * workers``) items submitted ahead of the one being yielded.
+    Processes: ``fn`` is inherited, never pickled (a closure or bound method is fine); the items
+    and results are pickled, so keep them small (ids in, rows out); ``fn`` must not touch
+    ``bpy`` or anything that holds a lock of the parent's other threads. When the consumer stops
+    early (an exception such as :class:`.progress.Cancelled` raised in its loop, or
+    ``close()``), batches not yet started are dropped, running threads are waited for and
+    worker processes terminated before the exception goes on. An exception in ``fn`` is raised
+    at that item's turn.
     """
     workers = int(workers or 1)
-    if workers <= 1:
+    if workers <= 1 or _IN_WORKER:
         for item in items:
             yield fn(item)
         return
+    if processes and processes_available():
+        yield from _process_map(fn, items, workers, in_flight)
+        return
+    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="radiosity")
+    try:
+        yield from _ordered(pool, fn, items, workers, in_flight)
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _ordered(pool, fn, items, workers, in_flight, *args):
+    """Submit ``fn(*args, item)`` ahead on ``pool`` and yield the results in order; on an early
+    stop, cancel what has not started (the caller shuts the pool down)."""
     ahead = max(workers, int(in_flight or 2 * workers))
     it = iter(items)
-    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="radiosity")
     pending = deque()
     try:
         for item in it:
-            pending.append(pool.submit(fn, item))
+            pending.append(pool.submit(fn, *args, item))
             if len(pending) >= ahead:
                 break
         while pending:
             result = pending.popleft().result()
             for item in it:                  # keep the pool fed before handing the result over
-                pending.append(pool.submit(fn, item))
+                pending.append(pool.submit(fn, *args, item))
                 break
             yield result
     finally:
         for f in pending:
             f.cancel()
+
+
+def _process_map(fn, items, workers, in_flight):
+    """:func:`ordered_map` on ``workers`` forked processes (threads when the fork fails)."""
+    token = next(_TOKENS)
+    _TASKS[token] = fn                       # before the fork: the workers inherit it
+    pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
+                               initializer=_worker_init)
+    done = False
+    try:
+        try:
+            with warnings.catch_warnings():  # Python >= 3.12 warns of fork() beside threads
+                warnings.simplefilter("ignore", DeprecationWarning)
+                pool.submit(_noop).result()  # the first submit forks every worker
+        except OSError:                      # no memory or processes left to fork: threads
+            with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="radiosity") as tp:
+                yield from _ordered(tp, fn, items, workers, in_flight)
+            done = True
+            return
+        try:
+            yield from _ordered(pool, _call, items, workers, in_flight, token)
+        except BrokenProcessPool as exc:     # a worker was killed (out of memory, a signal)
+            raise RadiosityError(f"a worker process stopped during the bake ({exc}); bake with "
+                                 "fewer workers or less memory per worker (larger patches)") from exc
+        done = True
+    finally:
+        _TASKS.pop(token, None)
+        if not done:                         # stopped early: do not wait for running batches
+            for p in list((getattr(pool, "_processes", None) or {}).values()):
+                try:
+                    p.terminate()
+                except (OSError, AttributeError):
+                    pass
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _worker_init():
+    """In a forked worker: Ctrl-C is the parent's to handle (it terminates the workers), maps
+    inside ``fn`` run serially, and BLAS uses one thread (each worker is one of the cores)."""
+    global _IN_WORKER
+    _IN_WORKER = True
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _one_blas_thread()
+
+
+def _one_blas_thread():
+    """Ask the OpenBLAS that NumPy loaded for one thread, if it is there (best effort). Its
+    threads only spin beside the rasteriser's small products (3 x V): in the serial bake they
+    burn a second core for nothing, and two workers with two BLAS threads each would fight over
+    two cores."""
+    try:
+        with open("/proc/self/maps") as f:
+            paths = {line.split()[-1] for line in f if "openblas" in line.lower()}
+    except OSError:
+        return
+    for path in paths:
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("openblas_set_num_threads64_", "openblas_set_num_threads",
+                     "scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads"):
+            fn = getattr(lib, name, None)
+            if fn is not None:
+                fn.argtypes, fn.restype = [ctypes.c_int], None
+                fn(1)
+                break
+
+
+def _noop():
+    return None
+
+
+def _call(token, item):
+    return _TASKS[token](item)
