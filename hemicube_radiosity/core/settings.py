@@ -136,9 +136,11 @@ class BakeSettings:
     # -- form factors
     method: str = setting("hemicube", "Method", "How form factors are computed", "form_factors",
                           choices=METHODS)
-    workers: int = setting(0, "Workers", "Threads that compute form factors and per-vertex light "
-                           "at once (0: every core, 1: one); the result is the same for any "
-                           "count", "form_factors", min=0, soft_max=64)
+    workers: int = setting(0, "Workers", "Cores that compute form factors and per-vertex light "
+                           "at once (0: every core, 1: one). On Linux form factors run in worker "
+                           "processes forked from this one (elsewhere on threads), per-vertex "
+                           "light on threads; the result is the same for any count",
+                           "form_factors", min=0, soft_max=64)
     resolution: int = setting(32, "Hemi-cube Resolution", "Pixels along a side of the hemi-cube's "
                               "top face (even)", "form_factors", min=2, max=2048, soft_min=8,
                               soft_max=512, step=2)
