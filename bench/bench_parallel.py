@@ -2,14 +2,18 @@
 
 Scenes: the dense Cornell box (``scenes.tessellate(scenes.cornell_box(), 40)``: 51,200 triangles,
 grouped into ~555 patches by the default settings) and the coarse ``cornell_box()`` cut into 0.1 m
-patches; each baked by the NumPy hemi-cube and by Embree, alternately with 1 and 2 workers,
-``--repeat`` times (best wall time kept). Per stage it prints wall and CPU seconds (CPU of this
-process: with 2 busy threads CPU ~ 2 x wall) and the speed-up, checks that the two worker counts
-gave identical F and vertex colours, and says how loaded the machine was: the CPU the rest of the
-machine used during the run, from /proc/stat (a shared machine's other sessions take their share
+patches; each baked by the NumPy hemi-cube and by Embree, in turn with 1 worker, 2 workers (the
+form factors on two forked processes, :mod:`core.parallel`) and, unless ``--no-threads``, 2
+workers with processes switched off (``parallel.PROCESSES = False``: everything on threads, as
+before), ``--repeat`` times (best wall time kept). Per stage it prints wall and CPU seconds (CPU
+of this process and of its worker processes: with two busy workers CPU ~ 2 x wall) and the
+speed-ups, checks that every worker count gave identical F and vertex colours, and says how
+loaded the machine was: the load average before and after, and the CPU the rest of the machine
+used during the run, from /proc/stat (a shared machine's other sessions take their share
 whatever this run asks for; see bench_batch.py).
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
+                                             [--no-threads]
 
 Results go to bench/out/bench_parallel.json.
 """
@@ -18,6 +22,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import sys
 import time
 
@@ -27,7 +32,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from hemicube_radiosity.core import pipeline, scenes  # noqa: E402
+from hemicube_radiosity.core import parallel, pipeline, scenes  # noqa: E402
 from hemicube_radiosity.core.parallel import cpu_count  # noqa: E402
 from hemicube_radiosity.core.rays import clear_ray_cache, embree_available  # noqa: E402
 from hemicube_radiosity.core.settings import BakeSettings  # noqa: E402
@@ -47,24 +52,31 @@ def machine_cpu():
     return sum(v) - idle, sum(v)
 
 
+def cpu_time():
+    """CPU seconds of this process and of its children that have ended (the worker processes of
+    a stage are joined before it returns, so a stage's difference counts them)."""
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + ch.ru_utime + ch.ru_stime
+
+
 def timed_bake(meshes, settings):
     """bake() with wall and CPU seconds of every stage."""
     cpu = {}
     orig = pipeline.BakeContext.run
 
     def run(self, name, stage):
-        c = time.process_time()
+        c = cpu_time()
         try:
             return orig(self, name, stage)
         finally:
-            cpu[name] = time.process_time() - c
+            cpu[name] = cpu_time() - c
 
     pipeline.BakeContext.run = run
     try:
         clear_ray_cache()
-        c0 = time.process_time()
+        c0 = cpu_time()
         res = pipeline.bake(meshes, settings)
-        cpu["total"] = time.process_time() - c0
+        cpu["total"] = cpu_time() - c0
     finally:
         pipeline.BakeContext.run = orig
     return res, dict(res.timings), cpu
@@ -83,59 +95,98 @@ def cases(only):
     return out
 
 
+#: (label, workers, processes on): the configurations baked in turn, in this order
+CONFIGS = (("1", 1, True), ("2", 2, True), ("2 thr", 2, False))
+
+
+def bake_config(meshes, kw, workers, processes):
+    parallel.PROCESSES = processes
+    try:
+        return timed_bake(meshes, BakeSettings(workers=workers, **kw))
+    finally:
+        parallel.PROCESSES = True
+
+
+def identical(a, b):
+    fa, fb = a.form_factors, b.form_factors
+    return bool(np.array_equal(fa.indptr, fb.indptr) and np.array_equal(fa.indices, fb.indices)
+                and np.array_equal(fa.data, fb.data) and np.array_equal(fa.sky, fb.sky)
+                and np.array_equal(a.vertex_radiosity, b.vertex_radiosity))
+
+
+def print_case(label, results, best, configs):
+    """The stage table of one case; returns its rows for the JSON report."""
+    r1 = results["1"]
+    same = {c: identical(r1, results[c]) for c, _, _ in configs[1:]}
+    print(f"\n{label}: {r1.unknowns} unknowns, {len(r1.patches)} patches, "
+          f"{len(r1.elements)} output elements; identical to 1 worker: "
+          + ", ".join(f"{c} {ok}" for c, ok in same.items()))
+    head = "".join(f" {'wall ' + c:>10s}" for c, _, _ in configs)
+    head += "".join(f" {'1/' + c:>8s}" for c, _, _ in configs[1:])
+    head += "".join(f" {'cpu ' + c:>9s}" for c, _, _ in configs)
+    print(f"  {'stage':14s}{head}")
+    rows = {}
+    for st in STAGES + ["total"]:
+        wall = {c: best[c]["wall"].get(st, 0.0) for c, _, _ in configs}
+        cpu = {c: best[c]["cpu"].get(st, 0.0) for c, _, _ in configs}
+        sp = {c: wall["1"] / wall[c] if wall[c] > 0 else float("nan") for c, _, _ in configs[1:]}
+        rows[st] = {"wall": wall, "cpu": cpu, "speedup": sp}
+        line = "".join(f" {wall[c]:10.2f}" for c, _, _ in configs)
+        line += "".join(f" {sp[c]:7.2f}x" for c, _, _ in configs[1:])
+        line += "".join(f" {cpu[c]:9.2f}" for c, _, _ in configs)
+        print(f"  {st:14s}{line}")
+    return {"identical": same, "stages": rows}
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=2, help="runs of each worker count (best kept)")
     ap.add_argument("--quick", action="store_true", help="one run of each, the coarse box only")
     ap.add_argument("--only", choices=("dense", "coarse"))
+    ap.add_argument("--no-threads", action="store_true",
+                    help="leave out '2 thr' (2 workers on threads only, as before processes)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else args.repeat
-    print(f"{cpu_count()} CPUs; load average before: {os.getloadavg()[0]:.2f}", flush=True)
+    configs = CONFIGS[:2] if args.no_threads else CONFIGS
+    load0 = os.getloadavg()
+    print(f"{cpu_count()} CPUs; load average before: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
+          f"worker processes {'available' if parallel.processes_available() else 'NOT available'}",
+          flush=True)
+    print("configurations: 1 = one worker; 2 = two workers (form factors on forked processes); "
+          "2 thr = two workers on threads only", flush=True)
     m0, w0 = machine_cpu() or (0, 0), time.perf_counter()
-    own0 = time.process_time()
-    report = {"cpus": cpu_count(), "cases": {}}
+    own0 = cpu_time()
+    report = {"cpus": cpu_count(), "load_before": load0, "cases": {}}
     all_ok = True
     for label, meshes, kw in cases("coarse" if args.quick else args.only):
-        best = {}
-        results = {}
+        best, results = {}, {}
         for r in range(repeat):
-            for w in (1, 2):
-                res, wall, cpu = timed_bake(meshes, BakeSettings(workers=w, **kw))
-                results[w] = res
-                b = best.setdefault(w, {"wall": dict(wall), "cpu": dict(cpu)})
-                if wall["total"] < b["wall"]["total"]:
-                    best[w] = {"wall": dict(wall), "cpu": dict(cpu)}
-        same = (np.array_equal(results[1].form_factors.data, results[2].form_factors.data)
-                and np.array_equal(results[1].form_factors.indices, results[2].form_factors.indices)
-                and np.array_equal(results[1].vertex_radiosity, results[2].vertex_radiosity))
-        all_ok &= same
-        print(f"\n{label}: {results[1].unknowns} unknowns, {len(results[1].patches)} patches, "
-              f"{len(results[1].elements)} output elements; workers 1 and 2 identical: {same}")
-        print(f"  {'stage':14s} {'wall 1':>8s} {'wall 2':>8s} {'speed-up':>8s} {'cpu 1':>8s} {'cpu 2':>8s}")
-        rows = {}
-        for st in STAGES + ["total"]:
-            w1, w2 = best[1]["wall"].get(st, 0.0), best[2]["wall"].get(st, 0.0)
-            c1, c2 = best[1]["cpu"].get(st, 0.0), best[2]["cpu"].get(st, 0.0)
-            sp = w1 / w2 if w2 > 0 else float("nan")
-            rows[st] = {"wall_1": w1, "wall_2": w2, "speedup": sp, "cpu_1": c1, "cpu_2": c2}
-            print(f"  {st:14s} {w1:8.2f} {w2:8.2f} {sp:7.2f}x {c1:8.2f} {c2:8.2f}"
-                  f"   cores used {c1 / max(w1, 1e-9):.2f} / {c2 / max(w2, 1e-9):.2f}")
-        report["cases"][label] = {"identical": bool(same), "stages": rows}
+            for c, w, proc in configs:
+                res, wall, cpu = bake_config(meshes, kw, w, proc)
+                results[c] = res
+                b = best.get(c)
+                if b is None or wall["total"] < b["wall"]["total"]:
+                    best[c] = {"wall": dict(wall), "cpu": dict(cpu)}
+        case = print_case(label, results, best, configs)
+        all_ok &= all(case["identical"].values())
+        report["cases"][label] = case
+        sys.stdout.flush()
     m1, w1 = machine_cpu() or (0, 0), time.perf_counter()
-    own = time.process_time() - own0
+    own = cpu_time() - own0
     elapsed = w1 - w0
     hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
     others = max(0.0, (m1[0] - m0[0]) / hz - own) / elapsed if elapsed > 0 else 0.0
-    print(f"\nload average after: {os.getloadavg()[0]:.2f}; during the run other processes used "
-          f"{others:.2f} of {cpu_count()} CPUs on average")
+    load1 = os.getloadavg()
+    print(f"\nload average after: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}; during the run "
+          f"({elapsed:.0f} s) other processes used {others:.2f} of {cpu_count()} CPUs on average")
     if others > 0.3:
         print("  (a loaded machine: a 2-worker stage gets less than two cores and the speed-ups "
               "above understate what an idle machine shows; compare the CPU columns)")
-    report["other_cpus"] = others
+    report.update(other_cpus=others, load_after=load1, seconds=elapsed)
     os.makedirs(os.path.join(HERE, "out"), exist_ok=True)
     with open(os.path.join(HERE, "out", "bench_parallel.json"), "w") as f:
         json.dump(report, f, indent=1)
-    ff = [c["stages"]["form_factors"]["speedup"] for c in report["cases"].values()]
+    ff = [c["stages"]["form_factors"]["speedup"]["2"] for c in report["cases"].values()]
     if ff and max(ff) < TARGET:
         print(f"target not met: best form-factor speed-up {max(ff):.2f}x < {TARGET}x")
     return 0 if all_ok else 1
