@@ -250,7 +250,7 @@ def test_coplanar_overlapping_faces_each_get_the_light_of_one_alone():
     assert len(keys) == 81                                  # the rug's 9 x 9 element vertices
     got_rug, got_floor = np.array([on_rug[k] for k in keys]), np.array([floor[k] for k in keys])
     ref = np.array([floor_alone[k] for k in keys])
-    assert ref.min() > 0.35                                 # lit: no face darkened its twin
+    assert ref.min() > 0.3                                  # lit (0.39 at least): no face darkened its twin
     np.testing.assert_allclose(got_rug, got_floor, rtol=0.005)
     np.testing.assert_allclose(got_floor, ref, rtol=0.005)
 
