@@ -3,14 +3,15 @@
 Scenes: the dense Cornell box (``scenes.tessellate(scenes.cornell_box(), 40)``: 51,200 triangles,
 grouped into ~555 patches by the default settings) and the coarse ``cornell_box()`` cut into 0.1 m
 patches; each baked by the NumPy hemi-cube and by Embree, in turn with 1 worker, 2 workers (the
-form factors on two forked processes, :mod:`core.parallel`) and, unless ``--no-threads``, 2
-workers with processes switched off (``parallel.PROCESSES = False``: everything on threads, as
-before), ``--repeat`` times (best wall time kept). Per stage it prints wall and CPU seconds (CPU
-of this process and of its worker processes: with two busy workers CPU ~ 2 x wall) and the
-speed-ups, checks that every worker count gave identical F and vertex colours, and says how
-loaded the machine was: the load average before and after, and the CPU the rest of the machine
-used during the run, from /proc/stat (a shared machine's other sessions take their share
-whatever this run asks for; see bench_batch.py).
+hemi-cube's form factors on two forked processes, :mod:`core.parallel`) and, unless
+``--no-threads``, 2 workers with processes switched off (``parallel.PROCESSES = False``:
+everything on threads, as before), ``--repeat`` times (each stage's best wall time kept, with
+its CPU time: on a shared machine the best run is the one least disturbed). Per stage it prints
+wall and CPU seconds (CPU of this process and of its worker processes: with two busy workers CPU
+~ 2 x wall) and the speed-ups, checks that every worker count gave identical F and vertex
+colours, and says how loaded the machine was: the load average before and after, and the CPU
+the rest of the machine used during each case and the whole run, from /proc/stat (a shared
+machine's other sessions take their share whatever this run asks for; see bench_batch.py).
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
                                              [--no-threads]
@@ -50,6 +51,13 @@ def machine_cpu():
         return None
     idle = v[3] + (v[4] if len(v) > 4 else 0)
     return sum(v) - idle, sum(v)
+
+
+def others_cpu(m0, m1, own, elapsed):
+    """CPUs the rest of the machine used on average between two :func:`machine_cpu` readings,
+    ``own`` CPU seconds of this run taken out."""
+    hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+    return max(0.0, (m1[0] - m0[0]) / hz - own) / elapsed if elapsed > 0 else 0.0
 
 
 def cpu_time():
@@ -160,22 +168,26 @@ def main(argv=None):
     all_ok = True
     for label, meshes, kw in cases("coarse" if args.quick else args.only):
         best, results = {}, {}
+        c0, t0, o0 = machine_cpu() or (0, 0), time.perf_counter(), cpu_time()
         for r in range(repeat):
             for c, w, proc in configs:
                 res, wall, cpu = bake_config(meshes, kw, w, proc)
                 results[c] = res
-                b = best.get(c)
-                if b is None or wall["total"] < b["wall"]["total"]:
-                    best[c] = {"wall": dict(wall), "cpu": dict(cpu)}
+                b = best.setdefault(c, {"wall": {}, "cpu": {}})
+                for st, t in wall.items():           # each stage's best run (and its CPU)
+                    if st not in b["wall"] or t < b["wall"][st]:
+                        b["wall"][st], b["cpu"][st] = t, cpu.get(st, 0.0)
         case = print_case(label, results, best, configs)
+        case["other_cpus"] = others_cpu(c0, machine_cpu() or (0, 0), cpu_time() - o0,
+                                        time.perf_counter() - t0)
+        print(f"  other processes used {case['other_cpus']:.2f} of {cpu_count()} CPUs during "
+              f"this case; load average now {os.getloadavg()[0]:.2f}")
         all_ok &= all(case["identical"].values())
         report["cases"][label] = case
         sys.stdout.flush()
     m1, w1 = machine_cpu() or (0, 0), time.perf_counter()
-    own = cpu_time() - own0
     elapsed = w1 - w0
-    hz = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-    others = max(0.0, (m1[0] - m0[0]) / hz - own) / elapsed if elapsed > 0 else 0.0
+    others = others_cpu(m0, m1, cpu_time() - own0, elapsed)
     load1 = os.getloadavg()
     print(f"\nload average after: {load1[0]:.2f} {load1[1]:.2f} {load1[2]:.2f}; during the run "
           f"({elapsed:.0f} s) other processes used {others:.2f} of {cpu_count()} CPUs on average")
