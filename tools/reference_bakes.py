@@ -1,8 +1,10 @@
 """Reference bakes for tests/test_reference_bakes.py: run once on the code a refactor starts from,
 so that the test can prove the refactored code gives the same numbers. Written first on cfa6419
 (before the settings schema and the stage list); written again when the solver began to stop on
-an error bound (96b8da5: results moved by at most 6e-5 of the maximum), and when the final gather
-began to read the output mesh instead of the patches (the two gathered cases).
+an error bound (96b8da5: results moved by at most 6e-5 of the maximum), when the final gather
+began to read the output mesh instead of the patches (the two gathered cases), and when patches
+began to be split where the direct light changes abruptly and weighted by the part the scene
+sees, with the gather reading exact light where it lands on such elements (issue 11).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 

@@ -35,10 +35,15 @@ def cached(cache, key, make):
 
 
 class FormFactorCache:
-    def __init__(self, directory=None, max_items=8):
+    def __init__(self, directory=None, max_items=256, max_bytes=2 << 30):
+        """Keeps at most ``max_items`` items and ``max_bytes`` of arrays in memory (the least
+        recently used go first; the newest always stays): a bake stores a dozen items (form
+        factors, patches, direct-light transports, the gather's rays), a relight needs them all."""
         self.directory = os.fspath(directory) if directory else None
         self.max_items = max_items
+        self.max_bytes = max_bytes
         self._mem: OrderedDict[str, CSR] = OrderedDict()
+        self._bytes: dict[str, int] = {}
         if self.directory:
             os.makedirs(self.directory, exist_ok=True)
 
@@ -74,8 +79,25 @@ class FormFactorCache:
     def _remember(self, key, F):
         self._mem[key] = F
         self._mem.move_to_end(key)
-        while len(self._mem) > self.max_items:
-            self._mem.popitem(last=False)
+        self._bytes[key] = _nbytes(F)
+        while len(self._mem) > 1 and (len(self._mem) > self.max_items
+                                      or sum(self._bytes.values()) > self.max_bytes):
+            old, _ = self._mem.popitem(last=False)
+            self._bytes.pop(old, None)
 
     def clear(self) -> None:
         self._mem.clear()
+        self._bytes.clear()
+
+
+def _nbytes(item, depth=0) -> int:
+    """Bytes of the arrays in ``item``: an array, a CSR, or the arrays among the fields of a
+    tuple or an object (one level down)."""
+    if isinstance(item, np.ndarray):
+        return int(item.nbytes)
+    if isinstance(item, CSR):
+        return item.nbytes + (0 if item.sky is None else int(np.asarray(item.sky).nbytes))
+    if depth > 1:
+        return 0
+    parts = item if isinstance(item, (tuple, list)) else getattr(item, "__dict__", {}).values()
+    return sum(_nbytes(x, depth + 1) for x in parts)

@@ -22,7 +22,9 @@ from .direct import apply_transport, emitter_transport
 from .lights import direct_irradiance
 from .patches import PatchSet
 from .progress import Ticker
-from .rays import embree_available, occluder
+from .rays import embree_available, embree_scene, occluder, open_fraction
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
 
 __all__ = ["DirectLight", "direct_stage", "source_term", "turned_around"]
 
@@ -91,6 +93,33 @@ class DirectLight:
         return np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
             / np.bincount(self.groups, weights=a, minlength=G)[:, None]
 
+    def _emitters_at(self, points, normals, where):
+        """(P, units) the emitters' transport to ``points`` (cached: geometry only)."""
+        key = None
+        if self.cache is not None:
+            pts = np.ascontiguousarray(points, dtype=np.float64)
+            grouped = b"" if self.groups is None else self.groups.tobytes()
+            key = cache_key(self.patches.geometry_key() + self.emitters.tobytes() + grouped + pts.tobytes(),
+                            ("direct", where, self.samples, self.two_sided))
+        return cached(self.cache if key else None, key, lambda: self._transport(points, normals))
+
+    def sources_at(self, points, normals, where: str) -> np.ndarray:
+        """(P, S) luminance arriving directly at ``points`` from each source apart: every
+        emitting object (its faces together), then every lamp. A source's column scales with its
+        strength and (its luminance) with its colour, so what depends only on each column's
+        shape, not its scale, is the same after a relight."""
+        cols = []
+        if self.emitters.size:
+            T = self._emitters_at(points, normals, where)
+            Y = self.emitted() @ LUMA
+            owner = _unit_owner(self)
+            cols += [T[:, owner == o].astype(np.float64) @ Y[owner == o] for o in np.unique(owner)]
+        for lamp in self.lights:
+            cols.append(direct_irradiance(self.patches, [lamp], points=points, normals=normals,
+                                          cancelled=self.cancelled, samples=self.light_samples,
+                                          seed=self.light_seed) @ LUMA)
+        return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
+
     def scene(self):
         """The shadow-ray scene, built once and only if a ray is cast."""
         if self._scene is None:
@@ -101,16 +130,8 @@ class DirectLight:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...)."""
         D = np.zeros((len(points), 3))
-        em = self.emitters
-        if em.size:
-            key = None
-            if self.cache is not None:
-                pts = np.ascontiguousarray(points, dtype=np.float64)
-                grouped = b"" if self.groups is None else self.groups.tobytes()
-                key = cache_key(self.patches.geometry_key() + em.tobytes() + grouped + pts.tobytes(),
-                                ("direct", where, self.samples, self.two_sided))
-            T = cached(self.cache if key else None, key, lambda: self._transport(points, normals))
-            D += apply_transport(T, self.emitted())
+        if self.emitters.size:
+            D += apply_transport(self._emitters_at(points, normals, where), self.emitted())
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
                                    cancelled=self.cancelled, samples=self.light_samples,
@@ -118,12 +139,46 @@ class DirectLight:
         return D
 
 
-def patch_average(patches: PatchSet, n, light_at, centre_only=None) -> np.ndarray:
+def _unit_owner(light: "DirectLight") -> np.ndarray:
+    """(units,) the object of each column of the emitters' transport."""
+    own = light.patches.owner[light.emitters]
+    if light.groups is None:
+        return own
+    first = np.zeros(int(light.groups.max()) + 1, dtype=own.dtype)
+    first[light.groups[::-1]] = own[::-1]
+    return first
+
+
+def grid_points(patches: PatchSet, n: int, rng=None):
+    """(N, n*n, 3) points at the centres of an n x n grid of each patch's bilinear map (a
+    triangle is a quad with two corners equal) and (N, n*n) their area weights (summing to 1).
+    ``rng`` (a NumPy Generator): each point jittered within its cell instead (a stratified
+    sample, so a mean over them has no bias where the light changes within a cell)."""
+    t = np.arange(n)
+    i, j = [a.ravel()[None, :, None] for a in np.meshgrid(t, t, indexing="ij")]   # (1, n^2, 1)
+    if rng is None:
+        u, v = (i + 0.5) / n, (j + 0.5) / n
+    else:
+        N = len(patches)
+        u, v = (i + rng.uniform(size=(N, n * n, 1))) / n, (j + rng.uniform(size=(N, n * n, 1))) / n
+    c = patches.corners()[:, None]                                                  # (N, 1, 4, 3)
+    c0, c1, c2, c3 = c[:, :, 0], c[:, :, 1], c[:, :, 2], c[:, :, 3]
+    x = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3
+    du = (1 - v) * (c1 - c0) + v * (c2 - c3)
+    dv = (1 - u) * (c3 - c0) + u * (c2 - c1)
+    w = np.linalg.norm(np.cross(du, dv), axis=-1)
+    return x, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+
+
+def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=None, rng=None) -> np.ndarray:
     """(N, 3) area-weighted mean over n x n points of every patch of ``light_at(points, normals,
     where) -> (P, 3)`` (n = 1: at the centres). The points are the centres of an n x n grid of
     the patch's bilinear map (a triangle is a quad with two corners equal), weighted by the map's
     area there. ``centre_only`` (N,) bool: patches taken at their centre whatever n (the faces of
-    a grouped cluster, whose mean over many faces already samples the light)."""
+    a grouped cluster, whose mean over many faces already samples the light).
+    ``weight_at(points, normals) -> (P,)`` in [0, 1]: how much each point counts besides its
+    area (a point the rest of the scene cannot see, 0); a patch whose points all weigh 0 takes
+    the plain area mean. ``rng``: jittered points (see :func:`grid_points`)."""
     if n <= 1 or (centre_only is not None and centre_only.all()):
         return light_at(patches.centers, patches.normals, "centres")
     if centre_only is not None and centre_only.any():
@@ -134,19 +189,15 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None) -> np.ndarra
         sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
                        patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
                        patches.source_face[rest], patches.object_names)
-        out[rest] = patch_average(sub, n, light_at)
+        out[rest] = patch_average(sub, n, light_at, weight_at=weight_at, rng=rng)
         return out
-    t = (np.arange(n) + 0.5) / n
-    u, v = [a.ravel()[None, :, None] for a in np.meshgrid(t, t, indexing="ij")]   # (1, n^2, 1)
-    c = patches.corners()[:, None]                                                  # (N, 1, 4, 3)
-    c0, c1, c2, c3 = c[:, :, 0], c[:, :, 1], c[:, :, 2], c[:, :, 3]
-    x = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3  # (N, n^2, 3)
-    du = (1 - v) * (c1 - c0) + v * (c2 - c3)
-    dv = (1 - u) * (c3 - c0) + u * (c2 - c1)
-    w = np.linalg.norm(np.cross(du, dv), axis=-1)                                   # (N, n^2)
-    w = w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
+    x, w = grid_points(patches, n, rng)
     N, K = x.shape[:2]
     nrm = np.repeat(patches.normals, K, axis=0)
+    if weight_at is not None:
+        seen = w * np.asarray(weight_at(x.reshape(N * K, 3), nrm), dtype=np.float64).reshape(N, K)
+        total = seen.sum(axis=1, keepdims=True)
+        w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
     D = light_at(x.reshape(N * K, 3), nrm, f"patch-points-{n}").reshape(N, K, 3)
     return np.einsum("nk,nkc->nc", w, D)
 
@@ -179,6 +230,38 @@ def source_term(patches, F, *, direct_irradiance=None, world=None) -> np.ndarray
     return S
 
 
+def _seen_weight(ctx):
+    """``weight_at`` for :func:`patch_average`: a point counts fully when at least half of its
+    hemisphere is open (:func:`.rays.open_fraction`, reach a twentieth of the patch size), less as
+    less of it is, nothing when it is enclosed (above a lamp's back, inside a block), so a
+    patch's light is that of the part the scene sees. None without Embree."""
+    p, s = ctx.patches, ctx.settings
+    if not embree_available() or not s.patch_size:
+        return None
+    reach = 0.05 * float(s.patch_size)
+
+    def weight_at(x, n):
+        key = cache_key(p.geometry_key() + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+        e = cached(ctx.cache, key, lambda: open_fraction(p, x, n, embree_scene(p), reach))
+        return np.minimum(1.0, e / 0.5)
+    return weight_at
+
+
+def _unknowns_direct(ctx, seen, rd) -> np.ndarray:
+    """(K, 3) direct light reflected by each unknown: its patch's ``rd`` (N, 3), or over a
+    cluster's pieces the mean weighted by area and by ``seen`` at the piece centres (pieces the
+    scene cannot see, a ceiling above a lamp, lend the cluster none of their light)."""
+    p, c = ctx.patches, ctx.clusters
+    if c is None or seen is None:
+        return ctx.to_unknowns(rd)
+    w = p.areas.copy()
+    multi = np.flatnonzero(c.sizes[c.of] > 1)
+    w[multi] *= seen(p.centers[multi], p.normals[multi])
+    total = np.bincount(c.of, weights=w, minlength=len(c))
+    mean = np.stack([np.bincount(c.of, weights=w * rd[:, k], minlength=len(c)) for k in range(3)], 1)
+    return np.where(total[:, None] > 0, mean / np.where(total > 0, total, 1.0)[:, None], c.mean(rd, p.areas))
+
+
 def direct_stage(ctx) -> None:
     """Fill ``ctx.direct`` (the exact plan or None), ``ctx.direct_patch`` (radiance arriving at
     the patch centres, exact path), ``ctx.irradiance`` (N, 3) at the patch centres and the
@@ -202,9 +285,20 @@ def direct_stage(ctx) -> None:
     ctx.say(0.0, f"exact direct light: {ctx.direct.emitters.size} emitting patches, "
                  f"{len(ctx.lights)} lamps")
     grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1
-    ctx.direct_patch = patch_average(p, s.patch_light_points, ctx.direct.at, grouped)
+    seen, memo = _seen_weight(ctx), {}
+
+    def at(x, n, where):                      # the same points twice: light them once
+        key = (where, np.ascontiguousarray(x).tobytes())
+        if key not in memo:
+            memo[key] = ctx.direct.at(x, n, where)
+        return memo[key]
+    # the plain area mean is what lands on the patches (the energy report, the irradiance);
+    # the solve takes the mean over the part of each patch the scene sees
+    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped)
     ctx.irradiance = np.pi * ctx.direct_patch
-    ctx.source = (source_term(u, ctx.form_factors, world=ctx.world) - u.emission
-                  + ctx.to_unknowns(p.rho * ctx.direct_patch))
+    seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen)
+    ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch)
+    memo.clear()
+    ctx.source = source_term(u, ctx.form_factors, world=ctx.world) - u.emission + ctx.direct_source
     if not embree_available():
         ctx.notes.append("Embree is not available: shadow rays use the slower NumPy BVH")

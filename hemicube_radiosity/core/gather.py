@@ -19,7 +19,7 @@ from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 from .sparse import CSR
 
-__all__ = ["final_gather", "gather_matrix", "apply_gather", "patch_parameters", "surface_values",
+__all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "patch_parameters", "surface_values",
            "surface_weights"]
 
 
@@ -67,7 +67,7 @@ def surface_values(params, polys, vertex_values, pid, y):
 
 
 def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
-                  chunk_rays=1 << 20, ticker=None, workers=1):
+                  chunk_rays=1 << 20, ticker=None, workers=1, hits=False):
     """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
@@ -77,6 +77,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
     a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
     1 = serial); G is bit-identical for any count.
+    ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float64 rows
+    ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
+    :func:`correct_hits`; each hit carries weight ``1 / rays`` in G).
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -91,7 +94,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     R = u.size
     step = max(1, chunk_rays // R)
     local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
-    rows, cols, vals = [], [], []
+    rows, cols, vals, found = [], [], [], []
     sky = np.zeros(P)
 
     def cast(s):
@@ -108,14 +111,16 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
         f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]          # front faces only
         y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
         ids, w = surface_weights(params, patches.polys, pid[f], y)
-        return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R
+        H = np.column_stack([s + f // R, pid[f], y]) if hits else None
+        return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R, H
 
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads share it
     # chunks in point order whatever the worker count: G is bit-identical
     with closing(ordered_map(cast, range(0, P, step), resolve_workers(workers))) as results:
-        for s, m, sky_s, r, c, w in results:
+        for s, m, sky_s, r, c, w, H in results:
             sky[s:s + m] = sky_s
+            found.append(H)
             rows.append(r)
             cols.append(c)
             vals.append(w)
@@ -124,7 +129,27 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     cat = (lambda a: np.concatenate(a) if a else np.zeros(0))
     G = CSR.from_coo(cat(rows).astype(np.int64), cat(cols).astype(np.int64), cat(vals), (P, V),
                      {"rays": R, "seed": seed})
+    if hits:
+        return G, sky, np.concatenate(found) if found else np.zeros((0, 5))
     return G, sky
+
+
+def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.ndarray:
+    """(P, k) what to add to ``G @ vertex_values`` so that the hits on the patches ``select``
+    (N,) bool read ``exact(points (h, 3), patch ids (h,)) -> (h, k)`` instead of the
+    interpolation of ``vertex_values`` (V, k). ``G``, ``H`` from :func:`gather_matrix` with
+    ``hits=True``."""
+    k = np.asarray(vertex_values).shape[1]
+    out = np.zeros((G.shape[0], k))
+    H = H[select[H[:, 1].astype(np.int64)]]
+    if not len(H):
+        return out
+    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:]
+    d = np.asarray(exact(y, pid), dtype=np.float64) - surface_values(patch_parameters(patches), patches.polys,
+                                                                      vertex_values, pid, y)
+    for c in range(k):
+        out[:, c] = np.bincount(row, weights=d[:, c], minlength=G.shape[0])
+    return out / G.meta["rays"]
 
 
 def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, rays=256, seed=0,

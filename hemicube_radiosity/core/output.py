@@ -18,16 +18,19 @@ import hashlib
 import numpy as np
 
 from .cache import cache_key, cached
-from .direct import vertex_frames
+from .clusters import _components
+from .direct import apply_transport, emitter_transport, vertex_frames
+from .direct_light import patch_average
 from .errors import RadiosityError
-from .gather import apply_gather, gather_matrix
+from .gather import apply_gather, correct_hits, gather_matrix
 from .interpolate import interpolate_located, locate
 from .patches import PatchSet, build_patches
 from .progress import Ticker
-from .rays import embree_available, embree_scene
+from .refine import LUMA, _subset, abrupt
+from .rays import embree_available, embree_scene, occluder, open_fraction
 from .vertex import exposure, vertex_radiosity
 
-__all__ = ["meshes_key", "output_elements", "vertex_stage"]
+__all__ = ["meshes_key", "output_elements", "vertex_stage", "abrupt_elements"]
 
 
 def meshes_key(meshes) -> bytes:
@@ -91,19 +94,101 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v):
     matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
     output mesh itself: the direct part exact at each of its vertices (as fine as the output, so
     a two-sided lamp's few-centimetre hot spot on a ceiling is not spread over whole patches),
-    the part reflected more than once from the patch solution."""
+    the part reflected more than once from the patch solution.
+
+    Where the direct part changes abruptly inside an element (a shadow's edge, a lamp hanging
+    millimetres under a ceiling), interpolating it from the element's corners would spread a
+    corner's light over the whole element: rays that land on such an element read the direct
+    light exactly where they land. The brightest of those elements (the ring of ceiling lit by
+    a lamp's back) would make rare, very bright hits, blotches: they light the vertices as
+    lamps do instead, by their form factor and shadow rays (:func:`_bright_elements`)."""
     rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
-    R_e = rho_v * ctx.direct.at(xv, nv, "vertices") + rest_e
+    direct_e = rho_v * ctx.direct.at(xv, nv, "vertices")
+    G, H = _gather_rays(ctx, elements, xv, nv)
+    out = apply_gather(G, G.sky, direct_e + rest_e, ctx.world)
+    select = abrupt_elements(elements, direct_e)
+    if not select.any():
+        return out
+    bright, shine = _bright_elements(ctx, elements, select, direct_e)
 
-    def make():
-        G, sky = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
-                               ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers)
-        G.sky = sky
-        return G
+    def exact(y, pid):
+        D = elements.rho[pid] * ctx.direct.at(y, elements.normals[pid], "gather-hits")
+        return np.where(bright[pid][:, None], 0.0, D)
+    out += correct_hits(G, H, elements, direct_e, exact, select)
+    if bright.any():
+        out += _shine(ctx, elements, np.flatnonzero(bright), shine[bright], xv, nv)
+    return out
 
+
+def _bright_elements(ctx, elements, select, direct_e, n=6, factor=4.0):
+    """(bright (N,) bool, shine (N, 3)): of the ``select``-ed elements, those whose reflected
+    direct light, averaged over the part the scene sees (n x n jittered points weighted by
+    :func:`.rays.open_fraction`: the light of a lamp's back falls off within millimetres of
+    its edge, points fixed at cell centres would over- or undershoot it), exceeds ``factor``
+    times the mean over the output vertices; ``shine`` is that average (0 elsewhere)."""
+    ids = np.flatnonzero(select)
+    sub = _subset(elements, ids)
+    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    scene = embree_scene(elements)
+
+    def light_at(x, nrm, where):
+        return ctx.direct.at(x, nrm, "bright-" + where)
+
+    def seen(x, nrm):
+        key = cache_key(elements.geometry_key() + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+        return np.minimum(1.0, cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, scene, reach)) / 0.5)
+
+    avg = sub.rho * patch_average(sub, n, light_at, weight_at=seen, rng=np.random.default_rng(0))
+    shine = np.zeros((len(elements), 3))
+    shine[ids] = avg
+    bright = np.zeros(len(elements), bool)
+    bright[ids] = avg @ LUMA > factor * float((direct_e @ LUMA).mean())
+    return bright, shine
+
+
+def _shine(ctx, elements, ids, radiance, xv, nv):
+    """(V, 3) light arriving at the points ``xv`` from elements ``ids`` shining ``radiance``
+    (M, 3) toward their front, with shadows: grouped by object and patch-size cell so the
+    shadow rays follow a few areas, not every element (:func:`.direct.emitter_transport`)."""
+    size = float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
+    key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
+    sub = _subset(elements, ids)
+    groups = np.unique(_components(key, sub.polys), return_inverse=True)[1].reshape(-1)
+    T = emitter_transport(elements, xv, nv, ids, scene=occluder(elements), samples=ctx.settings.direct_samples,
+                          groups=groups, workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled))
+    a = elements.areas[ids]
+    G = int(groups.max()) + 1
+    L = np.stack([np.bincount(groups, weights=a * radiance[:, k], minlength=G) for k in range(3)], 1) \
+        / np.bincount(groups, weights=a, minlength=G)[:, None]
+    return apply_transport(T, L)
+
+
+def _gather_rays(ctx, elements, xv, nv):
+    """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
+    H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only."""
     key = cache_key(elements.geometry_key(), ("gather-elements", ctx.settings.gather_rays))
-    G = cached(ctx.cache, key, make)
-    return apply_gather(G, G.sky, R_e, ctx.world)
+    G = ctx.cache.get(key) if ctx.cache is not None else None
+    H = ctx.cache.get(key + "-hits") if ctx.cache is not None else None
+    if G is None or H is None:
+        G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
+                                  ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
+                                  hits=True)
+        G.sky = sky
+        if ctx.cache is not None:
+            ctx.cache.put(key, G)
+            ctx.cache.put(key + "-hits", H)
+    return G, H
+
+
+def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02) -> np.ndarray:
+    """(N,) bool: elements across which the vertex field ``values_v`` (V, 3) changes too
+    abruptly to interpolate: the luminance at one corner is more than ``ratio`` times another's,
+    and the difference is more than ``floor`` of the mean over the vertices (dark corners and
+    faint gradients stay interpolated)."""
+    Y = np.asarray(values_v, dtype=np.float64) @ LUMA
+    polys = np.where(elements.polys < 0, elements.polys[:, :1], elements.polys)
+    return abrupt(Y[polys], ratio, floor * max(float(Y.mean()), 1e-300))
 
 
 def _interpolated(ctx, elements, field_v, xv, nv):
@@ -174,7 +259,7 @@ def vertex_stage(ctx) -> None:
     # direct light again at every output vertex (sharp shadows, exact falloff); only the
     # smoother light reflected more than once comes from the patches (or their clusters), as in
     # the paper
-    rest = ctx.reflected - ctx.to_unknowns(patches.rho * ctx.direct_patch)
+    rest = ctx.reflected - ctx.direct_source
     rest_v = vertex_radiosity(patches, ctx.to_patches(rest), weights=weights)
     in_v = None
     if lighting:

@@ -22,6 +22,7 @@ from .form_factors import compute_form_factors, form_factor_stage, receivers_nee
 from .output import meshes_key, output_elements, vertex_stage
 from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
+from .refine import refine_stage
 from .settings import BakeSettings
 from .solve import Solution, solve
 from .sparse import CSR
@@ -88,6 +89,8 @@ class BakeContext:
     direct: DirectLight | None = None        # exact direct light, or None ('hemicube' mode)
     direct_patch: np.ndarray | None = None   # (N, 3) radiance arriving directly at patch centres
     irradiance: np.ndarray | None = None     # (N, 3) W/m^2 direct irradiance at patch centres
+    direct_source: np.ndarray | None = None  # (K, 3) exact path: direct light each unknown reflects
+    given: bool = False                      # patches handed in ready: used as they are (not refined)
     source: np.ndarray | None = None         # (N, 3) the solve's source term
     reflected: np.ndarray | None = None      # (N, 3) exact path: the solve's reflected-only B
     solution: Solution | None = None
@@ -241,7 +244,8 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     exact path; what the solve emits on the 'hemicube' path), the lamps' power
     (:func:`lamp_power`) and, for the unbounded sources (suns, the world), the light they deliver
     to the patches. Light arriving directly (``ctx.direct_patch``, or the lamps' irradiance on
-    the 'hemicube' path) is absorbed at (1 - rho) and reflected into the solve; what the direct
+    the 'hemicube' path) is absorbed at (1 - rho) and reflected into the solve (less what the
+    parts of patches the scene cannot see reflect: absorbed where it lands); what the direct
     light does not deliver to any patch's front escapes (through openings into the world, or
     onto back faces), as does what the solve's rows do not see. 'direct' holds the direct
     light's own emitted / received / absorbed / escaped; ``imbalance`` is relative, as in
@@ -273,6 +277,10 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
         world_reflected = zero
     recv = (a * D).sum(axis=0) + world
     absorbed = (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
+    if ctx.direct_source is not None:
+        # what the parts of patches the scene cannot see reflect (a ceiling above a lamp's back)
+        # lands on what encloses them, not in the solve (direct_light._seen_weight)
+        absorbed = absorbed + (u.areas[:, None] * (ctx.to_unknowns(p.rho * D) - ctx.direct_source)).sum(axis=0)
     emitted = surf + lamps + sun + world
     direct = {"emitted": emitted, "received": recv, "absorbed": absorbed, "escaped": emitted - recv}
     # the 'hemicube' path's emitters are the solve's own source
@@ -287,8 +295,8 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
             "direct": {k: v.tolist() for k, v in direct.items()}, "solve": solved}
 
 
-STAGES = (("patches", patch_stage), ("form_factors", form_factor_stage), ("direct", direct_stage),
-          ("solve", solve_stage), ("vertices", vertex_stage))
+STAGES = (("patches", patch_stage), ("refine", refine_stage), ("form_factors", form_factor_stage),
+          ("direct", direct_stage), ("solve", solve_stage), ("vertices", vertex_stage))
 
 
 def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancelled=None,
@@ -297,7 +305,8 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     """Run every stage of :data:`STAGES`. ``progress(stage, fraction, message)``; ``cancelled()
     -> bool`` (raises :class:`.progress.Cancelled`). ``lights``: core.lights light objects;
     ``world``: (3,) radiance. ``cache``: a :class:`.cache.FormFactorCache`; a hit skips the
-    form-factor work. ``patches``: a ready PatchSet (then ``meshes`` is not cut again)."""
+    form-factor work. ``patches``: a ready PatchSet (then ``meshes`` is not cut again, nor the
+    patches refined: a relight hands back the refined patches of a first bake)."""
     settings = settings or BakeSettings()
     settings.validate()
     if meshes is not None:
@@ -305,7 +314,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     elif "auto" in (settings.patch_size, settings.element_size):
         raise SettingsError("'auto' sizes need the meshes")
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache, progress, cancelled,
-                      patches=patches)
+                      patches=patches, given=patches is not None)
     t0 = time.perf_counter()
     ctx.check()
     for name, stage in STAGES:

@@ -22,9 +22,10 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import RadiosityError
+from .geometry import cosine_directions, jittered_grid, tangent_frames
 from .patches import PatchSet
 
-__all__ = ["EmbreeUnavailable", "embree_available", "import_embreex", "EmbreeScene",
+__all__ = ["open_fraction", "EmbreeUnavailable", "embree_available", "import_embreex", "EmbreeScene",
            "embree_scene", "clear_ray_cache", "NumpyOccluder", "occluder", "patch_triangles"]
 
 
@@ -267,3 +268,32 @@ def occluder(patches, shadows="auto"):
         if shadows == "embree":
             raise EmbreeUnavailable()
     return NumpyOccluder(patches)
+
+
+def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
+             chunk_rays: int = 1 << 20) -> np.ndarray:
+    """(P,) fraction of ``rays`` cosine rays from each point (P, 3) with unit ``normals`` that
+    leave it into the open: neither hitting a surface closer than ``reach`` (world units) nor
+    the back of one at any distance. A point a few millimetres above a lamp's back, or on a
+    floor buried inside a block, has none; a point in the open has all, one in a corner about
+    half. ``scene``: :func:`.rays.embree_scene` of ``patches``. One jittered pattern (seeded)
+    for every point, in its normal's frame. Geometry only."""
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
+    local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
+    R = len(local)
+    eps = 1e-5 * scene.scale
+    out = np.empty(len(points))
+    step = max(1, chunk_rays // R)
+    for s in range(0, len(points), step):
+        x, n = points[s:s + step], normals[s:s + step]
+        d = np.einsum("rj,mjc->mrc", local, tangent_frames(n)).reshape(-1, 3)
+        pid, t = scene.intersect(np.repeat(x + eps * n, R, axis=0), d)
+        pid = np.asarray(pid)
+        hit = pid >= 0
+        back = np.zeros_like(hit)
+        back[hit] = np.einsum("ij,ij->i", d[hit], patches.normals[pid[hit]]) > 0
+        closed = back | (hit & (np.asarray(t) < reach))
+        out[s:s + step] = 1.0 - closed.reshape(len(x), R).mean(axis=1)
+    return out

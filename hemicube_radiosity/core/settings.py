@@ -124,6 +124,10 @@ class BakeSettings:
     group_angle: float = setting(30.0, "Grouping Angle", "Faces whose normals differ by more "
                                  "than this many degrees are not grouped into one patch",
                                  "patches", min=1.0, max=90.0)
+    refine_levels: int = setting(3, "Refinement Levels", "Split patches where the direct light "
+                                 "changes abruptly across them (a shadow's edge, the foot of a "
+                                 "block, a lamp close to a surface), up to this many times, each "
+                                 "halving their size; 0: no refinement", "patches", min=0, max=6)
     max_patches: int = setting(20000, "Max Patches", "Stop with an error before cutting more "
                                "patches (form factors grow with their square)", "patches",
                                min=1, soft_max=100000)
