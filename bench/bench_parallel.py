@@ -14,6 +14,7 @@ the rest of the machine used during each case and the whole run, from /proc/stat
 machine's other sessions take their share whatever this run asks for; see bench_batch.py).
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
+                                             [--method hemicube|embree]
                                              [--no-threads]
 
 Results go to bench/out/bench_parallel.json.
@@ -90,10 +91,11 @@ def timed_bake(meshes, settings):
     return res, dict(res.timings), cpu
 
 
-def cases(only):
+def cases(only, method=None):
     dense = scenes.tessellate(scenes.cornell_box(), 40)
     coarse = scenes.cornell_box()
     methods = ["hemicube"] + (["embree"] if embree_available() else [])
+    methods = [m for m in methods if method in (None, m)]
     out = []
     for name, meshes, kw in (("dense", dense, {}), ("coarse", coarse, {"patch_size": 0.1})):
         if only and name != only:
@@ -151,6 +153,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=2, help="runs of each worker count (best kept)")
     ap.add_argument("--quick", action="store_true", help="one run of each, the coarse box only")
     ap.add_argument("--only", choices=("dense", "coarse"))
+    ap.add_argument("--method", choices=("hemicube", "embree"), help="this method only")
     ap.add_argument("--no-threads", action="store_true",
                     help="leave out '2 thr' (2 workers on threads only, as before processes)")
     args = ap.parse_args(argv)
@@ -166,7 +169,7 @@ def main(argv=None):
     own0 = cpu_time()
     report = {"cpus": cpu_count(), "load_before": load0, "cases": {}}
     all_ok = True
-    for label, meshes, kw in cases("coarse" if args.quick else args.only):
+    for label, meshes, kw in cases("coarse" if args.quick else args.only, args.method):
         best, results = {}, {}
         c0, t0, o0 = machine_cpu() or (0, 0), time.perf_counter(), cpu_time()
         for r in range(repeat):
