@@ -20,6 +20,11 @@ w = (0.2126, 0.7152, 0.0722) per channel: e_v = sqrt(sum_c w_c (x_c - r_c)^2).
 ``rms`` = sqrt(mean e_v^2) / mean(Y_ref) (relative RMS), ``p95`` = 95th percentile of
 e_v / max(Y_ref,v, 0.05 mean Y_ref) (relative error per vertex, dark vertices floored).
 
+Smoothness (issue 11; :func:`flat_vertices`, :func:`smoothness`): on flat faces away from shadow
+boundaries and contacts, the RMS of (vertex luminance - mean of its edge neighbours) / that mean.
+Measured for the reference itself, every Cycles sweep point and every candidate of ours; ours at
+the defaults must be no worse than the reference's own value, on each scene.
+
 Also: a relight (new light strength and wall colour, cached form factors) against a Cycles
 re-bake at the same error, form factors for ~2,000 patches at resolution 64 (ms per hemi-cube),
 peak memory for 2k/8k/32k patches (one subprocess each), a profile of the hemi-cube hot loop.
@@ -52,6 +57,7 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 from hemicube_radiosity.core import pipeline  # noqa: E402
 from hemicube_radiosity.core.cache import FormFactorCache  # noqa: E402
+from hemicube_radiosity.core.direct_light import DirectLight  # noqa: E402
 from hemicube_radiosity.core.interpolate import interpolate_at  # noqa: E402
 from hemicube_radiosity.core.patches import MeshInput, build_patches  # noqa: E402
 
@@ -109,6 +115,78 @@ def correct(err, noise):
     err["rms_raw"] = err["rms"]
     err["rms_true"] = float(np.sqrt(max(err["rms"] ** 2 - noise["rms"] ** 2, 0.0)))
     return err
+
+
+# ----------------------------------------------------------------------------- smoothness
+def fine_edges(fine):
+    """(E, 2) unique vertex pairs joined by an edge of the evaluation mesh ``fine`` (indices in the
+    order of ``scenes_bench.fine_points``: the meshes' vertices one after the other)."""
+    e, off = [], 0
+    for m in fine:
+        for f in range(len(m.face_offsets) - 1):
+            ids = m.face_indices[m.face_offsets[f]:m.face_offsets[f + 1]] + off
+            e.append(np.stack([ids, np.roll(ids, -1)], 1))
+        off += len(m.verts)
+    return np.unique(np.sort(np.concatenate(e), 1), axis=0)
+
+
+def neighbour_mean(Y, edges):
+    """(mean of ``Y`` over each vertex's edge neighbours, number of neighbours)."""
+    V = len(Y)
+    s = np.bincount(edges[:, 0], Y[edges[:, 1]], V) + np.bincount(edges[:, 1], Y[edges[:, 0]], V)
+    c = np.bincount(edges[:, 0], None, V) + np.bincount(edges[:, 1], None, V)
+    return s / np.maximum(c, 1), c
+
+
+def flat_vertices(sc, pts, normals, mask, edges):
+    """The vertices the smoothness figure is measured on: flat faces away from shadow boundaries and
+    contacts. A vertex counts when
+
+    * it has >= 4 edge neighbours: it lies inside an original face (the evaluation mesh has hard
+      edges between original faces, so a vertex on a face's border or corner has 2-3);
+    * it is compared at all (``mask``: not an emitter, not a never-lit hidden vertex);
+    * it is lit by the direct light: D_v > 5% of the mean of D over ``mask``, where D is the exact
+      direct luminance at the vertex (``core.direct_light.DirectLight.plan`` on a patches-only bake
+      of the coarse scene: emitters and lamps, shadow rays);
+    * no neighbour's D differs from its own by more than 30% (of the larger): no shadow boundary;
+    * and none of its neighbours fails one of the tests above (a one-vertex margin).
+
+    A scene with no emitters or lamps (the yard: sky only) has no D: only the flat/interior test
+    (and the margin round masked vertices) applies. Returns (flat (V,) bool, whether D was used)."""
+    V = len(pts)
+    has_light = bool(sc.lights) or any(float(np.max(m.face_emission, initial=0)) > 0 for m in sc.coarse)
+    dl = None
+    if has_light:
+        res0 = pipeline.bake(sc.coarse, pipeline.BakeSettings(element_size=None, gather_rays=0),
+                             world=sc.world, lights=sc.lights)
+        dl = DirectLight.plan(res0.patches, res0.settings, list(sc.lights))
+    _, count = neighbour_mean(np.zeros(V), edges)
+    bad = ~mask
+    if dl is not None:
+        D = dl.at(pts + 1e-4 * normals, normals, "smoothness") @ LUMA
+        a, b = D[edges[:, 0]], D[edges[:, 1]]
+        rel = np.abs(a - b) / np.maximum(np.maximum(a, b), 1e-12)
+        jump = np.zeros(V)
+        np.maximum.at(jump, edges[:, 0], rel)
+        np.maximum.at(jump, edges[:, 1], rel)
+        bad = bad | (jump > 0.3) | ~(D > 0.05 * D[mask].mean())
+    near_bad = bad.copy()
+    np.logical_or.at(near_bad, edges[:, 0], bad[edges[:, 1]])
+    np.logical_or.at(near_bad, edges[:, 1], bad[edges[:, 0]])
+    return (count >= 4) & ~near_bad, dl is not None
+
+
+def smoothness(Y, edges, flat):
+    """The smoothness figure of vertex luminances ``Y`` (V,): over the ``flat`` vertices
+    (:func:`flat_vertices`), the RMS of (Y_v - m_v) / m_v, m_v = mean of Y over v's edge
+    neighbours. 0 = every flat vertex equals its neighbours' mean (locally linear); noise and
+    blotches raise it. NaN when no vertex is flat."""
+    Y = np.asarray(Y, float)
+    m, _ = neighbour_mean(Y, edges)
+    ok = flat & (m > 0)
+    if not ok.any():
+        return float("nan")
+    return float(np.sqrt(np.mean(((Y - m)[ok] / m[ok]) ** 2)))
 
 
 # ----------------------------------------------------------------------------- Blender side
@@ -377,16 +455,26 @@ def run_scene(sc, args):
     hidden = Yr <= 1e-4 * np.median(Yr[~emitter])
     mask = ~emitter & ~hidden
     log(f"{int(mask.sum())} vertices compared ({int(emitter.sum())} emitter, {int((hidden & ~emitter).sum())} hidden left out)")
+    edges = fine_edges(sc.fine)
+    t = time.perf_counter()
+    flat, flat_lit = flat_vertices(sc, pts, normals, mask, edges)
+    smooth_ref = smoothness(Yr, edges, flat)
+    log(f"smoothness: {int(flat.sum())} flat vertices ({'direct light tested' if flat_lit else 'interior test only'},"
+        f" {time.perf_counter() - t:.1f} s); reference {100 * smooth_ref:.2f}%")
     out = {"name": sc.name, "title": sc.title, "fine_faces": sc.n_fine_faces, "vertices": int(len(pts)),
            "compared": int(mask.sum()), "hidden": int((hidden & ~emitter).sum()),
-           "ref_spp": ref_spp, "ref_seconds": ref.seconds, "cycles": [], "ours": []}
+           "ref_spp": ref_spp, "ref_seconds": ref.seconds, "smooth_ref": smooth_ref,
+           "smooth_vertices": int(flat.sum()), "smooth_light_tested": bool(flat_lit), "cycles": [], "ours": []}
     # Cycles sweep
     spps = args.cycles_spp
     for spp in spps:
         b = cr.bake_vertex_radiance(objs, samples=spp, seed=CAND_SEED, bounces=BOUNCES, threads=2)
-        err = errors(cycles_values(b, sc), R, mask)
-        out["cycles"].append({"spp": spp, "seconds": b.seconds, "error": err})
-        log(f"cycles {spp:5d} spp: {b.seconds:7.2f} s  raw rms {100 * err['rms']:6.2f}%  p95 {100 * err['p95']:6.2f}%")
+        C = cycles_values(b, sc)
+        err = errors(C, R, mask)
+        sm = smoothness(C @ LUMA, edges, flat)
+        out["cycles"].append({"spp": spp, "seconds": b.seconds, "error": err, "smooth": sm})
+        log(f"cycles {spp:5d} spp: {b.seconds:7.2f} s  raw rms {100 * err['rms']:6.2f}%  p95 {100 * err['p95']:6.2f}%"
+            f"  smooth {100 * sm:.2f}%")
     noise = reference_noise(out["cycles"], ref_spp)
     out["ref_noise"] = noise
     log(f"reference noise (fit over the Cycles sweep): {100 * noise['rms']:.2f}% RMS, Cycles RMS ~ spp^-{noise['alpha'] / 2:.2f}")
@@ -429,11 +517,12 @@ def run_scene(sc, args):
         rec.update(seconds=total, core_seconds=core_s, write_seconds=wt,
                    stages={k: float(v) for k, v in res.timings.items()},
                    iterations=int(res.solution.iterations), nnz=int(res.form_factors.nnz),
-                   ff_mb=res.form_factors.nbytes / 1e6, error=err)
+                   ff_mb=res.form_factors.nbytes / 1e6, error=err, smooth=smoothness(vals @ LUMA, edges, flat))
         done.append(rec)
         st = res.timings
         log(f"ours  {rec['label']:48s} N={n:5d} {total:7.2f} s (ff {st['form_factors']:.2f}, direct"
-            f" {st.get('direct', 0):.2f}, solve {st['solve']:.2f}, vertices {st.get('vertices', 0):.2f}, write {wt:.2f})  rms {100 * err[METRIC]:6.2f}% (raw {100 * err['rms']:.2f}%)  p95 {100 * err['p95']:6.2f}%")
+            f" {st.get('direct', 0):.2f}, solve {st['solve']:.2f}, vertices {st.get('vertices', 0):.2f}, write {wt:.2f})  rms {100 * err[METRIC]:6.2f}% (raw {100 * err['rms']:.2f}%)  p95 {100 * err['p95']:6.2f}%"
+            f"  smooth {100 * rec['smooth']:.2f}%")
     out["ours"] = [d for d in done if not d.get("skipped")]
     out["skipped"] = [d for d in done if d.get("skipped")]
     # relight on this scene: best of ours at Cycles-64 error (or the most accurate)
@@ -654,6 +743,11 @@ def _pct(x):
     return f"{100 * x:.2f}%"
 
 
+def _pct_opt(x):
+    """A percentage, or 'n/a' when missing (results written before the field existed) or NaN."""
+    return "n/a" if x is None or not np.isfinite(x) else _pct(x)
+
+
 def _fmt_s(x):
     if x is None or not np.isfinite(x):
         return "n/a"
@@ -730,6 +824,18 @@ def targets(results):
         rows.append(("Peak memory reported for 2k/8k/32k patches; sparse, never a dense N x N past 5,000",
                      "; ".join(f"{m['patches']} {m['method']}: peak {m['peak_mb']:.0f} MB"
                                f" (dense float32 would be {m['dense_mb']:.0f} MB)" for m in mem), ok))
+    for sc in results["scenes"]:   # issue 11: smoothness at the defaults, each scene
+        ref = sc.get("smooth_ref")
+        if ref is None:
+            continue   # results from before the smoothness figure
+        d = next((o for o in sc["ours"] if o.get("defaults")), None)
+        ours = d.get("smooth") if d is not None else None
+        ok = ours is not None and np.isfinite(ours) and np.isfinite(ref) and ours <= ref
+        rows.append((f"`{sc['name']}`: smoothness at the defaults <= the {sc['ref_spp']:,}-spp reference's own"
+                     f" (issue 11)",
+                     (f"ours {_pct_opt(ours)} vs reference {_pct_opt(ref)}" if d is not None
+                      else f"defaults not run; reference {_pct_opt(ref)}")
+                     + f" ({sc.get('smooth_vertices', '?')} flat vertices)", bool(ok)))
     return rows
 
 
@@ -817,6 +923,11 @@ def write_report(results, doc, img_dir):
          "- Error at the vertices (emitters left out), luminance weights w = (0.2126, 0.7152, 0.0722):"
          " e_v = sqrt(sum_c w_c (x_c - r_c)^2); **RMS** = sqrt(mean e_v^2) / mean(Y_ref); **p95** = 95th"
          " percentile of e_v / max(Y_ref, 0.05 mean Y_ref); **bias** = relative difference of the mean luminance.",
+         "- **smooth** (issue 11): on flat faces away from shadow boundaries and contacts, the RMS of (vertex"
+         " luminance - mean of its edge neighbours) / that mean. Flat vertices: inside an original face (>= 4"
+         " neighbours), compared, lit by the exact direct light (> 5% of its mean; lamps and emitters, shadow rays)"
+         " with no jump > 30% of it to a neighbour, and no neighbour failing these (a scene lit by the sky alone:"
+         " the interior test only). The reference's own value is the bar (its noise counts in it too).",
          "- Time, Cycles: `bpy.ops.object.bake` (BVH build, sampling, colours written to the mesh). Time, ours:"
          " `core.pipeline.bake` on MeshInputs (patches, form factors, solve, vertex radiosities) + the add-on's"
          " `write_copies` (mesh + colour attribute) + the reader's `read_scene` of the evaluation scene (measured"
@@ -862,21 +973,25 @@ def write_report(results, doc, img_dir):
               f"Reference noise, fitted over the Cycles sweep: {_pct(sc['ref_noise']['rms'])} RMS (Cycles' error falls as"
               f" spp^-{sc['ref_noise']['alpha'] / 2:.2f}). RMS = measured RMS with that noise variance removed;"
               f" raw = as measured. {sc.get('compared', '?')} vertices compared ({sc.get('hidden', 0)} never-lit hidden"
-              " vertices and the emitters left out).", "",
-              "| Cycles spp | time (s) | RMS | raw RMS | p95 | bias |", "|---|---|---|---|---|---|"]
+              " vertices and the emitters left out)."
+              + (f" Smoothness of the reference itself: **{_pct_opt(sc['smooth_ref'])}** over"
+                 f" {sc.get('smooth_vertices', '?')} flat vertices"
+                 + ("" if sc.get("smooth_light_tested", True) else " (no lamp or emitter: interior test only)") + "."
+                 if "smooth_ref" in sc else ""), "",
+              "| Cycles spp | time (s) | RMS | raw RMS | p95 | bias | smooth |", "|---|---|---|---|---|---|---|"]
         for c in sc["cycles"]:
             e = c["error"]
             L.append(f"| {c['spp']} | {_fmt_s(c['seconds'])} | {_pct(e[METRIC])} | {_pct(e['rms'])} | {_pct(e['p95'])} |"
-                     f" {_pct(e['bias'])} |")
-        L += ["", "| ours | patches | time (s) | form factors | direct | solve (it) | vertices | write | RMS | p95 | bias"
-              " | frontier |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+                     f" {_pct(e['bias'])} | {_pct_opt(c.get('smooth'))} |")
+        L += ["", "| ours | patches | time (s) | form factors | direct | solve (it) | vertices | write | RMS | raw RMS | p95"
+              " | bias | smooth | frontier |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         front = set(pareto([(o["seconds"], o["error"][METRIC]) for o in sc["ours"]]))
         for i, o in sorted(enumerate(sc["ours"]), key=lambda kv: kv[1]["seconds"]):
             st, e = o["stages"], o["error"]
             L.append(f"| {o['label']} | {o['patches']} | {_fmt_s(o['seconds'])} | {_fmt_s(st['form_factors'])} |"
                      f" {_fmt_s(st.get('direct'))} | {_fmt_s(st['solve'])} ({o['iterations']}) |"
                      f" {_fmt_s(st.get('vertices'))} | {_fmt_s(o['write_seconds'])} | {_pct(e[METRIC])} | {_pct(e['rms'])} |"
-                     f" {_pct(e['p95'])} | {_pct(e['bias'])} | {'*' if i in front else ''} |")
+                     f" {_pct(e['p95'])} | {_pct(e['bias'])} | {_pct_opt(o.get('smooth'))} | {'*' if i in front else ''} |")
         sk = sc.get("skipped", [])
         if sk:
             L += ["", "Skipped: " + "; ".join(f"{s['label']} ({s['patches']} patches)"
