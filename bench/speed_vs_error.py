@@ -147,19 +147,20 @@ def flat_vertices(sc, pts, normals, mask, edges):
     * it is compared at all (``mask``: not an emitter, not a never-lit hidden vertex);
     * it is lit by the direct light: D_v > 5% of the mean of D over ``mask``, where D is the exact
       direct luminance at the vertex (``core.direct_light.DirectLight.plan`` on a patches-only bake
-      of the coarse scene: emitters and lamps, shadow rays);
+      of the coarse scene: emitters, lamps and the world's sky seen from the vertex, shadow rays);
     * no neighbour's D differs from its own by more than 30% (of the larger): no shadow boundary;
     * and none of its neighbours fails one of the tests above (a one-vertex margin).
 
-    A scene with no emitters or lamps (the yard: sky only) has no D: only the flat/interior test
-    (and the margin round masked vertices) applies. Returns (flat (V,) bool, whether D was used)."""
+    A scene with no light at all has no D: only the flat/interior test (and the margin round
+    masked vertices) applies. Returns (flat (V,) bool, whether D was used)."""
     V = len(pts)
-    has_light = bool(sc.lights) or any(float(np.max(m.face_emission, initial=0)) > 0 for m in sc.coarse)
+    has_light = (bool(sc.lights) or sc.world is not None
+                 or any(float(np.max(m.face_emission, initial=0)) > 0 for m in sc.coarse))
     dl = None
     if has_light:
         res0 = pipeline.bake(sc.coarse, pipeline.BakeSettings(element_size=None, gather_rays=0),
                              world=sc.world, lights=sc.lights)
-        dl = DirectLight.plan(res0.patches, res0.settings, list(sc.lights))
+        dl = DirectLight.plan(res0.patches, res0.settings, list(sc.lights), world=sc.world)
     _, count = neighbour_mean(np.zeros(V), edges)
     bad = ~mask
     if dl is not None:

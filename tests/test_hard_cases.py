@@ -306,10 +306,10 @@ def test_a_block_on_or_in_the_floor_lights_it_as_a_floor_with_a_hole_would(block
     assert np.abs([got[k] for k in under]).max() < 1e-3 * max(v.max() for v in ref.values())
 
 
-@pytest.mark.xfail(strict=True, reason="a floor vertex on a block's outline is shared with the buried "
-                   "elements: its evaluation point is moved toward all its elements' centres "
-                   "(core/direct.py vertex_frames), so it sits at the block's foot and half its gather "
-                   "rays go into the block: 66% dark resting on the floor, 83% sunk)")
+@pytest.mark.xfail(strict=True, reason="a floor vertex on a sunk block's outline: evaluated on the "
+                   "open side since output vertices weigh only open elements (was 83% dark), it is "
+                   "still 4-17% dark: the block's side elements cross the floor line, dark at their "
+                   "buried corners (resting on the floor: 0-3%)")
 def test_the_floor_on_a_sunk_blocks_outline_is_the_open_floors_limit(block_bakes):
     ref, bakes = block_bakes
     got = _floor_values(bakes[-0.1], 0)

@@ -121,3 +121,28 @@ def test_refinement_splits_the_same_patches_after_a_relight():
     relit[3].face_rho[:] = (0.2, 0.2, 0.7)
     b = bake(relit, s)
     assert len(a.patches) > 25 and a.patches.geometry_key() == b.patches.geometry_key()
+
+
+def _corner(a, b, c):
+    """Signed form factor from a point to the rectangle [0, a] x [0, b] at height c above it."""
+    return np.sign(a) * np.sign(b) * point_under_rectangle_corner(abs(a), abs(b), c)
+
+
+def test_world_light_is_exact_at_every_vertex_under_a_black_plate():
+    """A floor under a uniform world with a black 1 m plate 0.5 m above part of it: at every
+    output vertex B = rho L (1 - F), F the vertex's form factor to the plate (closed form,
+    corner rectangles added and subtracted). The world is direct light, seen by rays from each
+    vertex; the patches (0.5 m) could only interpolate the plate's soft shadow (0.055 off at
+    worst, 11% of rho L, with the paper's patch-only bake). Measured: 0.0045 at worst (0.9% of
+    rho L) with 1,024 sky rays."""
+    floor = scenes.quad([(0, 0, 0), (4, 0, 0), (4, 4, 0), (0, 4, 0)], (0.5, 0.5, 0.5), name="Floor")
+    plate = scenes.quad([(1.5, 1.5, 0.5), (1.5, 2.5, 0.5), (2.5, 2.5, 0.5), (2.5, 1.5, 0.5)], (0, 0, 0),
+                        name="Plate")
+    r = bake([floor, plate], BakeSettings(patch_size=0.5, element_size=0.125, sky_rays=1024), world=(1.0, 1.0, 1.0))
+    el = r.elements
+    v = np.unique(el.polys[el.owner == 0])
+    x, y = el.verts[v, 0], el.verts[v, 1]
+    F = np.array([_corner(2.5 - a, 2.5 - b, 0.5) - _corner(1.5 - a, 2.5 - b, 0.5)
+                  - _corner(2.5 - a, 1.5 - b, 0.5) + _corner(1.5 - a, 1.5 - b, 0.5) for a, b in zip(x, y)])
+    assert F.max() > 0.3 and F.min() < 0.01             # under the plate and far from it
+    np.testing.assert_allclose(r.vertex_radiosity[v, 1], 0.5 * (1 - F), atol=0.01)

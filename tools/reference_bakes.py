@@ -4,7 +4,8 @@ so that the test can prove the refactored code gives the same numbers. Written f
 an error bound (96b8da5: results moved by at most 6e-5 of the maximum), when the final gather
 began to read the output mesh instead of the patches (the two gathered cases), and when patches
 began to be split where the direct light changes abruptly and weighted by the part the scene
-sees, with the gather reading exact light where it lands on such elements (issue 11).
+sees, with the gather reading exact light where it lands on such elements, the world's light
+exact at every point, and 128 gather rays by default (issue 11).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 

@@ -24,22 +24,27 @@ from .patches import PatchSet
 __all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
 
 
-def vertex_frames(patches: PatchSet, inset=1e-2):
+def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     """Per patch vertex: an evaluation point, unit normal and reflectivity.
 
     Normal and reflectivity are the means over the patches around the vertex. The point is the
     vertex moved ``inset`` of the way toward the mean of those patches' centres: exactly at a
     corner the walls that meet there pass through the point and Lambert's formula cannot see
     them, while the radiosity on a wall is continuous up to the corner; the inset point gives
-    that limit.
+    that limit. ``weights`` (N,) >= 0: how much each patch counts in those means (a patch
+    buried under a block, 0: a floor vertex on the block's outline takes the open floor's
+    limit, not a point inside the block); a vertex whose patches all weigh 0 takes them all.
     """
     V = len(patches.verts)
     p, c = np.nonzero(patches.polys >= 0)
     v = patches.polys[p, c]
-    cnt = np.maximum(np.bincount(v, minlength=V), 1)[:, None]
+    w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=np.float64)[p]
+    total = np.bincount(v, weights=w, minlength=V)
+    w = np.where(total[v] > 0, w, 1.0)
+    total = np.maximum(np.bincount(v, weights=w, minlength=V), 1e-300)[:, None]
 
     def mean(a):
-        return np.stack([np.bincount(v, weights=a[p, k], minlength=V) for k in range(a.shape[1])], 1) / cnt
+        return np.stack([np.bincount(v, weights=w * a[p, k], minlength=V) for k in range(a.shape[1])], 1) / total
 
     n = mean(patches.normals)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)

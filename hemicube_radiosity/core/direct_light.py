@@ -22,7 +22,7 @@ from .direct import apply_transport, emitter_transport
 from .lights import direct_irradiance
 from .patches import PatchSet
 from .progress import Ticker
-from .rays import embree_available, embree_scene, occluder, open_fraction
+from .rays import embree_available, embree_scene, occluder, open_fraction, sky_fraction
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
 
@@ -53,13 +53,19 @@ class DirectLight:
     groups: np.ndarray | None = None
     two_sided: bool = False
     workers: int = 1                          # threads for the transport (settings.workers)
+    world: np.ndarray | None = None           # (3,) constant world radiance, or None (black)
+    sky_rays: int = 256                       # rays per point that look for the world
     _scene: object = field(default=None, repr=False)
 
     @classmethod
-    def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None, clusters=None):
-        """The exact direct light for ``settings``, or None when it is off or there is none."""
+    def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None, clusters=None,
+             world=None):
+        """The exact direct light for ``settings``, or None when it is off or there is none.
+        ``world`` (3,) radiance: the world's light is direct light too, seen where rays from a
+        point find no surface (:meth:`world_at`)."""
         emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
-        if settings.direct == "hemicube" or (emitters.size == 0 and not lights):
+        world = None if world is None or not np.any(np.asarray(world) > 0) else np.asarray(world, float)
+        if settings.direct == "hemicube" or (emitters.size == 0 and not lights and world is None):
             return None
         samples, groups = settings.direct_samples, None
         if emitters.size and clusters is not None:
@@ -70,14 +76,15 @@ class DirectLight:
             samples = max(1, int(settings.direct_samples) // int(per_face))
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
                    settings.light_seed, cancelled, cache, groups, settings.two_sided_emission,
-                   workers=settings.workers)
+                   workers=settings.workers, world=world, sky_rays=settings.sky_rays)
 
-    def _transport(self, points, normals):
+    def _transport(self, points, normals, samples=None):
         """The emitters' transport to ``points``: their fronts, plus their backs when two-sided
         (the same faces turned around, so the front-only tests and shadow-ray offsets apply)."""
         def transport(patches):
             return emitter_transport(patches, points, normals, self.emitters, scene=self.scene(),
-                                     samples=self.samples, ticker=Ticker(None, self.cancelled),
+                                     samples=samples or self.samples, ticker=Ticker(None, self.cancelled),
+                                     refine=3 if samples is None else 0,
                                      groups=self.groups, workers=self.workers)
         T = transport(self.patches)
         return T + transport(turned_around(self.patches)) if self.two_sided else T
@@ -93,19 +100,29 @@ class DirectLight:
         return np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
             / np.bincount(self.groups, weights=a, minlength=G)[:, None]
 
-    def _emitters_at(self, points, normals, where):
+    def _emitters_at(self, points, normals, where, samples=None):
         """(P, units) the emitters' transport to ``points`` (cached: geometry only)."""
+        samples = None if samples is None else min(samples, self.samples)
         key = None
         if self.cache is not None:
             pts = np.ascontiguousarray(points, dtype=np.float64)
             grouped = b"" if self.groups is None else self.groups.tobytes()
             key = cache_key(self.patches.geometry_key() + self.emitters.tobytes() + grouped + pts.tobytes(),
-                            ("direct", where, self.samples, self.two_sided))
-        return cached(self.cache if key else None, key, lambda: self._transport(points, normals))
+                            ("direct", where, samples, self.two_sided))
+        return cached(self.cache if key else None, key, lambda: self._transport(points, normals, samples))
+
+    def world_at(self, points, normals, where: str) -> np.ndarray:
+        """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
+        fraction of the hemisphere where rays find no surface (:func:`.rays.sky_fraction`,
+        ``sky_rays`` per point; geometry only, cached)."""
+        pts = np.ascontiguousarray(points, dtype=np.float64)
+        key = cache_key(self.patches.geometry_key() + pts.tobytes(), ("sky", where, self.sky_rays))
+        f = cached(self.cache, key, lambda: sky_fraction(self.scene(), pts, normals, self.sky_rays))
+        return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
         """(P, S) luminance arriving directly at ``points`` from each source apart: every
-        emitting object (its faces together), then every lamp. A source's column scales with its
+        emitting object (its faces together), every lamp, the world. A source's column scales with its
         strength and (its luminance) with its colour, so what depends only on each column's
         shape, not its scale, is the same after a relight."""
         cols = []
@@ -118,6 +135,8 @@ class DirectLight:
             cols.append(direct_irradiance(self.patches, [lamp], points=points, normals=normals,
                                           cancelled=self.cancelled, samples=self.light_samples,
                                           seed=self.light_seed) @ LUMA)
+        if self.world is not None:
+            cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
     def scene(self):
@@ -126,15 +145,20 @@ class DirectLight:
             self._scene = occluder(self.patches, "auto")
         return self._scene
 
-    def at(self, points, normals, where: str) -> np.ndarray:
+    def at(self, points, normals, where: str, samples=None) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
-        ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...)."""
+        ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
+        ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
+        (where many points are averaged, as a gather's hits are)."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
-            D += apply_transport(self._emitters_at(points, normals, where), self.emitted())
+            D += apply_transport(self._emitters_at(points, normals, where, samples), self.emitted())
+        if self.world is not None:
+            D += self.world_at(points, normals, where)
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
-                                   cancelled=self.cancelled, samples=self.light_samples,
+                                   cancelled=self.cancelled, samples=min(samples or self.light_samples,
+                                                                         self.light_samples),
                                    seed=self.light_seed) / np.pi
         return D
 
@@ -267,7 +291,7 @@ def direct_stage(ctx) -> None:
     the patch centres, exact path), ``ctx.irradiance`` (N, 3) at the patch centres and the
     solve's source ``ctx.source`` (per unknown: a cluster takes its patches' area-weighted mean)."""
     p, s, u = ctx.patches, ctx.settings, ctx.unknowns
-    ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters)
+    ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if ctx.direct is None:
         if s.two_sided_emission and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
             ctx.notes.append("emitters light their front only with the paper's direct light "
@@ -299,6 +323,9 @@ def direct_stage(ctx) -> None:
     seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen)
     ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch)
     memo.clear()
-    ctx.source = source_term(u, ctx.form_factors, world=ctx.world) - u.emission + ctx.direct_source
+    if ctx.direct.world is not None:          # the world's light, exact at the points above
+        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped)
+    # the world is in the direct light: the source does not take it again from F's sky
+    ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
     if not embree_available():
         ctx.notes.append("Embree is not available: shadow rays use the slower NumPy BVH")

@@ -105,19 +105,34 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v):
     rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
     direct_e = rho_v * ctx.direct.at(xv, nv, "vertices")
     G, H = _gather_rays(ctx, elements, xv, nv)
-    out = apply_gather(G, G.sky, direct_e + rest_e, ctx.world)
+    world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
+    out = apply_gather(G, G.sky, direct_e + rest_e, world)
     select = abrupt_elements(elements, direct_e)
     if not select.any():
         return out
     bright, shine = _bright_elements(ctx, elements, select, direct_e)
 
     def exact(y, pid):
-        D = elements.rho[pid] * ctx.direct.at(y, elements.normals[pid], "gather-hits")
+        D = elements.rho[pid] * ctx.direct.at(y, elements.normals[pid], "gather-hits", samples=1)
         return np.where(bright[pid][:, None], 0.0, D)
     out += correct_hits(G, H, elements, direct_e, exact, select)
     if bright.any():
         out += _shine(ctx, elements, np.flatnonzero(bright), shine[bright], xv, nv)
     return out
+
+
+def _open_elements(ctx, elements):
+    """(N,) 1 for an element the scene can see, 0 for one buried in a solid (its centre's rays
+    all end on back faces or within a twentieth of the patch size: :func:`.rays.open_fraction`),
+    so output vertices on a block's outline are evaluated on the open side. None without
+    Embree (every element counts)."""
+    if not embree_available():
+        return None
+    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    key = cache_key(elements.geometry_key(), ("open-centres", reach))
+    f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
+                                                     embree_scene(elements), reach))
+    return (f > 0.05).astype(np.float64)
 
 
 def _bright_elements(ctx, elements, select, direct_e, n=6, factor=4.0):
@@ -245,7 +260,7 @@ def vertex_stage(ctx) -> None:
     radiance: irradiance / pi) without the surface's own colour or emission."""
     patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
-    weights = ctx.to_patches(exposure(ctx.form_factors))
+    weights = ctx.to_patches(exposure(ctx.form_factors, u.areas))
     ctx.elements = patches
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
@@ -266,10 +281,10 @@ def vertex_stage(ctx) -> None:
         in_v = vertex_radiosity(patches, ctx.to_patches(_incoming(rest, u.rho)), weights=weights)
     if ctx.settings.uses_elements():
         ctx.elements = _cut_elements(ctx)
-        xv, nv, rho_v = vertex_frames(ctx.elements)
+        xv, nv, rho_v = vertex_frames(ctx.elements, weights=_open_elements(ctx, ctx.elements))
         rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v)
     else:
-        xv, nv, rho_v = vertex_frames(patches)
+        xv, nv, rho_v = vertex_frames(patches, weights=_open_elements(ctx, patches))
         rest_v = rest_v if in_v is None else in_v
     D_vert = ctx.direct.at(xv, nv, "vertices")
     if lighting:

@@ -91,6 +91,7 @@ class BakeContext:
     irradiance: np.ndarray | None = None     # (N, 3) W/m^2 direct irradiance at patch centres
     direct_source: np.ndarray | None = None  # (K, 3) exact path: direct light each unknown reflects
     given: bool = False                      # patches handed in ready: used as they are (not refined)
+    sky_patch: np.ndarray | None = None      # (N, 3) the world's part of direct_patch (exact path)
     source: np.ndarray | None = None         # (N, 3) the solve's source term
     reflected: np.ndarray | None = None      # (N, 3) exact path: the solve's reflected-only B
     solution: Solution | None = None
@@ -267,16 +268,21 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     sun = _suns_at(ctx)
     sun = zero if sun is None else (a * sun).sum(axis=0)
     world = zero
-    if ctx.world is not None and np.any(np.asarray(ctx.world) > 0) and ctx.form_factors.sky is not None:
+    if ctx.sky_patch is not None:             # exact path: the world's light is in D
+        world = (a * ctx.sky_patch).sum(axis=0)
+        recv = (a * D).sum(axis=0)
+        absorbed = (a * (1 - p.rho) * D).sum(axis=0)
+    elif ctx.world is not None and np.any(np.asarray(ctx.world) > 0) and ctx.form_factors.sky is not None:
         sky = np.where(computed, ctx.form_factors.sky, 0.0)
         world = (u.areas * sky).sum() * np.asarray(ctx.world, float)
-    if world.any():
-        world_reflected = (u.areas[:, None] * u.rho * np.where(computed, ctx.form_factors.sky, 0.0)[:, None]
-                           * np.asarray(ctx.world, float)).sum(axis=0)
-    else:
-        world_reflected = zero
-    recv = (a * D).sum(axis=0) + world
-    absorbed = (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
+    if ctx.sky_patch is None:
+        if world.any():
+            world_reflected = (u.areas[:, None] * u.rho * np.where(computed, ctx.form_factors.sky, 0.0)[:, None]
+                               * np.asarray(ctx.world, float)).sum(axis=0)
+        else:
+            world_reflected = zero
+        recv = (a * D).sum(axis=0) + world
+        absorbed = (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
     if ctx.direct_source is not None:
         # what the parts of patches the scene cannot see reflect (a ceiling above a lamp's back)
         # lands on what encloses them, not in the solve (direct_light._seen_weight)

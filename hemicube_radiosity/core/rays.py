@@ -25,7 +25,7 @@ from .errors import RadiosityError
 from .geometry import cosine_directions, jittered_grid, tangent_frames
 from .patches import PatchSet
 
-__all__ = ["open_fraction", "EmbreeUnavailable", "embree_available", "import_embreex", "EmbreeScene",
+__all__ = ["open_fraction", "sky_fraction", "EmbreeUnavailable", "embree_available", "import_embreex", "EmbreeScene",
            "embree_scene", "clear_ray_cache", "NumpyOccluder", "occluder", "patch_triangles"]
 
 
@@ -296,4 +296,26 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
         back[hit] = np.einsum("ij,ij->i", d[hit], patches.normals[pid[hit]]) > 0
         closed = back | (hit & (np.asarray(t) < reach))
         out[s:s + step] = 1.0 - closed.reshape(len(x), R).mean(axis=1)
+    return out
+
+
+def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20) -> np.ndarray:
+    """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
+    surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
+    anything with ``occluded(origins, directions)`` (:func:`occluder`). One jittered pattern
+    of ``rays`` (seeded) for every point, in its normal's frame: neighbouring points cast
+    parallel rays, so the estimate varies smoothly over a surface."""
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
+    local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
+    R = len(local)
+    eps = 1e-5 * getattr(scene, "scale", 1.0)
+    out = np.empty(len(points))
+    step = max(1, chunk_rays // R)
+    for s in range(0, len(points), step):
+        x, n = points[s:s + step], normals[s:s + step]
+        d = np.einsum("rj,mjc->mrc", local, tangent_frames(n)).reshape(-1, 3)
+        hit = np.asarray(scene.occluded(np.repeat(x + eps * n, R, axis=0), d))
+        out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     return out

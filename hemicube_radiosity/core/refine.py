@@ -134,7 +134,7 @@ def refine_stage(ctx) -> None:
     s = ctx.settings
     if s.refine_levels <= 0 or not s.uses_elements() or ctx.given:
         return                                # without elements the patches are the output mesh
-    plan = DirectLight.plan(ctx.patches, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters)
+    plan = DirectLight.plan(ctx.patches, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if plan is None:
         return
     p = ctx.patches

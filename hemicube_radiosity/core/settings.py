@@ -174,8 +174,11 @@ class BakeSettings:
     light_samples: int = setting(16, "Lamp Shadow Rays", "Shadow rays per point for lamps with a "
                                  "size (radius, angle, area); a point of zero size uses one",
                                  "light", min=1, soft_max=1024)
+    sky_rays: int = setting(256, "Sky Rays", "Rays per point that look for the world (its light "
+                            "is exact at every output vertex and patch point)", "light", min=1,
+                            soft_max=4096)
     light_seed: int = setting(0, "Lamp Seed", "Random seed of the lamps' shadow rays", None, min=0)
-    gather_rays: int = setting(64, "Gather Rays", "With a detail size: gather bounced light at "
+    gather_rays: int = setting(128, "Gather Rays", "With a detail size: gather bounced light at "
                                "every vertex with this many rays (0: interpolate it from the "
                                "patches). Needs Embree", "light", min=0, soft_max=4096)
     # -- solver
