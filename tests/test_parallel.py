@@ -175,6 +175,50 @@ def test_form_factor_workers_start_nothing_inside_blender(box, monkeypatch):
     assert multiprocessing.active_children() == []
 
 
+_ORPHAN_SCRIPT = """
+import os, sys, time
+sys.path.insert(0, sys.argv[1])
+from hemicube_radiosity.core.parallel import ordered_map
+
+def f(i):
+    print(os.getpid(), flush=True)
+    time.sleep(600)
+
+list(ordered_map(f, range(4), 2, processes=True))
+"""
+
+
+@needs_fork
+def test_workers_die_with_a_killed_baking_process(tmp_path):
+    """A Blender killed outright (a crash, a batch timeout) leaves no worker behind: they would
+    otherwise wait for batches forever, holding its memory."""
+    import signal
+    import subprocess
+    import time
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    script = tmp_path / "orphan.py"
+    script.write_text(_ORPHAN_SCRIPT)
+    p = subprocess.Popen([sys.executable, str(script), root], stdout=subprocess.PIPE, text=True)
+    try:
+        pids = [int(p.stdout.readline()) for _ in range(2)]      # both workers are drawing
+    finally:
+        p.send_signal(signal.SIGKILL)
+        p.wait()
+
+    def alive(pid):
+        try:
+            with open(f"/proc/{pid}/status") as fh:
+                return "\nState:\tZ" not in fh.read()             # a zombie has ended
+        except FileNotFoundError:
+            return False
+
+    deadline = time.monotonic() + 30                             # a bound on waiting, not a speed
+    while any(alive(q) for q in pids) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    assert not any(alive(q) for q in pids)
+
+
 def test_ordered_map_processes_fall_back_to_threads(monkeypatch):
     monkeypatch.setattr(parallel, "PROCESSES", False)
     assert not processes_available()

@@ -51,6 +51,7 @@ PROCESSES = True
 _TASKS: dict = {}              # token -> fn of the process maps running now (inherited by fork)
 _TOKENS = itertools.count()
 _IN_WORKER = False             # True inside a forked worker: its own maps run serially
+_PARENT_PID = None             # the process that forks the workers (set before every fork)
 
 
 def cpu_count() -> int:
@@ -138,8 +139,10 @@ def _ordered(pool, fn, items, workers, in_flight, *args):
 
 def _process_map(fn, items, workers, in_flight):
     """:func:`ordered_map` on ``workers`` forked processes (threads when the fork fails)."""
+    global _PARENT_PID
     token = next(_TOKENS)
     _TASKS[token] = fn                       # before the fork: the workers inherit it
+    _PARENT_PID = os.getpid()
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("fork"),
                                initializer=_worker_init)
     done = False
@@ -176,7 +179,22 @@ def _worker_init():
     global _IN_WORKER
     _IN_WORKER = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _die_with_parent()
     _one_blas_thread()
+
+
+def _die_with_parent():
+    """Linux: the kernel kills this worker when the thread that forked it ends, so a baking
+    process killed outright (a crash, SIGKILL, a batch timeout) leaves no worker waiting for
+    batches forever (they hold its pipes open, so they would never see it go). That thread is
+    in :func:`ordered_map` for the workers' whole life."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL, 0, 0, 0)             # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        return
+    if os.getppid() != _PARENT_PID:                        # the parent died before the call
+        os._exit(1)
 
 
 def _one_blas_thread():
