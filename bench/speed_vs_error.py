@@ -322,7 +322,11 @@ def pareto(points):
 def cycles_time_at(cyc, err):
     """Cycles' time to reach RMS ``err``: log-log interpolation along its spp sweep; below its
     lowest error, extrapolated from the most accurate point with time ~ spp ~ error^-2 (Monte
-    Carlo); above its highest error, the time of its cheapest run (fewer samples save little)."""
+    Carlo); above its highest error, the time of its cheapest run (fewer samples save little).
+    NaN for an error of 0 or less: below the reference's own noise (the noise-corrected RMS of a
+    noisy reference, the room's) no time can be claimed."""
+    if not err > 0:
+        return float("nan")
     pts = sorted((c["error"][METRIC], c["seconds"]) for c in cyc)
     e = np.log([p[0] for p in pts])
     t = np.log([p[1] for p in pts])
