@@ -11,6 +11,7 @@ that hit the back of a patch see nothing.
 from __future__ import annotations
 
 from contextlib import closing
+from functools import partial
 
 import numpy as np
 
@@ -84,36 +85,16 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     P, V = len(points), len(patches.verts)
-    rng = np.random.default_rng(seed)
-    params = patch_parameters(patches)
-    eps = 1e-5 * scene.scale
     # one stratified pattern for every point, in a frame that depends on the normal alone:
     # neighbouring points on a surface cast parallel rays, so what remains of the sampling error
     # varies smoothly over the surface instead of as per-vertex speckle
-    u, v = jittered_grid(rng, 1, rays)
+    u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
     R = u.size
     step = max(1, chunk_rays // R)
-    local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
+    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals,
+                   cosine_directions(np.stack([u[0], v[0]], -1)), step, hits)
     rows, cols, vals, found = [], [], [], []
     sky = np.zeros(P)
-
-    def cast(s):
-        x, n = points[s:s + step], normals[s:s + step]
-        m = len(x)
-        frames = tangent_frames(n)                                                # (m, 3, 3) rows u, v, n
-        d = np.einsum("rj,mjc->mrc", local, frames).reshape(-1, 3)
-        o = np.repeat(x + eps * n, R, axis=0)
-        pid, tfar = scene.intersect(o, d)
-        pid = np.asarray(pid)
-        hit = pid >= 0
-        sky_s = (~hit).reshape(m, R).mean(axis=1)
-        f = np.flatnonzero(hit)
-        f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]          # front faces only
-        y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
-        ids, w = surface_weights(params, patches.polys, pid[f], y)
-        H = np.column_stack([s + f // R, pid[f], y]) if hits else None
-        return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R, H
-
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads share it
     # chunks in point order whatever the worker count: G is bit-identical
@@ -132,6 +113,26 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     if hits:
         return G, sky, np.concatenate(found) if found else np.zeros((0, 5))
     return G, sky
+
+
+def _cast(patches, params, scene, points, normals, local, step, hits, s):
+    """The gather rays ``local`` (R, 3) of the points ``s:s + step``: (s, m, sky (m,), G's rows,
+    columns and values of the chunk, its hits (h, 5) or None)."""
+    R = len(local)
+    x, n = points[s:s + step], normals[s:s + step]
+    m = len(x)
+    d = np.einsum("rj,mjc->mrc", local, tangent_frames(n)).reshape(-1, 3)
+    o = np.repeat(x + 1e-5 * scene.scale * n, R, axis=0)
+    pid, tfar = scene.intersect(o, d)
+    pid = np.asarray(pid)
+    hit = pid >= 0
+    sky_s = (~hit).reshape(m, R).mean(axis=1)
+    f = np.flatnonzero(hit)
+    f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]              # front faces only
+    y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
+    ids, w = surface_weights(params, patches.polys, pid[f], y)
+    H = np.column_stack([s + f // R, pid[f], y]) if hits else None
+    return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R, H
 
 
 def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.ndarray:

@@ -236,6 +236,22 @@ def _suns_at(ctx):
     return patch_average(p, s.patch_light_points, at, grouped)
 
 
+def _world_and_direct(ctx, a, D, computed):
+    """(what the world delivers, what the direct light delivers, what of it is absorbed) per band,
+    radiance x area: on the exact path the world is in ``D`` (``ctx.sky_patch`` its part);
+    otherwise it comes through F's sky fractions and is reflected by the solve."""
+    p, u = ctx.patches, ctx.unknowns
+    if ctx.sky_patch is not None:
+        return (a * ctx.sky_patch).sum(axis=0), (a * D).sum(axis=0), (a * (1 - p.rho) * D).sum(axis=0)
+    world = world_reflected = np.zeros(3)
+    if ctx.world is not None and np.any(np.asarray(ctx.world) > 0) and ctx.form_factors.sky is not None:
+        sky = np.where(computed, ctx.form_factors.sky, 0.0)
+        world = (u.areas * sky).sum() * np.asarray(ctx.world, float)
+        world_reflected = (u.areas[:, None] * u.rho * sky[:, None] * np.asarray(ctx.world, float)).sum(axis=0)
+    recv = (a * D).sum(axis=0) + world
+    return world, recv, (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
+
+
 def scene_energy(ctx, solved: dict, computed) -> dict:
     """The whole scene's power balance per band, radiance x area (x pi for watts):
     ``emitted = absorbed + escaped``, where the solve's own balance (``solved``, kept under
@@ -267,22 +283,7 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     lamps = sum((w for w in lamps if w is not None), zero)
     sun = _suns_at(ctx)
     sun = zero if sun is None else (a * sun).sum(axis=0)
-    world = zero
-    if ctx.sky_patch is not None:             # exact path: the world's light is in D
-        world = (a * ctx.sky_patch).sum(axis=0)
-        recv = (a * D).sum(axis=0)
-        absorbed = (a * (1 - p.rho) * D).sum(axis=0)
-    elif ctx.world is not None and np.any(np.asarray(ctx.world) > 0) and ctx.form_factors.sky is not None:
-        sky = np.where(computed, ctx.form_factors.sky, 0.0)
-        world = (u.areas * sky).sum() * np.asarray(ctx.world, float)
-    if ctx.sky_patch is None:
-        if world.any():
-            world_reflected = (u.areas[:, None] * u.rho * np.where(computed, ctx.form_factors.sky, 0.0)[:, None]
-                               * np.asarray(ctx.world, float)).sum(axis=0)
-        else:
-            world_reflected = zero
-        recv = (a * D).sum(axis=0) + world
-        absorbed = (a * (1 - p.rho) * D).sum(axis=0) + world - world_reflected
+    world, recv, absorbed = _world_and_direct(ctx, a, D, computed)
     if ctx.direct_source is not None:
         # what the parts of patches the scene cannot see reflect (a ceiling above a lamp's back)
         # lands on what encloses them, not in the solve (direct_light._seen_weight)
