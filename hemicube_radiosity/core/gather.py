@@ -78,7 +78,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
     a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
     1 = serial); G is bit-identical for any count.
-    ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float64 rows
+    ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
     :func:`correct_hits`; each hit carries weight ``1 / rays`` in G).
     """
@@ -93,31 +93,32 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     step = max(1, chunk_rays // R)
     cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals,
                    cosine_directions(np.stack([u[0], v[0]], -1)), step, hits)
-    rows, cols, vals, found = [], [], [], []
+    counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
     sky = np.zeros(P)
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads share it
-    # chunks in point order whatever the worker count: G is bit-identical
+    # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
+    # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
     with closing(ordered_map(cast, range(0, P, step), resolve_workers(workers))) as results:
-        for s, m, sky_s, r, c, w, H in results:
+        for s, m, sky_s, n, c, w, H in results:
             sky[s:s + m] = sky_s
+            counts[s + 1:s + m + 1] = n
             found.append(H)
-            rows.append(r)
             cols.append(c)
             vals.append(w)
             if ticker is not None:
                 ticker.tick(s + m, P)
-    cat = (lambda a: np.concatenate(a) if a else np.zeros(0))
-    G = CSR.from_coo(cat(rows).astype(np.int64), cat(cols).astype(np.int64), cat(vals), (P, V),
-                     {"rays": R, "seed": seed})
+    G = CSR(np.cumsum(counts), np.concatenate(cols) if cols else np.zeros(0, np.int32),
+            np.concatenate(vals) if vals else np.zeros(0, np.float32), (P, V), {"rays": R, "seed": seed})
     if hits:
-        return G, sky, np.concatenate(found) if found else np.zeros((0, 5))
+        return G, sky, np.concatenate(found) if found else np.zeros((0, 5), np.float32)
     return G, sky
 
 
 def _cast(patches, params, scene, points, normals, local, step, hits, s):
-    """The gather rays ``local`` (R, 3) of the points ``s:s + step``: (s, m, sky (m,), G's rows,
-    columns and values of the chunk, its hits (h, 5) or None)."""
+    """The gather rays ``local`` (R, 3) of the points ``s:s + step``: (s, m, sky (m,), the
+    chunk's rows of G as entries per row (m,), columns (e,) int32 and values (e,) float32, its
+    hits (h, 5) or None)."""
     R = len(local)
     x, n = points[s:s + step], normals[s:s + step]
     m = len(x)
@@ -131,8 +132,18 @@ def _cast(patches, params, scene, points, normals, local, step, hits, s):
     f = f[np.einsum("ij,ij->i", d[f], patches.normals[pid[f]]) < 0]              # front faces only
     y = o[f] + np.asarray(tfar, np.float64)[f, None] * d[f]
     ids, w = surface_weights(params, patches.polys, pid[f], y)
-    H = np.column_stack([s + f // R, pid[f], y]) if hits else None
-    return s, m, sky_s, np.repeat(s + f // R, 4), ids.ravel(), w.ravel() / R, H
+    H = None
+    if hits:   # float32 holds ids exactly below 2^24 and positions to 1e-7 of the scene
+        exact = max(len(points), len(patches)) < (1 << 24)
+        H = np.column_stack([s + f // R, pid[f], y]).astype(np.float32 if exact else np.float64)
+    # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
+    V = len(patches.verts)
+    key, inv = np.unique(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True)
+    summed = np.bincount(inv.reshape(-1), weights=w.ravel() / R, minlength=key.size)
+    keep = summed != 0
+    key, summed = key[keep], summed[keep]
+    return (s, m, sky_s, np.bincount(key // V, minlength=m), (key % V).astype(np.int32),
+            summed.astype(np.float32), H)
 
 
 def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.ndarray:
@@ -145,7 +156,7 @@ def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.nd
     H = H[select[H[:, 1].astype(np.int64)]]
     if not len(H):
         return out
-    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:]
+    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:].astype(np.float64)
     d = np.asarray(exact(y, pid), dtype=np.float64) - surface_values(patch_parameters(patches), patches.polys,
                                                                       vertex_values, pid, y)
     for c in range(k):
