@@ -181,7 +181,7 @@ sys.path.insert(0, sys.argv[1])
 from hemicube_radiosity.core.parallel import ordered_map
 
 def f(i):
-    print(os.getpid(), flush=True)
+    os.write(1, f"{os.getpid()}\\n".encode())   # one write: two workers' lines never interleave
     time.sleep(600)
 
 list(ordered_map(f, range(4), 2, processes=True))
