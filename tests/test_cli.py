@@ -274,6 +274,10 @@ def test_detail_size_bakes_a_finer_mesh_over_coarse_patches(addon, cornell_blend
     assert rc == 0, err
     r = json.loads(rep.read_text())
     assert r["elements"] >= 12 * r["patches"]
+    per = r["per_object"]
+    assert sum(v["elements"] for v in per.values()) == r["elements"]
+    assert sum(v["patches"] for v in per.values()) == r["patches"]
+    assert per["Floor"]["elements"] == 16 * 16 and per["Floor"]["patches"] == 4 * 4
     assert r["settings"]["element_size"] == 0.125 and r["settings"]["gather_rays"] == int(gather)
     doc, accessor = read_gltf(str(tmp_path / "b.glb"))
     floor = next(m for m in doc["meshes"] if m["name"].startswith("Floor"))

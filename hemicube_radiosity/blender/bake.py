@@ -196,14 +196,15 @@ class BakeJob:
 
     def report(self, **extra) -> dict:
         """Everything a pipeline wants to know about the bake, JSON-ready: the settings as used
-        ('auto' sizes in scene units), every stage's time, counts, convergence, energy balance,
-        objects, notes, plus ``extra``."""
+        ('auto' sizes in scene units), every stage's time, counts (also per object), convergence,
+        energy balance, objects, notes, plus ``extra``."""
         r = self.result
         rep = {
             "settings": dataclasses.asdict(r.settings),
             "timings": {k: float(v) for k, v in self.timings.items()},
             "patches": int(len(r.patches)),
             "elements": int(len(r.elements)),
+            "per_object": _per_object(r),
             "nonzeros": int(r.form_factors.nnz),
             "iterations": int(r.solution.iterations),
             "residual": float(r.solution.residual),
@@ -217,6 +218,17 @@ class BakeJob:
         }
         rep.update(extra)
         return rep
+
+
+def _per_object(r) -> dict:
+    """{object name: {"patches": n, "elements": m}}: how finely each object was solved (after
+    refinement where the light changes abruptly) and written."""
+    import numpy as np
+
+    names = r.patches.object_names
+    p = np.bincount(r.patches.owner, minlength=len(names))
+    e = np.bincount(r.elements.owner, minlength=len(names))
+    return {n: {"patches": int(p[i]), "elements": int(e[i])} for i, n in enumerate(names)}
 
 
 def _jsonable(x):
