@@ -62,6 +62,11 @@ EYE_OFFSET = 1e-5
 NEAR = 1e-7
 #: Span ends this close (in pixels) to a pixel centre are decided by the edge inequalities.
 SNAP = 1e-3
+#: Vertices are snapped to 1/SUBPIXEL of a pixel (as GPUs snap to a sub-pixel grid): the same
+#: scene at another scale, which differs by float rounding, draws the same pixels (an edge
+#: through a pixel centre stays exactly on it, and the fill rule of :func:`_covers` decides it).
+#: 2^14 keeps ``R * SUBPIXEL`` within float32's exact integers up to R = 1024.
+SUBPIXEL = 1 << 14
 #: Bound on the fragments expanded at once in the rasteriser (about 40 bytes each).
 FRAGMENTS_PER_CHUNK = 1 << 21
 #: Bound on receivers x patches transformed per batch (about 100 bytes each).  Batches this
@@ -347,7 +352,23 @@ def _project(uvw, faces, R):
     w = uvw[..., 2]
     px = (uvw[..., 0] / w + 1) * half
     py = (uvw[..., 1] / w - _FACE_V0[faces][:, None]) * half
-    return px.astype(np.float32), py.astype(np.float32)
+    return _subpixel(px.astype(np.float32)), _subpixel(py.astype(np.float32))
+
+
+def _subpixel(p):
+    """Pixel coordinates ``p`` (float32) rounded to :data:`SUBPIXEL` of a pixel, as GPUs do."""
+    with np.errstate(invalid="ignore", over="ignore"):
+        return np.rint(p * np.float32(SUBPIXEL)) / np.float32(SUBPIXEL)
+
+
+def _covers(A, B, X, rhs):
+    """Edge test with a fill rule: ``A X > rhs``, or on the edge (``A X == rhs``) when the edge
+    is this polygon's to own (``A > 0``, or ``A == 0`` and ``B >= 0``: a padding edge of zero
+    length, 0 >= 0 everywhere, never excludes).  A polygon sharing the edge
+    has ``-A``, ``-B``, ``-rhs``: a pixel centre exactly on it goes to one of the two, decided by
+    the geometry, not by which depth rounds nearer."""
+    ax = A * X
+    return (ax > rhs) | ((ax == rhs) & ((A > 0) | ((A == 0) & (B >= 0))))
 
 
 def _edge_functions(px, py):
@@ -506,12 +527,14 @@ def _spans(height, rows, j0, px, py, pixel_base, depth, item, R):
         # edge (A = +0) gives +inf (row outside: empty), -inf or nan (no bound) from below
         # and nothing from above (nan and inf are ignored by fmax / fmin)
         l = bound + np.where(A < 0, -inf, zero)
+        # a level edge through the row's centres (0 / 0): the row is inside when the edge is ours
+        l = np.where((A == 0) & (rhs == 0) & (b[k] < 0), inf, l)
         h = bound + np.where(A >= 0, inf, zero)
         lo = l if lo is None else np.fmax(lo, l)
         hi = h if hi is None else np.fmin(hi, h)
         rhs_l.append(rhs)
-    i_lo = np.maximum(_snap_to_pixels(lo, a, rhs_l, first=True), zero)
-    i_hi = np.minimum(_snap_to_pixels(hi, a, rhs_l, first=False), np.float32(R - 1))
+    i_lo = np.maximum(_snap_to_pixels(lo, a, b, rhs_l, first=True), zero)
+    i_hi = np.minimum(_snap_to_pixels(hi, a, b, rhs_l, first=False), np.float32(R - 1))
     n = i_hi - i_lo + 1
     ok = (n > 0) & (r < rows) & ~flat
     da, db, dc = depth
@@ -525,12 +548,12 @@ def _spans(height, rows, j0, px, py, pixel_base, depth, item, R):
     return q0, dq, start, item[s], n.ravel()[idx].astype(np.int64)
 
 
-def _snap_to_pixels(bound, A, rhs, first):
+def _snap_to_pixels(bound, A, B, rhs, first):
     """First (or last) pixel column whose centre lies inside, given the span bound on X.
 
-    ``bound`` and ``rhs[k]`` are (height, S), ``A[k]`` (S,).  Columns whose centres are within
-    ``SNAP`` of the bound are tested with the inequalities ``A X >= rhs`` (all edges) instead
-    of trusting the quotient's rounding.
+    ``bound`` and ``rhs[k]`` are (height, S), ``A[k]``, ``B[k]`` (S,).  Columns whose centres
+    are within ``SNAP`` of the bound are tested with the edge inequalities (all edges, with the
+    fill rule of :func:`_covers`) instead of trusting the quotient's rounding.
     """
     t = bound - np.float32(0.5)
     col = np.ceil(t) if first else np.floor(t)
@@ -542,8 +565,8 @@ def _snap_to_pixels(bound, A, rhs, first):
         nr = near.ravel()[check]
         X = nr + np.float32(0.5)
         inside = None
-        for Ak, rk in zip(A, rhs):
-            t_k = Ak[s] * X >= rk.ravel()[check]
+        for Ak, Bk, rk in zip(A, B, rhs):
+            t_k = _covers(Ak[s], Bk[s], X, rk.ravel()[check])
             inside = t_k if inside is None else inside & t_k
         col.ravel()[check] = np.where(inside, nr, nr + (1 if first else -1))
     return col
@@ -564,6 +587,7 @@ def _draw_points(i, j, px, py, pixel_base, depth, item, keys, R):
     """Depth-test polygons that can cover one pixel centre only, (i, j), into ``keys``.
 
     The pixel is covered when its centre satisfies every edge inequality ``a X >= -(b Y + c)``
+    (on an edge: by the fill rule of :func:`_covers`)
     (as computed in :func:`_spans`, which decides a single candidate the same way), and its
     fragment carries the same depth and key as there.
     """
@@ -572,7 +596,7 @@ def _draw_points(i, j, px, py, pixel_base, depth, item, keys, R):
     Y = j.astype(np.float32) + np.float32(0.5)
     inside = ~flat
     for k in range(len(a)):
-        inside &= a[k] * X >= (-b[k]) * Y + (-c[k])
+        inside &= _covers(a[k], b[k], X, (-b[k]) * Y + (-c[k]))
     sel = np.flatnonzero(inside)
     if not sel.size:
         return
@@ -625,7 +649,7 @@ def _vertex_projection(x, y, z, face, R):
     with np.errstate(divide="ignore", invalid="ignore"):
         px = (u / w + 1) * half
         py = (v / w - _FACE_V0[face]) * half
-    return px, py
+    return _subpixel(px), _subpixel(py)
 
 
 def _face_uvw(f, x, y, z):
