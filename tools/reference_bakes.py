@@ -5,7 +5,9 @@ an error bound (96b8da5: results moved by at most 6e-5 of the maximum), when the
 began to read the output mesh instead of the patches (the two gathered cases), and when patches
 began to be split where the direct light changes abruptly and weighted by the part the scene
 sees, with the gather reading exact light where it lands on such elements, the world's light
-exact at every point, and 128 gather rays by default (issue 11).
+exact at every point, and 128 gather rays by default (issue 11), and when the hemi-cube began to
+snap vertices to a sub-pixel grid and give a pixel centre on a shared edge to one polygon by a
+fill rule, not to whichever depth rounded nearer (issue 12: scale invariance).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 
