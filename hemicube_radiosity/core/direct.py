@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import group_form_factors, jittered_grid, polygon_form_factors
+from .geometry import GroupOutline, group_form_factors, jittered_grid, polygon_form_factors
 from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 
@@ -122,6 +122,8 @@ class _Transport:
                  samples, chunk_rays):
         self.points, self.normals, self.corners, self.em_normals = points, normals, corners, em_normals
         self.groups, self.scene, self.refine, self.eps, self.draw = groups, scene, refine, eps, draw
+        # the groups' outlines once, not per chunk (hundreds of jagged edges on a dense lamp)
+        self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
         self.ys = draw(samples)                                           # (units, S, 3)
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
@@ -137,7 +139,7 @@ class _Transport:
         if self.groups is None:
             F = polygon_form_factors(x, nx, self.corners, self.em_normals)                # (p, M)
         else:
-            F = group_form_factors(x, nx, self.corners, self.groups, self.em_normals)     # (p, G)
+            F = group_form_factors(x, nx, self.corners, self.groups, self.em_normals, self.outline)  # (p, G)
         if self.scene is None:
             return s, F, None, None, None, None, None
         pi, mi = np.nonzero(F > 0)

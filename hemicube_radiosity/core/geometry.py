@@ -32,11 +32,14 @@ Lengths are in the scene's units (Blender metres); angles in radians.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 __all__ = ["orthonormal_basis", "tangent_frames", "stratified_unit_square", "jittered_grid",
            "cosine_directions", "polygon_form_factor", "polygon_form_factors",
-           "equal_area_scale", "disk_polygons", "disk_samples", "DISK_SIDES"]
+           "equal_area_scale", "disk_polygons", "disk_samples", "DISK_SIDES", "GroupOutline",
+           "group_form_factors"]
 
 #: Sides of the regular polygon standing in for disks and ellipses.
 DISK_SIDES = 64
@@ -272,10 +275,62 @@ def _merge_collinear(edges, groups, tol=1e-9):
     return np.array(out_e), np.array(out_g)
 
 
-def group_form_factors(points, normals, polys, groups, poly_normals):
+@dataclass(frozen=True)
+class GroupOutline:
+    """What :func:`group_form_factors` needs of groups of polygons that does not depend on the
+    points: computed once per emitter set, not per chunk of points (a lamp modelled as
+    thousands of triangles has a jagged outline of hundreds of edges per group).
+
+    ``polys`` (M, K, 3), ``groups`` (M,) int64 in 0..G-1, ``normals`` (M, 3) float64;
+    ``edges`` (E, 2, 3) the groups' directed boundary edges and ``edge_group`` (E,)
+    (:func:`_boundary_edges`), sorted by group; per group ``edge_start``, ``edge_count`` (G,)
+    its run of edges, ``rep`` (G,) a polygon of it, ``planar`` (G,) bool
+    (one plane for all its polygons), ``count`` (G,) its polygons; per polygon ``centre``
+    (M, 3) and ``size`` (M,) its bounding-box diagonal.
+    """
+
+    polys: np.ndarray
+    groups: np.ndarray
+    normals: np.ndarray
+    edges: np.ndarray
+    edge_group: np.ndarray
+    edge_start: np.ndarray
+    edge_count: np.ndarray
+    rep: np.ndarray
+    planar: np.ndarray
+    count: np.ndarray
+    centre: np.ndarray
+    size: np.ndarray
+
+    @classmethod
+    def of(cls, polys, groups, poly_normals) -> "GroupOutline":
+        polys = np.asarray(polys, dtype=np.float64)
+        groups = np.asarray(groups, dtype=np.int64)
+        pn = np.asarray(poly_normals, dtype=np.float64)
+        G = int(groups.max()) + 1
+        edges, eg = _boundary_edges(polys, groups)
+        order = np.argsort(eg, kind="stable")
+        edges, eg = edges[order], eg[order]
+        centre = polys.mean(axis=1)
+        size = np.maximum(np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1), 1e-300)
+        count = np.bincount(groups, minlength=G)
+        first = np.searchsorted(np.sort(groups), np.arange(G))
+        rep = np.argsort(groups, kind="stable")[first]                    # a polygon of each group
+        planar = np.ones(G, bool)
+        off = np.abs(np.einsum("mj,mj->m", centre - centre[rep][groups], pn[rep][groups]))
+        bent = (np.abs(pn - pn[rep][groups]).max(axis=1) > 1e-9) | (off > 1e-9 * size)
+        planar[groups[bent]] = False
+        edge_count = np.bincount(eg, minlength=G)
+        return cls(polys, groups, pn, edges, eg, np.cumsum(edge_count) - edge_count, edge_count, rep,
+                   planar, count, centre, size)
+
+
+def group_form_factors(points, normals, polys, groups, poly_normals, outline: GroupOutline | None = None):
     """(P, G) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
     ``normals`` to groups of front-facing polygons (``polys`` (M, K, 3), ``groups`` (M,) in
     0..G-1, ``poly_normals`` (M, 3)): the sum of :func:`polygon_form_factors` over each group.
+    ``outline``: :meth:`GroupOutline.of` the same polygons, when the caller asks for many
+    chunks of points (else computed here).
 
     A group in front of a point is one surface to Lambert's contour integral: only its boundary
     edges count (shared edges cancel), clipped to the point's horizon and closed along it where
@@ -285,23 +340,27 @@ def group_form_factors(points, normals, polys, groups, poly_normals):
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
-    polys = np.asarray(polys, dtype=np.float64)
-    groups = np.asarray(groups, dtype=np.int64)
-    pn = np.asarray(poly_normals, dtype=np.float64)
-    P, G = len(points), int(groups.max()) + 1
-    edges, eg = _boundary_edges(polys, groups)
-    rel_a = edges[None, :, 0] - points[:, None]                             # (P, E, 3)
-    term = _edge_terms(rel_a, edges[None, :, 1] - points[:, None], normals)
+    o = outline if outline is not None else GroupOutline.of(polys, groups, poly_normals)
+    polys, groups, pn, edges, eg = o.polys, o.groups, o.normals, o.edges, o.edge_group
+    P, G = len(points), len(o.count)
     F = np.zeros((P, G))
-    np.add.at(F.T, eg, term.T)
-    F = np.abs(F) / (2 * np.pi)
-    # where the contour does not stand for the group: some corner at or below the horizon, or
-    # the point not in front of every polygon of the group
     below = np.zeros((P, G), bool)
-    h = np.einsum("pec,pc->pe", rel_a, normals)
-    np.logical_or.at(below.T, eg, (h <= 0).T)
-    n_front, count = _in_front(points, polys, groups, pn, G)
-    F[n_front == 0] = 0.0
+    n_front, count = _in_front(points, o)
+    # the contour only for the pairs whose point is in front of the group (a lamp's back is in
+    # front of the ceiling above it alone): each pair's group's edges, flat
+    pi, gi = np.nonzero(n_front > 0)
+    if pi.size:
+        k = o.edge_count[gi]
+        pair = np.repeat(np.arange(pi.size), k)
+        e = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + np.repeat(o.edge_start[gi], k)
+        x, n = points[pi[pair]], normals[pi[pair]]
+        rel_a = edges[e, 0] - x
+        term = _edge_terms_flat(rel_a, edges[e, 1] - x, n)
+        F[pi, gi] = np.abs(np.bincount(pair, weights=term, minlength=pi.size)) / (2 * np.pi)
+        # where the contour does not stand for the group: some corner at or below the horizon,
+        # or the point not in front of every polygon of the group
+        h = np.einsum("ec,ec->e", rel_a, n)
+        below[pi, gi] = np.bincount(pair, weights=h <= 0, minlength=pi.size) > 0
     partial = (n_front > 0) & (n_front < count[None])
     for g in np.flatnonzero((below & ~partial & (n_front > 0)).any(axis=0)):
         p = np.flatnonzero(below[:, g] & ~partial[:, g] & (n_front[:, g] > 0))
@@ -314,20 +373,12 @@ def group_form_factors(points, normals, polys, groups, poly_normals):
     return F
 
 
-def _in_front(points, polys, groups, pn, G):
+def _in_front(points, o: GroupOutline):
     """(P, G) how many polygons of each group have the point in front of their plane (by more
     than round-off), and (G,) how many polygons each group has. A planar group (one plane for
     all its polygons) is tested once, a curved one polygon by polygon."""
-    centre = polys.mean(axis=1)
-    size = np.maximum(np.linalg.norm(polys.max(axis=1) - polys.min(axis=1), axis=1), 1e-300)
-    count = np.bincount(groups, minlength=G)
-    first = np.searchsorted(np.sort(groups), np.arange(G))
-    rep = np.argsort(groups, kind="stable")[first]                        # a polygon of each group
-    planar = np.ones(G, bool)
-    off = np.abs(np.einsum("mj,mj->m", centre - centre[rep][groups], pn[rep][groups]))
-    bent = (np.abs(pn - pn[rep][groups]).max(axis=1) > 1e-9) | (off > 1e-9 * size)
-    planar[groups[bent]] = False
-    n_front = np.zeros((len(points), G))
+    centre, size, count, rep, planar, groups, pn = o.centre, o.size, o.count, o.rep, o.planar, o.groups, o.normals
+    n_front = np.zeros((len(points), len(count)))
     h = np.einsum("pj,gj->pg", points, pn[rep]) - np.einsum("gj,gj->g", centre[rep], pn[rep])
     n_front[:, planar] = (h[:, planar] > 1e-9 * size[rep][planar]) * count[planar]
     curved = np.flatnonzero(~planar[groups])
@@ -373,6 +424,15 @@ def _clipped_contour(x, n, edges, plane_normal):
     end = np.where(ex[..., None], qb, qa)                                 # ... to the entry
     total += np.where(pair, _edge_terms(start, end, n), 0.0).sum(axis=1)
     return np.abs(total) / (2 * np.pi), ok
+
+
+def _edge_terms_flat(a, b, n):
+    """:func:`_edge_terms` of edges a -> b (N, 3), each with its receiver's normal n (N, 3)."""
+    c = np.cross(a, b)
+    cn = np.linalg.norm(c, axis=-1)
+    theta = np.arctan2(cn, np.einsum("ec,ec->e", a, b))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(cn > 0, theta * np.einsum("ec,ec->e", c, n) / cn, 0.0)
 
 
 def _edge_terms(a, b, n):

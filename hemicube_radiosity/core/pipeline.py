@@ -320,8 +320,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         settings = settings.resolved(meshes)
     elif "auto" in (settings.patch_size, settings.element_size):
         raise SettingsError("'auto' sizes need the meshes")
-    ctx = BakeContext(meshes, settings, list(lights or ()), world, cache, progress, cancelled,
-                      patches=patches, given=patches is not None)
+    # without a cache to keep, one for this bake alone: stages that ask for the same
+    # geometry-only work (the direct light at the output vertices) do it once
+    ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
+                      progress, cancelled, patches=patches, given=patches is not None)
     t0 = time.perf_counter()
     ctx.check()
     for name, stage in STAGES:
