@@ -7,7 +7,9 @@ began to be split where the direct light changes abruptly and weighted by the pa
 sees, with the gather reading exact light where it lands on such elements, the world's light
 exact at every point, and 128 gather rays by default (issue 11), and when the hemi-cube began to
 snap vertices to a sub-pixel grid and give a pixel centre on a shared edge to one polygon by a
-fill rule, not to whichever depth rounded nearer (issue 12: scale invariance).
+fill rule, not to whichever depth rounded nearer (issue 12: scale invariance), and when each chunk
+of an emitter transport began to draw its penumbra rays from its own random stream (so chunks can
+run on worker processes).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 

@@ -21,6 +21,10 @@ from .geometry import GroupOutline, group_form_factors, jittered_grid, polygon_f
 from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 
+#: Shadow rays (points x emitter units x samples) from which a transport with several workers
+#: runs on forked processes: below, forking costs more than it saves.
+PROCESS_RAYS = 1 << 20
+
 __all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
 
 
@@ -89,22 +93,22 @@ def _visible_fraction(scene, origins, targets):
     return 1 - blocked.reshape(-1, S).mean(axis=1)
 
 
-def _sample_drawer(patches, em, corners, groups, units, eps, rng):
-    """``draw(count)``: (units, count, 3) shadow-ray targets on the emitters (per patch, or
-    spread over each group by area), from the one random stream ``rng``.
+def _sample_drawer(patches, em, corners, groups, units, eps):
+    """``draw(count, rng)``: (units, count, 3) shadow-ray targets on the emitters (per patch, or
+    spread over each group by area), from the random stream ``rng``.
 
     The points are lifted ``eps`` (scene units) off the emitter along its normal (a group's
     area-weighted mean normal): a shadow ray that ends exactly on a surface would graze it at
     float32 precision (a wall lighting the floor at their shared edge)."""
     if groups is None:
-        def draw(count):
+        def draw(count, rng):
             return _emitter_samples(corners, count, rng) + eps * patches.normals[em][:, None, :]
         return draw
     lift = np.zeros((units, 3))
     np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
     lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
 
-    def draw(count):
+    def draw(count, rng):
         return _group_samples(corners, patches.areas[em], groups, count, rng) + lift[:, None, :]
     return draw
 
@@ -115,16 +119,19 @@ class _Transport:
     ``points``, ``normals`` (P, 3) float64; ``corners`` (M, 4, 3) and ``em_normals`` (M, 3) of
     the emitter patches; ``groups`` (M,) int64 or None; ``eps`` the lift off the surfaces
     (scene units); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
-    ``samples`` targets per emitter unit, shared by every chunk.
+    ``samples`` targets per emitter unit (from ``seed``), shared by every chunk; a chunk's
+    penumbra draws from its own stream (``seed`` and the chunk's first point), so chunks are
+    independent and T is the same whoever computes them.
     """
 
     def __init__(self, points, normals, corners, em_normals, groups, scene, refine, eps, draw,
-                 samples, chunk_rays):
+                 samples, chunk_rays, seed=0):
         self.points, self.normals, self.corners, self.em_normals = points, normals, corners, em_normals
         self.groups, self.scene, self.refine, self.eps, self.draw = groups, scene, refine, eps, draw
+        self.seed = seed
         # the groups' outlines once, not per chunk (hundreds of jagged edges on a dense lamp)
         self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
-        self.ys = draw(samples)                                           # (units, S, 3)
+        self.ys = draw(samples, np.random.default_rng(seed))             # (units, S, 3)
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
         self.step = max(1, min(len(points), chunk_rays // max(units * self.S, 1), 4096))
@@ -149,37 +156,41 @@ class _Transport:
         part = (v > 0) & (v < 1)
         return s, F, pi, mi, o, v, part if self.refine > 0 and part.any() else None
 
-    def second_pass(self, job):
-        """(s, T rows (p, units)) of a chunk from its :meth:`first_pass` and the extra targets
-        (units, refine * S, 3) drawn for its penumbra (None when it has none)."""
-        (s, F, pi, mi, o, v, part), extra = job
+    def chunk(self, s):
+        """(s, T rows (p, units) float32) of the chunk starting at point ``s``: its
+        :meth:`first_pass`, then ``refine * S`` more rays where it has a penumbra, aimed at
+        targets drawn from the chunk's own random stream."""
+        s, F, pi, mi, o, v, part = self.first_pass(s)
         if self.scene is None:
-            return s, F
+            return s, F.astype(np.float32)
         if part is not None:
             refine = self.refine
+            extra = self.draw(refine * self.S, np.random.default_rng((self.seed, 1 + s)))
             v[part] = (v[part] + refine * _visible_fraction(self.scene, o[part], extra[mi[part]])) / (1 + refine)
         vis = np.zeros(F.shape)
         vis[pi, mi] = v
-        return s, F * vis
+        return s, (F * vis).astype(np.float32)
 
     def run(self, T, workers, ticker):
-        """Fill T (P, units) chunk by chunk on ``workers`` threads (resolved), ticking ``ticker``.
+        """Fill T (P, units) chunk by chunk on ``workers`` (resolved), ticking ``ticker``.
 
-        Chunks are independent but for ``draw``, which takes the penumbra's extra sample points
-        from one random stream: a window of chunks runs its first pass on the threads, then the
-        draws are made here in chunk order (the order of the serial loop, so T is the same for
-        any worker count), then the refinement runs on the threads."""
+        Chunks are independent (:meth:`chunk`), so T is the same for any worker count. With
+        more than one worker and enough rays to pay for a fork, the chunks run on forked
+        processes (:func:`.parallel.ordered_map`): the shadow rays (embreex holds the GIL while
+        it casts them) and the many small NumPy steps of the contour integrals both scale
+        there, where threads did not; otherwise on threads."""
         P, step = len(self.points), self.step
         starts = list(range(0, P, step))
-        window = 1 if workers <= 1 else 2 * workers
-        for w in range(0, len(starts), window):
-            firsts = list(ordered_map(self.first_pass, starts[w:w + window], workers))
-            jobs = [(f, self.draw(self.refine * self.S) if f[6] is not None else None) for f in firsts]
-            for s, F in ordered_map(self.second_pass, jobs, workers):
-                T[s:s + step] = F
+        rays = P * self.ys.shape[0] * max(self.S, 1) * (self.scene is not None)
+        forked = workers > 1 and len(starts) > 1 and rays >= PROCESS_RAYS
+        if forked and self.scene is not None:     # Embree commits its BVH on the first query:
+            self.scene.occluded(self.points[:1], self.normals[:1], np.ones(1))  # here, before the fork
+        done = 0
+        for s, F in ordered_map(self.chunk, starts, workers, processes=forked):
+            T[s:s + step] = F
+            done = min(s + step, P)
             if ticker is not None:
-                last = starts[min(w + window, len(starts)) - 1]
-                ticker.tick(min(last + step, P), P)
+                ticker.tick(done, P)
 
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
@@ -197,9 +208,9 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     ``groups``: (M,) int, emitter patches that shine as one (a lamp modelled as many faces):
     T is then (P, G), F summed over each group's patches and ``samples`` rays spread over the
     whole group by area, so the cost follows the lamps, not their faces.
-    ``workers``: threads computing chunks of points at once (0 = every core, 1 = serial); T is
-    bit-identical for any count. ``ticker`` is polled after every chunk (serial) or window of
-    ``2 * workers`` chunks.
+    ``workers``: workers computing chunks of points at once (0 = every core, 1 = serial; forked
+    processes for large transports, see :meth:`_Transport.run`); T is bit-identical for any
+    count. ``ticker`` is polled after every chunk.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -212,9 +223,9 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
         groups = np.asarray(groups, dtype=np.int64)
     corners = patches.corners()[em]
     eps = 1e-5 * (float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0)
-    draw = _sample_drawer(patches, em, corners, groups, units, eps, np.random.default_rng(seed))
+    draw = _sample_drawer(patches, em, corners, groups, units, eps)
     work = _Transport(points, normals, corners, patches.normals[em], groups, scene, refine, eps, draw,
-                      samples, chunk_rays)
+                      samples, chunk_rays, seed)
     work.run(T, resolve_workers(workers), ticker)
     return T
 
