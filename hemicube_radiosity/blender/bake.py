@@ -190,14 +190,16 @@ class BakeJob:
     def summary(self):
         r = self.result
         detail = "" if r.elements is r.patches else f" ({len(r.elements)} output elements)"
+        estimate = "" if r.error_estimate is None else f", {r.error_estimate.describe()}"
         return (f"Radiosity: {len(r.patches)} patches{detail}, {r.form_factors.nnz} form factors "
                 f"({r.form_factor_source}), {r.solution.iterations} iterations, residual "
-                f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s")
+                f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s{estimate}")
 
     def report(self, **extra) -> dict:
         """Everything a pipeline wants to know about the bake, JSON-ready: the settings as used
         ('auto' sizes in scene units), every stage's time, counts (also per object), convergence,
-        energy balance, objects, notes, plus ``extra``."""
+        energy balance, the estimated error (with ``estimate_error``, else None), objects, notes,
+        plus ``extra``."""
         r = self.result
         rep = {
             "settings": dataclasses.asdict(r.settings),
@@ -210,6 +212,7 @@ class BakeJob:
             "residual": float(r.solution.residual),
             "converged": bool(r.solution.converged),
             "energy": _jsonable(r.solution.energy),
+            "error_estimate": None if r.error_estimate is None else r.error_estimate.as_dict(),
             "form_factor_source": r.form_factor_source,
             "objects": [o.name for o in self.scene_input.objects if o.bake],
             "occluders": [o.name for o in self.scene_input.objects if not o.bake],

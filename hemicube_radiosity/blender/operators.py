@@ -28,7 +28,7 @@ __all__ = ["OBJECT_OT_radiosity_bake", "OBJECT_OT_radiosity_clear", "classes"]
 
 # Share of the progress bar per stage (form factors dominate).
 _STAGE_SPAN = {"patches": (0.0, 0.03), "refine": (0.03, 0.05), "form_factors": (0.05, 0.7), "direct": (0.7, 0.78),
-               "solve": (0.78, 0.82), "vertices": (0.82, 0.97), "write": (0.97, 1.0)}
+               "solve": (0.78, 0.82), "vertices": (0.82, 0.95), "estimate": (0.95, 0.97), "write": (0.97, 1.0)}
 _PASS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
          "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
 

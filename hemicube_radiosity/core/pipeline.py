@@ -17,6 +17,7 @@ from .cache import FormFactorCache, cache_key, cached
 from .clusters import Clusters, group_pieces
 from .direct_light import DirectLight, direct_stage, patch_average, source_term
 from .errors import SettingsError
+from .estimate import estimate_stage
 from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .output import meshes_key, output_elements, vertex_stage
@@ -51,6 +52,7 @@ class BakeResult:
     elements: PatchSet | None = None
     settings: BakeSettings | None = None      # as used: 'auto' sizes resolved to world units
     clusters: Clusters | None = None          # small faces grouped: solution.B is per cluster
+    error_estimate: object = None             # core.estimate.ErrorEstimate with settings.estimate_error
 
     def __post_init__(self):
         if self.elements is None:
@@ -97,6 +99,7 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
+    error_estimate: object = None            # core.estimate.ErrorEstimate (estimate stage)
 
     @property
     def unknowns(self):
@@ -133,7 +136,7 @@ class BakeContext:
     def result(self) -> BakeResult:
         return BakeResult(self.patches, self.form_factors, self.solution, self.vertex_radiosity,
                           self.timings, self.form_factor_source, self.source, self.irradiance,
-                          self.notes, self.elements, self.settings, self.clusters)
+                          self.notes, self.elements, self.settings, self.clusters, self.error_estimate)
 
 
 def patch_stage(ctx) -> None:
@@ -303,7 +306,8 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
 
 
 STAGES = (("patches", patch_stage), ("refine", refine_stage), ("form_factors", form_factor_stage),
-          ("direct", direct_stage), ("solve", solve_stage), ("vertices", vertex_stage))
+          ("direct", direct_stage), ("solve", solve_stage), ("vertices", vertex_stage),
+          ("estimate", estimate_stage))
 
 
 def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancelled=None,
