@@ -353,13 +353,17 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
         k = o.edge_count[gi]
         pair = np.repeat(np.arange(pi.size), k)
         e = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + np.repeat(o.edge_start[gi], k)
-        x, n = points[pi[pair]], normals[pi[pair]]
-        rel_a = edges[e, 0] - x
-        term = _edge_terms_flat(rel_a, edges[e, 1] - x, n)
+        # by components (3 arrays of the pairs' edges): NumPy's cross and norm of (N, 3) rows
+        # cost more than the arithmetic
+        p_of = pi[pair]
+        a = [o.edges[e, 0, c] - points[p_of, c] for c in range(3)]
+        b = [o.edges[e, 1, c] - points[p_of, c] for c in range(3)]
+        n = [normals[p_of, c] for c in range(3)]
+        term = _edge_terms_xyz(a, b, n)
         F[pi, gi] = np.abs(np.bincount(pair, weights=term, minlength=pi.size)) / (2 * np.pi)
         # where the contour does not stand for the group: some corner at or below the horizon,
         # or the point not in front of every polygon of the group
-        h = np.einsum("ec,ec->e", rel_a, n)
+        h = a[0] * n[0] + a[1] * n[1] + a[2] * n[2]
         below[pi, gi] = np.bincount(pair, weights=h <= 0, minlength=pi.size) > 0
     partial = (n_front > 0) & (n_front < count[None])
     for g in np.flatnonzero((below & ~partial & (n_front > 0)).any(axis=0)):
@@ -426,13 +430,18 @@ def _clipped_contour(x, n, edges, plane_normal):
     return np.abs(total) / (2 * np.pi), ok
 
 
-def _edge_terms_flat(a, b, n):
-    """:func:`_edge_terms` of edges a -> b (N, 3), each with its receiver's normal n (N, 3)."""
-    c = np.cross(a, b)
-    cn = np.linalg.norm(c, axis=-1)
-    theta = np.arctan2(cn, np.einsum("ec,ec->e", a, b))
+def _edge_terms_xyz(a, b, n):
+    """:func:`_edge_terms` of edges a -> b, each with its receiver's normal n, all given as
+    their three components (lists of 3 arrays (N,))."""
+    ax, ay, az = a
+    bx, by, bz = b
+    cx = ay * bz - az * by
+    cy = az * bx - ax * bz
+    cz = ax * by - ay * bx
+    cn = np.sqrt(cx * cx + cy * cy + cz * cz)
+    theta = np.arctan2(cn, ax * bx + ay * by + az * bz)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(cn > 0, theta * np.einsum("ec,ec->e", c, n) / cn, 0.0)
+        return np.where(cn > 0, theta * (cx * n[0] + cy * n[1] + cz * n[2]) / cn, 0.0)
 
 
 def _edge_terms(a, b, n):
