@@ -76,6 +76,7 @@ def test_cli_report(cli_bake):
     assert rep["patches"] == len(z["areas"]) > 100
     assert rep["nonzeros"] > rep["patches"]
     assert rep["iterations"] >= 1 and rep["residual"] < rep["settings"]["tolerance"]
+    assert rep["error_estimate"] is None                     # only with --estimate-error
     e = rep["energy"]
     # open box: emitted = absorbed + escaped (through the open front)
     assert min(e["emitted"]) > 0 and e["imbalance"] < 0.02
@@ -291,3 +292,15 @@ def test_detail_size_bakes_a_finer_mesh_over_coarse_patches(addon, cornell_blend
     lit = lum[(x > 1.5) & (x < 1.9) & (y > 0.1) & (y < 0.6)].mean()
     umbra = lum[(x > 1.65) & (x < 1.95) & (y > 1.65) & (y < 1.95)].mean()
     assert lit > 2.5 * umbra            # measured 3.0
+
+
+def test_cli_estimate_error_reaches_the_report_and_the_summary(addon, cornell_blend, tmp_path):
+    report = str(tmp_path / "r.json")
+    rc, out, err = run(addon, ["bake", cornell_blend, "--report", report, "--patch-size", "0.5",
+                               "--element-size", "0.25", "--gather-rays", "32", "--estimate-error"])
+    assert rc == 0, err
+    e = json.load(open(report))["error_estimate"]
+    assert e["method"] == "detail" and 0 < e["noise"] <= e["error"] < 1
+    assert e["error"] == pytest.approx(float(np.hypot(e["noise"], e["detail"])))
+    assert "estimated error" in out
+    assert json.load(open(report))["timings"]["estimate"] > 0

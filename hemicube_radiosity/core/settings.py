@@ -189,9 +189,10 @@ class BakeSettings:
     max_iterations: int = setting(200, "Max Iterations", "Give up after this many sweeps (or "
                                   "shots)", "solver", min=1, soft_max=10000)
     # -- output
-    estimate_error: bool = setting(False, "Estimate Error", "After the bake, bake the output again "
-                                   "at twice the detail size and report how much it moved as the "
-                                   "estimated error (costs about a third more)", "output")
+    estimate_error: bool = setting(False, "Estimate Error", "After the bake, run the output again "
+                                   "with half the gather rays and at twice the detail size, and "
+                                   "report how much it moved as the estimated error (about a third "
+                                   "more time)", "output")
     output_pass: str = setting("radiosity", "Pass", "What the colour attribute holds", "output",
                                choices=OUTPUT_PASSES)
     attribute_name: str = setting("Radiosity", "Attribute", "Name of the FLOAT_COLOR corner "
