@@ -5,6 +5,7 @@ import pytest
 
 from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core import output, scenes
+from hemicube_radiosity.core.direct_light import DirectLight
 from hemicube_radiosity.core.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.rays import embree_scene, open_fraction
@@ -146,3 +147,40 @@ def test_world_light_is_exact_at_every_vertex_under_a_black_plate():
                   - _corner(2.5 - a, 1.5 - b, 0.5) + _corner(1.5 - a, 1.5 - b, 0.5) for a, b in zip(x, y)])
     assert F.max() > 0.3 and F.min() < 0.01             # under the plate and far from it
     np.testing.assert_allclose(r.vertex_radiosity[v, 1], 0.5 * (1 - F), atol=0.01)
+
+
+def _rectangle_above(x1, x2, y1, y2, c):
+    """Form factor from a point to the parallel rectangle [x1, x2] x [y1, y2] (relative to the
+    point, axes along its sides) a distance c away: :func:`_corner` rectangles (closed form)."""
+    return _corner(x2, y2, c) - _corner(x1, y2, c) - _corner(x2, y1, c) + _corner(x1, y1, c)
+
+
+def test_a_soft_shadow_is_smooth_when_the_lamp_is_cut_into_patches():
+    """A 0.5 m lamp 1 m over a floor, cut into 3 x 3 patches, a large plate halfway up with its
+    edge under the lamp's centre: a floor point at x sees the part of the lamp with x' > -x,
+    a rectangle, so its light is a closed form. With the face's 16 shadow rays shared out as
+    one per patch, a point saw each patch all lit or all dark and never found its penumbra:
+    the light stepped in nine levels (measured: RMS error 5.5% of the brightest, second
+    differences along the row 19x the exact light's). At least 2 rays per patch (a 2 x 2 grid)
+    find it and refine it: 1.8% RMS, 6x (what is left: a shadow's edge that passes between a
+    patch's points unseen)."""
+    q = scenes.quad
+    h = 0.25
+    lamp = q([(-h, -h, 1), (-h, h, 1), (h, h, 1), (h, -h, 1)], (0, 0, 0), (1.0,) * 3, name="Lamp")   # faces down
+    plate = q([(-3, -3, 0.5), (-3, 3, 0.5), (0, 3, 0.5), (0, -3, 0.5)], (0, 0, 0), name="Plate")
+    floor = q([(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], (0.5, 0.5, 0.5), name="Floor")
+    ps = build_patches([lamp, plate, floor], 0.17)
+    light = DirectLight.plan(ps, BakeSettings(patch_size=0.17, direct_samples=16, two_sided_emission=False), [])
+    assert light.emitters.size == 9
+    x = np.linspace(-0.4, 0.4, 81)
+    y = 0.05
+    pts = np.column_stack([x, np.full_like(x, y), np.zeros_like(x)])
+    got = light.at(pts, np.tile([0.0, 0.0, 1.0], (len(x), 1)), "row")[:, 0]
+    lo = np.maximum(-h, -x)
+    exact = np.where(lo < h, _rectangle_above(lo - x, h - x, -h - y, h - y, 1.0), 0.0)
+    err = (got - exact) / exact.max()
+
+    def d2(a):
+        return a[:-2] - 2 * a[1:-1] + a[2:]
+    assert np.sqrt(np.mean(err ** 2)) < 0.03
+    assert np.sqrt(np.mean(d2(err) ** 2)) < 10 * np.sqrt(np.mean(d2(exact / exact.max()) ** 2))

@@ -34,7 +34,8 @@ class DirectLight:
     """Exact direct light for one bake: emissive patches and lamps, evaluated at any points.
 
     ``emitters`` (M,) ids of emissive patches; ``samples`` shadow rays per point and emitting
-    patch (``settings.direct_samples`` shared between the patches an emitting face was cut into);
+    patch (``settings.direct_samples`` shared between the patches an emitting face was cut into,
+    at least 2);
     ``groups`` (M,) or None: emitting patches of one cluster (small faces grouped) shine as one,
     with ``samples`` rays spread over the cluster;
     ``lights`` core.lights objects with ``light_samples`` / ``light_seed`` for their shadow rays.
@@ -73,7 +74,13 @@ class DirectLight:
         elif emitters.size:
             face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
             per_face = np.unique(face, return_counts=True)[1].max()
-            samples = max(1, int(settings.direct_samples) // int(per_face))
+            # the face's rays shared out, but at least 2 per patch (a 2 x 2 jittered grid): with
+            # one ray a point sees each patch all lit or all dark, never in part, so a penumbra
+            # is never found nor refined (:func:`.direct.emitter_transport`) and a soft shadow
+            # steps in as many levels as the face has patches (issue 11: the Cornell box's
+            # light, cut in 9, made the roughest part of its bake)
+            budget = int(settings.direct_samples)
+            samples = max(min(2, budget), -(-budget // int(per_face)))
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
                    settings.light_seed, cancelled, cache, groups, settings.two_sided_emission,
                    workers=settings.workers, world=world, sky_rays=settings.sky_rays)
