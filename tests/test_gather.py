@@ -2,10 +2,11 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.gather import final_gather, patch_parameters, surface_values
+from analytic import point_under_rectangle_corner
+from hemicube_radiosity.core.gather import final_gather, gather_matrix, patch_parameters, surface_values
 from hemicube_radiosity.core.geometry import polygon_form_factors
 from hemicube_radiosity.core.patches import build_patches
-from hemicube_radiosity.core.rays import embree_scene
+from hemicube_radiosity.core.rays import embree_scene, sky_fraction
 from hemicube_radiosity.core.scenes import closed_box, quad
 
 
@@ -45,3 +46,35 @@ def test_surface_values_are_bilinear_on_quads_and_linear_on_triangles():
     # quad at (u, v) = (0.5, 0.5): mean of the corners; triangle: plane through (2,0)=3, (3,0)=5, (2,1)=7
     assert got[0, 0] == pytest.approx((1 + 3 + 7 + 2) / 4)
     assert got[1, 0] == pytest.approx(3 + 0.5 * 2 + 0.25 * 4)
+
+
+def _rectangle_above(x1, x2, y1, y2, c):
+    """Form factor from an upward point at the origin to the parallel rectangle [x1, x2] x
+    [y1, y2] a height c above it: corner rectangles added and subtracted (closed form)."""
+    def corner(a, b):
+        return np.sign(a) * np.sign(b) * point_under_rectangle_corner(np.abs(a), np.abs(b), c)
+    return corner(x2, y2) - corner(x1, y2) - corner(x2, y1) + corner(x1, y1)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_the_shared_ray_pattern_reads_a_plates_form_factor_along_a_row_under_its_edge(seed):
+    """Floor points on a row that passes under the edge of a 1 m plate 0.5 m up: the cosine rays
+    that hit the plate are its form factor (closed form), for the gather (the plate's value 1)
+    and the sky fraction alike, which cast the same pattern (:func:`.rays.cosine_lattice`).
+    256 rays: RMS error along the row 0.42-0.50% of the hemisphere, at worst 1.3% (measured,
+    seeds 0-2); the jittered grid the pattern replaced: 0.45-0.82%, at worst 2.2%."""
+    plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
+    floor = quad([(-2, -2, 0), (3, -2, 0), (3, 3, 0), (-2, 3, 0)], name="Floor")
+    ps = build_patches([plate, floor], 0.25)
+    x = np.linspace(-0.6, 0.6, 121)
+    pts = np.column_stack([x, np.full_like(x, 0.37), np.zeros_like(x)])
+    up = np.tile([0.0, 0.0, 1.0], (len(x), 1))
+    F = _rectangle_above(-x, 1 - x, -0.37, 0.63, 0.5)
+    scene = embree_scene(ps)
+    on_plate = np.isin(np.arange(len(ps.verts)), ps.polys[ps.owner == 0]).astype(float)[:, None]
+    G, sky = gather_matrix(ps, pts, up, scene, rays=256, seed=seed)
+    for got in (G.matvec(on_plate)[:, 0], 1 - sky_fraction(scene, pts, up, 256, seed=seed)):
+        err = got - F
+        assert np.sqrt(np.mean(err ** 2)) < 0.006
+        assert np.abs(err).max() < 0.016
+    np.testing.assert_allclose(sky, sky_fraction(scene, pts, up, 256, seed=seed), atol=1e-12)

@@ -2,8 +2,9 @@
 
 A coarse patch solution is accurate in the power each patch reflects but blurs where light
 changes. The finer output elements gather it instead of interpolating it: from each element
-vertex, stratified cosine-distributed rays find the surface they see, and read there the
-bilinear interpolation of the patches' reflected radiance (``R = B - E``, at patch vertices).
+vertex, cosine-distributed rays of one even pattern (:func:`.rays.cosine_lattice`) find the
+surface they see, and read there the bilinear interpolation of the patches' reflected radiance
+(``R = B - E``, at patch vertices).
 Their mean is the radiance arriving at the point from reflected light (the emitters' own light
 is added exactly by :mod:`.direct`). Rays that see no surface see the world's radiance; rays
 that hit the back of a patch see nothing.
@@ -15,9 +16,10 @@ from functools import partial
 
 import numpy as np
 
-from .geometry import cosine_directions, jittered_grid, tangent_frames
+from .geometry import tangent_frames
 from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
+from .rays import cosine_lattice
 from .sparse import CSR
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "patch_parameters", "surface_values",
@@ -74,9 +76,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
 
     ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
-    point: one jittered-grid cosine pattern (seeded) shared by every point, in the point's
-    normal frame. A ray that hits the back of a patch sees nothing. G depends on geometry only:
-    a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
+    point: one cosine pattern (:func:`.rays.cosine_lattice`, seeded) shared by every point, in
+    the point's normal frame. A ray that hits the back of a patch sees nothing. G depends on
+    geometry only: a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
     1 = serial); G is bit-identical for any count.
     ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
@@ -85,14 +87,13 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     P, V = len(points), len(patches.verts)
-    # one stratified pattern for every point, in a frame that depends on the normal alone:
+    # one even pattern for every point, in a frame that depends on the normal alone:
     # neighbouring points on a surface cast parallel rays, so what remains of the sampling error
     # varies smoothly over the surface instead of as per-vertex speckle
-    u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
-    R = u.size
+    local = cosine_lattice(rays, seed)
+    R = len(local)
     step = max(1, chunk_rays // R)
-    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals,
-                   cosine_directions(np.stack([u[0], v[0]], -1)), step, hits)
+    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
     sky = np.zeros(P)
     if P:
