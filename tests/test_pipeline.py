@@ -304,3 +304,31 @@ def test_corner_colours_reach_the_output_vertices(gather_rays):
     inside = np.all((r.elements.verts[:, :2] * 4) % 1 > 1e-6, axis=1)   # off the checker's edges
     assert inside.sum() > 50
     np.testing.assert_allclose(r.vertex_radiosity[inside], want[inside], rtol=1e-6 if gather_rays else 0.1)
+
+
+def test_relight_of_a_lamp_under_a_ceiling_casts_no_ray_and_equals_a_cold_bake(monkeypatch):
+    """The bench's case: a two-sided lamp 2 mm under the ceiling, so the gather reads exact light
+    at its hits and the ceiling ring beside the lamp shines on the vertices by shadow rays. A
+    relight (the lamp brighter, a wall's colour changed) reuses all of it: not one ray is cast
+    (each class that casts rays is forbidden), and the result equals a cold bake."""
+    from hemicube_radiosity.core import pipeline, rays
+
+    s = BakeSettings(patch_size=0.5, element_size=0.125, gather_rays=64, resolution=32, tolerance=1e-8)
+    assert s.two_sided_emission                # cornell_box's lamp hangs 2 mm under the ceiling
+    cache = FormFactorCache()
+    bake(cornell_box(light_radiance=5.0), s, cache=cache)
+    changed = cornell_box(light_radiance=7.0)
+    changed[3].face_rho[:] = (0.2, 0.2, 0.7)
+    cold = bake(changed, s)
+
+    def forbidden(*a, **k):
+        raise AssertionError("a relight must not cast rays nor recompute geometry")
+
+    for cls in (rays.EmbreeScene, rays.NumpyOccluder):
+        for name in ("intersect", "occluded"):
+            if hasattr(cls, name):
+                monkeypatch.setattr(cls, name, forbidden)
+    monkeypatch.setattr(pipeline, "compute_form_factors", forbidden)
+    monkeypatch.setattr(pipeline, "build_patches", forbidden)
+    warm = bake(changed, s, cache=cache)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)

@@ -114,9 +114,12 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world)
-    select = abrupt_elements(elements, direct_e)
+    # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
+    # a relight that changes a colour or scales the lamps picks the same elements and finds
+    # their grids and shine in the cache (no ray)
+    select = abrupt_elements(elements, light_v)
     opened = _open_elements(ctx, elements)
-    bar = HOT * _mean_light(elements, direct_e, opened)
+    bar = HOT * _mean_light(elements, light_v, opened)
     hot, shine = _hot_elements(ctx, elements, light_v, bar, ~select, opened)
     if not (select.any() or hot.any()):
         return out
@@ -160,9 +163,9 @@ def _mean_light(elements, values_v, opened=None) -> float:
 
 def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     """(hot (N,) bool, radiance (N, 3)): of the elements whose direct light changes ``smooth``-ly,
-    those whose reflected direct light (``radiance``: their reflectivity times the mean of
-    ``light_v`` (V, 3) over their corners; 0 for the others) passes the luminance ``bar``
-    (:data:`HOT` times its :func:`_mean_light`): the spot a pendant lamp's back lights on a
+    those whose direct light arriving (the mean of ``light_v`` (V, 3) over their corners)
+    passes the luminance ``bar`` (:data:`HOT` times its :func:`_mean_light`), with
+    ``radiance`` their reflectivity times it (0 for the others): the spot a pendant lamp's back lights on a
     ceiling, the floor under a lamp, a block's top beside it. A gather's rays find such a spot
     by chance, a few at a vertex and one more or fewer at its neighbour: each ray there
     carries many times the light of the others, so the vertices blotch (a room whose lamp
@@ -176,8 +179,9 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     mostly in one area should not pay that for hundreds of them."""
     valid = elements.polys >= 0
     corner = light_v[np.where(valid, elements.polys, 0)] * valid[..., None]
-    radiance = elements.rho * corner.sum(axis=1) / valid.sum(axis=1)[:, None]
-    hot = smooth & (radiance @ LUMA > bar)
+    arriving = corner.sum(axis=1) / valid.sum(axis=1)[:, None]
+    radiance = elements.rho * arriving
+    hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
         hot &= opened > 0
     ids = np.flatnonzero(hot)
@@ -185,7 +189,7 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
         groups = _shine_groups(ctx, elements, ids)
         if groups.max() >= budget:
             a = elements.areas[ids]
-            Y = np.bincount(groups, weights=a * (radiance[ids] @ LUMA)) / np.bincount(groups, weights=a)
+            Y = np.bincount(groups, weights=a * (arriving[ids] @ LUMA)) / np.bincount(groups, weights=a)
             hot[ids[~np.isin(groups, np.argsort(-Y, kind="stable")[:budget])]] = False
     return hot, np.where(hot[:, None], radiance, 0.0)
 
@@ -258,9 +262,10 @@ class _AbruptGrid:
             x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
         owner = np.repeat(ids, count)
         nrm = elements.normals[owner]
-        self.values = elements.rho[owner] * ctx.direct.at(x, nrm, "abrupt-grid")
+        light = ctx.direct.at(x, nrm, "abrupt-grid")
+        self.values = elements.rho[owner] * light
         self.seen = _seen(ctx, elements, x, nrm)
-        Y = self.values @ LUMA
+        Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
         # every cell: its element (local index), row i, column j
         loc = np.repeat(np.arange(len(ids)), n * n)
         r = np.arange(loc.size) - self.cell_offset[loc]
@@ -281,7 +286,9 @@ class _AbruptGrid:
         if s.any():
             mean[s], seen[s] = self._means(ctx, ids, loc[s], i[s], j[s])
         self.cell_mean = mean
-        self.hot = (seen > 0) & (mean @ LUMA > bar)
+        rho = elements.rho[ids[loc]]
+        arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
+        self.hot = (seen > 0) & (arriving @ LUMA > bar)
         self.ids, self.cell_loc, self.cell_i, self.cell_j = ids, loc, i, j
 
     def hot_cells(self):
@@ -422,7 +429,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     grouped as their elements would be, apart from whole elements.
 
     A group shines its area-weighted mean radiance; its shadow rays go to points spread over it
-    by power (area times luminance), not area, so a bright piece's light is shadowed as that
+    by power (area times the luminance arriving), not area, so a bright piece's light is shadowed as that
     piece is, not as its dim neighbours are (spread by area, the cells beside a lamp 5 mm
     under a ceiling, hidden from most of the room by the lamp, shone 3x what they do alone)."""
     groups = _shine_groups(ctx, elements, ids) if ids.size else np.zeros(0, np.int64)
@@ -441,7 +448,13 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
         polys = np.concatenate([polys, V + np.arange(4 * c).reshape(c, 4)])
         every, L = np.concatenate([ids, parent]), np.concatenate([radiance, cell_light])
     centers, _, area = _poly_geometry(verts, polys)
-    power = area * np.maximum(L @ LUMA, 1e-300)            # where the shadow rays go
+    rho = elements.rho[every]
+    arriving = np.where(rho > 0, L / np.where(rho > 0, rho, 1.0), 0.0)
+    power = area * np.maximum(arriving @ LUMA, 1e-300)     # where the shadow rays go (light arriving:
+                                                           # the same after a change of colour)
+    # relative power to 6 digits: a relight that scales the light finds the same transport in
+    # the cache (no ray), and a first bake draws from exactly what a relight would
+    power = np.maximum(np.round(power / power.max(), 6), 1e-12)
     source = PatchSet(verts, polys, centers, elements.normals[every], power, elements.rho[every],
                       np.zeros((len(every), 3)), elements.owner[every], elements.source_face[every],
                       list(elements.object_names))
@@ -449,8 +462,11 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    T = emitter_transport(source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples,
-                          groups=groups, workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled))
+    key = cache_key(elements.geometry_key() + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
+                    + groups.tobytes() + power.tobytes() + np.ascontiguousarray(xv).tobytes(), ("shine", samples))
+    T = cached(ctx.cache, key, lambda: emitter_transport(
+        source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
+        workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled)))
     G = int(groups.max()) + 1
     L = np.stack([np.bincount(groups, weights=area * L[:, k], minlength=G) for k in range(3)], 1) \
         / np.bincount(groups, weights=area, minlength=G)[:, None]
