@@ -9,7 +9,8 @@ exact at every point, and 128 gather rays by default (issue 11), and when the he
 snap vertices to a sub-pixel grid and give a pixel centre on a shared edge to one polygon by a
 fill rule, not to whichever depth rounded nearer (issue 12: scale invariance), and when each chunk
 of an emitter transport began to draw its penumbra rays from its own random stream (so chunks can
-run on worker processes).
+run on worker processes), and when the vertex stage began to read abrupt elements on a grid, let
+bright areas shine, judge both on the light arriving, and cast the lattice ray pattern (issue 11).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 
