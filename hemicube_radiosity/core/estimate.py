@@ -13,7 +13,8 @@ same patch solution and measures how much the answer moves:
   report says so.
 
 ``error = hypot(noise, detail)``, a relative RMS like the bench's: luminance-weighted RMS over the
-output vertices that do not emit, over their mean luminance. It is an estimate, not a bound:
+output vertices that do not emit and that the scene sees (not a floor under a block), over their
+mean luminance. It is an estimate, not a bound:
 ``bench/speed_vs_error.py`` sets it beside the error measured against Cycles on each scene, and
 where the coarser output goes wrong in a way the finer one does not (a lamp's back-lit ceiling
 smeared across elements twice as wide), it overestimates.
@@ -28,7 +29,7 @@ import numpy as np
 from .direct import vertex_frames
 from .direct_light import LUMA
 from .interpolate import interpolate_at
-from .output import vertex_stage
+from .output import _open_elements, vertex_stage
 from .rays import embree_available
 
 __all__ = ["ErrorEstimate", "estimate_stage", "relative_rms"]
@@ -73,10 +74,14 @@ def relative_rms(a, b, mask=None) -> float:
     return float(np.sqrt(np.mean((ya - yb) ** 2)) / mean) if mean > 0 else 0.0
 
 
-def _lit_vertices(elements) -> np.ndarray:
-    """(V,) bool: vertices of at least one element that does not emit."""
+def _lit_vertices(elements, opened=None) -> np.ndarray:
+    """(V,) bool: vertices of at least one element that does not emit and that the scene sees
+    (``opened`` (N,) > 0, :func:`.output._open_elements`; None: every element): a floor under a
+    block is nobody's error."""
     keep = np.zeros(len(elements.verts), bool)
     dark = elements.emission.max(axis=1) <= 0
+    if opened is not None:
+        dark &= np.asarray(opened) > 0
     p = elements.polys[dark]
     keep[p[p >= 0]] = True
     return keep
@@ -111,7 +116,7 @@ def estimate_stage(ctx) -> None:
         return
     t = time.perf_counter()
     fine, X = ctx.elements, ctx.vertex_radiosity
-    mask = _lit_vertices(fine)
+    mask = _lit_vertices(fine, _open_elements(ctx, fine))
     ctx.say(0.0, "estimating the error: sampling noise")
     noise = detail = 0.0
     if s.gather_rays >= 2 and embree_available():
