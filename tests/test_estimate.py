@@ -3,8 +3,8 @@
 Truth here is the same bake converged: output elements a third the size and 512 gather rays,
 interpolated to the default bake's vertices (Cycles' version of this check, on the bench scenes,
 is in ``bench/speed_vs_error.py``: Targets). Measured (bench-like relative RMS over the open
-vertices that do not emit): the open box under a uniform sky, estimated 3.2% against 3.9%
-measured; the one-sided Cornell box 3.2% against 1.6% (outside the factor 2: a strict xfail), and
+vertices that do not emit, the scene sees and are not buried under a block): the open box
+under a uniform sky, estimated 0.80% against 0.84% measured; the one-sided Cornell box 3.2% against 1.6% (outside the factor 2: a strict xfail), and
 with its lamp lighting the ceiling from its back, far outside (strict xfail): the estimate is
 the change from an output twice as coarse, which goes wrong at contacts and hot spots where
 the bake itself no longer does.
@@ -18,7 +18,7 @@ from hemicube_radiosity.core import pipeline, scenes
 from hemicube_radiosity.core.direct import vertex_frames
 from hemicube_radiosity.core.estimate import _lit_vertices, _vertex_owner, relative_rms
 from hemicube_radiosity.core.interpolate import interpolate_at
-from hemicube_radiosity.core.output import _open_elements
+from hemicube_radiosity.core.output import _open_elements, seen_vertices
 from hemicube_radiosity.core.patches import MeshInput
 from hemicube_radiosity.core.rays import embree_available
 
@@ -34,7 +34,9 @@ def _measured(meshes, settings, world=None):
     xv, nv, _ = vertex_frames(r.elements)
     truth = interpolate_at(fine.elements, fine.vertex_radiosity, xv, _vertex_owner(r.elements), nv)
     opened = _open_elements(SimpleNamespace(settings=r.settings, cache=None), r.elements)
-    return r, relative_rms(r.vertex_radiosity, truth, _lit_vertices(r.elements, opened))
+    ctx = SimpleNamespace(settings=r.settings, cache=None)
+    seen = seen_vertices(ctx, r.elements)      # a buried corner carries the open side's limit
+    return r, relative_rms(r.vertex_radiosity, truth, _lit_vertices(r.elements, opened) & seen)
 
 
 def _open_box():
@@ -57,7 +59,7 @@ def test_estimated_error_is_within_a_factor_two_of_the_measured(case):
     e = r.error_estimate
     assert e.method == "detail" and e.noise > 0 and e.detail > 0
     assert e.error == pytest.approx(np.hypot(e.noise, e.detail))
-    assert 0.01 < measured < 0.1                          # a real error to estimate
+    assert 0.005 < measured < 0.1                         # a real error to estimate
     assert 0.5 <= e.error / measured <= 2.0, (e.error, measured)
     assert any(n.startswith("estimated error") for n in r.notes)
     assert r.timings["estimate"] > 0

@@ -29,7 +29,7 @@ import numpy as np
 from .direct import vertex_frames
 from .direct_light import LUMA
 from .interpolate import interpolate_at
-from .output import _open_elements, vertex_stage
+from .output import _open_elements, seen_vertices, vertex_stage
 from .rays import embree_available
 
 __all__ = ["ErrorEstimate", "estimate_stage", "relative_rms"]
@@ -116,7 +116,7 @@ def estimate_stage(ctx) -> None:
         return
     t = time.perf_counter()
     fine, X = ctx.elements, ctx.vertex_radiosity
-    mask = _lit_vertices(fine, _open_elements(ctx, fine))
+    mask = _lit_vertices(fine, _open_elements(ctx, fine)) & seen_vertices(ctx, fine)
     ctx.say(0.0, "estimating the error: sampling noise")
     noise = detail = 0.0
     if s.gather_rays >= 2 and embree_available():

@@ -19,6 +19,7 @@ import numpy as np
 
 from .cache import cache_key, cached
 from .clusters import _components
+from .contact import open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, correct_hits, gather_matrix
@@ -406,6 +407,30 @@ def _seen(ctx, elements, x, nrm):
     return np.minimum(1.0, f / 0.5)
 
 
+def seen_vertices(ctx, elements) -> np.ndarray:
+    """(V,) bool: output vertices the scene sees (:func:`_seen` at their evaluation points of
+    the vertex stage, at least a half), not those buried under what stands on their surface;
+    all of them without Embree."""
+    if not embree_available():
+        return np.ones(len(elements.verts), bool)
+    xv, nv, _ = vertex_frames(elements, weights=_open_elements(ctx, elements))
+    return _seen(ctx, elements, xv, nv) >= 0.5
+
+
+def _open_side(ctx, elements, xv, nv):
+    """The :class:`.contact.OpenSide` of the output vertices buried under what stands on their
+    surface (:func:`_seen` below a half: less than a quarter of their rays leave into the
+    open), or None without Embree. Geometry only, cached: a relight casts no ray."""
+    if ctx.direct is None or not embree_available():
+        return None
+    buried = _seen(ctx, elements, xv, nv) < 0.5
+    if not buried.any():
+        return None
+    key = cache_key(elements.geometry_key() + np.ascontiguousarray(xv).tobytes(), ("open-side",))
+    return cached(ctx.cache, key, lambda: open_side(elements, buried, embree_scene(elements),
+                                                    _open_elements(ctx, elements)))
+
+
 def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
     """(M,) group of each element ``ids``: connected elements of one object in one cell of
     ``scale`` times the patch size shine as one (:func:`_shine`). Elements touch where they
@@ -578,11 +603,19 @@ def vertex_stage(ctx) -> None:
         ctx.elements = _cut_elements(ctx)
         xv, nv, rho_v = vertex_frames(ctx.elements, weights=_open_elements(ctx, ctx.elements))
         D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
+        side = _open_side(ctx, ctx.elements, xv, nv)
+        if side is not None:                            # before the gather: its rays read it
+            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
         rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert)
     else:
         xv, nv, rho_v = vertex_frames(patches, weights=_open_elements(ctx, patches))
         rest_v = rest_v if in_v is None else in_v
         D_vert = ctx.direct.at(xv, nv, "vertices")
+        side = _open_side(ctx, patches, xv, nv)
+        if side is not None:
+            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
+    if side is not None:                                # what a buried vertex gathered: the inside
+        rest_v = side.spread(rest_v)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
         return
