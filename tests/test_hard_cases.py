@@ -241,8 +241,10 @@ def _floor_values(r, owner, scale=1.0):
 def test_coplanar_overlapping_faces_each_get_the_light_of_one_alone():
     """A rug modelled as a quad lying in the floor's plane (z-fighting, another object and
     colour): neither face shadows the other, so both get the light arriving there, as the
-    floor alone does. Measured: rug and floor under it 0.18% apart (the light arriving,
-    radiosity / reflectivity), the floor 0.12% from the room baked without the rug."""
+    floor alone does, less what the rug absorbs. Measured: rug and floor under it 0.05% apart
+    (the light arriving, radiosity / reflectivity); against the room baked without the rug, the
+    light arriving there is 0.6% (red) to 0.9% (blue) dimmer: the rug (0.3, 0.2, 0.1) covers a
+    quarter of a 0.7 floor, so less light comes back from the floor, bluish least."""
     room, lamp = _lit_room()
     rug_rho = np.array([0.3, 0.2, 0.1])
     rug = quad([(0.5, 0.5, 0), (1.5, 0.5, 0), (1.5, 1.5, 0), (0.5, 1.5, 0)], rug_rho, name="rug")
@@ -257,8 +259,9 @@ def test_coplanar_overlapping_faces_each_get_the_light_of_one_alone():
     got_rug, got_floor = np.array([on_rug[k] for k in keys]), np.array([floor[k] for k in keys])
     ref = np.array([floor_alone[k] for k in keys])
     assert ref.min() > 0.3                                  # lit (0.39 at least): no face darkened its twin
-    np.testing.assert_allclose(got_rug, got_floor, rtol=0.005)
-    np.testing.assert_allclose(got_floor, ref, rtol=0.005)
+    np.testing.assert_allclose(got_rug, got_floor, rtol=0.002)
+    dimmer = 1 - (got_floor / ref).mean(axis=0)                # per band, over the rug
+    assert np.all((dimmer > 0.002) & (dimmer < 0.015)) and dimmer[2] > dimmer[1] > dimmer[0]
 
 
 def _block_on_floor(z0):

@@ -109,3 +109,213 @@ def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
     # a hair short of the wall (a thousandth of the edge), on the surface itself
     points = elements.verts[a] + np.maximum(t - 1e-3 * length, 0.0)[:, None] * d
     return OpenSide(a, b, points, n, np.bincount(b, minlength=V))
+
+
+# ------------------------------------------------------------------------------------------
+# Cutting output elements along contact lines
+
+
+def _contact_segments(face_corners, face_normal, cutters, cutter_normals, eps):
+    """Segments (k, 2, 3) where the polygons ``cutters`` (G, 4, 3) (a triangle repeats its last
+    corner) meet the plane of a face (corners (4, 3), unit normal (3,)): a wall standing on it,
+    a block's side through it; and (k,) which cutter made each. Cutters parallel to the face
+    (coplanar or not) do not cut."""
+    n = face_normal
+    s = (cutters - face_corners[0]) @ n                                   # (G, 4) heights over the plane
+    cross = (s.min(axis=1) < eps) & (s.max(axis=1) > -eps) & (np.abs(cutter_normals @ n) < 1 - 1e-6)
+    segs, which = [], []
+    for g, c, h in zip(np.flatnonzero(cross), cutters[cross], s[cross]):
+        pts = [c[i] for i in range(4) if abs(h[i]) <= eps]
+        for i in range(4):
+            j = (i + 1) % 4
+            if (h[i] < -eps and h[j] > eps) or (h[i] > eps and h[j] < -eps):
+                t = h[i] / (h[i] - h[j])
+                pts.append(c[i] + t * (c[j] - c[i]))
+        if len(pts) < 2:
+            continue
+        pts = np.array(pts)
+        pts -= np.outer((pts - face_corners[0]) @ n, n)                    # onto the plane
+        i, j = np.unravel_index(np.argmax(((pts[:, None] - pts[None]) ** 2).sum(-1)), (len(pts),) * 2)
+        if np.linalg.norm(pts[j] - pts[i]) > eps:
+            segs.append((pts[i], pts[j]))
+            which.append(g)
+    return np.array(segs).reshape(-1, 2, 3), np.array(which, np.int64)
+
+
+def _split(poly, a, m, tol):
+    """A convex polygon (k, 3) split by the line through ``a`` with in-plane unit normal ``m``:
+    (positive side, negative side), each None when the polygon lies on the other side (corners
+    within ``tol`` of the line count as on it)."""
+    h = (poly - a) @ m
+    if h.max() <= tol or h.min() >= -tol:
+        return None
+    pos, neg = [], []
+    k = len(poly)
+    for i in range(k):
+        j = (i + 1) % k
+        p, hp, hq = poly[i], h[i], h[j]
+        if hp >= -tol:
+            pos.append(p)
+        if hp <= tol:
+            neg.append(p)
+        if (hp > tol and hq < -tol) or (hp < -tol and hq > tol):
+            x = p + (hp / (hp - hq)) * (poly[j] - p)
+            pos.append(x)
+            neg.append(x)
+    return np.array(pos), np.array(neg)
+
+
+def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_rel=1e-3) -> PatchSet:
+    """``elements`` cut along the lines where other surfaces (``faces``: the scene's faces, e.g.
+    :func:`.patches.build_patches` with no size) stand on or pass through them, with the
+    vertices on those lines apart on each side (a seam): no element straddles a wall's foot,
+    and a vertex on it is evaluated on its own side (the open side's limit; the side under a
+    house sees nothing and is never seen). A piece of more than four corners is fanned into
+    triangles; a cut closer than ``tol_rel`` of an element's size to its corner snaps to it.
+    ``eps_rel``: of the scene's size, what counts as touching a plane. Returns ``elements``
+    itself when nothing is cut."""
+    scale = float(np.ptp(faces.verts, axis=0).max()) or 1.0
+    eps = eps_rel * scale
+    corners = elements.corners()
+    cut_corners = faces.corners()
+    lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
+    key = np.stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64)], 1)
+    groups, inv = np.unique(key, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    pieces = {}                       # element -> list of (polygon, tags)
+    for gi in range(len(groups)):
+        ids = np.flatnonzero(inv == gi)
+        c = corners[ids]
+        n = elements.normals[ids[0]]
+        if not np.all(np.isfinite(n)):
+            continue
+        glo, ghi = c.reshape(-1, 3).min(axis=0) - eps, c.reshape(-1, 3).max(axis=0) + eps
+        near = np.flatnonzero(np.all((lo <= ghi) & (hi >= glo), axis=1))
+        if near.size == 0:
+            continue
+        segs, which = _contact_segments(c[0], n, cut_corners[near], faces.normals[near], eps)
+        if not len(segs):
+            continue
+        size = np.sqrt(elements.areas[ids])
+        for (a, b), g in zip(segs, near[which]):
+            length = float(np.linalg.norm(b - a))
+            d = (b - a) / length
+            # sides: in front of the cutter (its normal's part in this plane) or behind it, the
+            # same on every face it cuts
+            m = faces.normals[g] - (faces.normals[g] @ n) * n
+            m /= np.linalg.norm(m)
+            ext = (c - a) @ d                                             # (M, 4) along the line
+            h = (c - a) @ m                                               # (M, 4) across it
+            tol = np.maximum(tol_rel * size, eps)[:, None]
+            along = (ext.max(axis=1) > -eps) & (ext.min(axis=1) < length + eps)
+            both = (h.max(axis=1) > tol[:, 0]) & (h.min(axis=1) < -tol[:, 0])
+            on = (np.abs(h) <= tol).any(axis=1)
+            hit = along & (both | on)
+            side = np.sign((np.where(np.abs(h) <= tol, 0.0, h)).sum(axis=1))
+            # a line along the face's own border (its neighbour face, a wall meeting a floor
+            # at the floor's edge) has elements on one side only: nothing to keep apart
+            if not (hit & both).any() and np.unique(side[hit & ~both]).size < 2:
+                continue
+            for e, tl in zip(ids[hit], tol[hit, 0]):
+                line = (int(g), a, m, float(tl), d, length)
+                todo = pieces.get(e) or [(_polygon(elements, e), ())]
+                out = []
+                for poly, tags in todo:
+                    sp = _split(poly, a, m, line[3])
+                    if sp is None:
+                        hs = (poly - a) @ m
+                        out.append((poly, tags + ((line, 1 if hs.sum() >= 0 else -1),)))
+                    else:
+                        out += [(sp[0], tags + ((line, 1),)), (sp[1], tags + ((line, -1),))]
+                pieces[e] = out
+    if not pieces:
+        return elements
+    return _assemble(elements, pieces, eps)
+
+
+def _polygon(elements, e):
+    p = elements.polys[e]
+    return elements.verts[p[p >= 0]]
+
+
+def _assemble(elements, pieces, eps):
+    """The PatchSet of ``elements`` with each element of ``pieces`` replaced by its pieces: a
+    corner on a cut line (within its tolerance, inside the segment's reach) is a vertex of its
+    side only; other corners keep the element's vertices."""
+    V = len(elements.verts)
+    verts = [elements.verts]
+    index = {}
+    polys, parent = [], []
+    q = max(eps, 1e-300)
+    for e in range(len(elements)):
+        if e not in pieces:
+            polys.append(elements.polys[e])
+            parent.append(e)
+            continue
+        src = elements.polys[e][elements.polys[e] >= 0]
+        src_pts = elements.verts[src]
+        for poly, tags in pieces[e]:
+            ids = []
+            for x in poly:
+                on = tuple(sorted((ln[0], side) for ln, side in tags if _on_segment(x, ln)))
+                same = np.flatnonzero(np.all(np.abs(src_pts - x) <= q, axis=1))
+                if not on and same.size:
+                    ids.append(int(src[same[0]]))
+                    continue
+                k = (int(elements.owner[e]),) + tuple(np.round(x / q).astype(np.int64)) + on
+                if k not in index:
+                    index[k] = V + len(index)
+                    verts.append(x[None])
+                ids.append(index[k])
+            ids = _dedupe(ids)
+            if len(ids) < 3:
+                continue
+            for tri in _fan(ids):
+                polys.append(np.array(tri + [-1] * (4 - len(tri)), np.int64))
+                parent.append(e)
+    verts = np.concatenate(verts)
+    polys = np.array(polys, np.int64)
+    parent = np.array(parent, np.int64)
+    from .patches import _poly_geometry
+    centers, _, areas = _poly_geometry(verts, polys)
+    keep = areas > 0
+    polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]
+    used = np.unique(polys[polys >= 0])
+    remap = np.full(len(verts), -1, np.int64)
+    remap[used] = np.arange(used.size)
+    polys = np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
+    return PatchSet(verts[used], polys, centers, elements.normals[parent], areas, elements.rho[parent],
+                    elements.emission[parent], elements.owner[parent], elements.source_face[parent],
+                    list(elements.object_names))
+
+
+def _on_segment(x, line) -> bool:
+    """Whether the point ``x`` lies on the contact segment ``line`` (cutter, start, across,
+    tolerance, along, length): within the tolerance of its line and of its extent."""
+    _, a, m, tol, d, length = line
+    t = float((x - a) @ d)
+    return abs(float((x - a) @ m)) <= tol and -tol <= t <= length + tol
+
+
+def _dedupe(ids):
+    out = []
+    for i in ids:
+        if not out or out[-1] != i:
+            out.append(i)
+    while len(out) > 1 and out[0] == out[-1]:
+        out.pop()
+    return out
+
+
+def _fan(ids):
+    """A convex polygon's corner ids as quads and triangles (<= 4 corners: itself)."""
+    if len(ids) <= 4:
+        return [list(ids)]
+    out = []
+    i = 1
+    while i + 2 < len(ids):
+        out.append([ids[0], ids[i], ids[i + 1], ids[i + 2]])
+        i += 2
+    if i + 1 < len(ids):
+        out.append([ids[0], ids[i], ids[i + 1]])
+    return out

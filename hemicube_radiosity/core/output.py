@@ -19,7 +19,7 @@ import numpy as np
 
 from .cache import cache_key, cached
 from .clusters import _components
-from .contact import open_side
+from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, correct_hits, gather_matrix
@@ -89,6 +89,13 @@ def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:
     return np.stack([np.bincount(v, weights=per_corner[p, c, k], minlength=V) for k in range(3)], 1) / cnt[:, None]
 
 
+#: Passes of :func:`_bounce_again`. Measured against Cycles (raw RMS / bias): one pass, yard
+#: 0.89% / -0.26%, Cornell 1.13% / +0.09%, room 3.17% / -0.26%; converged (8 at most), 0.84%,
+#: 1.10% and 3.18% with the room's bias at -0.55%: at the elements' level each bounce loses a
+#: little more (rays through the cracks of touching objects) than the patch solution does.
+GATHER_PASSES = 1
+
+
 def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     """Reflected light R at element vertices by a final gather (the gather's ray hits cached as a
     matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
@@ -115,6 +122,34 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world)
+    out += _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
+    return _bounce_again(G, rho_v, out, rest_e)
+
+
+def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4):
+    """The gather again, reading the light reflected more than once as the elements reflect what
+    it found (rho_v * out) instead of the patch solution's (``rest_e``); ``passes`` times, or
+    until it changes by less than ``tol`` of its largest value (many passes: the element-level
+    solution, with the patch solution as the first guess). The patches straddle walls' feet and
+    contacts, the elements do not: the foot of the bench yard's walls read 10% dark after one
+    gather (against a 4,096-ray gather of the output itself), and one pass more took the
+    yard's RMS error against Cycles from 1.42% to 0.89%, the Cornell box's from 1.38% to
+    1.13%. One sparse product per pass: a relight casts no ray."""
+    zero = np.zeros_like(G.sky)
+    before = rest_e
+    for _ in range(passes):
+        step = apply_gather(G, zero, rho_v * out - before, None)
+        before = rho_v * out
+        out = out + step
+        if np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
+            break
+    return out
+
+
+def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
+    """What the gather of ``direct_e`` misses: the exact light of abrupt elements' grids and
+    what shines (see :func:`_gathered`); (V, 3)."""
+    out = np.zeros((len(xv), 3))
     # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
     # a relight that changes a colour or scales the lamps picks the same elements and finds
     # their grids and shine in the cache (no ray)
@@ -562,6 +597,10 @@ def _cut_elements(ctx) -> PatchSet:
     elements = output_elements(ctx.meshes, s, ctx.cache)
     if elements.geometry_key() == ctx.patches.geometry_key():
         return ctx.patches                    # the input is finer than the detail: its own faces
+    # no element across a wall's foot: cut along where surfaces stand on others
+    key = cache_key(meshes_key(ctx.meshes), ("elements-cut", s.element_size))
+    elements = cached(ctx.cache, key, lambda: cut_along_contacts(
+        elements, build_patches(ctx.meshes, None))).with_mesh_materials(ctx.meshes)
     if len(elements) > s.max_elements:
         raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
                              f"output elements, more than the limit of {s.max_elements}: use a "
