@@ -22,8 +22,8 @@ from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
 
-__all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "patch_parameters", "surface_values",
-           "surface_weights"]
+__all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
+           "surface_values", "surface_weights"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -163,6 +163,34 @@ def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.nd
     for c in range(k):
         out[:, c] = np.bincount(row, weights=d[:, c], minlength=G.shape[0])
     return out / G.meta["rays"]
+
+
+def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0) -> CSR:
+    """:func:`correct_hits` as a matrix, for values that change while the hits and their choice
+    do not (a relight): C (P x (V + ``extra``)), float64, such that ``C @ [vertex_values; x]``
+    is what :func:`correct_hits` adds when ``exact(y, pid)`` reads ``x`` (``extra``, k) through
+    ``read(y, pid) -> (columns (h, m) into x, weights (h, m))`` (None: reads nothing, 0)."""
+    P, V = G.shape
+    R = G.meta["rays"]
+    H = H[select[H[:, 1].astype(np.int64)]]
+    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:].astype(np.float64)
+    ids, w = surface_weights(patch_parameters(patches), patches.polys, pid, y)
+    rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
+    if read is not None and len(H):
+        c, r = read(y, pid)
+        rows.append(np.repeat(row, c.shape[1]))
+        cols.append(V + np.asarray(c, np.int64).ravel())
+        vals.append(np.asarray(r, np.float64).ravel())
+    rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
+    n = V + int(extra)
+    key, inv = np.unique(rows * n + cols, return_inverse=True)
+    summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
+    keep = summed != 0
+    key, summed = key[keep], summed[keep]
+    indptr = np.zeros(P + 1, np.int64)
+    np.cumsum(np.bincount(key // n, minlength=P), out=indptr[1:])
+    return CSR(indptr, (key % n).astype(np.int32 if n < 2 ** 31 else np.int64), summed, (P, n),
+               {"rays": R})
 
 
 def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, rays=256, seed=0,

@@ -21,7 +21,7 @@ from .cache import cache_key, cached
 from .clusters import _components
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
-from .gather import apply_gather, correct_hits, gather_matrix
+from .gather import apply_gather, correction_matrix, gather_matrix
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
@@ -124,17 +124,25 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     if not (select.any() or hot.any()):
         return out
     grid = cells = None
+    x, masks = np.zeros((0, 3)), [select, hot]
     if select.any():
         grid = _AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar)
         cells = grid.hot_cells()
+        x, masks = np.concatenate([grid.values, grid.cell_mean]), masks + [grid.spiky, grid.hot]
 
-    def exact(y, pid):              # abrupt elements: their grid (none where it shines)
-        D = np.zeros((len(pid), 3))
+    def read(y, pid):               # abrupt elements: their grid (none where it shines)
+        cols, w = np.zeros((len(pid), 4), np.int64), np.zeros((len(pid), 4))
         on = select[pid]
         if on.any():
-            D[on] = grid.at(y[on], pid[on])
-        return D
-    out += correct_hits(G, H, elements, direct_e, exact, select | hot)
+            cols[on], w[on] = grid.weights(y[on], pid[on])
+        return cols, w
+    # the hits' correction as a matrix: it depends on geometry and on what was chosen (on the
+    # light arriving), so a relight that chooses the same reads its new light through it
+    s = ctx.settings
+    key = cache_key(elements.geometry_key() + b"".join(np.packbits(m).tobytes() for m in masks),
+                    ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
+    C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
+    out += C.matvec(np.concatenate([direct_e, x]))
     if hot.any() or (cells is not None and len(cells[0])):
         out += _shine(ctx, elements, np.flatnonzero(hot), shine[hot], xv, nv, cells)
     return out
@@ -362,6 +370,12 @@ class _AbruptGrid:
         """(h, 3) the grid's light at points ``y`` (h, 3) on elements ``pid`` (h,): bilinear in
         the cell each falls in over its corners seen, its mean where it is spiky, nothing where
         it shines."""
+        cols, w = self.weights(y, pid)
+        return np.einsum("hc,hck->hk", w, np.concatenate([self.values, self.cell_mean])[cols])
+
+    def weights(self, y, pid):
+        """(columns (h, 4), weights (h, 4)): :meth:`at` as weights of the rows of
+        ``[values; cell_mean]`` (a relight reads new light through the same weights)."""
         loc = self.local[pid]
         n = self.n[loc]
         u, v = self.uv(np.asarray(y, dtype=np.float64), pid)
@@ -374,11 +388,13 @@ class _AbruptGrid:
         seen = w * np.stack([self.seen[q] for q in k], axis=1)
         total = seen.sum(axis=1, keepdims=True)
         w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
-        out = np.einsum("hc,hck->hk", w, np.stack([self.values[q] for q in k], axis=1))
+        cols = np.stack(k, axis=1)
         cell = self.cell_offset[loc] + i * n + j
-        out[self.spiky[cell]] = self.cell_mean[cell[self.spiky[cell]]]
-        out[self.hot[cell]] = 0.0
-        return out
+        spiky = self.spiky[cell]
+        cols[spiky] = len(self.values) + cell[spiky, None]
+        w[spiky] = (1.0, 0.0, 0.0, 0.0)
+        w[self.hot[cell]] = 0.0
+        return cols, w
 
 
 def _open_elements(ctx, elements):
@@ -412,12 +428,17 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
     have a corner at the same place, whether or not the mesh shares the vertex (a floor
     modelled as four faces around a hole groups as one floor would)."""
     size = scale * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
-    key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
-    place = np.unique(elements.verts, axis=0, return_inverse=True)[1].reshape(-1)
-    polys = elements.polys[ids]
-    polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
-    return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
+
+    def groups():
+        cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
+        key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
+        place = np.unique(elements.verts, axis=0, return_inverse=True)[1].reshape(-1)
+        polys = elements.polys[ids]
+        polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
+        return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
+    # geometry only (a relight that shines the same elements finds them grouped)
+    ids = np.ascontiguousarray(ids, dtype=np.int64)
+    return cached(ctx.cache, cache_key(elements.geometry_key() + ids.tobytes(), ("shine-groups", size)), groups)
 
 
 def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
