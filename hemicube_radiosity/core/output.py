@@ -17,7 +17,7 @@ import hashlib
 
 import numpy as np
 
-from .cache import cache_key, cached
+from .cache import cache_key, cached, geometry_key
 from .clusters import _components
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
@@ -113,7 +113,7 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     direct_e = rho_v * light_v
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
-    out = apply_gather(G, G.sky, direct_e + rest_e, world)
+    out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
     # a relight that changes a colour or scales the lamps picks the same elements and finds
     # their grids and shine in the cache (no ray)
@@ -139,7 +139,7 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     # the hits' correction as a matrix: it depends on geometry and on what was chosen (on the
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
-    key = cache_key(elements.geometry_key() + b"".join(np.packbits(m).tobytes() for m in masks),
+    key = cache_key(geometry_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
     C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
     out += C.matvec(np.concatenate([direct_e, x]))
@@ -251,36 +251,18 @@ class _AbruptGrid:
 
     def __init__(self, ctx, elements, ids, floor, bar, ratio=4.0, inset=1e-2):
         size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
-        n = np.ceil(np.sqrt(elements.areas[ids]) / (size / self.CELLS))
-        self.n = n = np.clip(n, 1, self.CELLS).astype(np.int64)
-        self.inset = inset
-        count = (n + 1) ** 2
-        self.offset = np.concatenate([[0], np.cumsum(count)[:-1]])
-        self.cell_offset = np.concatenate([[0], np.cumsum(n * n)[:-1]])
-        self.local = np.full(len(elements), -1, np.int64)
-        self.local[ids] = np.arange(len(ids))
-        self.elements = elements
-        self.corners = elements.corners()
-        x = np.empty((int(count.sum()), 3))
-        for k in np.unique(n):
-            m = np.flatnonzero(n == k)
-            t = inset + (1 - 2 * inset) * np.arange(k + 1) / k
-            u, v = (a.reshape(1, -1, 1) for a in np.meshgrid(t, t, indexing="ij"))   # point i * (k+1) + j
-            p = _bilinear(self.corners[ids[m]][:, None], u, v)                       # (m, (k+1)^2, 3)
-            x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
-        owner = np.repeat(ids, count)
-        nrm = elements.normals[owner]
+        self.inset, self.elements = inset, elements
+        # the grid's geometry, cached on the elements chosen (a relight that chooses the same
+        # only lights its points again)
+        key = cache_key(geometry_key(elements) + np.ascontiguousarray(ids, np.int64).tobytes(),
+                        ("abrupt-grid", size, self.CELLS, inset))
+        (self.n, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
+         loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
+        n = self.n
         light = ctx.direct.at(x, nrm, "abrupt-grid")
         self.values = elements.rho[owner] * light
-        self.seen = _seen(ctx, elements, x, nrm)
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
-        # every cell: its element (local index), row i, column j
-        loc = np.repeat(np.arange(len(ids)), n * n)
-        r = np.arange(loc.size) - self.cell_offset[loc]
-        i, j = r // n[loc], r % n[loc]
-        k = self._corner_ids(loc, i, j)
-        Yc = np.stack([Y[q] for q in k], axis=1)
-        w = np.stack([self.seen[q] for q in k], axis=1)
+        Yc = Y[k.T]
         # spiky: the brightest corner, seen or not, against the darkest seen one (a corner
         # buried in a block is dark for want of light, not a peak to look for between corners)
         hi, lo = Yc.max(axis=1), np.where(w > 0, Yc, np.inf).min(axis=1)
@@ -288,7 +270,7 @@ class _AbruptGrid:
         # each cell's mean over the part seen, and how much of it is seen
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
-        mean = np.einsum("cq,cqk->ck", w, np.stack([self.values[q] for q in k], axis=1))
+        mean = np.einsum("cq,cqk->ck", w, self.values[k.T])
         mean /= w.sum(axis=1)[:, None]
         s = self.spiky
         if s.any():
@@ -298,6 +280,37 @@ class _AbruptGrid:
         arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
         self.hot = (seen > 0) & (arriving @ LUMA > bar)
         self.ids, self.cell_loc, self.cell_i, self.cell_j = ids, loc, i, j
+
+    def _layout(self, ctx, elements, ids, size, inset):
+        """The grid's geometry: (n, offset, cell_offset, local, corners, points (X, 3), their
+        elements and normals, :func:`_seen` at them, every cell's element (local index), row i,
+        column j, corner point ids (4, cells) and :func:`_seen` at its corners (cells, 4))."""
+        n = np.ceil(np.sqrt(elements.areas[ids]) / (size / self.CELLS))
+        n = np.clip(n, 1, self.CELLS).astype(np.int64)
+        count = (n + 1) ** 2
+        self.n = n
+        self.offset = np.concatenate([[0], np.cumsum(count)[:-1]])
+        self.cell_offset = np.concatenate([[0], np.cumsum(n * n)[:-1]])
+        local = np.full(len(elements), -1, np.int64)
+        local[ids] = np.arange(len(ids))
+        corners = elements.corners()
+        x = np.empty((int(count.sum()), 3))
+        for k in np.unique(n):
+            m = np.flatnonzero(n == k)
+            t = inset + (1 - 2 * inset) * np.arange(k + 1) / k
+            u, v = (a.reshape(1, -1, 1) for a in np.meshgrid(t, t, indexing="ij"))   # point i * (k+1) + j
+            p = _bilinear(corners[ids[m]][:, None], u, v)                            # (m, (k+1)^2, 3)
+            x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
+        owner = np.repeat(ids, count)
+        nrm = elements.normals[owner]
+        seen = _seen(ctx, elements, x, nrm)
+        # every cell: its element (local index), row i, column j
+        loc = np.repeat(np.arange(len(ids)), n * n)
+        r = np.arange(loc.size) - self.cell_offset[loc]
+        i, j = r // n[loc], r % n[loc]
+        k = np.stack(self._corner_ids(loc, i, j))
+        return (n, self.offset, self.cell_offset, local, corners, x, owner, nrm, seen, loc, i, j, k,
+                seen[k.T])
 
     def hot_cells(self):
         """The cells that shine: (elements (c,), corners (c, 4, 3), radiance (c, 3)). A cell is the
@@ -328,21 +341,27 @@ class _AbruptGrid:
         on their order, and the cells along a lamp's edge do not all sample its glow at the same
         distance (one pattern for every cell made a room's walls 3.7% too bright)."""
         S = self.SPIKE
-        a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
-        n = self.n[loc][:, None]
-        c = self.corners[ids[loc]][:, None]                                           # (c, 1, 4, 3)
-        centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
-        ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S).transpose(1, 0, 2)
-        su = (i[:, None] + (a + ju) / S) / n
-        sv = (j[:, None] + (b + jv) / S) / n
-        u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
-        x = _bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
-        el = np.repeat(ids[loc], S * S)
-        nrm = self.elements.normals[el]
+
+        def points():               # geometry, cached on the cells (a relight finds them)
+            a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
+            n = self.n[loc][:, None]
+            c = self.corners[ids[loc]][:, None]                                       # (c, 1, 4, 3)
+            centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
+            ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S).transpose(1, 0, 2)
+            su = (i[:, None] + (a + ju) / S) / n
+            sv = (j[:, None] + (b + jv) / S) / n
+            u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
+            x = _bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
+            el = np.repeat(ids[loc], S * S)
+            nrm = self.elements.normals[el]
+            return x, el, nrm, _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
+        key = cache_key(geometry_key(self.elements) + b"".join(np.ascontiguousarray(a, np.int64).tobytes()
+                                                                for a in (ids, self.n, loc, i, j)),
+                        ("abrupt-cells", self.SPIKE, self.inset))
+        x, el, nrm, w = cached(ctx.cache, key, points)
         # one shadow ray per emitting patch and point: the mean over the points is what counts
         D = self.elements.rho[el] * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
         D = D.reshape(loc.size, S * S, 3)
-        w = _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
         return np.einsum("cs,csk->ck", w, D) / w.sum(axis=1)[:, None], seen
@@ -405,7 +424,7 @@ def _open_elements(ctx, elements):
     if not embree_available():
         return None
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(elements.geometry_key(), ("open-centres", reach))
+    key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach))
     return (f > 0.05).astype(np.float64)
@@ -417,7 +436,7 @@ def _seen(ctx, elements, x, nrm):
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
     millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(elements.geometry_key() + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach))
     return np.minimum(1.0, f / 0.5)
 
@@ -438,7 +457,7 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
         return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
     # geometry only (a relight that shines the same elements finds them grouped)
     ids = np.ascontiguousarray(ids, dtype=np.int64)
-    return cached(ctx.cache, cache_key(elements.geometry_key() + ids.tobytes(), ("shine-groups", size)), groups)
+    return cached(ctx.cache, cache_key(geometry_key(elements) + ids.tobytes(), ("shine-groups", size)), groups)
 
 
 def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
@@ -483,7 +502,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    key = cache_key(elements.geometry_key() + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
                     + groups.tobytes() + power.tobytes() + np.ascontiguousarray(xv).tobytes(), ("shine", samples))
     T = cached(ctx.cache, key, lambda: emitter_transport(
         source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
@@ -497,7 +516,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
 def _gather_rays(ctx, elements, xv, nv):
     """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
     H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only."""
-    key = cache_key(elements.geometry_key(), ("gather-elements", ctx.settings.gather_rays))
+    key = cache_key(geometry_key(elements), ("gather-elements", ctx.settings.gather_rays))
     G = ctx.cache.get(key) if ctx.cache is not None else None
     H = ctx.cache.get(key + "-hits") if ctx.cache is not None else None
     if G is None or H is None:
@@ -531,7 +550,7 @@ def _interpolated(ctx, elements, field_v, xv, nv):
             owner_v[elements.polys[on, c]] = elements.owner[on]
         return locate(ctx.patches, xv, owner=owner_v, normals=nv)
 
-    key = cache_key(ctx.patches.geometry_key() + elements.geometry_key(), ("located",))
+    key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
     return interpolate_located(ctx.patches, field_v, *cached(ctx.cache, key, where))
 
 
@@ -556,7 +575,7 @@ def _cut_elements(ctx) -> PatchSet:
     s = ctx.settings
     ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
     elements = output_elements(ctx.meshes, s, ctx.cache)
-    if elements.geometry_key() == ctx.patches.geometry_key():
+    if geometry_key(elements) == geometry_key(ctx.patches):
         return ctx.patches                    # the input is finer than the detail: its own faces
     if len(elements) > s.max_elements:
         raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
