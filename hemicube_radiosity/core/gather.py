@@ -205,20 +205,43 @@ def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, ra
 def apply_gather(G, sky, vertex_values, world=None, workers=1) -> np.ndarray:
     """``G @ vals + sky * world`` (see :func:`gather_matrix`). ``workers`` (0 = every core):
     threads that take a share of G's rows each (NumPy lets go of the GIL in the gathers and
-    sums), at most one per million entries; the same result, bit for bit."""
+    sums), at most one per million entries. Rows are summed as :meth:`.sparse.CSR.matvec` sums
+    them: the same result, bit for bit, for any count."""
     vals = np.asarray(vertex_values, dtype=np.float64)
+    one = vals.ndim == 1
+    xt = np.ascontiguousarray((vals[:, None] if one else vals).T)     # (k, V): contiguous gathers
+    out = np.zeros((G.shape[0], xt.shape[0]))
     n = min(resolve_workers(workers), max(1, G.nnz >> 20))
-    if n <= 1:
-        out = G.matvec(vals)
-    else:
-        bounds = [0, *np.searchsorted(G.indptr, np.linspace(0, G.nnz, n + 1)[1:-1]).tolist(), G.shape[0]]
-
-        def rows(i):
-            r0, r1 = bounds[i], bounds[i + 1]
-            s, e = G.indptr[r0], G.indptr[r1]
-            return CSR(G.indptr[r0:r1 + 1] - s, G.indices[s:e], G.data[s:e], (r1 - r0, G.shape[1])).matvec(vals)
-        with closing(ordered_map(rows, range(n), n)) as parts:
-            out = np.concatenate(list(parts))
+    bounds = [0, *np.searchsorted(G.indptr, np.linspace(0, G.nnz, n + 1)[1:-1]).tolist(), G.shape[0]]
+    with closing(ordered_map(lambda i: _rows_product(G, xt, bounds[i], bounds[i + 1], out), range(n), n)) as done:
+        for _ in done:
+            pass
+    out = out[:, 0] if one else out
     if world is not None:
         out = out + sky[:, None] * np.asarray(world, dtype=np.float64)[None, :]
     return out
+
+
+def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
+    """``out[r0:r1] = (G @ x)[r0:r1]`` for ``xt`` = x.T (k, V), in runs of rows of about ``chunk``
+    entries, so that the products stay in the CPU's cache (whole-matrix temporaries, hundreds of
+    megabytes on a dense mesh's G, made the product twice as slow); each row is summed as
+    :meth:`.sparse.CSR.matvec` sums it."""
+    ip = G.indptr
+    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
+    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    buf = np.empty(0)
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        s, e = ip[a], ip[b]
+        if e == s:
+            continue
+        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
+        starts = ip[a:b][nz] - s
+        idx, d = G.indices[s:e], G.data[s:e]
+        if buf.size < e - s:
+            buf = np.empty(max(e - s, chunk))
+        p = buf[:e - s]
+        for k in range(xt.shape[0]):   # float32 data times float64 x: products in float64
+            np.take(xt[k], idx, out=p)
+            np.multiply(p, d, out=p)
+            out[a + nz, k] = np.add.reduceat(p, starts)
