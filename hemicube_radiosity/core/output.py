@@ -21,7 +21,7 @@ from .cache import cache_key, cached, geometry_key
 from .clusters import _components
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
-from .gather import apply_gather, correction_matrix, gather_matrix
+from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
@@ -142,7 +142,7 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     key = cache_key(geometry_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
     C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
-    out += C.matvec(np.concatenate([direct_e, x]))
+    out += product(C, np.concatenate([direct_e, x]))
     if hot.any() or (cells is not None and len(cells[0])):
         out += _shine(ctx, elements, np.flatnonzero(hot), shine[hot], xv, nv, cells)
     return out
@@ -510,7 +510,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     G = int(groups.max()) + 1
     L = np.stack([np.bincount(groups, weights=area * L[:, k], minlength=G) for k in range(3)], 1) \
         / np.bincount(groups, weights=area, minlength=G)[:, None]
-    return apply_transport(T, L)
+    return transport_product(T, L)
 
 
 def _gather_rays(ctx, elements, xv, nv):
