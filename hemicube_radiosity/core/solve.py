@@ -164,7 +164,7 @@ def _segment_sums(vals, cols, x, starts, nonempty, nrows):
     rows. Returns (nrows, bands)."""
     out = np.zeros((nrows, x.shape[0]))
     if starts.size:   # every band at once: the same sums, bit for bit, a third of the calls
-        out[nonempty] = np.add.reduceat(x[:, cols] * vals, starts, axis=1, dtype=np.float64).T
+        out[nonempty] = np.add.reduceat(np.take(x, cols, axis=1) * vals, starts, axis=1, dtype=np.float64).T
     return out
 
 
