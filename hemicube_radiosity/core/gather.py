@@ -257,9 +257,10 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
 def transport_product(T, L) -> np.ndarray:
     """``T @ L`` for a dense (P, M) transport (float32) and (M, 3) radiances, in float64, equal
     bit for bit to :func:`.direct.apply_transport` (each sum runs over m in order; with one
-    band einsum sums otherwise, to the last bit) and, without BLAS either, several times faster: the sums run down the rows of T transposed, whole rows
-    at a time (einsum's mixed-precision loop took 7.6 ms for the 13,249 x 37 transport of the
-    dense room's shining groups, this 1.1 ms)."""
+    band einsum sums otherwise, to the last bit) and, without BLAS either, several times
+    faster: the sums run down the rows of T transposed, whole rows at a time (einsum's
+    mixed-precision loop took 7.6 ms for the 13,249 x 37 transport of the dense room's shining
+    groups, this 1.1 ms)."""
     L = np.asarray(L, dtype=np.float64)
     Tt = np.ascontiguousarray(np.asarray(T).T)
     if Tt.shape[0] == 0:

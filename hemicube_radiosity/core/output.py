@@ -253,9 +253,9 @@ class _AbruptGrid:
         size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
         self.inset, self.elements = inset, elements
         # the grid's geometry, cached on the elements chosen (a relight that chooses the same
-        # only lights its points again)
+        # only lights its points again); the patch size sets :func:`_seen`'s reach
         key = cache_key(geometry_key(elements) + np.ascontiguousarray(ids, np.int64).tobytes(),
-                        ("abrupt-grid", size, self.CELLS, inset))
+                        ("abrupt-grid", size, ctx.settings.patch_size, self.CELLS, inset))
         (self.n, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
          loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
         n = self.n
@@ -347,7 +347,8 @@ class _AbruptGrid:
             n = self.n[loc][:, None]
             c = self.corners[ids[loc]][:, None]                                       # (c, 1, 4, 3)
             centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
-            ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S).transpose(1, 0, 2)
+            ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S) \
+                .transpose(1, 0, 2)
             su = (i[:, None] + (a + ju) / S) / n
             sv = (j[:, None] + (b + jv) / S) / n
             u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
@@ -357,7 +358,8 @@ class _AbruptGrid:
             return x, el, nrm, _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
         key = cache_key(geometry_key(self.elements) + b"".join(np.ascontiguousarray(a, np.int64).tobytes()
                                                                 for a in (ids, self.n, loc, i, j)),
-                        ("abrupt-cells", self.SPIKE, self.inset))
+                        ("abrupt-cells", ctx.settings.patch_size, ctx.settings.element_size, self.SPIKE,
+                         self.inset))
         x, el, nrm, w = cached(ctx.cache, key, points)
         # one shadow ray per emitting patch and point: the mean over the points is what counts
         D = self.elements.rho[el] * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
