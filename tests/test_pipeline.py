@@ -332,3 +332,40 @@ def test_relight_of_a_lamp_under_a_ceiling_casts_no_ray_and_equals_a_cold_bake(m
     monkeypatch.setattr(pipeline, "build_patches", forbidden)
     warm = bake(changed, s, cache=cache)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+
+
+def test_relight_that_moves_the_bright_areas_chooses_again_and_equals_a_cold_bake(monkeypatch):
+    """What the gather reads exactly or shines (abrupt and hot elements, their grid's cells) is
+    judged on the light arriving, and the hits' correction matrix is cached under that choice:
+    a relight that only scales the light reuses it, while one that moves the light elsewhere (a
+    second lamp low on the red wall turned from as bright as the ceiling lamp to dim) chooses
+    again and builds a new one, never reads a stale one, and equals a cold bake."""
+    from hemicube_radiosity.core import output
+    from hemicube_radiosity.core.scenes import quad
+
+    def scene(top, low, wall=None):
+        meshes = cornell_box(light_radiance=top)
+        z, y = 0.3, 1.0       # a small lamp 1 cm off the red wall (x = 0), facing +x
+        meshes.append(quad([(0.01, y - 0.15, z - 0.15), (0.01, y - 0.15, z + 0.15), (0.01, y + 0.15, z + 0.15),
+                            (0.01, y + 0.15, z - 0.15)], (0.0, 0.0, 0.0), (low,) * 3, name="LowLamp"))
+        if wall is not None:
+            meshes[4].face_rho[:] = wall
+        return meshes
+
+    built = []
+    real = output.correction_matrix
+    monkeypatch.setattr(output, "correction_matrix", lambda *a, **k: built.append(1) or real(*a, **k))
+    s = BakeSettings(patch_size=0.5, element_size=0.125, gather_rays=64, resolution=32, tolerance=1e-8)
+    cache = FormFactorCache()
+    bake(scene(8.0, 8.0), s, cache=cache)
+    assert built
+    built.clear()
+    warm = bake(scene(10.0, 10.0, (0.2, 0.2, 0.7)), s, cache=cache)      # the same light, scaled
+    assert not built
+    cold = bake(scene(10.0, 10.0, (0.2, 0.2, 0.7)), s)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+    built.clear()
+    warm = bake(scene(8.0, 0.08), s, cache=cache)                          # the light moved
+    assert built
+    cold = bake(scene(8.0, 0.08), s)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)

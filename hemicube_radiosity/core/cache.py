@@ -15,13 +15,31 @@ import numpy as np
 
 from .sparse import CSR
 
-__all__ = ["FormFactorCache", "cache_key", "cached"]
+__all__ = ["FormFactorCache", "cache_key", "cached", "geometry_key"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
     h = hashlib.sha256(geometry_key)
     h.update(repr(settings_key).encode())
     return h.hexdigest()
+
+
+_GEOMETRY: dict = {}     # id(polys) -> (verts, polys, key): the last few geometries hashed
+
+
+def geometry_key(patches) -> bytes:
+    """``patches.geometry_key()``, hashed once per pair of ``verts`` and ``polys`` arrays (the
+    same objects: a relight's patches and elements share their cached geometry's arrays, and a
+    bake keys a dozen products on them). Geometry arrays are never changed in place."""
+    v, p = patches.verts, patches.polys
+    hit = _GEOMETRY.get(id(p))
+    if hit is not None and hit[0] is v and hit[1] is p:
+        return hit[2]
+    key = patches.geometry_key()
+    while len(_GEOMETRY) >= 16:
+        _GEOMETRY.pop(next(iter(_GEOMETRY)))
+    _GEOMETRY[id(p)] = (v, p, key)
+    return key
 
 
 def cached(cache, key, make):

@@ -17,12 +17,12 @@ import hashlib
 
 import numpy as np
 
-from .cache import cache_key, cached
+from .cache import cache_key, cached, geometry_key
 from .clusters import _components
 from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
-from .gather import apply_gather, correct_hits, gather_matrix
+from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
@@ -121,12 +121,12 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     direct_e = rho_v * light_v
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
-    out = apply_gather(G, G.sky, direct_e + rest_e, world)
+    out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
-    return _bounce_again(G, rho_v, out, rest_e)
+    return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers)
 
 
-def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4):
+def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1):
     """The gather again, reading the light reflected more than once as the elements reflect what
     it found (rho_v * out) instead of the patch solution's (``rest_e``); ``passes`` times, or
     until it changes by less than ``tol`` of its largest value (many passes: the element-level
@@ -138,7 +138,7 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4):
     zero = np.zeros_like(G.sky)
     before = rest_e
     for _ in range(passes):
-        step = apply_gather(G, zero, rho_v * out - before, None)
+        step = apply_gather(G, zero, rho_v * out - before, None, workers)
         before = rho_v * out
         out = out + step
         if np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
@@ -160,17 +160,25 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
     if not (select.any() or hot.any()):
         return out
     grid = cells = None
+    x, masks = np.zeros((0, 3)), [select, hot]
     if select.any():
         grid = _AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar)
         cells = grid.hot_cells()
+        x, masks = np.concatenate([grid.values, grid.cell_mean]), masks + [grid.spiky, grid.hot]
 
-    def exact(y, pid):              # abrupt elements: their grid (none where it shines)
-        D = np.zeros((len(pid), 3))
+    def read(y, pid):               # abrupt elements: their grid (none where it shines)
+        cols, w = np.zeros((len(pid), 4), np.int64), np.zeros((len(pid), 4))
         on = select[pid]
         if on.any():
-            D[on] = grid.at(y[on], pid[on])
-        return D
-    out += correct_hits(G, H, elements, direct_e, exact, select | hot)
+            cols[on], w[on] = grid.weights(y[on], pid[on])
+        return cols, w
+    # the hits' correction as a matrix: it depends on geometry and on what was chosen (on the
+    # light arriving), so a relight that chooses the same reads its new light through it
+    s = ctx.settings
+    key = cache_key(geometry_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
+                    ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
+    C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
+    out += product(C, np.concatenate([direct_e, x]))
     if hot.any() or (cells is not None and len(cells[0])):
         out += _shine(ctx, elements, np.flatnonzero(hot), shine[hot], xv, nv, cells)
     return out
@@ -279,36 +287,18 @@ class _AbruptGrid:
 
     def __init__(self, ctx, elements, ids, floor, bar, ratio=4.0, inset=1e-2):
         size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
-        n = np.ceil(np.sqrt(elements.areas[ids]) / (size / self.CELLS))
-        self.n = n = np.clip(n, 1, self.CELLS).astype(np.int64)
-        self.inset = inset
-        count = (n + 1) ** 2
-        self.offset = np.concatenate([[0], np.cumsum(count)[:-1]])
-        self.cell_offset = np.concatenate([[0], np.cumsum(n * n)[:-1]])
-        self.local = np.full(len(elements), -1, np.int64)
-        self.local[ids] = np.arange(len(ids))
-        self.elements = elements
-        self.corners = elements.corners()
-        x = np.empty((int(count.sum()), 3))
-        for k in np.unique(n):
-            m = np.flatnonzero(n == k)
-            t = inset + (1 - 2 * inset) * np.arange(k + 1) / k
-            u, v = (a.reshape(1, -1, 1) for a in np.meshgrid(t, t, indexing="ij"))   # point i * (k+1) + j
-            p = _bilinear(self.corners[ids[m]][:, None], u, v)                       # (m, (k+1)^2, 3)
-            x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
-        owner = np.repeat(ids, count)
-        nrm = elements.normals[owner]
+        self.inset, self.elements = inset, elements
+        # the grid's geometry, cached on the elements chosen (a relight that chooses the same
+        # only lights its points again); the patch size sets :func:`_seen`'s reach
+        key = cache_key(geometry_key(elements) + np.ascontiguousarray(ids, np.int64).tobytes(),
+                        ("abrupt-grid", size, ctx.settings.patch_size, self.CELLS, inset))
+        (self.n, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
+         loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
+        n = self.n
         light = ctx.direct.at(x, nrm, "abrupt-grid")
         self.values = elements.rho[owner] * light
-        self.seen = _seen(ctx, elements, x, nrm)
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
-        # every cell: its element (local index), row i, column j
-        loc = np.repeat(np.arange(len(ids)), n * n)
-        r = np.arange(loc.size) - self.cell_offset[loc]
-        i, j = r // n[loc], r % n[loc]
-        k = self._corner_ids(loc, i, j)
-        Yc = np.stack([Y[q] for q in k], axis=1)
-        w = np.stack([self.seen[q] for q in k], axis=1)
+        Yc = Y[k.T]
         # spiky: the brightest corner, seen or not, against the darkest seen one (a corner
         # buried in a block is dark for want of light, not a peak to look for between corners)
         hi, lo = Yc.max(axis=1), np.where(w > 0, Yc, np.inf).min(axis=1)
@@ -316,7 +306,7 @@ class _AbruptGrid:
         # each cell's mean over the part seen, and how much of it is seen
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
-        mean = np.einsum("cq,cqk->ck", w, np.stack([self.values[q] for q in k], axis=1))
+        mean = np.einsum("cq,cqk->ck", w, self.values[k.T])
         mean /= w.sum(axis=1)[:, None]
         s = self.spiky
         if s.any():
@@ -326,6 +316,37 @@ class _AbruptGrid:
         arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
         self.hot = (seen > 0) & (arriving @ LUMA > bar)
         self.ids, self.cell_loc, self.cell_i, self.cell_j = ids, loc, i, j
+
+    def _layout(self, ctx, elements, ids, size, inset):
+        """The grid's geometry: (n, offset, cell_offset, local, corners, points (X, 3), their
+        elements and normals, :func:`_seen` at them, every cell's element (local index), row i,
+        column j, corner point ids (4, cells) and :func:`_seen` at its corners (cells, 4))."""
+        n = np.ceil(np.sqrt(elements.areas[ids]) / (size / self.CELLS))
+        n = np.clip(n, 1, self.CELLS).astype(np.int64)
+        count = (n + 1) ** 2
+        self.n = n
+        self.offset = np.concatenate([[0], np.cumsum(count)[:-1]])
+        self.cell_offset = np.concatenate([[0], np.cumsum(n * n)[:-1]])
+        local = np.full(len(elements), -1, np.int64)
+        local[ids] = np.arange(len(ids))
+        corners = elements.corners()
+        x = np.empty((int(count.sum()), 3))
+        for k in np.unique(n):
+            m = np.flatnonzero(n == k)
+            t = inset + (1 - 2 * inset) * np.arange(k + 1) / k
+            u, v = (a.reshape(1, -1, 1) for a in np.meshgrid(t, t, indexing="ij"))   # point i * (k+1) + j
+            p = _bilinear(corners[ids[m]][:, None], u, v)                            # (m, (k+1)^2, 3)
+            x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
+        owner = np.repeat(ids, count)
+        nrm = elements.normals[owner]
+        seen = _seen(ctx, elements, x, nrm)
+        # every cell: its element (local index), row i, column j
+        loc = np.repeat(np.arange(len(ids)), n * n)
+        r = np.arange(loc.size) - self.cell_offset[loc]
+        i, j = r // n[loc], r % n[loc]
+        k = np.stack(self._corner_ids(loc, i, j))
+        return (n, self.offset, self.cell_offset, local, corners, x, owner, nrm, seen, loc, i, j, k,
+                seen[k.T])
 
     def hot_cells(self):
         """The cells that shine: (elements (c,), corners (c, 4, 3), radiance (c, 3)). A cell is the
@@ -356,21 +377,29 @@ class _AbruptGrid:
         on their order, and the cells along a lamp's edge do not all sample its glow at the same
         distance (one pattern for every cell made a room's walls 3.7% too bright)."""
         S = self.SPIKE
-        a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
-        n = self.n[loc][:, None]
-        c = self.corners[ids[loc]][:, None]                                           # (c, 1, 4, 3)
-        centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
-        ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S).transpose(1, 0, 2)
-        su = (i[:, None] + (a + ju) / S) / n
-        sv = (j[:, None] + (b + jv) / S) / n
-        u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
-        x = _bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
-        el = np.repeat(ids[loc], S * S)
-        nrm = self.elements.normals[el]
+
+        def points():               # geometry, cached on the cells (a relight finds them)
+            a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
+            n = self.n[loc][:, None]
+            c = self.corners[ids[loc]][:, None]                                       # (c, 1, 4, 3)
+            centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
+            ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S) \
+                .transpose(1, 0, 2)
+            su = (i[:, None] + (a + ju) / S) / n
+            sv = (j[:, None] + (b + jv) / S) / n
+            u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
+            x = _bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
+            el = np.repeat(ids[loc], S * S)
+            nrm = self.elements.normals[el]
+            return x, el, nrm, _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
+        key = cache_key(geometry_key(self.elements) + b"".join(np.ascontiguousarray(a, np.int64).tobytes()
+                                                                for a in (ids, self.n, loc, i, j)),
+                        ("abrupt-cells", ctx.settings.patch_size, ctx.settings.element_size, self.SPIKE,
+                         self.inset))
+        x, el, nrm, w = cached(ctx.cache, key, points)
         # one shadow ray per emitting patch and point: the mean over the points is what counts
         D = self.elements.rho[el] * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
         D = D.reshape(loc.size, S * S, 3)
-        w = _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
         return np.einsum("cs,csk->ck", w, D) / w.sum(axis=1)[:, None], seen
@@ -398,6 +427,12 @@ class _AbruptGrid:
         """(h, 3) the grid's light at points ``y`` (h, 3) on elements ``pid`` (h,): bilinear in
         the cell each falls in over its corners seen, its mean where it is spiky, nothing where
         it shines."""
+        cols, w = self.weights(y, pid)
+        return np.einsum("hc,hck->hk", w, np.concatenate([self.values, self.cell_mean])[cols])
+
+    def weights(self, y, pid):
+        """(columns (h, 4), weights (h, 4)): :meth:`at` as weights of the rows of
+        ``[values; cell_mean]`` (a relight reads new light through the same weights)."""
         loc = self.local[pid]
         n = self.n[loc]
         u, v = self.uv(np.asarray(y, dtype=np.float64), pid)
@@ -410,11 +445,13 @@ class _AbruptGrid:
         seen = w * np.stack([self.seen[q] for q in k], axis=1)
         total = seen.sum(axis=1, keepdims=True)
         w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
-        out = np.einsum("hc,hck->hk", w, np.stack([self.values[q] for q in k], axis=1))
+        cols = np.stack(k, axis=1)
         cell = self.cell_offset[loc] + i * n + j
-        out[self.spiky[cell]] = self.cell_mean[cell[self.spiky[cell]]]
-        out[self.hot[cell]] = 0.0
-        return out
+        spiky = self.spiky[cell]
+        cols[spiky] = len(self.values) + cell[spiky, None]
+        w[spiky] = (1.0, 0.0, 0.0, 0.0)
+        w[self.hot[cell]] = 0.0
+        return cols, w
 
 
 def _open_elements(ctx, elements):
@@ -425,7 +462,7 @@ def _open_elements(ctx, elements):
     if not embree_available():
         return None
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(elements.geometry_key(), ("open-centres", reach))
+    key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach))
     return (f > 0.05).astype(np.float64)
@@ -437,7 +474,7 @@ def _seen(ctx, elements, x, nrm):
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
     millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(elements.geometry_key() + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach))
     return np.minimum(1.0, f / 0.5)
 
@@ -461,7 +498,7 @@ def _open_side(ctx, elements, xv, nv):
     buried = _seen(ctx, elements, xv, nv) < 0.5
     if not buried.any():
         return None
-    key = cache_key(elements.geometry_key() + np.ascontiguousarray(xv).tobytes(), ("open-side",))
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(xv).tobytes(), ("open-side",))
     return cached(ctx.cache, key, lambda: open_side(elements, buried, embree_scene(elements),
                                                     _open_elements(ctx, elements)))
 
@@ -472,12 +509,17 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
     have a corner at the same place, whether or not the mesh shares the vertex (a floor
     modelled as four faces around a hole groups as one floor would)."""
     size = scale * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
-    key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
-    place = np.unique(elements.verts, axis=0, return_inverse=True)[1].reshape(-1)
-    polys = elements.polys[ids]
-    polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
-    return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
+
+    def groups():
+        cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
+        key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
+        place = np.unique(elements.verts, axis=0, return_inverse=True)[1].reshape(-1)
+        polys = elements.polys[ids]
+        polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
+        return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
+    # geometry only (a relight that shines the same elements finds them grouped)
+    ids = np.ascontiguousarray(ids, dtype=np.int64)
+    return cached(ctx.cache, cache_key(geometry_key(elements) + ids.tobytes(), ("shine-groups", size)), groups)
 
 
 def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
@@ -522,7 +564,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    key = cache_key(elements.geometry_key() + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
                     + groups.tobytes() + power.tobytes() + np.ascontiguousarray(xv).tobytes(), ("shine", samples))
     T = cached(ctx.cache, key, lambda: emitter_transport(
         source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
@@ -530,13 +572,13 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     G = int(groups.max()) + 1
     L = np.stack([np.bincount(groups, weights=area * L[:, k], minlength=G) for k in range(3)], 1) \
         / np.bincount(groups, weights=area, minlength=G)[:, None]
-    return apply_transport(T, L)
+    return transport_product(T, L)
 
 
 def _gather_rays(ctx, elements, xv, nv):
     """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
     H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only."""
-    key = cache_key(elements.geometry_key(), ("gather-elements", ctx.settings.gather_rays))
+    key = cache_key(geometry_key(elements), ("gather-elements", ctx.settings.gather_rays))
     G = ctx.cache.get(key) if ctx.cache is not None else None
     H = ctx.cache.get(key + "-hits") if ctx.cache is not None else None
     if G is None or H is None:
@@ -570,7 +612,7 @@ def _interpolated(ctx, elements, field_v, xv, nv):
             owner_v[elements.polys[on, c]] = elements.owner[on]
         return locate(ctx.patches, xv, owner=owner_v, normals=nv)
 
-    key = cache_key(ctx.patches.geometry_key() + elements.geometry_key(), ("located",))
+    key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
     return interpolate_located(ctx.patches, field_v, *cached(ctx.cache, key, where))
 
 
@@ -595,7 +637,7 @@ def _cut_elements(ctx) -> PatchSet:
     s = ctx.settings
     ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
     elements = output_elements(ctx.meshes, s, ctx.cache)
-    if elements.geometry_key() == ctx.patches.geometry_key():
+    if geometry_key(elements) == geometry_key(ctx.patches):
         return ctx.patches                    # the input is finer than the detail: its own faces
     # no element across a wall's foot: cut along where surfaces stand on others
     key = cache_key(meshes_key(ctx.meshes), ("elements-cut", s.element_size))
