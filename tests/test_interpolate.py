@@ -43,7 +43,7 @@ def test_triangle_patches_interpolate_barycentrically():
 # ----------------------------------------------------------------------------- the grid search (issue 9)
 import pytest  # noqa: E402
 
-from hemicube_radiosity.core import interpolate  # noqa: E402
+from hemicube_radiosity.core import interpolate, spatial  # noqa: E402
 from hemicube_radiosity.core.interpolate import _bilinear, _inverse_bilinear  # noqa: E402
 from hemicube_radiosity.core.scenes import tessellate  # noqa: E402
 from hemicube_radiosity.core.spatial import k_nearest  # noqa: E402
@@ -133,7 +133,11 @@ def test_locate_equals_a_brute_force_search(monkeypatch, brute):
                 np.testing.assert_array_equal(uv, ref_uv)
 
 
-def test_k_nearest_equals_a_full_sort():
+@pytest.mark.parametrize("pairs", [None, 64])
+def test_k_nearest_equals_a_full_sort(monkeypatch, pairs):
+    """``pairs``: the (point, site) pairs handled at once, 64 to split every batch of points."""
+    if pairs is not None:
+        monkeypatch.setattr(spatial, "_PAIRS", pairs)
     rng = np.random.default_rng(4)
     for trial in range(24):
         N = int(rng.integers(1, 300))

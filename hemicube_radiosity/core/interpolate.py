@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .patches import PatchSet
-from .spatial import Grid, sq_dist
+from .spatial import _PAIRS, Grid, sq_dist
 
 __all__ = ["interpolate_located", "locate", "interpolate_at"]
 
@@ -133,8 +133,9 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
                 redo.append(ids[tied | (d2[:, k - 1] == d2[:, k])])
             redo = np.concatenate(redo)
         # the brute force, where the order of the candidates decides (or the object has few patches)
-        for s in range(0, redo.size, 256):
-            ids = redo[s:s + 256]
+        rows = max(1, _PAIRS // N)
+        for s in range(0, redo.size, rows):
+            ids = redo[s:s + rows]
             d2 = sq_dist(points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
             settle(ids, cand_all[np.argpartition(d2, k - 1, axis=1)[:, :k]])
     return out_idx, out_uv

@@ -18,6 +18,7 @@ import numpy as np
 __all__ = ["Grid", "k_nearest", "sq_dist"]
 
 _MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
+_PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
 
 
 def sq_dist(a, b):
@@ -86,7 +87,11 @@ class _Level:
         key = np.where(valid, self._key(nb), -1)
         pos = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
         hit = valid & (self.keys[pos] == key)
-        cnt = np.where(hit, self.count[pos], 0).ravel()
+        cnt = np.where(hit, self.count[pos], 0)
+        if m > 1 and int(cnt.sum()) > _PAIRS:     # crowded cells (sites much denser than the cell): halves
+            parts = [self.ring(sites, q, k, r) for q in (p[:m // 2], p[m // 2:])]
+            return tuple(np.concatenate(x) for x in zip(*parts))
+        cnt = cnt.ravel()
         nz = cnt > 0
         cnt, st = cnt[nz], self.start[pos].ravel()[nz]
         row = np.repeat(np.repeat(np.arange(m), nb.shape[1])[nz], cnt)
@@ -154,8 +159,9 @@ class Grid:
                 out_s[ids[ok]], out_d[ids[ok]] = s[ok], d[ok]
                 ids = ids[~ok]
                 i += 1
-            for b in range(0, ids.size, 256):
-                sub = ids[b:b + 256]
+            rows = max(1, _PAIRS // N)
+            for b in range(0, ids.size, rows):
+                sub = ids[b:b + rows]
                 out_s[sub], out_d[sub] = self._all(points[sub], k)
         return out_s, out_d
 
