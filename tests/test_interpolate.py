@@ -38,3 +38,119 @@ def test_triangle_patches_interpolate_barycentrically():
     vals = np.array([[1.0], [3.0], [5.0]])
     got = interpolate_at(ps, vals, [[0.5, 0.5, 0], [1, 1, 0], [0, 0, 0]])
     np.testing.assert_allclose(got[:, 0], [1 + 0.25 * 2 + 0.25 * 4, 1 + 0.5 * 2 + 0.5 * 4, 1.0], rtol=1e-9)
+
+
+# ----------------------------------------------------------------------------- the grid search (issue 9)
+import pytest  # noqa: E402
+
+from hemicube_radiosity.core import interpolate, spatial  # noqa: E402
+from hemicube_radiosity.core.interpolate import _bilinear, _inverse_bilinear  # noqa: E402
+from hemicube_radiosity.core.scenes import tessellate  # noqa: E402
+from hemicube_radiosity.core.spatial import k_nearest  # noqa: E402
+
+
+def _brute_locate(ps, points, owner=None, normals=None, candidates=8):
+    """locate as it was before the grid (issue 9): every point against every patch centre of its
+    object, the ``candidates`` nearest by ``np.argpartition``, tried in the order it gives."""
+    points = np.asarray(points, float)
+    powner = ps.owner if owner is not None else np.zeros(len(ps), np.int64)
+    owner = np.zeros(len(points), np.int64) if owner is None else np.asarray(owner)
+    corners, size = ps.corners(), np.sqrt(ps.areas)
+    idx, uv = np.empty(len(points), np.int64), np.empty((len(points), 2))
+    for o in np.unique(owner):
+        ids = np.flatnonzero(owner == o)
+        cand_all = np.flatnonzero(powner == o)
+        k = min(candidates, cand_all.size)
+        p = points[ids]
+        d2 = ((p[:, None, :] - ps.centers[cand_all][None]) ** 2).sum(-1)
+        near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < cand_all.size else np.broadcast_to(
+            np.arange(k), (ids.size, k))
+        cand = cand_all[near]
+        c = corners[cand]
+        pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
+        u, v = _inverse_bilinear(c, pp)
+        outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
+        uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
+        score = outside + np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
+        if normals is not None:
+            score = score + 10.0 * (np.einsum("mkj,mj->mk", ps.normals[cand], np.asarray(normals, float)[ids]) < 0.5)
+        b = np.argmin(score, axis=1)
+        r = np.arange(len(ids))
+        idx[ids], uv[ids] = cand[r, b], np.stack([uc[r, b], vc[r, b]], 1)
+    return idx, uv
+
+
+def _mixed_scene():
+    """Two patch sets: a box cut into quads with a rotated box of triangles (their points go
+    through two grid levels), and a floor of 1 m quads beside 0.1 m ones (cells sized for the
+    big ones, dozens of centres in a cell of the fine part)."""
+    big = tessellate([MeshInput.from_faces(np.array([[0, 0, 0], [4, 0, 0], [4, 4, 0], [0, 4, 0]], float),
+                                           [[0, 1, 2, 3]], name="big")], 4, triangles=False)[0]
+    fine = tessellate([MeshInput.from_faces(np.array([[4, 0, 0], [5, 0, 0], [5, 1, 0], [4, 1, 0]], float),
+                                            [[0, 1, 2, 3]], name="fine")], 10, triangles=False)[0]
+    cat = np.concatenate
+    offsets = cat([big.face_offsets, fine.face_offsets[1:] + big.face_offsets[-1]])
+    floor = MeshInput(cat([big.verts, fine.verts]), offsets,
+                      cat([big.face_indices, np.asarray(fine.face_indices) + len(big.verts)]),
+                      cat([big.face_rho, fine.face_rho]), cat([big.face_emission, fine.face_emission]), "floor")
+    a = build_patches([box((0, 0, 0.5), (1, 1, 1.5), name="a"),
+                       tessellate([box((2, 0, 0.5), (3, 1, 1.0), rotate_z=0.4, name="b")], 3)[0]], 0.25)
+    f = build_patches([floor], None)
+    return a, f
+
+
+def _points(ps, rng):
+    """Patch corners (on edges several patches share: ties), points inside patches, points off
+    the surfaces (near and far: the grid's last resort), each with its patch's owner and normal."""
+    corners = ps.corners()
+    sel = rng.integers(0, len(ps), 300)
+    u, v = rng.uniform(0, 1, (2, len(sel)))
+    inside = _bilinear(corners[sel], u, v)
+    on_corner = corners[sel, rng.integers(0, 4, len(sel))]
+    pts = np.concatenate([inside, on_corner, inside + rng.normal(0, 0.1, inside.shape),
+                          on_corner[:20] + [40.0, -3.0, 7.0]])
+    src = np.concatenate([sel, sel, sel, sel[:20]])
+    nrm = ps.normals[src].copy()
+    flip = rng.uniform(size=len(src)) < 0.2
+    nrm[flip] = rng.normal(size=(int(flip.sum()), 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    return pts, ps.owner[src], nrm
+
+
+@pytest.mark.parametrize("brute", [0, 512])
+def test_locate_equals_a_brute_force_search(monkeypatch, brute):
+    """To the bit, ties included; ``brute``: objects of at most so many patches skip the grid
+    (0: the grid for all; the objects here have 96 to 432 patches, 528 for points of any object)."""
+    monkeypatch.setattr(interpolate, "_BRUTE", brute)
+    rng = np.random.default_rng(3)
+    for ps in _mixed_scene():
+        pts, owner, nrm = _points(ps, rng)
+        for args in ((owner, nrm), (owner, None), (None, None), (None, nrm)):
+            for candidates in (8, 3):
+                idx, uv = locate(ps, pts, *args, candidates=candidates, chunk=97)
+                ref_idx, ref_uv = _brute_locate(ps, pts, *args, candidates=candidates)
+                np.testing.assert_array_equal(idx, ref_idx)
+                np.testing.assert_array_equal(uv, ref_uv)
+
+
+@pytest.mark.parametrize("pairs", [None, 64])
+def test_k_nearest_equals_a_full_sort(monkeypatch, pairs):
+    """``pairs``: the (point, site) pairs handled at once, 64 to split every batch of points."""
+    if pairs is not None:
+        monkeypatch.setattr(spatial, "_PAIRS", pairs)
+    rng = np.random.default_rng(4)
+    for trial in range(24):
+        N = int(rng.integers(1, 300))
+        k = int(rng.integers(1, min(N, 12) + 1))
+        if trial % 3 == 0:        # a lattice: many equal distances, ties at the k-th go to the lower index
+            sites = rng.integers(0, 5, (N, 3)) * 0.5
+            pts = rng.integers(-2, 7, (200, 3)) * 0.25
+        else:                     # a scatter flattened towards a plane, and points far outside it
+            sites = rng.normal(size=(N, 3)) * [1, 1, 0.01 * trial]
+            pts = np.concatenate([rng.normal(size=(180, 3)) * 1.5, rng.normal(size=(20, 3)) * 100])
+        cell = (None, 0.05, 0.3, 2.0)[trial % 4]
+        idx, d2 = k_nearest(sites, pts, k, cell=cell, chunk=61)
+        full = ((pts[:, None, :] - sites[None]) ** 2).sum(-1)
+        ref = np.argsort(full, axis=1, kind="stable")[:, :k]
+        np.testing.assert_array_equal(idx, ref)
+        np.testing.assert_array_equal(d2, np.take_along_axis(full, ref, 1))

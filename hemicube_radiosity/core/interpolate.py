@@ -10,8 +10,12 @@ from __future__ import annotations
 import numpy as np
 
 from .patches import PatchSet
+from .spatial import _PAIRS, Grid, sq_dist
 
 __all__ = ["interpolate_located", "locate", "interpolate_at"]
+
+_CELL = 2.0     # locate's grid cells, in patch sizes: the 8 nearest centres mostly in the 27 cells around
+_BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
 
 
 def _bilinear(c, u, v):
@@ -46,6 +50,25 @@ def _inverse_bilinear(c, p, iterations=8):
     return u, v
 
 
+def _pick(patches, corners, size, cand, p, normals):
+    """The best of each point's candidate patches ``cand`` (m, k) for the points ``p`` (m, 3):
+    (m,) position in ``cand`` (the first of equal scores), clamped (u, v) (m, k) each, and (m,)
+    True where another candidate scores the same."""
+    c = corners[cand]                                            # (m, k, 4, 3)
+    pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
+    u, v = _inverse_bilinear(c, pp)
+    outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
+    uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
+    gap = np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
+    score = outside + gap
+    if normals is not None:
+        facing = np.einsum("mkj,mj->mk", patches.normals[cand], normals)
+        score = score + 10.0 * (facing < 0.5)
+    best = np.argmin(score, axis=1)
+    tied = (score == score[np.arange(len(cand)), best][:, None]).sum(1) > 1
+    return best, uc, vc, tied
+
+
 def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, chunk=2048):
     """Patch index (P,) and bilinear (u, v) (P, 2) in [0, 1] for points on the patch surfaces.
 
@@ -53,44 +76,68 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
     patches facing another way (for corners shared by differently oriented faces). Each point is
     tried against its ``candidates`` nearest patch centres; the one it lies in (or is closest to
     lying in) wins. Points off every surface get the nearest patch, clamped.
+
+    The result is the brute-force search's to the bit: every centre of the object for every
+    point (``np.argpartition`` of the squared distances), the candidates tried in the order that
+    gives. The nearest centres come from a grid over the object's centres instead
+    (``spatial.Grid``, cells twice the area-weighted patch size), at a cost of about
+    P * candidates, not P * patches; only where the grid's candidates leave the choice open is the
+    point compared with every centre as before: when two candidates fit equally well (a point on
+    an edge two patches share, at a cost of its object's patches: ``argpartition``'s order picks
+    one, and at a T-junction they give other values) or the last candidate's distance is tied with
+    the next centre's. Objects of at most 512 patches take the brute force for every point.
     """
     points = np.asarray(points, dtype=np.float64)
     P = len(points)
     by_owner = owner is not None
     owner = np.asarray(owner, np.int64) if by_owner else np.zeros(P, np.int64)
     powner = patches.owner if by_owner else np.zeros(len(patches), np.int64)
+    normals = None if normals is None else np.asarray(normals, dtype=np.float64)
     corners = patches.corners()
     size = np.sqrt(patches.areas)
     out_idx = np.full(P, -1, np.int64)
     out_uv = np.zeros((P, 2))
+
+    def settle(ids, cand):
+        best, uc, vc, tied = _pick(patches, corners, size, cand, points[ids],
+                                   None if normals is None else normals[ids])
+        r = np.arange(ids.size)
+        out_idx[ids] = cand[r, best]
+        out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
+        return tied
+
     for o in np.unique(owner):
         pts_ids = np.flatnonzero(owner == o)
         cand_all = np.flatnonzero(powner == o)
         if cand_all.size == 0:
             raise ValueError(f"no patches belong to object {int(o)}")
-        k = min(candidates, cand_all.size)
+        N = cand_all.size
+        k = min(candidates, N)
+        if k == N:                       # every patch a candidate, in index order (as before)
+            for s in range(0, pts_ids.size, chunk):
+                ids = pts_ids[s:s + chunk]
+                settle(ids, np.broadcast_to(cand_all, (ids.size, k)))
+            continue
         cc = patches.centers[cand_all]
-        for s in range(0, pts_ids.size, chunk):
-            ids = pts_ids[s:s + chunk]
-            p = points[ids]
-            d2 = ((p[:, None, :] - cc[None, :, :]) ** 2).sum(-1)
-            near = np.argpartition(d2, k - 1, axis=1)[:, :k] if k < cand_all.size else np.broadcast_to(
-                np.arange(k), (ids.size, k))
-            cand = cand_all[near]                                    # (m, k)
-            c = corners[cand]                                        # (m, k, 4, 3)
-            pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
-            u, v = _inverse_bilinear(c, pp)
-            outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
-            uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
-            gap = np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
-            score = outside + gap
-            if normals is not None:
-                facing = np.einsum("mkj,mj->mk", patches.normals[cand], np.asarray(normals, float)[ids])
-                score = score + 10.0 * (facing < 0.5)
-            best = np.argmin(score, axis=1)
-            r = np.arange(ids.size)
-            out_idx[ids] = cand[r, best]
-            out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
+        if N <= _BRUTE:
+            redo = pts_ids
+        else:
+            a = patches.areas[cand_all]
+            typical = float((a * size[cand_all]).sum() / a.sum()) if a.sum() > 0 else 0.0   # area-weighted
+            grid = Grid(cc, _CELL * typical)
+            redo = []
+            for s in range(0, pts_ids.size, chunk):
+                ids = pts_ids[s:s + chunk]
+                near, d2 = grid.k_nearest(points[ids], k + 1)
+                tied = settle(ids, cand_all[np.sort(near[:, :k], axis=1)])
+                redo.append(ids[tied | (d2[:, k - 1] == d2[:, k])])
+            redo = np.concatenate(redo)
+        # the brute force, where the order of the candidates decides (or the object has few patches)
+        rows = max(1, _PAIRS // N)
+        for s in range(0, redo.size, rows):
+            ids = redo[s:s + rows]
+            d2 = sq_dist(points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
+            settle(ids, cand_all[np.argpartition(d2, k - 1, axis=1)[:, :k]])
     return out_idx, out_uv
 
 

@@ -1,0 +1,174 @@
+"""Exact k nearest neighbours in 3-D through uniform grids of buckets (pure NumPy: Blender has no SciPy).
+
+:func:`k_nearest` gives, for every query point, the ``k`` sites a full sort of its squared distances
+to all the sites would give, ``((point - site) ** 2).sum(-1)`` with ties broken by the lower site
+index, at the cost of the sites in the 27 cells around each point instead of all of them.
+
+The sites are hashed into cubic cells of edge ``cell`` (and, when needed, 2, 4, 8... times that).
+A point looks at the 3 x 3 x 3 cells around its own: every site outside is farther from the point
+than the cube's nearest face, so when the k-th nearest site found is nearer than that face (with a
+margin for rounding), the k found are the k nearest. Points for which that does not hold (sparse
+sites around them) try the next coarser grid; those that no grid of more than a few cells an axis
+settles (a point far off every site) are compared with every site.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["Grid", "k_nearest", "sq_dist"]
+
+_MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
+_PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
+
+
+def sq_dist(a, b):
+    """``((a - b) ** 2).sum(-1)`` of broadcastable (..., 3) arrays, to the bit (NumPy adds the
+    three squares in order: x, then y, then z), without the (..., 3) temporaries."""
+    d = a[..., 0] - b[..., 0]
+    out = d * d
+    d = a[..., 1] - b[..., 1]
+    out += d * d
+    d = a[..., 2] - b[..., 2]
+    out += d * d
+    return out
+
+
+def _offsets(r):
+    a = np.arange(-r, r + 1)
+    return np.stack(np.meshgrid(a, a, a, indexing="ij"), -1).reshape(-1, 3)
+
+
+def _select(row, site, d2, m, k):
+    """The k smallest (d2, site) of each row of a ragged list -> (m, k) sites, (m, k) d2 in that
+    order, (m,) entries per row; rows with fewer than k entries are padded with -1 / inf.
+    ``row`` is non-decreasing (each row's entries together)."""
+    n = np.bincount(row, minlength=m)
+    first = np.cumsum(n) - n
+    if row.size > 2 * k * m and int(n.max()) * m <= 1 << 22:
+        # sort only what can be among the k: up to each row's k-th smallest d2, ties included
+        pad = np.full((m, int(n.max())), np.inf)
+        pad[row, np.arange(row.size) - first[row]] = d2
+        kth = np.partition(pad, k - 1, axis=1)[:, k - 1]
+        sel = d2 <= kth[row]
+        row, site, d2 = row[sel], site[sel], d2[sel]
+    perm = np.lexsort((site, d2, row))
+    row, site, d2 = row[perm], site[perm], d2[perm]
+    kept = np.bincount(row, minlength=m)
+    rank = np.arange(row.size) - (np.cumsum(kept) - kept)[row]
+    keep = rank < k
+    out_s = np.full((m, k), -1, np.int64)
+    out_d = np.full((m, k), np.inf)
+    out_s[row[keep], rank[keep]] = site[keep]
+    out_d[row[keep], rank[keep]] = d2[keep]
+    return out_s, out_d, n
+
+
+class _Level:
+    """The sites hashed into cubic cells of edge ``h`` (from the corner ``lo``)."""
+
+    def __init__(self, sites, lo, h):
+        self.lo, self.h = lo, h
+        ci = np.floor((sites - lo) / h).astype(np.int64)
+        self.dims = ci.max(0) + 1
+        key = self._key(ci)
+        self.order = np.argsort(key, kind="stable")
+        self.keys, self.start, self.count = np.unique(key[self.order], return_index=True, return_counts=True)
+
+    def _key(self, ci):
+        return (ci[..., 0] * self.dims[1] + ci[..., 1]) * self.dims[2] + ci[..., 2]
+
+    def ring(self, sites, p, k, r):
+        """Candidates of the points p (m, 3) in the cube of (2 r + 1)^3 cells around theirs: (m, k)
+        sites and d2 (the k smallest found), (m,) bool where they are certainly the k nearest."""
+        m, h, dims = len(p), self.h, self.dims
+        pc = np.clip(np.floor((p - self.lo) / h), -r - 1, dims + r).astype(np.int64)
+        nb = pc[:, None, :] + _offsets(r)[None]                       # (m, c, 3)
+        valid = ((nb >= 0) & (nb < dims)).all(-1)
+        key = np.where(valid, self._key(nb), -1)
+        pos = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
+        hit = valid & (self.keys[pos] == key)
+        cnt = np.where(hit, self.count[pos], 0)
+        if m > 1 and int(cnt.sum()) > _PAIRS:     # crowded cells (sites much denser than the cell): halves
+            parts = [self.ring(sites, q, k, r) for q in (p[:m // 2], p[m // 2:])]
+            return tuple(np.concatenate(x) for x in zip(*parts))
+        cnt = cnt.ravel()
+        nz = cnt > 0
+        cnt, st = cnt[nz], self.start[pos].ravel()[nz]
+        row = np.repeat(np.repeat(np.arange(m), nb.shape[1])[nz], cnt)
+        within = np.arange(row.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        site = self.order[np.repeat(st, cnt) + within]
+        d2 = sq_dist(p[row], sites[site])
+        s, d, n = _select(row, site, d2, m, k)
+        # the distance from each point to its cube's nearest face: every site outside is farther
+        bound = np.minimum(p - (self.lo + (pc - r) * h), (self.lo + (pc + r + 1) * h) - p).min(1)
+        ok = (n >= k) & (bound > 0) & (d[:, -1] < (bound * (1 - _MARGIN)) ** 2)
+        return s, d, ok | (n == len(sites))
+
+
+class Grid:
+    """Sites (N, 3) hashed into cubic cells of edge ``cell``, 2 ``cell``, 4 ``cell``... (each level
+    built when a query first needs it), for :meth:`k_nearest` queries."""
+
+    def __init__(self, sites, cell=None):
+        sites = np.ascontiguousarray(sites, dtype=np.float64)
+        if sites.ndim != 2 or sites.shape[1] != 3 or len(sites) == 0:
+            raise ValueError("sites must be a non-empty (N, 3) array")
+        self.sites = sites
+        self.lo = sites.min(0)
+        self.extent = float((sites.max(0) - self.lo).max())
+        if cell is None or not np.isfinite(cell) or cell <= 0:
+            cell = self.extent / max(np.sqrt(len(sites)), 1.0)     # about one site a cell on a surface
+        # at most 2^20 cells an axis (keys fit in int64); a positive edge for coincident sites
+        self.cell = max(float(cell), self.extent / 2.0 ** 20, 1e-300)
+        self._levels = []
+
+    def _level(self, i):
+        while len(self._levels) <= i:
+            self._levels.append(_Level(self.sites, self.lo, self.cell * 2.0 ** len(self._levels)))
+        return self._levels[i]
+
+    def _all(self, p, k):
+        """Brute force: every site for every point (what :meth:`k_nearest` falls back to)."""
+        d2 = sq_dist(p[:, None, :], self.sites[None, :, :])
+        if k < d2.shape[1]:
+            kth = np.partition(d2, k - 1, axis=1)[:, k - 1:k]
+            row, site = np.nonzero(d2 <= kth)                          # at least k a row (ties at the k-th)
+        else:
+            row, site = np.nonzero(np.ones(d2.shape, bool))
+        s, d, _ = _select(row, site, d2[row, site], len(p), k)
+        return s, d
+
+    def k_nearest(self, points, k, chunk=4096):
+        """(P, k) int64 site indices, each row ascending by (squared distance, index), and (P, k)
+        squared distances: each point's k nearest sites, ties at the k-th broken by the lower index.
+
+        Each point looks at the 27 cells around its own, on the finest level first, then on
+        coarser ones while that is not enough; with the coarsest worth it (4 cells or fewer an
+        axis) not enough either (a point far from every site), at every site."""
+        points = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+        P, N = len(points), len(self.sites)
+        if not 1 <= k <= N:
+            raise ValueError(f"k = {k} must be between 1 and the {N} sites")
+        out_s = np.empty((P, k), np.int64)
+        out_d = np.empty((P, k))
+        for a in range(0, P, chunk):
+            ids = np.arange(a, min(a + chunk, P))
+            i = 0
+            while ids.size and (i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4):
+                s, d, ok = self._level(i).ring(self.sites, points[ids], k, 1)
+                out_s[ids[ok]], out_d[ids[ok]] = s[ok], d[ok]
+                ids = ids[~ok]
+                i += 1
+            rows = max(1, _PAIRS // N)
+            for b in range(0, ids.size, rows):
+                sub = ids[b:b + rows]
+                out_s[sub], out_d[sub] = self._all(points[sub], k)
+        return out_s, out_d
+
+
+def k_nearest(sites, points, k, cell=None, chunk=4096):
+    """(P, k) indices into ``sites`` (N, 3) of each point's ``k`` nearest sites (1 <= k <= N),
+    ascending by squared distance ``((point - site) ** 2).sum(-1)``, ties by the lower index, and
+    those (P, k) squared distances. ``cell``: the grid's cell edge, in the sites' units (about the
+    spacing between sites times sqrt(k) is good; by default from the sites' spread)."""
+    return Grid(sites, cell).k_nearest(points, k, chunk)
