@@ -319,6 +319,22 @@ def test_a_block_on_or_in_the_floor_lights_it_as_a_floor_with_a_hole_would(block
     assert np.abs([got[k] for k in under]).max() < 1e-3 * max(v.max() for v in ref.values())
 
 
+def test_the_floor_on_a_resting_blocks_outline_is_the_open_floors_limit(block_bakes):
+    """A block resting on the floor: the floor vertices on its outline are one vertex each (its
+    seen elements all lie on one side: nothing parts them, the block's corner edge grazing the
+    segment across a corner included) and read the floor with a hole's limit there, to 2.8%
+    at the corners and 0.05% along the sides (measured)."""
+    ref, bakes = block_bakes
+    el = bakes[0.0].elements
+    v = np.unique(el.polys[(el.owner == 0) & (np.abs(el.centers[:, 2]) < 1e-9)])
+    v = v[v >= 0]
+    assert np.unique(np.round(el.verts[v], 6), axis=0).shape[0] == v.size     # no vertex parted
+    got = _floor_values(bakes[0.0], 0)
+    keys = [k for k in ref if abs(_footprint_distance([k])[0]) < 1e-9]
+    assert len(keys) == 16
+    np.testing.assert_allclose([got[k] for k in keys], [ref[k] for k in keys], rtol=0.035)
+
+
 @pytest.mark.xfail(strict=True, reason="a floor vertex on a sunk block's outline: evaluated on the "
                    "open side since output vertices weigh only open elements (was 83% dark), it is "
                    "still 4-17% dark: the block's side elements cross the floor line, dark at their "

@@ -500,6 +500,13 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         if np.array_equal(new, label):
             break
         label = new
+    # a vertex whose seen elements all join up (a floor around a block's corner, whose edge
+    # grazes the segment across the corner) is not split: not even its buried corners
+    pairs = np.unique(np.column_stack([sv, label[slot]]), axis=0)
+    split_v[:] = False
+    split_v[pairs[1:, 0][pairs[1:, 0] == pairs[:-1, 0]]] = True
+    if not split_v.any():
+        return None
     flat = polys.reshape(-1).copy()
     at = np.flatnonzero((flat >= 0) & split_v[np.maximum(flat, 0)])
     groups, inv = np.unique(np.column_stack([flat[at], label[at]]), axis=0, return_inverse=True)
