@@ -95,6 +95,32 @@ def test_a_zero_thickness_wall_leaks_no_light_at_all():
     assert np.all(line / before > 0.7) and np.all(line / before < 0.9)
 
 
+def test_a_relight_of_the_partitioned_room_casts_no_ray(monkeypatch):
+    """The vertices parted along the wall's line are geometry: a relight (the lamp brighter)
+    finds them in the cache with everything else, casts no ray and equals a cold bake."""
+    from hemicube_radiosity.core import rays
+    from hemicube_radiosity.core.cache import FormFactorCache
+
+    s = BakeSettings(patch_size=0.2, element_size=0.1, gather_rays=32)
+    cache = FormFactorCache()
+    first = bake(_room_with_partition(0.0), s, cache=cache)
+    assert len(first.elements.verts) > len(np.unique(np.round(first.elements.verts, 9), axis=0))   # parted
+    brighter = _room_with_partition(0.0)
+    brighter[2].face_emission[:] = 20.0
+    cold = bake(brighter, s)
+
+    def forbidden(*a, **k):
+        raise AssertionError("a relight must not cast rays")
+
+    for cls in (rays.EmbreeScene, rays.NumpyOccluder):
+        for name in ("intersect", "occluded"):
+            if hasattr(cls, name):
+                monkeypatch.setattr(cls, name, forbidden)
+    warm = bake(brighter, s, cache=cache)
+    np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(warm.vertex_radiosity, 2 * first.vertex_radiosity, rtol=1e-6, atol=1e-9)
+
+
 def test_a_block_piercing_the_floor_darkens_nothing_around_it():
     """A block standing on the floor and the same block sunk 10 cm into it light the floor
     around it alike: the buried floor gets no light, and its zero does not pull down the

@@ -408,11 +408,17 @@ def _sided(ctx, mesh: PatchSet) -> PatchSet:
     nothing is split, as in a scene without such contacts. Cached (geometry only)."""
     if not embree_available() or len(mesh) == 0:
         return mesh
-    key = cache_key(mesh.geometry_key(), ("sides",))
-    split = cached(ctx.cache, key, lambda: _split_sides(ctx, mesh))
-    if split is None:
+    def split():                              # one array, so the cache keeps it on disk too
+        out = _split_sides(ctx, mesh)
+        if out is None:
+            return np.zeros(0, np.int64)      # nothing split: remembered as well (a relight casts no ray)
+        return np.concatenate([[out[0].size], out[0].reshape(-1), out[1]]).astype(np.int64)
+
+    code = cached(ctx.cache, cache_key(mesh.geometry_key(), ("sides",)), split)
+    if code.size == 0:
         return mesh
-    polys, origin = split
+    n = int(code[0])
+    polys, origin = code[1:1 + n].reshape(mesh.polys.shape), code[1 + n:]
     out = PatchSet(mesh.verts[origin], polys, mesh.centers, mesh.normals, mesh.areas, mesh.rho,
                    mesh.emission, mesh.owner, mesh.source_face, list(mesh.object_names))
     # the elements are the same: what is known of them carries over (no second ray cast)
