@@ -361,16 +361,18 @@ def test_the_floor_on_a_resting_blocks_outline_is_the_open_floors_limit(block_ba
     np.testing.assert_allclose([got[k] for k in keys], [ref[k] for k in keys], rtol=0.035)
 
 
-@pytest.mark.xfail(strict=True, reason="a floor vertex on a sunk block's outline: evaluated on the "
-                   "open side since output vertices weigh only open elements (was 83% dark), it is "
-                   "still 4-17% dark: the block's side elements cross the floor line, dark at their "
-                   "buried corners (resting on the floor: 0-3%)")
 def test_the_floor_on_a_sunk_blocks_outline_is_the_open_floors_limit(block_bakes):
+    """The floor on a sunk block's outline against the floor with a hole. Measured: 1.6-2.0%
+    bright at the corners, 2.6-2.8% dark along the sides (was 5% and 17-18% dark: the block's
+    side patch across the floor line saw from the floor's plane, half of it the void below, and
+    the side's elements across the line were dark at their buried corners; now that patch is
+    split where the floor passes through it and the gather's rays read buried corners as their
+    open neighbours)."""
     ref, bakes = block_bakes
     got = _floor_values(bakes[-0.1], 0)
     keys = [k for k in ref if abs(_footprint_distance([k])[0]) < 1e-9]
     assert len(keys) == 16
-    np.testing.assert_allclose([got[k] for k in keys], [ref[k] for k in keys], rtol=0.1)
+    np.testing.assert_allclose([got[k] for k in keys], [ref[k] for k in keys], rtol=0.035)
 
 
 def test_a_patch_buried_under_a_block_weighs_nothing_in_its_vertices():

@@ -27,7 +27,7 @@ from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
 from .refine import LUMA, abrupt
 from .rays import embree_available, embree_scene, occluder, open_fraction
-from .vertex import exposure, vertex_radiosity
+from .vertex import exposure, fill_buried, vertex_radiosity
 
 __all__ = ["meshes_key", "output_elements", "vertex_stage", "abrupt_elements"]
 
@@ -718,6 +718,10 @@ def vertex_stage(ctx) -> None:
     if lighting:
         in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, u.rho)), weights=weights)
     if ctx.settings.uses_elements():
+        if ctx.settings.gather_rays > 0 and embree_available():
+            # what the gather's rays read: buried vertices take their open neighbours' light
+            # (the output never shows it: it is each vertex's exact direct light and gather)
+            rest_v = fill_buried(sided, rest_v, weights)
         elements = _cut_elements(ctx)
         ctx.elements = sided if elements is patches else _sided(ctx, elements)
         xv, nv, rho_v = vertex_frames(ctx.elements, weights=_open_elements(ctx, ctx.elements))
