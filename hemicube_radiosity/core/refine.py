@@ -145,7 +145,6 @@ def _crossing(patches, cache=None):
     from .rays import embree_available, embree_scene
     if not embree_available():
         return None
-    scene = embree_scene(patches)
 
     def crossed(x, sub):
         key = cache_key(patches.geometry_key() + np.ascontiguousarray(x).tobytes(), ("crossed",))
@@ -161,7 +160,8 @@ def _crossing(patches, cache=None):
         out = np.ones(N, bool)
         for side in (1, -1):
             p, q = (x + side * lift)[:, a], (x + side * lift)[:, b]
-            hit = scene.occluded(p.reshape(-1, 3), (q - p).reshape(-1, 3), np.ones(p.shape[0] * p.shape[1]))
+            hit = embree_scene(patches).occluded(p.reshape(-1, 3), (q - p).reshape(-1, 3),
+                                                 np.ones(p.shape[0] * p.shape[1]))
             out &= hit.reshape(N, -1).any(axis=1)
         return out
     return crossed
