@@ -377,7 +377,8 @@ def test_the_floor_on_a_sunk_blocks_outline_is_the_open_floors_limit(block_bakes
 
 def test_a_patch_buried_under_a_block_weighs_nothing_in_its_vertices():
     """Exposure (the vertex weights): a floor patch wholly under a sunk block sees nothing and is
-    seen only through pixel leaks (up to 1.2%, measured), so with the areas it weighs 0; the lamp's rows are not drawn
+    seen only through pixel leaks (none measured; 1.2% while pixels were sampled at their
+    centres), so with the areas it weighs 0; the lamp's rows are not drawn
     (it reflects nothing) but others see it, so it weighs 1. Without the areas every empty row
     counts as exposed (how vertex_stage calls it today)."""
     r = bake(_block_on_floor(-0.1), BakeSettings(patch_size=0.25, element_size=None, gather_rays=0))

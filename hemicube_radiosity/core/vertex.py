@@ -51,7 +51,9 @@ def exposure(F, areas=None) -> np.ndarray:
     solid, which sees nothing. With ``areas`` they are told apart by reciprocity: others see a
     lamp (its row sum from the computed rows, ``sum_j A_j F_ji / A_i``, is what it would see),
     while a buried patch is seen only through the odd pixel leaking past the solid's edges
-    (measured up to 1.2% of its hemisphere, beside a block sunk 10 cm): below ``BURIED`` it counts as buried (0), else as exposed (1).
+    (measured up to 1.2% of its hemisphere beside a block sunk 10 cm while pixels were sampled
+    at their centres, none since: :data:`.hemicube.SAMPLE_X`): below ``BURIED`` it counts as
+    buried (0), else as exposed (1).
     Without ``areas`` every empty row counts as exposed. (Counting them all as exposed gave a
     floor patch wholly under a block the weight of an open one: the vertices it shares with
     open floor took half its zero.)"""
