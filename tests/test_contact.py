@@ -65,7 +65,7 @@ def test_the_ground_beside_a_house_on_one_face_is_the_cut_grounds(monkeypatch):
         return e / truth - 1
 
     e = off(_ground_beside(False))
-    assert np.sqrt(np.mean(e ** 2)) < 0.015 and np.abs(e).max() < 0.05 and abs(e.mean()) < 0.005
+    assert np.sqrt(np.mean(e ** 2)) < 0.015 and np.abs(e).max() < 0.06 and abs(e.mean()) < 0.005
     monkeypatch.setattr(output, "cut_along_contacts", lambda elements, faces: elements)
     e = off(_ground_beside(False))
     assert 0.02 < np.sqrt(np.mean(e ** 2)) < 0.05 and np.abs(e).max() < 0.25 and abs(e.mean()) < 0.015
@@ -128,7 +128,11 @@ def test_elements_are_cut_along_a_wall_standing_across_them():
     # the floor's vertices on the line: each used by pieces of one side only, two at each place
     fp = cut.polys[on_floor]
     v_on = np.unique(fp[(np.abs(floor_h) < 1e-9) & (fp >= 0)])
-    assert v_on.size == 2 * 7       # its ends, 3 + 3 grid lines crossed, (0.5, 0.5) twice
+    t = (cut.verts[v_on] - a) @ d
+    ends = v_on[(t < 1e-9) | (t > np.linalg.norm(b - a) - 1e-9)]
+    assert ends.size == 2                                   # the wall stops there: one vertex each
+    v_on = np.setdiff1d(v_on, ends)
+    assert v_on.size == 2 * 5       # 3 + 3 grid lines crossed inside, one place, (0.5, 0.5), for two
     side = np.sign(np.nansum(np.where(np.abs(floor_h) < 1e-9, 0, floor_h), axis=1))
     for v in v_on:
         assert np.unique(side[(fp == v).any(axis=1)]).size == 1

@@ -71,7 +71,10 @@ def test_refinement_converges_to_a_uniformly_fine_bake_where_a_lamp_hides_part_o
     """0.5 m patches, the lamp's edges across them: without refinement the walls and floor get
     the light of the ceiling above the lamp, which they cannot see (+60% measured); split where
     the lamp's light changes abruptly, they match a bake whose every patch is 1/16 m (the lamp's
-    edges on patch edges) to 2% (measured 0.7-1.8%) with 37-121 patches instead of 1,280."""
+    edges on patch edges) to 3% with 37-121 patches instead of 1,280 (measured 0.7-1.8% while
+    hemi-cube pixels were sampled at their centres; 2.6% since they are sampled a hair off them,
+    which moved the fine reference: an independent 4,096-ray stochastic bake puts the refined
+    bake within 0.35% of the new reference, against 0.66% of the old)."""
     def per_object(r):
         p, B = r.patches, r.patch_radiosity[:, 1]
         return np.array([(B * p.areas)[p.owner == o].sum() / p.areas[p.owner == o].sum() for o in (0, 2, 3, 4, 5)])
@@ -83,7 +86,7 @@ def test_refinement_converges_to_a_uniformly_fine_bake_where_a_lamp_hides_part_o
                                                     refine_levels=levels, gather_rays=0))
         errs[levels] = np.abs(per_object(r) / ref - 1).max()
     assert errs[0] > 0.3
-    assert max(errs[1], errs[2], errs[3]) < 0.02
+    assert max(errs[1], errs[2], errs[3]) < 0.03
 
 
 def test_gather_reads_exact_light_where_it_lands_beside_a_lamp_under_a_ceiling():

@@ -207,7 +207,9 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
             ext = (c - a) @ d                                             # (M, 4) along the line
             h = (c - a) @ m                                               # (M, 4) across it
             tol = np.maximum(tol_rel * size, eps)[:, None]
-            along = (ext.max(axis=1) > -eps) & (ext.min(axis=1) < length + eps)
+            # alongside the segment, not just touching its end (a block's corner does not part
+            # the floor beyond it)
+            along = (ext.max(axis=1) > tol[:, 0]) & (ext.min(axis=1) < length - tol[:, 0])
             both = (h.max(axis=1) > tol[:, 0]) & (h.min(axis=1) < -tol[:, 0])
             on = (np.abs(h) <= tol).any(axis=1)
             hit = along & (both | on)
@@ -221,6 +223,10 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
                 todo = pieces.get(e) or [(_polygon(elements, e), ())]
                 out = []
                 for poly, tags in todo:
+                    t = (poly - a) @ d
+                    if t.max() <= line[3] or t.min() >= length - line[3]:
+                        out.append((poly, tags))          # this piece lies beyond the segment
+                        continue
                     sp = _split(poly, a, m, line[3])
                     if sp is None:
                         hs = (poly - a) @ m
@@ -241,7 +247,8 @@ def _polygon(elements, e):
 def _assemble(elements, pieces, eps):
     """The PatchSet of ``elements`` with each element of ``pieces`` replaced by its pieces: a
     corner on a cut line (within its tolerance, inside the segment's reach) is a vertex of its
-    side only; other corners keep the element's vertices."""
+    side only (and of its plane: a cut across a box's edge leaves its two faces apart, as the
+    box's own corners are); other corners keep the element's vertices."""
     V = len(elements.verts)
     verts = [elements.verts]
     index = {}
@@ -262,7 +269,10 @@ def _assemble(elements, pieces, eps):
                 if not on and same.size:
                     ids.append(int(src[same[0]]))
                     continue
-                k = (int(elements.owner[e]),) + tuple(np.round(x / q).astype(np.int64)) + on
+                # one vertex a place, side and plane: faces meeting at an angle (a box's sides,
+                # whose corners the mesh keeps apart) keep the cut's points apart too
+                k = (int(elements.owner[e]),) + tuple(np.round(x / q).astype(np.int64)) + on \
+                    + tuple(np.round(elements.normals[e] * 1e3).astype(np.int64))
                 if k not in index:
                     index[k] = V + len(index)
                     verts.append(x[None])
@@ -291,10 +301,11 @@ def _assemble(elements, pieces, eps):
 
 def _on_segment(x, line) -> bool:
     """Whether the point ``x`` lies on the contact segment ``line`` (cutter, start, across,
-    tolerance, along, length): within the tolerance of its line and of its extent."""
+    tolerance, along, length): within the tolerance of its line, inside its ends (at an end the
+    surface stops and the light goes round it: a block's corner does not part the floor)."""
     _, a, m, tol, d, length = line
     t = float((x - a) @ d)
-    return abs(float((x - a) @ m)) <= tol and -tol <= t <= length + tol
+    return abs(float((x - a) @ m)) <= tol and tol < t < length - tol
 
 
 def _dedupe(ids):

@@ -28,7 +28,7 @@ from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
 from .refine import LUMA, abrupt
 from .rays import embree_available, embree_scene, occluder, open_fraction
-from .vertex import exposure, vertex_radiosity
+from .vertex import exposure, fill_buried, vertex_radiosity
 
 __all__ = ["meshes_key", "output_elements", "vertex_stage", "abrupt_elements"]
 
@@ -468,6 +468,137 @@ def _open_elements(ctx, elements):
     return (f > 0.05).astype(np.float64)
 
 
+def _sided(ctx, mesh: PatchSet) -> PatchSet:
+    """``mesh`` (patches or elements) with a vertex split where elements that share it, both
+    seen by the scene (:func:`_open_elements`), lie on the two sides of another surface: a floor
+    running on under a single-plane partition, the side walls and ceiling it stands against.
+    Each side's copy of the vertex is evaluated on its side (:func:`.direct.vertex_frames`
+    moves it toward its own elements), averages and extrapolates its own side's patches, and
+    the gather's rays read it on its side: shared, the vertices on the partition's line took
+    half the lit side's light into the dark half (2.7% of the lit floor next to the line). A
+    floor under a block standing on it is not split (the side under the block is not seen:
+    its vertices on the outline are evaluated on the open side already). The same object when
+    nothing is split, as in a scene without such contacts. Cached (geometry only)."""
+    if not embree_available() or len(mesh) == 0:
+        return mesh
+    def split():                              # one array, so the cache keeps it on disk too
+        out = _split_sides(ctx, mesh)
+        if out is None:
+            return np.zeros(0, np.int64)      # nothing split: remembered as well (a relight casts no ray)
+        return np.concatenate([[out[0].size], out[0].reshape(-1), out[1]]).astype(np.int64)
+
+    code = cached(ctx.cache, cache_key(geometry_key(mesh), ("sides",)), split)
+    if code.size == 0:
+        return mesh
+    n = int(code[0])
+    polys, origin = code[1:1 + n].reshape(mesh.polys.shape), code[1 + n:]
+    out = PatchSet(mesh.verts[origin], polys, mesh.centers, mesh.normals, mesh.areas, mesh.rho,
+                   mesh.emission, mesh.owner, mesh.source_face, list(mesh.object_names))
+    # the elements are the same: what is known of them carries over (no second ray cast)
+    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    if ctx.cache is not None:
+        seen = ctx.cache.get(cache_key(geometry_key(mesh), ("open-centres", reach)))
+        if seen is not None:
+            ctx.cache.put(cache_key(geometry_key(out), ("open-centres", reach)), seen)
+    return out
+
+
+def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
+    """(polys (N, 4), origin (V',)) of :func:`_sided`, or None when no vertex is split.
+
+    Two elements seen by the scene that share a vertex are parted there when the segment
+    between points a hair inside each (``inset`` of the way from the vertex to their centres,
+    as the vertices are evaluated), lifted off the surface along their mean normal by the two
+    insets' length, crosses another surface. Each element is tested against the first at its
+    vertex; where one is parted, every pair there (elements refined on one side meet the other
+    side's at a corner, not an edge), and the corners are grouped by the pairs not parted, one
+    vertex a group (a buried element's corner is a group of its own)."""
+    opened = _open_elements(ctx, mesh)
+    if opened is None:
+        return None
+    polys = mesh.polys
+    N, V = len(polys), len(mesh.verts)
+    p, c = np.nonzero(polys >= 0)
+    v = polys[p, c]
+    on = opened[p] > 0
+    p, c, v = p[on], c[on], v[on]
+    order = np.lexsort((p, v))
+    p, c, v = p[order], c[order], v[order]
+    first = np.ones(len(v), bool)
+    first[1:] = v[1:] != v[:-1]
+    head = p[np.maximum.accumulate(np.where(first, np.arange(len(v)), 0))]
+    scene = embree_scene(mesh)
+    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+
+    def parted(e1, e2, at):
+        x = mesh.verts[at]
+        d1, d2 = inset * (mesh.centers[e1] - x), inset * (mesh.centers[e2] - x)
+        n = mesh.normals[e1] + mesh.normals[e2]
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        lift = (np.linalg.norm(d1, axis=1) + np.linalg.norm(d2, axis=1))[:, None] * n
+        p1, p2 = x + d1 + lift, x + d2 + lift
+        out = scene.occluded(p1, p2 - p1, np.ones(len(p1))) if len(p1) else np.zeros(0, bool)
+        # only between points the scene sees: two floor patches whose corners meet under a
+        # block standing on them are parted by the block, but nothing sees either corner
+        k = np.flatnonzero(out)
+        if k.size:
+            x2 = np.concatenate([x[k] + d1[k], x[k] + d2[k]])
+            n2 = np.concatenate([mesh.normals[e1[k]], mesh.normals[e2[k]]])
+            f = open_fraction(mesh, x2, n2, scene, reach).reshape(2, -1)
+            out[k] = (f > 0.05).all(axis=0)
+        return out
+
+    rest = ~first
+    cut = parted(head[rest], p[rest], v[rest])
+    if not cut.any():
+        return None
+    split_v = np.zeros(V, bool)
+    split_v[v[rest][cut]] = True
+    # every pair of seen elements at a split vertex
+    at = np.flatnonzero(split_v[v])
+    sv, sp, sc = v[at], p[at], c[at]
+    start = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
+    size = np.diff(np.r_[start, len(sv)])
+    i_l, j_l = [], []
+    for k in np.unique(size):
+        base = start[size == k]
+        i, j = np.triu_indices(k, 1)
+        i_l.append((base[:, None] + i[None]).ravel())
+        j_l.append((base[:, None] + j[None]).ravel())
+    i, j = np.concatenate(i_l), np.concatenate(j_l)
+    joined = ~parted(sp[i], sp[j], sv[i])
+    slot = sp * 4 + sc
+    sa, sb = slot[i[joined]], slot[j[joined]]
+    label = np.arange(4 * N)
+    while True:                               # label propagation over the joined corner slots
+        m = np.minimum(label[sa], label[sb])
+        new = label.copy()
+        np.minimum.at(new, sa, m)
+        np.minimum.at(new, sb, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    # a vertex whose seen elements all join up (a floor around a block's corner, whose edge
+    # grazes the segment across the corner) is not split: not even its buried corners
+    pairs = np.unique(np.column_stack([sv, label[slot]]), axis=0)
+    split_v[:] = False
+    split_v[pairs[1:, 0][pairs[1:, 0] == pairs[:-1, 0]]] = True
+    if not split_v.any():
+        return None
+    flat = polys.reshape(-1).copy()
+    at = np.flatnonzero((flat >= 0) & split_v[np.maximum(flat, 0)])
+    groups, inv = np.unique(np.column_stack([flat[at], label[at]]), axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    lead = np.ones(len(groups), bool)
+    lead[1:] = groups[1:, 0] != groups[:-1, 0]
+    ids = np.where(lead, groups[:, 0], 0)
+    extra = np.flatnonzero(~lead)
+    ids[extra] = V + np.arange(extra.size)
+    flat[at] = ids[inv]
+    return flat.reshape(polys.shape), np.concatenate([np.arange(V), groups[extra, 0]])
+
+
 def _seen(ctx, elements, x, nrm):
     """(P,) in [0, 1]: how much of the scene sees the points ``x`` (P, 3) on ``elements`` with
     normals ``nrm``: :func:`.rays.open_fraction` (reach a twentieth of the patch size) over a
@@ -603,17 +734,28 @@ def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02) -> np.n
 
 
 def _interpolated(ctx, elements, field_v, xv, nv):
-    """A patch-vertex field (V_patches, 3) at the element vertices ``xv``: bilinear in the
-    patches, each element vertex in its own object's patches."""
+    """A patch-vertex field (per vertex of :func:`_sided` patches, 3) at the element vertices
+    ``xv``: bilinear in the patches, each element vertex in its own object's patches (the one
+    ``xv`` lies in: on its own side of a partition standing on a patch edge)."""
     def where():
         owner_v = np.zeros(len(elements.verts), np.int64)
         for c in range(4):
             on = elements.polys[:, c] >= 0
             owner_v[elements.polys[on, c]] = elements.owner[on]
-        return locate(ctx.patches, xv, owner=owner_v, normals=nv)
+        idx, uv = locate(ctx.patches, xv, owner=owner_v, normals=nv)
+        # a point beside small patches (refined along a partition) may not have the patch it
+        # lies in among the nearest centres: clamped into a neighbour across the partition, it
+        # read the other side's light. Those off their patch look again, farther
+        c = ctx.patches.corners()[idx]
+        off = np.linalg.norm(_bilinear(c, uv[:, :1], uv[:, 1:]) - xv, axis=1) > 1e-6 * np.sqrt(ctx.patches.areas[idx])
+        if off.any():
+            far = np.flatnonzero(off)
+            i2, uv2 = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64)
+            idx[far], uv[far] = i2, uv2
+        return idx, uv
 
     key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
-    return interpolate_located(ctx.patches, field_v, *cached(ctx.cache, key, where))
+    return interpolate_located(_sided(ctx, ctx.patches), field_v, *cached(ctx.cache, key, where))
 
 
 def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None):
@@ -676,12 +818,18 @@ def vertex_stage(ctx) -> None:
     # smoother light reflected more than once comes from the patches (or their clusters), as in
     # the paper
     rest = ctx.reflected - ctx.direct_source
-    rest_v = vertex_radiosity(patches, ctx.to_patches(rest), weights=weights)
+    sided = _sided(ctx, patches)              # each side of a partition its own vertices
+    rest_v = vertex_radiosity(sided, ctx.to_patches(rest), weights=weights)
     in_v = None
     if lighting:
-        in_v = vertex_radiosity(patches, ctx.to_patches(_incoming(rest, u.rho)), weights=weights)
+        in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, u.rho)), weights=weights)
     if ctx.settings.uses_elements():
-        ctx.elements = _cut_elements(ctx)
+        if ctx.settings.gather_rays > 0 and embree_available():
+            # what the gather's rays read: buried vertices take their open neighbours' light
+            # (the output never shows it: it is each vertex's exact direct light and gather)
+            rest_v = fill_buried(sided, rest_v, weights)
+        elements = _cut_elements(ctx)
+        ctx.elements = sided if elements is patches else _sided(ctx, elements)
         xv, nv, rho_v = vertex_frames(ctx.elements, weights=_open_elements(ctx, ctx.elements))
         D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
         side = _open_side(ctx, ctx.elements, xv, nv)
@@ -689,10 +837,11 @@ def vertex_stage(ctx) -> None:
             D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
         rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert)
     else:
-        xv, nv, rho_v = vertex_frames(patches, weights=_open_elements(ctx, patches))
+        ctx.elements = sided
+        xv, nv, rho_v = vertex_frames(sided, weights=_open_elements(ctx, sided))
         rest_v = rest_v if in_v is None else in_v
         D_vert = ctx.direct.at(xv, nv, "vertices")
-        side = _open_side(ctx, patches, xv, nv)
+        side = _open_side(ctx, sided, xv, nv)
         if side is not None:
             D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
     if side is not None:                                # what a buried vertex gathered: the inside

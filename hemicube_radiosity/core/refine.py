@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cache import cache_key, cached
 from .clusters import _make
 from .direct_light import LUMA, DirectLight, grid_points
 from .patches import PatchSet, _poly_geometry
@@ -84,7 +85,7 @@ def _subset(patches: PatchSet, ids) -> PatchSet:
 
 
 def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n=3, min_area=0.0,
-           frozen=None, say=None) -> tuple[PatchSet, np.ndarray]:
+           frozen=None, say=None, crossed=None) -> tuple[PatchSet, np.ndarray]:
     """Split patches where the direct light changes abruptly, up to ``levels`` times.
 
     ``light_at(points (P, 3), normals (P, 3)) -> (P, S)``: the luminance arriving directly from
@@ -114,6 +115,8 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         split = np.zeros(len(ids), bool)
         for s in range(Y.shape[2]):
             split |= abrupt(Y[:, :, s], ratio, absolute[s])
+        if crossed is not None:
+            split |= crossed(x, sub)
         hit = np.zeros(len(patches), bool)
         hit[ids[split]] = True
         if say is not None:
@@ -124,6 +127,44 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         parent = parent[p]
         check = hit[p] & (patches.areas > min_area)
     return patches, parent
+
+
+def _crossing(patches, cache=None):
+    """``crossed(points (n, K, 3), sub) -> (n,) bool`` for :func:`refine`: a patch another
+    surface passes through (a block's side sunk into a floor, the floor across that side):
+    segments between neighbouring points of its grid, lifted a hair off it, hit a surface both
+    in front of it and behind it. A block resting on the floor, a wall standing on it, touch
+    the floor from one side only: nothing to split for (the light splits the floor there, and
+    the output's vertices take the open side). None without Embree.
+
+    Patch by patch the hemi-cube sees from the centre: a side patch of a block sunk 10 cm into
+    the floor had its centre on the floor's plane and saw the room above and the void below
+    (B 0.047 against 0.099 for the patch above it); the floor beside the block, which gathers
+    that side within millimetres of the floor, read 17% too little on the block's outline. Geometry only: cached in
+    ``cache`` (a relight casts no ray)."""
+    from .rays import embree_available, embree_scene
+    if not embree_available():
+        return None
+
+    def crossed(x, sub):
+        key = cache_key(patches.geometry_key() + np.ascontiguousarray(x).tobytes(), ("crossed",))
+        return cached(cache, key, lambda: test(x, sub).astype(np.uint8)).astype(bool)
+
+    def test(x, sub):
+        N, K = x.shape[:2]
+        n = int(round(np.sqrt(K)))
+        k = np.arange(K).reshape(n, n)
+        a = np.concatenate([k[:, :-1].ravel(), k[:-1, :].ravel()])
+        b = np.concatenate([k[:, 1:].ravel(), k[1:, :].ravel()])
+        lift = 1e-3 * np.sqrt(sub.areas)[:, None, None] * sub.normals[:, None, :]
+        out = np.ones(N, bool)
+        for side in (1, -1):
+            p, q = (x + side * lift)[:, a], (x + side * lift)[:, b]
+            hit = embree_scene(patches).occluded(p.reshape(-1, 3), (q - p).reshape(-1, 3),
+                                                 np.ones(p.shape[0] * p.shape[1]))
+            out &= hit.reshape(N, -1).any(axis=1)
+        return out
+    return crossed
 
 
 def refine_stage(ctx) -> None:
@@ -149,7 +190,7 @@ def refine_stage(ctx) -> None:
         ctx.check()
 
     refined, parent = refine(p, lambda x, n: plan.sources_at(x, n, "refine"), s.refine_levels, frozen=frozen,
-                             min_area=min_area, say=say)
+                             min_area=min_area, say=say, crossed=_crossing(p, ctx.cache))
     if len(refined) == len(p):
         return
     if ctx.clusters is not None:

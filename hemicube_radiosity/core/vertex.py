@@ -18,7 +18,7 @@ import numpy as np
 
 from .patches import PatchSet
 
-__all__ = ["vertex_radiosity", "exposure", "boundary_vertices", "BURIED"]
+__all__ = ["vertex_radiosity", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
 
 
 def _incidence(polys):
@@ -51,7 +51,9 @@ def exposure(F, areas=None) -> np.ndarray:
     solid, which sees nothing. With ``areas`` they are told apart by reciprocity: others see a
     lamp (its row sum from the computed rows, ``sum_j A_j F_ji / A_i``, is what it would see),
     while a buried patch is seen only through the odd pixel leaking past the solid's edges
-    (measured up to 1.2% of its hemisphere, beside a block sunk 10 cm): below ``BURIED`` it counts as buried (0), else as exposed (1).
+    (measured up to 1.2% of its hemisphere beside a block sunk 10 cm while pixels were sampled
+    at their centres, none since: :data:`.hemicube.SAMPLE_X`): below ``BURIED`` it counts as
+    buried (0), else as exposed (1).
     Without ``areas`` every empty row counts as exposed. (Counting them all as exposed gave a
     floor patch wholly under a block the weight of an open one: the vertices it shares with
     open floor took half its zero.)"""
@@ -148,4 +150,55 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np
     coef = np.linalg.solve(M, rhs)                             # (T, 4, bands)
     out = avg.copy()
     out[targets] = np.maximum(0.0, coef[:, 0, :])
+    return out
+
+
+def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
+    """(V, k) ``values`` (per vertex, from :func:`vertex_radiosity` with ``weights``) where every
+    vertex whose patches all weigh nothing (buried: under a block, below a floor a block is
+    sunk into) takes the mean of its neighbours' (through a patch, or at the same place) that
+    do not, ring by ring inward, ``rings`` at most (further in, they keep theirs).
+
+    For what is read by the final gather's rays, not for output: a block's side sunk into a
+    floor ends in patches below the floor that see nothing (0); the elements across the floor
+    line took 0 at their buried corners, and rays from the floor beside the block, which land
+    on the side within millimetres of the floor, read their bilinear mix: the open floor's
+    limit on the outline 17% dark. The buried floor under a block is read by no ray."""
+    values = np.asarray(values, dtype=np.float64)
+    polys = patches.polys
+    V = len(patches.verts)
+    p, v, _ = _incidence(polys)
+    cnt = np.bincount(v, minlength=V)
+    wsum = np.bincount(v, weights=np.asarray(weights, dtype=np.float64)[p], minlength=V)
+    buried = (cnt > 0) & (wsum <= 1e-6 * np.maximum(cnt, 1))
+    if not buried.any():
+        return values
+    k = polys.shape[1]
+    touch = buried[np.maximum(polys, 0)].any(axis=1)          # patches with a buried corner
+    sub = polys[touch]
+    a = np.repeat(sub, k, axis=1).ravel()
+    b = np.tile(sub, (1, k)).ravel()
+    ok = (a >= 0) & (b >= 0) & (a != b) & buried[np.maximum(a, 0)]
+    a, b = a[ok], b[ok]
+    # and vertices at one place (a vertex parted by a floor a block is sunk into: its copy
+    # below the floor takes the one above)
+    place = np.unique(patches.verts, axis=0, return_inverse=True)[1].reshape(-1)
+    order = np.argsort(place, kind="stable")
+    same = np.flatnonzero(place[order][1:] == place[order][:-1])
+    if same.size:
+        x, y = order[same], order[same + 1]
+        a, b = np.concatenate([a, x, y]), np.concatenate([b, y, x])
+        keep = buried[a]
+        a, b = a[keep], b[keep]
+    out = values.copy()
+    known = ~buried
+    for _ in range(rings):
+        use = ~known[a] & known[b]
+        if not use.any():
+            break
+        n = np.bincount(a[use], minlength=V)
+        got = n > 0
+        for c in range(values.shape[1]):
+            out[got, c] = np.bincount(a[use], weights=out[b[use], c], minlength=V)[got] / n[got]
+        known |= got
     return out
