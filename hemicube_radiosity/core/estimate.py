@@ -28,8 +28,8 @@ import numpy as np
 
 from .direct import vertex_frames
 from .direct_light import LUMA
-from .interpolate import interpolate_at
-from .output import _open_elements, seen_vertices, vertex_stage
+from .interpolate import interpolate_located, locate
+from .output import _open_elements, abrupt_elements, seen_vertices, vertex_stage
 from .rays import embree_available
 
 __all__ = ["ErrorEstimate", "estimate_stage", "relative_rms"]
@@ -128,10 +128,16 @@ def estimate_stage(ctx) -> None:
     coarse, Y = _again(ctx, element_size=2.0 * float(s.element_size))
     if coarse.geometry_key() != fine.geometry_key():      # else the meshes' own faces both times
         xv, nv, _ = vertex_frames(fine)
-        Y = interpolate_at(coarse, Y, xv, _vertex_owner(fine), nv)
+        idx, uv = locate(coarse, xv, _vertex_owner(fine), nv)
+        smooth = ~abrupt_elements(coarse, Y)[idx]
+        Y = interpolate_located(coarse, Y, idx, uv)
         # interpolation converges as h^2 where the light is smooth: the error at h is a third
-        # of the change from 2 h (Richardson, p = 2)
-        detail = relative_rms(Y, X, mask) / 3.0
+        # of the change from 2 h (Richardson, p = 2). Not where it is not: inside a coarse
+        # element whose corners' light differs 2x or more (a lamp's back-lit ring on a ceiling,
+        # a shadow's edge) the change measures the coarse interpolation's own error, which the
+        # output at h does not make (it reads such elements on a grid): 150% estimated against
+        # 1.1% measured on the bench's Cornell box, 20% against 3% in its room
+        detail = relative_rms(Y, X, mask & smooth) / 3.0
         method = "detail"
     ctx.error_estimate = ErrorEstimate(float(np.hypot(noise, detail)), float(noise), float(detail), method,
                                        int(mask.sum()), time.perf_counter() - t)
