@@ -180,19 +180,39 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     cut_corners = faces.corners()
     lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
     key = np.stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64)], 1)
-    groups, inv = np.unique(key, axis=0, return_inverse=True)
+    groups, inv, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
+    order = np.argsort(inv, kind="stable")
+    start = np.r_[0, np.cumsum(count)]
+    flat = corners.reshape(len(corners), -1, 3)
+    g_lo = np.minimum.reduceat(flat.min(axis=1)[order], start[:-1]) - eps
+    g_hi = np.maximum.reduceat(flat.max(axis=1)[order], start[:-1]) + eps
+    g_n = elements.normals[order[start[:-1]]]
+    # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
+    # both sides of, or on, the group's plane
+    gi_all, ci_all = _overlapping(g_lo, g_hi, lo, hi)
+    h = np.einsum("pkj,pj->pk", cut_corners[ci_all] - flat[order[start[gi_all]], 0][:, None], g_n[gi_all])
+    tri = np.all(cut_corners[ci_all][:, 3] == cut_corners[ci_all][:, 2], axis=1)
+    on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
+    keep = (((h.min(axis=1) < -eps) & (h.max(axis=1) > eps)) | (on >= 2)) & \
+        (np.abs(np.einsum("pj,pj->p", faces.normals[ci_all], g_n[gi_all])) < 1 - 1e-6)
+    gi_all, ci_all = gi_all[keep], ci_all[keep]
+    # a face sharing an edge with the group's face (two corners at the same places) meets it at
+    # its border: nothing to cut (the faces of a tessellated box along its edges)
+    src = _face_corners(elements, order[start[gi_all]], faces)
+    same = np.abs(src[:, :, None, :] - cut_corners[ci_all][:, None, :, :]).max(axis=-1) <= eps
+    shared = same.any(axis=1)[:, :3].sum(axis=1) + (same.any(axis=1)[:, 3] & ~tri[keep])
+    gi_all, ci_all = gi_all[shared < 2], ci_all[shared < 2]
+    by_group = np.split(ci_all[np.argsort(gi_all, kind="stable")],
+                        np.searchsorted(np.sort(gi_all), np.arange(1, len(groups))))
     pieces = {}                       # element -> list of (polygon, tags)
-    for gi in range(len(groups)):
-        ids = np.flatnonzero(inv == gi)
+    for gi in np.unique(gi_all):
+        ids = order[start[gi]:start[gi + 1]]
         c = corners[ids]
         n = elements.normals[ids[0]]
         if not np.all(np.isfinite(n)):
             continue
-        glo, ghi = c.reshape(-1, 3).min(axis=0) - eps, c.reshape(-1, 3).max(axis=0) + eps
-        near = np.flatnonzero(np.all((lo <= ghi) & (hi >= glo), axis=1))
-        if near.size == 0:
-            continue
+        near = by_group[gi]
         segs, which = _contact_segments(c[0], n, cut_corners[near], faces.normals[near], eps)
         if not len(segs):
             continue
@@ -237,6 +257,69 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     if not pieces:
         return elements
     return _assemble(elements, pieces, eps)
+
+
+def _face_corners(elements, ids, faces):
+    """(P, 4, 3) corners of the faces (of ``faces``: the scene's faces as patches) that elements
+    ``ids`` were cut from: the face of the same object and source face whose plane holds them
+    (an n-gon split into several: any of its pieces; a triangle repeats its last corner)."""
+    key = faces.owner.astype(np.int64) * (1 << 32) + faces.source_face.astype(np.int64)
+    want = elements.owner[ids].astype(np.int64) * (1 << 32) + elements.source_face[ids].astype(np.int64)
+    order = np.argsort(key, kind="stable")
+    at = order[np.minimum(np.searchsorted(key[order], want), len(order) - 1)]
+    return faces.corners()[at]
+
+
+def _overlapping(alo, ahi, blo, bhi, per_box=64):
+    """(i, j): the pairs of boxes ``a`` (lo, hi (A, 3)) and ``b`` (B, 3) that overlap. A grid of
+    cells twice the median box size finds the candidates (a box over more than ``per_box`` cells
+    is tested against every box of the other set instead), then the boxes are compared."""
+    ext = np.concatenate([ahi - alo, bhi - blo]).max(axis=1)
+    size = 2.0 * max(float(np.median(ext)), 1e-12 * max(float(ext.max()), 1e-300))
+    origin = np.minimum(alo.min(axis=0), blo.min(axis=0))
+
+    def cells(lo, hi):
+        i0 = np.floor((lo - origin) / size).astype(np.int64)
+        i1 = np.floor((hi - origin) / size).astype(np.int64)
+        return i0, i1, np.prod(i1 - i0 + 1, axis=1)
+
+    def expand(i0, i1, ids):
+        dims = (i1 - i0 + 1)[ids]
+        n = np.prod(dims, axis=1)
+        own = np.repeat(ids, n)
+        off = np.arange(int(n.sum())) - np.repeat(np.r_[0, np.cumsum(n)[:-1]], n)
+        d = dims[np.repeat(np.arange(len(ids)), n)]
+        g = i0[own] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
+        return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own
+
+    a0, a1, na = cells(alo, ahi)
+    b0, b1, nb = cells(blo, bhi)
+    small_a, small_b = np.flatnonzero(na <= per_box), np.flatnonzero(nb <= per_box)
+    ka, ia = expand(a0, a1, small_a)
+    kb, ib = expand(b0, b1, small_b)
+    order = np.argsort(kb, kind="stable")
+    kb, ib = kb[order], ib[order]
+    lo_ = np.searchsorted(kb, ka, "left")
+    hi_ = np.searchsorted(kb, ka, "right")
+    cnt = hi_ - lo_
+    ii = np.repeat(ia, cnt)
+    jj = ib[np.repeat(lo_ - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())] if cnt.sum() else \
+        np.zeros(0, np.int64)
+    pairs = [np.stack([ii, jj], 1)]
+    for k in np.flatnonzero(na > per_box):                  # big boxes: against every box
+        j = np.flatnonzero(np.all((blo <= ahi[k]) & (bhi >= alo[k]), axis=1))
+        pairs.append(np.stack([np.full(len(j), k), j], 1))
+    for k in np.flatnonzero(nb > per_box):
+        i = np.flatnonzero(np.all((alo <= bhi[k]) & (ahi >= blo[k]), axis=1) & (na <= per_box))
+        pairs.append(np.stack([i, np.full(len(i), k)], 1))
+    p = np.concatenate(pairs).astype(np.int64)
+    B = max(len(blo), 1)
+    k = np.unique(p[:, 0] * B + p[:, 1])
+    p = np.stack([k // B, k % B], 1)
+    if not len(p):
+        return p[:, 0], p[:, 1]
+    ok = np.all((alo[p[:, 0]] <= bhi[p[:, 1]]) & (ahi[p[:, 0]] >= blo[p[:, 1]]), axis=1)
+    return p[ok, 0], p[ok, 1]
 
 
 def _polygon(elements, e):
