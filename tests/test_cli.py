@@ -275,12 +275,12 @@ def test_detail_size_bakes_a_finer_mesh_over_coarse_patches(addon, cornell_blend
                                "--gather-rays", gather, "--refine-levels", "0"])
     assert rc == 0, err
     r = json.loads(rep.read_text())
-    assert r["elements"] >= 12 * r["patches"]
+    assert r["elements"] >= 10 * r["patches"]     # both cut along the blocks' feet too
     per = r["per_object"]
     assert sum(v["elements"] for v in per.values()) == r["elements"]
     assert sum(v["patches"] for v in per.values()) == r["patches"]
     # 16 x 16 elements, those under the blocks' outlines cut along them (core/contact.py)
-    assert 16 * 16 < per["Floor"]["elements"] < 2 * 16 * 16 and per["Floor"]["patches"] == 4 * 4
+    assert 16 * 16 < per["Floor"]["elements"] < 2 * 16 * 16 and 4 * 4 < per["Floor"]["patches"] < 4 * 4 * 4
     assert r["settings"]["element_size"] == 0.125 and r["settings"]["gather_rays"] == int(gather)
     doc, accessor = read_gltf(str(tmp_path / "b.glb"))
     floor = next(m for m in doc["meshes"] if m["name"].startswith("Floor"))
