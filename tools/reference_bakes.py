@@ -11,10 +11,10 @@ fill rule, not to whichever depth rounded nearer (issue 12: scale invariance), a
 of an emitter transport began to draw its penumbra rays from its own random stream (so chunks can
 run on worker processes), and when the vertex stage began to read abrupt elements on a grid, let
 bright areas shine, judge both on the light arriving, and cast the lattice ray pattern (issue 11),
-and when the output elements began to be cut along contact lines, buried corners to take the open
-side's limit, the gather to run once more at the elements' level, the hemi-cube to sample pixels
-a hair off their centres and element vertices to be located in the patch they lie in (issues 11
-and 12).
+and when patches and output elements began to be cut along contact lines, buried corners to take
+the open side's limit, the gather to run once more at the elements' level, the hemi-cube to sample
+pixels a hair off their centres and element vertices to be located in the patch they lie in
+(issues 11 and 12).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 
