@@ -129,7 +129,7 @@ class _Transport:
         self.points, self.normals, self.corners, self.em_normals = points, normals, corners, em_normals
         self.groups, self.scene, self.refine, self.eps, self.draw = groups, scene, refine, eps, draw
         self.seed = seed
-        # the groups' outlines once, not per chunk (hundreds of jagged edges on a dense lamp)
+        # the groups' outlines once, not per chunk (a few straight edges per group, see GroupOutline)
         self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
         self.ys = draw(samples, np.random.default_rng(seed))             # (units, S, 3)
         self.S = self.ys.shape[1]
