@@ -15,7 +15,7 @@ machine's other sessions take their share whatever this run asks for; see bench_
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
                                              [--method hemicube|embree]
-                                             [--no-threads]
+                                             [--no-threads] [--gather-threads]
 
 Results go to bench/out/bench_parallel.json.
 """
@@ -107,14 +107,22 @@ def cases(only, method=None):
 
 #: (label, workers, processes on): the configurations baked in turn, in this order
 CONFIGS = (("1", 1, True), ("2", 2, True), ("2 thr", 2, False))
+#: with ``--gather-threads``: 2 workers, processes on, but the final gather on threads (as
+#: before it forked), for a before / after in one run
+GATHER_THREADS = ("2 gthr", 2, True)
 
 
-def bake_config(meshes, kw, workers, processes):
+def bake_config(meshes, kw, workers, processes, label=""):
+    from hemicube_radiosity.core import gather
     parallel.PROCESSES = processes
+    forked_from = gather.PROCESS_RAYS
+    if label == GATHER_THREADS[0]:
+        gather.PROCESS_RAYS = float("inf")
     try:
         return timed_bake(meshes, BakeSettings(workers=workers, **kw))
     finally:
         parallel.PROCESSES = True
+        gather.PROCESS_RAYS = forked_from
 
 
 def identical(a, b):
@@ -156,15 +164,20 @@ def main(argv=None):
     ap.add_argument("--method", choices=("hemicube", "embree"), help="this method only")
     ap.add_argument("--no-threads", action="store_true",
                     help="leave out '2 thr' (2 workers on threads only, as before processes)")
+    ap.add_argument("--gather-threads", action="store_true",
+                    help="add '2 gthr' (2 workers, the final gather on threads as before it forked)")
     args = ap.parse_args(argv)
     repeat = 1 if args.quick else args.repeat
     configs = CONFIGS[:2] if args.no_threads else CONFIGS
+    if args.gather_threads:
+        configs = configs + (GATHER_THREADS,)
     load0 = os.getloadavg()
     print(f"{cpu_count()} CPUs; load average before: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
           f"worker processes {'available' if parallel.processes_available() else 'NOT available'}",
           flush=True)
-    print("configurations: 1 = one worker; 2 = two workers (form factors on forked processes); "
-          "2 thr = two workers on threads only", flush=True)
+    print("configurations: 1 = one worker; 2 = two workers (form factors, large transports and "
+          "the final gather on forked processes); 2 thr = two workers on threads only; 2 gthr = "
+          "two workers, the final gather on threads", flush=True)
     m0, w0 = machine_cpu() or (0, 0), time.perf_counter()
     own0 = cpu_time()
     report = {"cpus": cpu_count(), "load_before": load0, "cases": {}}
@@ -174,7 +187,7 @@ def main(argv=None):
         c0, t0, o0 = machine_cpu() or (0, 0), time.perf_counter(), cpu_time()
         for r in range(repeat):
             for c, w, proc in configs:
-                res, wall, cpu = bake_config(meshes, kw, w, proc)
+                res, wall, cpu = bake_config(meshes, kw, w, proc, c)
                 results[c] = res
                 b = best.setdefault(c, {"wall": {}, "cpu": {}})
                 for st, t in wall.items():           # each stage's best run (and its CPU)
