@@ -71,3 +71,19 @@ def test_cached_fits_and_frames_are_the_same_bit_for_bit():
     # new materials on the same geometry: the cached frames' reflectivity is the new one's
     other = ps.with_materials(rng.random((len(ps), 3)), ps.emission)
     assert all(np.array_equal(a, b) for a, b in zip(frames(other, w, cache), vertex_frames(other, weights=w)))
+
+
+def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
+    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core.vertex import fill_buried
+    ps = grid(8, 6, (8.0, 6.0))
+    w = np.ones(len(ps))
+    w[(ps.centers[:, 0] > 2) & (ps.centers[:, 0] < 6) & (ps.centers[:, 1] > 1) & (ps.centers[:, 1] < 5)] = 0.0
+    rng = np.random.default_rng(2)
+    cache = FormFactorCache()
+    for _ in range(3):
+        vals = vertex_radiosity(ps, rng.random((len(ps), 3)), weights=w)
+        ref = fill_buried(ps, vals, w)
+        assert not np.array_equal(ref, vals)              # something was filled
+        assert np.array_equal(fill_buried(ps, vals, w, cache=cache), ref)
+    assert fill_buried(ps, vals, np.ones(len(ps)), cache=cache) is vals   # nothing buried

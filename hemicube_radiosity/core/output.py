@@ -222,8 +222,14 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     brightest: each group costs every vertex a form factor and shadow rays, and a scene lit
     mostly in one area should not pay that for hundreds of them."""
     valid = elements.polys >= 0
-    corner = light_v[np.where(valid, elements.polys, 0)] * valid[..., None]
-    arriving = corner.sum(axis=1) / valid.sum(axis=1)[:, None]
+    idx = np.where(valid, elements.polys, 0)
+    # the corners summed in order, one at a time (as the (N, 4, 3) array's sum over its corners
+    # adds them, bit for bit): that gather and its strided sum were 5.7 of this function's
+    # 7 ms in the dense room's relight
+    total = light_v[idx[:, 0]] * valid[:, 0, None]
+    for c in range(1, idx.shape[1]):
+        total = total + light_v[idx[:, c]] * valid[:, c, None]
+    arriving = total / valid.sum(axis=1)[:, None]
     radiance = elements.rho * arriving
     hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
@@ -828,7 +834,7 @@ def vertex_stage(ctx) -> None:
         if ctx.settings.gather_rays > 0 and embree_available():
             # what the gather's rays read: buried vertices take their open neighbours' light
             # (the output never shows it: it is each vertex's exact direct light and gather)
-            rest_v = fill_buried(sided, rest_v, weights)
+            rest_v = fill_buried(sided, rest_v, weights, cache=ctx.cache)
         elements = _cut_elements(ctx)
         ctx.elements = sided if elements is patches else _sided(ctx, elements)
         xv, nv, rho_v = frames(ctx.elements, _open_elements(ctx, ctx.elements), ctx.cache)

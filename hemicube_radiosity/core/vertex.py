@@ -208,7 +208,7 @@ def _fits(patches: PatchSet, weights, extrapolate=True):
     return p, v, wp, safe, V, p[pb], iv, slot, targets, sw[:, None] * X, M
 
 
-def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
+def fill_buried(patches: PatchSet, values, weights, rings=16, cache=None) -> np.ndarray:
     """(V, k) ``values`` (per vertex, from :func:`vertex_radiosity` with ``weights``) where every
     vertex whose patches all weigh nothing (buried: under a block, below a floor a block is
     sunk into) takes the mean of its neighbours' (through a patch, or at the same place) that
@@ -218,8 +218,31 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
     floor ends in patches below the floor that see nothing (0); the elements across the floor
     line took 0 at their buried corners, and rays from the floor beside the block, which land
     on the side within millimetres of the floor, read their bilinear mix: the open floor's
-    limit on the outline 17% dark. The buried floor under a block is read by no ray."""
+    limit on the outline 17% dark. The buried floor under a block is read by no ray.
+
+    Which vertex takes which neighbours' values, ring by ring, depends on the geometry and
+    ``weights`` only (:func:`_fill_rings`): kept in ``cache`` (a :class:`.cache.FormFactorCache`)
+    when given, so a relight only averages its values (the same sums, bit for bit)."""
     values = np.asarray(values, dtype=np.float64)
+    if cache is None:
+        steps = _fill_rings(patches, weights, rings)
+    else:
+        wkey = np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+        steps = cached(cache, cache_key(geometry_key(patches) + wkey, ("fill-rings", rings)),
+                       lambda: _fill_rings(patches, weights, rings))
+    if not steps:
+        return values
+    out = values.copy()
+    V = len(patches.verts)
+    for a, b, got, n in steps:
+        for c in range(values.shape[1]):
+            out[got, c] = np.bincount(a, weights=out[b, c], minlength=V)[got] / n
+    return out
+
+
+def _fill_rings(patches: PatchSet, weights, rings=16) -> list:
+    """The rings of :func:`fill_buried`: per ring (vertex a, neighbour b it reads (e,), the
+    vertices filled (V,) bool, how many neighbours each reads); [] when nothing is buried."""
     polys = patches.polys
     V = len(patches.verts)
     p, v, _ = _incidence(polys)
@@ -227,7 +250,7 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
     wsum = np.bincount(v, weights=np.asarray(weights, dtype=np.float64)[p], minlength=V)
     buried = (cnt > 0) & (wsum <= 1e-6 * np.maximum(cnt, 1))
     if not buried.any():
-        return values
+        return []
     k = polys.shape[1]
     touch = buried[np.maximum(polys, 0)].any(axis=1)          # patches with a buried corner
     sub = polys[touch]
@@ -245,7 +268,7 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
         a, b = np.concatenate([a, x, y]), np.concatenate([b, y, x])
         keep = buried[a]
         a, b = a[keep], b[keep]
-    out = values.copy()
+    steps = []
     known = ~buried
     for _ in range(rings):
         use = ~known[a] & known[b]
@@ -253,7 +276,6 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
             break
         n = np.bincount(a[use], minlength=V)
         got = n > 0
-        for c in range(values.shape[1]):
-            out[got, c] = np.bincount(a[use], weights=out[b[use], c], minlength=V)[got] / n[got]
+        steps.append((a[use], b[use], got, n[got]))
         known |= got
-    return out
+    return steps
