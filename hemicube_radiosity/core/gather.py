@@ -23,7 +23,11 @@ from .rays import cosine_lattice
 from .sparse import CSR
 
 #: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
-#: with more than one worker (:mod:`.parallel`): below, forking costs more than it saves.
+#: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). The
+#: gather alone (bench_parallel.py --gather, the dense box's 51,200 faces, an idle machine):
+#: 2.57 s on one worker, 1.62 s median forked, 2.03 s on threads. In whole bakes the
+#: difference stays inside what the order of the configurations moves (+-1.3 s of the
+#: vertices stage's 7-9 s; see the commit that set this).
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
@@ -83,10 +87,8 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     point: one cosine pattern (:func:`.rays.cosine_lattice`, seeded) shared by every point, in
     the point's normal frame. A ray that hits the back of a patch sees nothing. G depends on
     geometry only: a relight reuses it. ``workers``: workers casting chunks of points at once (0 = every
-    core, 1 = serial): forked processes from :data:`PROCESS_RAYS` rays on (each chunk's surface
-    weights, duplicate sums and hit rows are NumPy work under the GIL after Embree's rays, so
-    threads ran it ~1.2x as fast as one; only the chunk starts go out, the chunk's rows come
-    back), threads below; G is bit-identical for any count.
+    core, 1 = serial): threads, or forked processes from :data:`PROCESS_RAYS` rays on (only the
+    chunk starts go out, each chunk's rows come back); G is bit-identical for any count.
     ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
     :func:`correct_hits`; each hit carries weight ``1 / rays`` in G).
@@ -107,7 +109,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     workers = resolve_workers(workers)
     if workers > 1:        # a few chunks a worker, so they end together (rows never span chunks:
         step = max(1, min(step, -(-P // (4 * workers))))      # G is the same for any chunking)
-    forked = workers > 1 and P > step and P * R >= PROCESS_RAYS
+    forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
     cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
