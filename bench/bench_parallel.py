@@ -15,7 +15,8 @@ machine's other sessions take their share whatever this run asks for; see bench_
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
                                              [--method hemicube|embree]
-                                             [--no-threads]
+                                             [--no-threads] [--gather-threads]
+    .venv/bin/python bench/bench_parallel.py --gather ROUNDS     (the final gather alone)
 
 Results go to bench/out/bench_parallel.json.
 """
@@ -107,14 +108,22 @@ def cases(only, method=None):
 
 #: (label, workers, processes on): the configurations baked in turn, in this order
 CONFIGS = (("1", 1, True), ("2", 2, True), ("2 thr", 2, False))
+#: with ``--gather-threads``: 2 workers, processes on, but the final gather on threads (as
+#: before it forked), for a comparison in one run
+GATHER_THREADS = ("2 gthr", 2, True)
 
 
-def bake_config(meshes, kw, workers, processes):
+def bake_config(meshes, kw, workers, processes, label=""):
+    from hemicube_radiosity.core import gather
     parallel.PROCESSES = processes
+    forked_from = gather.PROCESS_RAYS
+    if label == GATHER_THREADS[0]:
+        gather.PROCESS_RAYS = None
     try:
         return timed_bake(meshes, BakeSettings(workers=workers, **kw))
     finally:
         parallel.PROCESSES = True
+        gather.PROCESS_RAYS = forked_from
 
 
 def identical(a, b):
@@ -148,6 +157,40 @@ def print_case(label, results, best, configs):
     return {"identical": same, "stages": rows}
 
 
+def gather_only(rounds):
+    """The final gather alone (gather_matrix of the dense box's 51,200 faces at their vertices,
+    the default rays, with hits) at 1 worker, 2 forked workers and 2 threads, ``rounds`` times
+    in turn: wall and CPU (with the workers') per configuration, best and median. A whole bake
+    on a shared machine buries this stage's difference in the other stages' noise."""
+    from hemicube_radiosity.core import gather
+    from hemicube_radiosity.core.direct import vertex_frames
+    from hemicube_radiosity.core.patches import build_patches
+    from hemicube_radiosity.core.rays import embree_scene
+    el = build_patches(scenes.tessellate(scenes.cornell_box(), 40), None)
+    x, n, _ = vertex_frames(el)
+    scene, rays = embree_scene(el), BakeSettings().gather_rays
+    runs, first, forked_from = {}, None, gather.PROCESS_RAYS
+    try:
+        for _ in range(rounds):
+            for name, w, forked in (("1", 1, True), ("2 forked", 2, True), ("2 threads", 2, False)):
+                gather.PROCESS_RAYS = 0 if forked else None
+                c, t = cpu_time(), time.perf_counter()
+                G, sky, H = gather.gather_matrix(el, x, n, scene, rays=rays, workers=w, hits=True)
+                runs.setdefault(name, []).append((time.perf_counter() - t, cpu_time() - c))
+                first = first or (G, H)
+                assert np.array_equal(G.data, first[0].data) and np.array_equal(G.indices, first[0].indices) \
+                    and np.array_equal(H, first[1]), "gather differs with the worker count"
+    finally:
+        gather.PROCESS_RAYS = forked_from
+    print(f"final gather alone: {len(x)} points x {rays} rays, {first[0].nnz} entries, {len(first[1])} "
+          f"hits, identical for every configuration; load average {os.getloadavg()[0]:.2f}")
+    best1 = min(t for t, _ in runs["1"])
+    for name, v in runs.items():
+        v = np.array(v)
+        print(f"  {name:10s} wall best {v[:, 0].min():.2f} s ({best1 / v[:, 0].min():.2f}x), median "
+              f"{np.median(v[:, 0]):.2f} s; CPU median {np.median(v[:, 1]):.2f} s")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=2, help="runs of each worker count (best kept)")
@@ -156,15 +199,25 @@ def main(argv=None):
     ap.add_argument("--method", choices=("hemicube", "embree"), help="this method only")
     ap.add_argument("--no-threads", action="store_true",
                     help="leave out '2 thr' (2 workers on threads only, as before processes)")
+    ap.add_argument("--gather-threads", action="store_true",
+                    help="add '2 gthr' (2 workers, the final gather on threads as before it forked)")
+    ap.add_argument("--gather", type=int, metavar="ROUNDS",
+                    help="time the final gather alone, ROUNDS times each (no bakes)")
     args = ap.parse_args(argv)
+    if args.gather:
+        gather_only(args.gather)
+        return 0
     repeat = 1 if args.quick else args.repeat
     configs = CONFIGS[:2] if args.no_threads else CONFIGS
+    if args.gather_threads:
+        configs = configs + (GATHER_THREADS,)
     load0 = os.getloadavg()
     print(f"{cpu_count()} CPUs; load average before: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
           f"worker processes {'available' if parallel.processes_available() else 'NOT available'}",
           flush=True)
-    print("configurations: 1 = one worker; 2 = two workers (form factors on forked processes); "
-          "2 thr = two workers on threads only", flush=True)
+    print("configurations: 1 = one worker; 2 = two workers (form factors, large transports and "
+          "the final gather on forked processes); 2 thr = two workers on threads only; 2 gthr = "
+          "two workers, the final gather on threads", flush=True)
     m0, w0 = machine_cpu() or (0, 0), time.perf_counter()
     own0 = cpu_time()
     report = {"cpus": cpu_count(), "load_before": load0, "cases": {}}
@@ -174,7 +227,7 @@ def main(argv=None):
         c0, t0, o0 = machine_cpu() or (0, 0), time.perf_counter(), cpu_time()
         for r in range(repeat):
             for c, w, proc in configs:
-                res, wall, cpu = bake_config(meshes, kw, w, proc)
+                res, wall, cpu = bake_config(meshes, kw, w, proc, c)
                 results[c] = res
                 b = best.setdefault(c, {"wall": {}, "cpu": {}})
                 for st, t in wall.items():           # each stage's best run (and its CPU)

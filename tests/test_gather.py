@@ -78,3 +78,21 @@ def test_the_shared_ray_pattern_reads_a_plates_form_factor_along_a_row_under_its
         assert np.sqrt(np.mean(err ** 2)) < 0.006
         assert np.abs(err).max() < 0.016
     np.testing.assert_allclose(sky, sky_fraction(scene, pts, up, 256, seed=seed), atol=1e-12)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_product_is_matvec_bit_for_bit(dtype):
+    # the relight's sparse products (G in float32, the correction matrix in float64), in runs of
+    # rows and on threads, sum every row as CSR.matvec does
+    from hemicube_radiosity.core.gather import product
+    from hemicube_radiosity.core.sparse import CSR
+    rng = np.random.default_rng(5)
+    P, V, nnz = 3000, 2000, 1 << 21
+    rows = np.sort(rng.integers(0, P - 10, nnz))               # the last rows empty
+    M = CSR.from_coo(rows, rng.integers(0, V, nnz), rng.random(nnz), (P, V))
+    M.data = M.data.astype(dtype)
+    x = rng.random((V, 3)) - 0.4
+    ref = M.matvec(x)
+    for workers in (1, 2):
+        assert np.array_equal(product(M, x, workers), ref)
+        assert np.array_equal(product(M, x[:, 1], workers), ref[:, 1])

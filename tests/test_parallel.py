@@ -319,12 +319,18 @@ def test_emitter_transport_cancel_with_two_workers(box, pool_kind, monkeypatch):
 
 
 @needs_embree
-def test_gather_identical_with_two_workers(box):
+def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
+    from hemicube_radiosity.core import gather
+    monkeypatch.setattr(gather, "PROCESS_RAYS", 0)                     # fork even for this small box
     x, n, _ = vertex_frames(box)
-    G1, s1 = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=1)
-    G2, s2 = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=2)
+    G1, s1, H1 = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=1, hits=True)
+    G2, s2, H2 = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=2, hits=True)
     assert np.array_equal(G1.indptr, G2.indptr) and np.array_equal(G1.indices, G2.indices)
-    assert np.array_equal(G1.data, G2.data) and np.array_equal(s1, s2)
+    assert np.array_equal(G1.data, G2.data) and np.array_equal(s1, s2) and np.array_equal(H1, H2)
+    # the chunking (smaller with two workers) does not change G: rows never span chunks
+    G3, s3 = gather_matrix(box, x, n, embree_scene(box), rays=16, workers=1)
+    assert np.array_equal(G3.indptr, G1.indptr) and np.array_equal(G3.data, G1.data)
+    assert np.array_equal(G3.indices, G1.indices) and np.array_equal(s3, s1)
 
 
 # ------------------------------------------------------------------ the whole bake

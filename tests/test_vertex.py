@@ -46,3 +46,44 @@ def test_surfaces_that_share_no_vertex_do_not_mix():
 def test_single_patch_takes_its_own_value():
     ps = build_patches(MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]), None)
     np.testing.assert_allclose(vertex_radiosity(ps, [[0.3, 0.2, 0.1]]), [[0.3, 0.2, 0.1]] * 3)
+
+
+def test_cached_fits_and_frames_are_the_same_bit_for_bit():
+    # a relight's vertex values come from the fits kept in the cache: the same arithmetic
+    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core.direct import vertex_frames
+    from hemicube_radiosity.core.vertex import frames
+    ps = build_patches(scenes.cornell_box(), 0.25)
+    rng = np.random.default_rng(3)
+    w = rng.random(len(ps)) * (rng.random(len(ps)) > 0.2)
+    cache = FormFactorCache()
+    for weights in (None, w):
+        for extrapolate in (True, False):
+            for B in (rng.random((len(ps), 3)), rng.random((len(ps), 3)) - 0.5):
+                ref = vertex_radiosity(ps, B, extrapolate, weights)
+                for _ in range(2):                # made, then found in the cache
+                    assert np.array_equal(vertex_radiosity(ps, B, extrapolate, weights, cache=cache), ref)
+        ref = vertex_frames(ps, weights=weights)
+        for _ in range(2):
+            got = frames(ps, weights, cache)
+            assert all(np.array_equal(a, b) for a, b in zip(got, ref))
+    # new materials on the same geometry: the cached frames' reflectivity is the new one's
+    other = ps.with_materials(rng.random((len(ps), 3)), ps.emission)
+    assert all(np.array_equal(a, b) for a, b in zip(frames(other, w, cache), vertex_frames(other, weights=w)))
+
+
+def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
+    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core.vertex import fill_buried
+    ps = grid(8, 6, (8.0, 6.0))
+    w = np.ones(len(ps))
+    w[(ps.centers[:, 0] > 2) & (ps.centers[:, 0] < 6) & (ps.centers[:, 1] > 1) & (ps.centers[:, 1] < 5)] = 0.0
+    rng = np.random.default_rng(2)
+    cache = FormFactorCache()
+    for _ in range(3):
+        vals = vertex_radiosity(ps, rng.random((len(ps), 3)), weights=w)
+        ref = fill_buried(ps, vals, w)
+        assert not np.array_equal(ref, vals)              # something was filled
+        assert np.array_equal(fill_buried(ps, vals, w, cache=cache), ref)
+    assert fill_buried(ps, vals, np.ones(len(ps)), cache=cache) is vals   # nothing buried

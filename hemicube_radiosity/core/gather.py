@@ -22,6 +22,14 @@ from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
 
+#: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
+#: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). The
+#: gather alone (bench_parallel.py --gather, the dense box's 51,200 faces, an idle machine):
+#: 2.57 s on one worker, 1.62 s median forked, 2.03 s on threads. In whole bakes the
+#: difference stays inside what the order of the configurations moves (+-1.3 s of the
+#: vertices stage's 7-9 s; see the commit that set this).
+PROCESS_RAYS = 1 << 20
+
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
            "product", "surface_values", "surface_weights", "transport_product"]
 
@@ -78,8 +86,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
     point: one cosine pattern (:func:`.rays.cosine_lattice`, seeded) shared by every point, in
     the point's normal frame. A ray that hits the back of a patch sees nothing. G depends on
-    geometry only: a relight reuses it. ``workers``: threads casting chunks of points at once (0 = every core,
-    1 = serial); G is bit-identical for any count.
+    geometry only: a relight reuses it. ``workers``: workers casting chunks of points at once (0 = every
+    core, 1 = serial): threads, or forked processes from :data:`PROCESS_RAYS` rays on (only the
+    chunk starts go out, each chunk's rows come back); G is bit-identical for any count.
     ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
     :func:`correct_hits`; each hit carries weight ``1 / rays`` in G).
@@ -93,14 +102,18 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     local = cosine_lattice(rays, seed)
     R = len(local)
     step = max(1, chunk_rays // R)
-    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
     sky = np.zeros(P)
     if P:
-        scene.intersect(points[:1], normals[:1])  # commit the scene before threads share it
+        scene.intersect(points[:1], normals[:1])  # commit the scene before threads (or forks) share it
+    workers = resolve_workers(workers)
+    if workers > 1:        # a few chunks a worker, so they end together (rows never span chunks:
+        step = max(1, min(step, -(-P // (4 * workers))))      # G is the same for any chunking)
+    forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
+    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
-    with closing(ordered_map(cast, range(0, P, step), resolve_workers(workers))) as results:
+    with closing(ordered_map(cast, range(0, P, step), workers, processes=forked)) as results:
         for s, m, sky_s, n, c, w, H in results:
             sky[s:s + m] = sky_s
             counts[s + 1:s + m + 1] = n
@@ -222,11 +235,20 @@ def product(M, x, workers=1) -> np.ndarray:
     xt = np.ascontiguousarray((x[:, None] if one else x).T)     # (k, n): contiguous gathers
     out = np.zeros((M.shape[0], xt.shape[0]))
     n = min(resolve_workers(workers), max(1, M.nnz >> 20))
+    _data64(M)                                                  # made once, before any thread
     bounds = [0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]]
     with closing(ordered_map(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), range(n), n)) as done:
         for _ in done:
             pass
     return out[:, 0] if one else out
+
+
+def _data64(M) -> np.ndarray:
+    """``M.data`` in float64, kept on the matrix (a cached G is read by every relight): float32
+    times float64 is the same product, without a cast in every multiply."""
+    if M.data.dtype == np.float64:
+        return M.data
+    return M._memo("data64", lambda: M.data.astype(np.float64))
 
 
 def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
@@ -237,6 +259,7 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
     ip = G.indptr
     cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
     cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    data = _data64(G)
     buf = np.empty(0)
     for a, b in zip(cuts[:-1], cuts[1:]):
         s, e = ip[a], ip[b]
@@ -244,12 +267,14 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
             continue
         nz = np.flatnonzero(np.diff(ip[a:b + 1]))
         starts = ip[a:b][nz] - s
-        idx, d = G.indices[s:e], G.data[s:e]
+        idx, d = G.indices[s:e], data[s:e]
         if buf.size < e - s:
             buf = np.empty(max(e - s, chunk))
         p = buf[:e - s]
-        for k in range(xt.shape[0]):   # float32 data times float64 x: products in float64
-            np.take(xt[k], idx, out=p)
+        for k in range(xt.shape[0]):
+            # 'wrap' (the columns are in range: the same values) skips take's buffered bounds
+            # check: with it the gathers were half the dense room's product
+            np.take(xt[k], idx, out=p, mode="wrap")
             np.multiply(p, d, out=p)
             out[a + nz, k] = np.add.reduceat(p, starts)
 

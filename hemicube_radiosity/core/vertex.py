@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cache import cache_key, cached, geometry_key
 from .patches import PatchSet
 
-__all__ = ["vertex_radiosity", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
+__all__ = ["vertex_radiosity", "frames", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
 
 
 def _incidence(polys):
@@ -101,30 +102,90 @@ def _topology(polys, V, cnt):
     return out
 
 
-def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np.ndarray:
+def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache=None) -> np.ndarray:
     """(V, 3) radiosity per patch vertex from (N, 3) patch radiosities ``B``.
 
     ``weights`` (N,) weigh each patch in its vertices' averages and fits (e.g. :func:`exposure`,
     so a patch buried under a block does not darken the vertices it shares with lit ones); a
     vertex whose patches all weigh 0 takes their plain mean. ``extrapolate=False`` gives
     averages everywhere (for comparison). Vertices no patch uses get 0.
+
+    ``cache`` (a :class:`.cache.FormFactorCache`): what depends only on the geometry and the
+    weights (the incidences, the fits' samples and their 4 x 4 normal matrices, :func:`_fits`)
+    is kept there, so a relight only sums its values into the fits and solves them: the same
+    arithmetic, bit for bit. (Folding the fits into one sparse matrix instead moved vertices
+    whose samples lie nearly on a line, where the fit is ill-conditioned, by up to 2e-7 of the
+    scene's largest value.)
     """
     B = np.asarray(B, dtype=np.float64)
+    if cache is None:
+        fit = _fits(patches, weights, extrapolate)
+    else:
+        wkey = b"" if weights is None else np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+        key = cache_key(geometry_key(patches) + wkey, ("vertex-fits", weights is None, bool(extrapolate)))
+        fit = cached(cache, key, lambda: _fits(patches, weights, extrapolate))
+    p, v, wp, safe, V = fit[:5]
+    avg = np.stack([np.bincount(v, weights=wp * B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
+    if len(fit) == 5:
+        return avg
+    pp, iv, slot, targets, Xw, M = fit[5:]
+    sb = np.concatenate([B[pp], avg[iv]])
+    # the normal equations' right-hand sides, (T, 4, bands): per entry, the samples summed in
+    # order (as np.add.at sums them, bit for bit)
+    rhs = np.empty((targets.size, 4, B.shape[1]))
+    for i in range(4):
+        for k in range(B.shape[1]):
+            rhs[:, i, k] = np.bincount(slot, weights=Xw[:, i] * sb[:, k], minlength=targets.size)
+    coef = np.linalg.solve(M, rhs)                             # (T, 4, bands)
+    out = avg.copy()
+    out[targets] = np.maximum(0.0, coef[:, 0, :])
+    return out
+
+
+def frames(patches: PatchSet, weights=None, cache=None):
+    """:func:`.direct.vertex_frames` ``(points, normals, rho)`` with ``weights``, its points and
+    normals (geometry and weights only) kept in ``cache`` with the means' weights: a relight
+    only averages the new reflectivity to the vertices, as vertex_frames does (bit for bit)."""
+    from .direct import vertex_frames
+    if cache is None:
+        return vertex_frames(patches, weights=weights)
+    wkey = b"" if weights is None else np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+
+    def make():
+        x, n, _ = vertex_frames(patches, weights=weights)
+        V = len(patches.verts)
+        p, c = np.nonzero(patches.polys >= 0)
+        v = patches.polys[p, c]
+        w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=np.float64)[p]
+        total = np.bincount(v, weights=w, minlength=V)
+        w = np.where(total[v] > 0, w, 1.0)
+        return x, n, p, v, w, np.maximum(np.bincount(v, weights=w, minlength=V), 1e-300)[:, None]
+    key = cache_key(geometry_key(patches) + wkey, ("vertex-frames", weights is None))
+    x, n, p, v, w, total = cached(cache, key, make)
+    rho = patches.rho
+    V = len(patches.verts)
+    return x, n, np.stack([np.bincount(v, weights=w * rho[p, k], minlength=V) for k in range(rho.shape[1])], 1) / total
+
+
+def _fits(patches: PatchSet, weights, extrapolate=True):
+    """What :func:`vertex_radiosity` needs of the geometry and weights: (incidence patch p,
+    vertex v, weight wp, weight sum per vertex, V) and, where boundary vertices are fitted,
+    (patches sampled, interior vertices sampled, each sample's fit, the fitted vertices,
+    the samples' weighted [1, dx, dy, dz] (S, 4), the fits' normal matrices (T, 4, 4))."""
     polys = patches.polys
     V = len(patches.verts)
     p, v, _ = _incidence(polys)
     cnt = np.bincount(v, minlength=V).astype(np.float64)
-    w = np.ones(len(B)) if weights is None else np.asarray(weights, dtype=np.float64)
+    w = np.ones(len(patches)) if weights is None else np.asarray(weights, dtype=np.float64)
     wsum = np.bincount(v, weights=w[p], minlength=V)
     plain = wsum <= 1e-6 * np.maximum(cnt, 1)
     wp = np.where(plain[v], 1.0, w[p])                          # per incidence
     safe = np.maximum(np.bincount(v, weights=wp, minlength=V), 1e-300)
-    avg = np.stack([np.bincount(v, weights=wp * B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
     if not extrapolate:
-        return avg
+        return p, v, wp, safe, V
     boundary, pairs = _topology(polys, V, cnt)
     if pairs.size == 0:
-        return avg
+        return p, v, wp, safe, V
     bv, iv = pairs[:, 0], pairs[:, 1]
     has = np.zeros(V, bool)
     has[bv] = True
@@ -132,7 +193,6 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np
     pb = boundary[v] & has[v] & (wp > 0)
     sv = np.concatenate([v[pb], bv])
     sx = np.concatenate([patches.centers[p[pb]], patches.verts[iv]])
-    sb = np.concatenate([B[p[pb]], avg[iv]])
     sw = np.concatenate([wp[pb], np.ones(bv.size)])
     order = np.unique(sv, return_inverse=True)
     targets, slot = order[0], order[1].reshape(-1)
@@ -140,20 +200,15 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None) -> np
     X = np.concatenate([np.ones((len(sv), 1)), d], axis=1)     # (S, 4): [1, dx, dy, dz]
     M = np.zeros((targets.size, 4, 4))
     np.add.at(M, slot, sw[:, None, None] * X[:, :, None] * X[:, None, :])
-    rhs = np.zeros((targets.size, 4, B.shape[1]))
-    np.add.at(rhs, slot, sw[:, None, None] * X[:, :, None] * sb[:, None, :])
     # samples on a surface leave the gradient along the normal free: a tiny ridge term fixes it
     scale = np.einsum("ij,ij->i", d, d)
     lam = 1e-9 * np.bincount(slot, weights=scale, minlength=targets.size) / np.bincount(slot, minlength=targets.size)
     lam = np.maximum(lam, 1e-30)
     M[:, 1:, 1:] += lam[:, None, None] * np.eye(3)
-    coef = np.linalg.solve(M, rhs)                             # (T, 4, bands)
-    out = avg.copy()
-    out[targets] = np.maximum(0.0, coef[:, 0, :])
-    return out
+    return p, v, wp, safe, V, p[pb], iv, slot, targets, sw[:, None] * X, M
 
 
-def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
+def fill_buried(patches: PatchSet, values, weights, rings=16, cache=None) -> np.ndarray:
     """(V, k) ``values`` (per vertex, from :func:`vertex_radiosity` with ``weights``) where every
     vertex whose patches all weigh nothing (buried: under a block, below a floor a block is
     sunk into) takes the mean of its neighbours' (through a patch, or at the same place) that
@@ -163,8 +218,31 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
     floor ends in patches below the floor that see nothing (0); the elements across the floor
     line took 0 at their buried corners, and rays from the floor beside the block, which land
     on the side within millimetres of the floor, read their bilinear mix: the open floor's
-    limit on the outline 17% dark. The buried floor under a block is read by no ray."""
+    limit on the outline 17% dark. The buried floor under a block is read by no ray.
+
+    Which vertex takes which neighbours' values, ring by ring, depends on the geometry and
+    ``weights`` only (:func:`_fill_rings`): kept in ``cache`` (a :class:`.cache.FormFactorCache`)
+    when given, so a relight only averages its values (the same sums, bit for bit)."""
     values = np.asarray(values, dtype=np.float64)
+    if cache is None:
+        steps = _fill_rings(patches, weights, rings)
+    else:
+        wkey = np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+        steps = cached(cache, cache_key(geometry_key(patches) + wkey, ("fill-rings", rings)),
+                       lambda: _fill_rings(patches, weights, rings))
+    if not steps:
+        return values
+    out = values.copy()
+    V = len(patches.verts)
+    for a, b, got, n in steps:
+        for c in range(values.shape[1]):
+            out[got, c] = np.bincount(a, weights=out[b, c], minlength=V)[got] / n
+    return out
+
+
+def _fill_rings(patches: PatchSet, weights, rings=16) -> list:
+    """The rings of :func:`fill_buried`: per ring (vertex a, neighbour b it reads (e,), the
+    vertices filled (V,) bool, how many neighbours each reads); [] when nothing is buried."""
     polys = patches.polys
     V = len(patches.verts)
     p, v, _ = _incidence(polys)
@@ -172,7 +250,7 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
     wsum = np.bincount(v, weights=np.asarray(weights, dtype=np.float64)[p], minlength=V)
     buried = (cnt > 0) & (wsum <= 1e-6 * np.maximum(cnt, 1))
     if not buried.any():
-        return values
+        return []
     k = polys.shape[1]
     touch = buried[np.maximum(polys, 0)].any(axis=1)          # patches with a buried corner
     sub = polys[touch]
@@ -190,7 +268,7 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
         a, b = np.concatenate([a, x, y]), np.concatenate([b, y, x])
         keep = buried[a]
         a, b = a[keep], b[keep]
-    out = values.copy()
+    steps = []
     known = ~buried
     for _ in range(rings):
         use = ~known[a] & known[b]
@@ -198,7 +276,6 @@ def fill_buried(patches: PatchSet, values, weights, rings=16) -> np.ndarray:
             break
         n = np.bincount(a[use], minlength=V)
         got = n > 0
-        for c in range(values.shape[1]):
-            out[got, c] = np.bincount(a[use], weights=out[b[use], c], minlength=V)[got] / n[got]
+        steps.append((a[use], b[use], got, n[got]))
         known |= got
-    return out
+    return steps
