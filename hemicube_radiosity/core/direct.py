@@ -28,6 +28,19 @@ PROCESS_RAYS = 1 << 20
 __all__ = ["emitter_transport", "emitter_direct", "apply_transport", "vertex_frames"]
 
 
+def vertex_weights(patches: PatchSet, weights=None):
+    """How :func:`vertex_frames` averages over the patches around each vertex: (patch p (I,),
+    vertex v (I,), weight w (I,), weight sum per vertex (V, 1)) over every patch corner I;
+    ``weights`` (N,) or None (all 1), a vertex whose patches all weigh 0 weighing them all."""
+    V = len(patches.verts)
+    p, c = np.nonzero(patches.polys >= 0)
+    v = patches.polys[p, c]
+    w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=np.float64)[p]
+    total = np.bincount(v, weights=w, minlength=V)
+    w = np.where(total[v] > 0, w, 1.0)
+    return p, v, w, np.maximum(np.bincount(v, weights=w, minlength=V), 1e-300)[:, None]
+
+
 def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     """Per patch vertex: an evaluation point, unit normal and reflectivity.
 
@@ -40,12 +53,7 @@ def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     limit, not a point inside the block); a vertex whose patches all weigh 0 takes them all.
     """
     V = len(patches.verts)
-    p, c = np.nonzero(patches.polys >= 0)
-    v = patches.polys[p, c]
-    w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=np.float64)[p]
-    total = np.bincount(v, weights=w, minlength=V)
-    w = np.where(total[v] > 0, w, 1.0)
-    total = np.maximum(np.bincount(v, weights=w, minlength=V), 1e-300)[:, None]
+    p, v, w, total = vertex_weights(patches, weights)
 
     def mean(a):
         return np.stack([np.bincount(v, weights=w * a[p, k], minlength=V) for k in range(a.shape[1])], 1) / total

@@ -146,20 +146,14 @@ def frames(patches: PatchSet, weights=None, cache=None):
     """:func:`.direct.vertex_frames` ``(points, normals, rho)`` with ``weights``, its points and
     normals (geometry and weights only) kept in ``cache`` with the means' weights: a relight
     only averages the new reflectivity to the vertices, as vertex_frames does (bit for bit)."""
-    from .direct import vertex_frames
+    from .direct import vertex_frames, vertex_weights
     if cache is None:
         return vertex_frames(patches, weights=weights)
     wkey = b"" if weights is None else np.ascontiguousarray(weights, dtype=np.float64).tobytes()
 
     def make():
         x, n, _ = vertex_frames(patches, weights=weights)
-        V = len(patches.verts)
-        p, c = np.nonzero(patches.polys >= 0)
-        v = patches.polys[p, c]
-        w = np.ones(len(p)) if weights is None else np.asarray(weights, dtype=np.float64)[p]
-        total = np.bincount(v, weights=w, minlength=V)
-        w = np.where(total[v] > 0, w, 1.0)
-        return x, n, p, v, w, np.maximum(np.bincount(v, weights=w, minlength=V), 1e-300)[:, None]
+        return (x, n) + vertex_weights(patches, weights)
     key = cache_key(geometry_key(patches) + wkey, ("vertex-frames", weights is None))
     x, n, p, v, w, total = cached(cache, key, make)
     rho = patches.rho
