@@ -7,13 +7,15 @@ are grouped into clusters of about the patch size:
 * the same object and the same material (reflectivity and emission, or ``material`` ids),
 * normals within ``max_angle`` of each other (a curved surface becomes several clusters, each
   nearly planar: the pieces' normals are binned on the cube map, cells ``max_angle`` wide),
-* the same cell of a world grid of the patch size, and connected through shared vertices.
+* the same cell of a world grid of the patch size (by the centre of the piece's bounding box),
+  and connected through shared vertices.
 
 Only whole input faces (and pieces much smaller than the patch size) are grouped: pieces that
 :func:`build_patches` cut from a coarse face already have the patch size and each stay a patch of
 their own, so a scene modelled coarsely solves exactly as before. The pieces remain the geometry: hemi-cubes
-draw every piece with its cluster's id (visibility sees the real surfaces), direct light and the
-output are evaluated on the pieces; only the unknowns of the solve are the clusters.
+draw the pieces with their cluster's id (visibility sees the real surfaces; a planar cluster is
+drawn as its outline, the same region, :mod:`drawn`), direct light and the output are evaluated on
+the pieces; only the unknowns of the solve are the clusters.
 
 Units: world units for positions and sizes, radiance for emission; areas are sums over pieces.
 """
@@ -143,7 +145,15 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     if material is None:
         material = np.unique(np.hstack([pieces.rho, pieces.emission]), axis=0, return_inverse=True)[1]
     lo = pieces.verts.min(axis=0)
-    cell = np.floor((pieces.centers - lo) / size).astype(np.int64)
+    # a piece's cell is that of its bounding box's centre, not its centroid: the two triangles
+    # of a quad share the box's centre when the quad is aligned with the world's axes (a wall
+    # modelled as a grid of quads), so the cells' borders follow the quads' edges rather than
+    # zigzagging through them (the outline :mod:`drawn` draws stays a few straight edges)
+    corners = pieces.corners()
+    centre = 0.5 * (corners.min(axis=1) + corners.max(axis=1))
+    # (a centre on a cell border, as a grid of quads puts whole rows of them, goes the same way
+    # for every one: rounded to 1e-9 of a cell first, float noise does not pick the side)
+    cell = np.floor(np.round((centre - lo) / size, 9)).astype(np.int64)
     parts = np.stack([pieces.owner.astype(np.int64), np.asarray(material, np.int64).reshape(-1),
                       _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)
     # a piece that is not small keys on its own index: it stays alone

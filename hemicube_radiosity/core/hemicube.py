@@ -47,6 +47,7 @@ from functools import partial
 import numpy as np
 
 from .deltaff import delta_form_factors
+from .drawn import draw_set
 from .geometry import tangent_frames
 from .patches import PatchSet
 from .parallel import ordered_map, resolve_workers
@@ -81,6 +82,9 @@ SUBPIXEL = 1 << 14
 #: reference Cornell bakes by up to 1.2e-3 of their maximum (ties broken anew, not a bias).
 SAMPLE_X = 128 / SUBPIXEL
 SAMPLE_Y = 79 / SUBPIXEL
+#: Draw a planar cluster of pieces as its outline (:mod:`drawn`): the same pixels, drawn at a
+#: cost that follows the clusters, not the modelling. False draws every piece (for comparison).
+DRAW_OUTLINES = True
 #: Bound on the fragments expanded at once in the rasteriser (about 40 bytes each).
 FRAGMENTS_PER_CHUNK = 1 << 21
 #: Bound on receivers x patches transformed per batch (about 100 bytes each).  Batches this
@@ -198,17 +202,21 @@ class _Scene:
         lo, hi = verts.min(axis=0), verts.max(axis=0)
         origin = 0.5 * (lo + hi)
         scale = float(np.linalg.norm(hi - lo)) or 1.0
-        self.n = len(patches)
+        self.item_of = None
+        drawn = patches
+        if clusters is not None:
+            drawn = draw_set(patches, clusters) if DRAW_OUTLINES else patches
+            self.item_of = np.asarray(drawn.item_of if DRAW_OUTLINES else clusters.of, dtype=np.int64)
+        self.n = len(drawn)
         self.resolution = resolution
-        self.verts = (verts - origin).astype(np.float32)
-        polys = np.asarray(patches.polys)
+        self.verts = (np.asarray(drawn.verts, dtype=np.float64) - origin).astype(np.float32)
+        polys = np.asarray(drawn.polys)
         self.corner_ids = np.where(polys < 0, polys[:, 2:3], polys)
         self.corners_t = np.ascontiguousarray(self.corner_ids.T)         # (4, N)
-        self.normals = np.asarray(patches.normals, dtype=np.float64)
-        self.plane = np.einsum("ij,ij->i", self.normals, patches.centers - origin)
-        rc, rn = (patches.centers, self.normals) if clusters is None else (clusters.centers, clusters.normals)
-        self.eyes = rc - origin + EYE_OFFSET * scale * rn
-        self.item_of = None if clusters is None else np.asarray(clusters.of, dtype=np.int64)
+        self.normals = np.asarray(drawn.normals, dtype=np.float64)
+        self.plane = np.einsum("ij,ij->i", self.normals, drawn.centers - origin)
+        rc, rn = (patches.centers, patches.normals) if clusters is None else (clusters.centers, clusters.normals)
+        self.eyes = rc - origin + EYE_OFFSET * scale * np.asarray(rn, dtype=np.float64)
         self.near = np.float32(NEAR * scale)
         self.weights = pixel_weights(resolution)
 
@@ -861,7 +869,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     frames = receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
     workers = resolve_workers(workers)
     # with several batches drawn at once, smaller ones: the peak memory stays that of one worker
-    B = _batch_size(len(patches), R, batch) if batch is not None else max(1, _batch_size(len(patches), R, None) // workers)
+    B = _batch_size(scene.n, R, batch) if batch is not None else max(1, _batch_size(scene.n, R, None) // workers)
     ticker = Ticker(progress, cancelled)
     ticker.tick(0, recv.size, force=True)
     batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
