@@ -245,3 +245,27 @@ def test_straightened_group_outlines_keep_the_exact_sum(monkeypatch, kind):
             assert outline.edge_count.max() <= 12
         F = group_form_factors(pts, nrm, c, g, pn, outline)
         np.testing.assert_allclose(F.sum(1), whole, rtol=1e-12, atol=1e-15)
+
+
+def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
+    """A dense sphere cut into curved groups (a hot cap shining on a room): the normal cone
+    that decides most point-group pairs at once, and the face-by-face sum over the faces turned
+    to the point only, give the plain sum over every face of :func:`polygon_form_factors`."""
+    from hemicube_radiosity.core import geometry
+
+    rng = np.random.default_rng(3)
+    p = build_patches([_uv_sphere(48, 24)], None)
+    c, pn = p.corners(), p.normals
+    g = group_pieces(p, 0.7).of                                       # cells and 30-degree normal bins
+    outline = geometry.GroupOutline.of(c, g, pn)
+    assert (~outline.planar).sum() >= 8
+    pts = np.concatenate([rng.uniform(-3, 3, (300, 3)), p.centers[::7] * 1.0001])   # far, and on the ball
+    nrm = rng.normal(size=(len(pts), 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    every = polygon_form_factors(pts, nrm, c, pn)
+    want = np.stack([every[:, g == k].sum(1) for k in range(g.max() + 1)], 1)
+    F = group_form_factors(pts, nrm, c, g, pn, outline)
+    np.testing.assert_allclose(F, want, rtol=1e-9, atol=1e-13)
+    # the cone settles most pairs without a face-by-face test
+    n_front, count = geometry._in_front(pts, outline)
+    assert ((n_front == 0) | (n_front == count[None])).mean() > 0.8
