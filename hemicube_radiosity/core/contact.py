@@ -190,7 +190,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     g_n = elements.normals[order[start[:-1]]]
     # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
     # both sides of, or on, the group's plane
-    gi_all, ci_all = _overlapping(g_lo, g_hi, lo, hi)
+    gi_all, ci_all = _crossing_candidates(g_lo, g_hi, g_n, lo, hi, faces.normals)
     h = np.einsum("pkj,pj->pk", cut_corners[ci_all] - flat[order[start[gi_all]], 0][:, None], g_n[gi_all])
     tri = np.all(cut_corners[ci_all][:, 3] == cut_corners[ci_all][:, 2], axis=1)
     on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
@@ -268,6 +268,47 @@ def _face_corners(elements, ids, faces):
     order = np.argsort(key, kind="stable")
     at = order[np.minimum(np.searchsorted(key[order], want), len(order) - 1)]
     return faces.corners()[at]
+
+
+def _direction_keys(normals) -> np.ndarray:
+    """(N,) int64 one key per direction up to sign, normals rounded to 1e-6 (parallel faces of
+    a wall, a floor, share one)."""
+    n = np.asarray(normals, dtype=np.float64)
+    big = np.take_along_axis(n, np.abs(n).argmax(axis=1)[:, None], axis=1)
+    n = np.round(np.where(big < 0, -n, n), 6) + 0.0
+    return np.unique(n, axis=0, return_inverse=True)[1].reshape(-1)
+
+
+def _crossing_candidates(g_lo, g_hi, g_n, lo, hi, c_n, share=0.01):
+    """(i, j) sorted: the pairs of group boxes (``g_lo``, ``g_hi``, normals ``g_n``) and cutter
+    boxes (``lo``, ``hi``, normals ``c_n``) that overlap, leaving out most pairs of parallel
+    faces (which never cut: a dense floor's triangles against each other were most of the pairs
+    of :func:`_overlapping`). The groups of each direction held by more than ``share`` of them
+    are matched against the cutters of other directions near them only; the rest against all."""
+    keys = _direction_keys(np.concatenate([g_n, c_n]))
+    gk, ck = keys[:len(g_n)], keys[len(g_n):]
+    count = np.bincount(gk)
+    big = np.flatnonzero(count > max(64, share * len(g_n)))
+    out_i, out_j = [], []
+    rest = ~np.isin(gk, big)
+    for k in big:
+        a = np.flatnonzero(gk == k)
+        box_lo, box_hi = g_lo[a].min(axis=0), g_hi[a].max(axis=0)
+        b = np.flatnonzero((ck != k) & np.all((lo <= box_hi) & (hi >= box_lo), axis=1))
+        if b.size:
+            i, j = _overlapping(g_lo[a], g_hi[a], lo[b], hi[b])
+            out_i.append(a[i])
+            out_j.append(b[j])
+    a = np.flatnonzero(rest)
+    if a.size:
+        i, j = _overlapping(g_lo[a], g_hi[a], lo, hi)
+        out_i.append(a[i])
+        out_j.append(j)
+    if not out_i:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    i, j = np.concatenate(out_i), np.concatenate(out_j)
+    o = np.lexsort((j, i))
+    return i[o], j[o]
 
 
 def _overlapping(alo, ahi, blo, bhi, per_box=64):
