@@ -305,3 +305,37 @@ def _ear_clip(pos, loop, normal):
     elif cross(p, q, r) < 0:
         return None
     return np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+
+def plane_outlines(patches: PatchSet) -> PatchSet:
+    """The same surfaces as ``patches`` in fewer triangles, for shadow rays (which ask whether
+    something is in the way, not what): connected patches in one plane (welded by position) are
+    one region, drawn as its outline triangulated like a cluster (:func:`draw_set`); a region
+    with a hole, or a patch alone, stays as it is. Only the geometry is meaningful in the
+    result (reflectivity and emission 0, owner and source face -1)."""
+    from .clusters import _components, _make
+
+    P = len(patches)
+    verts = np.asarray(patches.verts, dtype=np.float64)
+    if P < 2:
+        return patches
+    diag = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) or 1.0
+    n = np.asarray(patches.normals, dtype=np.float64)
+    d = np.einsum("ij,ij->i", n, np.asarray(patches.centers)) / diag
+    key = np.unique(np.round(np.column_stack([n, d]), 7) + 0.0, axis=0, return_inverse=True)[1].reshape(-1)
+    key = np.where(np.all(np.isfinite(n), axis=1), key, -1 - np.arange(P))
+    weld = np.unique(verts, axis=0, return_inverse=True)[1].reshape(-1)
+    polys = np.asarray(patches.polys)
+    wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
+    of = np.unique(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
+    if of.max() + 1 == P:
+        return patches
+    d_set = draw_set(patches, _make(patches, of))
+    V = d_set.verts
+    c = np.where(d_set.polys < 0, d_set.polys[:, 2:3], d_set.polys)
+    corners = V[c]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 1] - corners[:, 0])
+                                + np.cross(corners[:, 3] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    M = len(d_set)
+    return PatchSet(V, d_set.polys, corners.mean(axis=1), d_set.normals, area, np.zeros((M, 3)),
+                    np.zeros((M, 3)), np.full(M, -1, np.int32), np.full(M, -1, np.int32), [])

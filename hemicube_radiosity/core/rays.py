@@ -117,13 +117,13 @@ _SCENE_CACHE: dict = {}
 
 
 def embree_scene(patches: PatchSet) -> EmbreeScene:
-    """The Embree scene for ``patches``, built once per geometry (the two most recent are kept
+    """The Embree scene for ``patches``, built once per geometry (the four most recent are kept
     until :func:`clear_ray_cache`)."""
     key = patches.geometry_key()
     sc = _SCENE_CACHE.get(key)
     if sc is None:
         sc = EmbreeScene(patches)
-        while len(_SCENE_CACHE) >= 2:
+        while len(_SCENE_CACHE) >= 4:
             _SCENE_CACHE.pop(next(iter(_SCENE_CACHE)))
         _SCENE_CACHE[key] = sc
     return sc
@@ -132,6 +132,7 @@ def embree_scene(patches: PatchSet) -> EmbreeScene:
 def clear_ray_cache() -> None:
     """Forget every cached ray scene (frees Embree's memory once no caller holds a scene)."""
     _SCENE_CACHE.clear()
+    _OCCLUDING_CACHE.clear()
 
 
 # --------------------------------------------------------------------------------------------
@@ -265,10 +266,29 @@ def occluder(patches, shadows="auto"):
         raise ValueError(f"shadows must be 'auto', 'embree', 'numpy' or 'none', got {shadows!r}")
     if shadows in ("auto", "embree"):
         if embree_available():
-            return embree_scene(patches)
+            return embree_scene(_occluding(patches))
         if shadows == "embree":
             raise EmbreeUnavailable()
-    return NumpyOccluder(patches)
+    return NumpyOccluder(_occluding(patches))
+
+
+_OCCLUDING_CACHE: dict = {}
+
+
+def _occluding(patches: PatchSet) -> PatchSet:
+    """The surfaces shadow rays test against: ``patches`` with each planar region as its
+    outline (:func:`.drawn.plane_outlines`; a wall modelled as 10,000 triangles is 2 for a shadow
+    ray), built once per geometry (the two most recent are kept)."""
+    from .drawn import plane_outlines
+
+    key = patches.geometry_key()
+    got = _OCCLUDING_CACHE.get(key)
+    if got is None:
+        got = plane_outlines(patches)
+        while len(_OCCLUDING_CACHE) >= 2:
+            _OCCLUDING_CACHE.pop(next(iter(_OCCLUDING_CACHE)))
+        _OCCLUDING_CACHE[key] = got
+    return got
 
 
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
