@@ -138,6 +138,8 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers)
 
 
+#: With more than one worker, :func:`_gathered` runs the gather's product on a thread of its own
+#: beside the corrections (the same result, bit for bit); False: one after the other.
 OVERLAP = True
 
 
