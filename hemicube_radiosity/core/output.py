@@ -14,7 +14,6 @@ Embree) or interpolated bilinearly (:mod:`.interpolate`).
 from __future__ import annotations
 
 import hashlib
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -24,7 +23,6 @@ from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
-from .parallel import resolve_workers
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
@@ -123,24 +121,9 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     direct_e = rho_v * light_v
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
-    if OVERLAP and resolve_workers(ctx.settings.workers) > 1:
-        # the gather's product and the corrections need nothing of each other: the product on a
-        # thread of its own (NumPy lets go of the GIL in its gathers and sums) while the
-        # corrections are judged and read; the same sums, added in the same order
-        with ThreadPoolExecutor(1, thread_name_prefix="radiosity") as pool:
-            gathered = pool.submit(apply_gather, G, G.sky, direct_e + rest_e, world, 1)
-            corrections = _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
-            out = gathered.result()
-    else:
-        out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
-        corrections = _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
-    out += corrections
+    out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
+    out += _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers)
-
-
-#: With more than one worker, :func:`_gathered` runs the gather's product on a thread of its own
-#: beside the corrections (the same result, bit for bit); False: one after the other.
-OVERLAP = True
 
 
 def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1):
