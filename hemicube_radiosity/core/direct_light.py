@@ -221,8 +221,7 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
         return light_at(patches.centers, patches.normals, "centres")
     if centre_only is not None and centre_only.any():
         out = np.empty((len(patches), 3))
-        out[centre_only] = light_at(patches.centers[centre_only], patches.normals[centre_only],
-                                    "grouped-centres")
+        out[centre_only] = light_at(*_centres(patches, centre_only), "grouped-centres")
         rest = np.flatnonzero(~centre_only)
         sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
                        patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
@@ -238,6 +237,26 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
         w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
     D = light_at(x.reshape(N * K, 3), nrm, f"patch-points-{n}").reshape(N, K, 3)
     return np.einsum("nk,nkc->nc", w, D)
+
+
+_CENTRES: dict = {}      # (id(centers), id(normals), mask bytes) -> (centers, normals, their rows)
+
+
+def _centres(patches: PatchSet, select) -> tuple:
+    """(centres (M, 3), normals (M, 3)) of the patches ``select`` (N,) bool, the same arrays for
+    the same patch arrays and selection (a relight's: its transports' keys hash them once,
+    :func:`.cache.array_key`). The arrays are read-only."""
+    c, n = patches.centers, patches.normals
+    key = (id(c), id(n), np.packbits(select).tobytes(), len(select))
+    hit = _CENTRES.get(key)
+    if hit is None or hit[0] is not c or hit[1] is not n:
+        rows = (c[select], n[select])
+        for a in rows:
+            a.flags.writeable = False
+        while len(_CENTRES) >= 8:
+            _CENTRES.pop(next(iter(_CENTRES)))
+        hit = _CENTRES[key] = (c, n, rows)
+    return hit[2]
 
 
 def turned_around(patches: PatchSet) -> PatchSet:
@@ -326,7 +345,7 @@ def direct_stage(ctx) -> None:
     seen, memo = _seen_weight(ctx), {}
 
     def at(x, n, where):                      # the same points twice: light them once
-        key = (where, np.ascontiguousarray(x).tobytes())
+        key = (where, array_key(x))
         if key not in memo:
             memo[key] = ctx.direct.at(x, n, where)
         return memo[key]
