@@ -255,18 +255,10 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
     """``out[r0:r1] = (G @ x)[r0:r1]`` for ``xt`` = x.T (k, V), in runs of rows of about ``chunk``
     entries, so that the products stay in the CPU's cache (whole-matrix temporaries, hundreds of
     megabytes on a dense mesh's G, made the product twice as slow); each row is summed as
-    :meth:`.sparse.CSR.matvec` sums it."""
-    ip = G.indptr
-    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
-    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    :meth:`.sparse.CSR.matvec` sums it. The runs (:func:`_row_runs`) are kept on G."""
     data = _data64(G)
     buf = np.empty(0)
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        s, e = ip[a], ip[b]
-        if e == s:
-            continue
-        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
-        starts = ip[a:b][nz] - s
+    for s, e, rows, starts in G._memo(("row-runs", r0, r1, chunk), lambda: _row_runs(G.indptr, r0, r1, chunk)):
         idx, d = G.indices[s:e], data[s:e]
         if buf.size < e - s:
             buf = np.empty(max(e - s, chunk))
@@ -276,7 +268,25 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
             # check: with it the gathers were half the dense room's product
             np.take(xt[k], idx, out=p, mode="wrap")
             np.multiply(p, d, out=p)
-            out[a + nz, k] = np.add.reduceat(p, starts)
+            out[rows, k] = np.add.reduceat(p, starts)
+
+
+def _row_runs(ip, r0, r1, chunk) -> list:
+    """The runs of :func:`_rows_product` over rows ``r0:r1`` of a CSR with row pointers ``ip``:
+    (first entry, end entry, the run's non-empty rows (a slice where all are), their first
+    entries' offsets in the run), for runs of whole rows of about ``chunk`` entries (a relight's
+    products make them once per matrix)."""
+    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
+    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    runs = []
+    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+        s, e = int(ip[a]), int(ip[b])
+        if e == s:
+            continue
+        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
+        rows = slice(a, b) if nz.size == b - a else a + nz
+        runs.append((s, e, rows, ip[a:b][nz] - s))
+    return runs
 
 
 def transport_product(T, L, transposed=False) -> np.ndarray:
