@@ -61,10 +61,17 @@ def array_key(a) -> bytes:
     h = hashlib.sha256(str(c.dtype).encode() + str(c.shape).encode())
     h.update(c.tobytes())
     key = h.digest()
-    while len(_ARRAYS) >= 32:
+    _ARRAYS.pop(id(a), None)
+    # what is remembered stays alive: at most 32 arrays and ARRAY_MEMO_BYTES of them (a relight's
+    # are cached anyway; a bake's one-off point sets go first)
+    while _ARRAYS and (len(_ARRAYS) >= 32 or sum(x.nbytes for x, _ in _ARRAYS.values()) + a.nbytes > ARRAY_MEMO_BYTES):
         _ARRAYS.pop(next(iter(_ARRAYS)))
     _ARRAYS[id(a)] = (a, key)
     return key
+
+
+#: Bytes of arrays :func:`array_key` keeps alive at most.
+ARRAY_MEMO_BYTES = 64 << 20
 
 
 def cached(cache, key, make, disk=True):
