@@ -96,3 +96,20 @@ def test_product_is_matvec_bit_for_bit(dtype):
     for workers in (1, 2):
         assert np.array_equal(product(M, x, workers), ref)
         assert np.array_equal(product(M, x[:, 1], workers), ref[:, 1])
+
+
+def test_transport_product_transposed_is_apply_transport_bit_for_bit():
+    # the relight keeps its cached transports transposed to float64 (gather.transposed_transport):
+    # the same sums as the (P, M) float32 transport and as direct.apply_transport's einsum
+    from hemicube_radiosity.core.direct import apply_transport
+    from hemicube_radiosity.core.gather import transport_product, transposed_transport
+    rng = np.random.default_rng(3)
+    T = rng.random((5000, 37)).astype(np.float32)
+    T[rng.random(T.shape) < 0.3] = 0
+    L = rng.random((37, 3)) * 5
+    ref = apply_transport(T, L)
+    Tt = transposed_transport(T)
+    assert Tt.shape == (37, 5000) and Tt.dtype == np.float64 and Tt.flags.c_contiguous
+    assert np.array_equal(transport_product(T, L), ref)
+    assert np.array_equal(transport_product(Tt, L, transposed=True), ref)
+    assert transport_product(np.zeros((4, 0), np.float32), np.zeros((0, 3))).shape == (4, 3)

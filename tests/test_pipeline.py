@@ -374,3 +374,32 @@ def test_relight_that_moves_the_bright_areas_chooses_again_and_equals_a_cold_bak
     assert built
     cold = bake(scene(8.0, 0.08), s)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
+
+
+def test_relight_reads_materials_as_the_patches_and_clusters_do():
+    """What a relight re-reads onto the cached patches and clusters (pipeline._with_mesh_materials,
+    Clusters.with_materials) equals, bit for bit, PatchSet.with_mesh_materials and the clusters'
+    area-weighted mean; and a point set's cache digest (cache.array_key) is kept per array object
+    and follows its values."""
+    from hemicube_radiosity.core.cache import array_key
+    from hemicube_radiosity.core.pipeline import _with_mesh_materials
+    from hemicube_radiosity.core.scenes import tessellate
+
+    meshes = tessellate(cornell_box(), 3)
+    r = bake(meshes, BakeSettings(patch_size=0.3, gather_rays=0, resolution=16))
+    assert r.clusters is not None
+    relit = tessellate(cornell_box(light_radiance=9.0), 3)
+    rng = np.random.default_rng(2)
+    for m in relit:
+        m.face_rho[:] = rng.uniform(0.05, 0.9, np.shape(m.face_rho))
+    for _ in range(2):                                   # the index made, then kept
+        got = _with_mesh_materials(r.patches, relit)
+        want = r.patches.with_mesh_materials(relit)
+        assert np.array_equal(got.rho, want.rho) and np.array_equal(got.emission, want.emission)
+        assert got.verts is r.patches.verts and got.polys is r.patches.polys
+    c = r.clusters.with_materials(got)
+    assert np.array_equal(c.rho[c.sizes > 1], r.clusters.mean(got.rho, got.areas)[c.sizes > 1])
+    assert np.array_equal(c.emission[c.sizes > 1], r.clusters.mean(got.emission, got.areas)[c.sizes > 1])
+    x = rng.random((50, 3))
+    assert array_key(x) == array_key(x) == array_key(x.copy())
+    assert array_key(x) != array_key(x[::-1].copy()) and array_key(x) != array_key(x.astype(np.float32))

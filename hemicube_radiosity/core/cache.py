@@ -15,7 +15,7 @@ import numpy as np
 
 from .sparse import CSR
 
-__all__ = ["FormFactorCache", "cache_key", "cached", "geometry_key"]
+__all__ = ["FormFactorCache", "array_key", "cache_key", "cached", "geometry_key"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
@@ -42,13 +42,50 @@ def geometry_key(patches) -> bytes:
     return key
 
 
-def cached(cache, key, make):
-    """``cache``'s item under ``key``, made by ``make()`` and stored when absent (no cache: made)."""
+_ARRAYS: dict = {}       # id(array) -> (array, digest): the last few point sets hashed
+
+
+def array_key(a) -> bytes:
+    """SHA-256 digest of the array ``a``'s dtype, shape and values, hashed once per array object
+    (kept, so its id is not reused while remembered): the point sets a bake keys its
+    geometry-only products on (a relight's output vertices and patch grid points are the same,
+    cached arrays; hashing their bytes again was a few ms of every relight). As for
+    :func:`geometry_key`, arrays so keyed are never changed in place; anything else (a list, a
+    new array each call) is hashed as given."""
+    if not isinstance(a, np.ndarray):
+        a = np.asarray(a)
+    hit = _ARRAYS.get(id(a))
+    if hit is not None and hit[0] is a:
+        return hit[1]
+    c = np.ascontiguousarray(a)
+    h = hashlib.sha256(str(c.dtype).encode() + str(c.shape).encode())
+    h.update(c.tobytes())
+    key = h.digest()
+    _ARRAYS.pop(id(a), None)
+    # what is remembered stays alive: at most 32 arrays and ARRAY_MEMO_BYTES of them (a relight's
+    # are cached anyway; a bake's one-off point sets go first)
+    while _ARRAYS and (len(_ARRAYS) >= 32 or sum(x.nbytes for x, _ in _ARRAYS.values()) + a.nbytes > ARRAY_MEMO_BYTES):
+        _ARRAYS.pop(next(iter(_ARRAYS)))
+    _ARRAYS[id(a)] = (a, key)
+    return key
+
+
+#: Bytes of arrays :func:`array_key` keeps alive at most.
+ARRAY_MEMO_BYTES = 64 << 20
+
+
+def cached(cache, key, make, disk=True):
+    """``cache``'s item under ``key``, made by ``make()`` and stored when absent (no cache: made).
+    ``disk=False``: kept in memory only (what is quickly made again from another item, e.g. a
+    transport transposed)."""
     item = cache.get(key) if cache is not None else None
     if item is None:
         item = make()
         if cache is not None:
-            cache.put(key, item)
+            if disk:
+                cache.put(key, item)
+            else:
+                cache.put(key, item, disk=False)
     return item
 
 
@@ -82,11 +119,12 @@ class FormFactorCache:
             return item
         return None
 
-    def put(self, key: str, item) -> None:
+    def put(self, key: str, item, disk=True) -> None:
         """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
-        on disk; anything else (e.g. an output element mesh) in memory only."""
+        (unless ``disk`` is False) on disk; anything else (e.g. an output element mesh) in memory
+        only."""
         self._remember(key, item)
-        if self.directory and isinstance(item, (CSR, np.ndarray)):
+        if disk and self.directory and isinstance(item, (CSR, np.ndarray)):
             tmp = self._path(key) + ".tmp.npz"
             if isinstance(item, CSR):
                 item.save(tmp)

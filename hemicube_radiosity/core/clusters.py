@@ -77,10 +77,19 @@ class Clusters:
     def with_materials(self, pieces: PatchSet) -> "Clusters":
         """The same grouping with reflectivity and emission read again from ``pieces`` (a
         cluster of one piece takes that piece's values exactly)."""
-        rho, em = self.mean(pieces.rho, pieces.areas), self.mean(pieces.emission, pieces.areas)
+        rho, em = (self._area_mean(a, pieces.areas) for a in (pieces.rho, pieces.emission))
         solo = np.flatnonzero(self.sizes[self.of] == 1)
         rho[self.of[solo]], em[self.of[solo]] = pieces.rho[solo], pieces.emission[solo]
         return Clusters(self.of, self.centers, self.normals, self.areas, rho, em, self.owner)
+
+    def _area_mean(self, per_piece, piece_areas) -> np.ndarray:
+        """:meth:`mean` of a (P, 3) array, bit for bit (each cluster's products summed in piece
+        order, from 0), by a bincount per band instead of ``np.add.at`` (a tenth of the time:
+        a relight reads its materials onto the clusters every time)."""
+        a = np.asarray(per_piece, dtype=np.float64) * np.asarray(piece_areas, dtype=np.float64)[:, None]
+        K = len(self)
+        return np.stack([np.bincount(self.of, weights=a[:, k], minlength=K) for k in range(a.shape[1])], 1) \
+            / self.areas[:, None]
 
 
 def _small(pieces: PatchSet, size) -> np.ndarray:

@@ -31,7 +31,7 @@ from .sparse import CSR
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
-           "product", "surface_values", "surface_weights", "transport_product"]
+           "product", "surface_values", "surface_weights", "transport_product", "transposed_transport"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -255,18 +255,10 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
     """``out[r0:r1] = (G @ x)[r0:r1]`` for ``xt`` = x.T (k, V), in runs of rows of about ``chunk``
     entries, so that the products stay in the CPU's cache (whole-matrix temporaries, hundreds of
     megabytes on a dense mesh's G, made the product twice as slow); each row is summed as
-    :meth:`.sparse.CSR.matvec` sums it."""
-    ip = G.indptr
-    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
-    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    :meth:`.sparse.CSR.matvec` sums it. The runs (:func:`_row_runs`) are kept on G."""
     data = _data64(G)
     buf = np.empty(0)
-    for a, b in zip(cuts[:-1], cuts[1:]):
-        s, e = ip[a], ip[b]
-        if e == s:
-            continue
-        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
-        starts = ip[a:b][nz] - s
+    for s, e, rows, starts in G._memo(("row-runs", r0, r1, chunk), lambda: _row_runs(G.indptr, r0, r1, chunk)):
         idx, d = G.indices[s:e], data[s:e]
         if buf.size < e - s:
             buf = np.empty(max(e - s, chunk))
@@ -276,18 +268,44 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
             # check: with it the gathers were half the dense room's product
             np.take(xt[k], idx, out=p, mode="wrap")
             np.multiply(p, d, out=p)
-            out[a + nz, k] = np.add.reduceat(p, starts)
+            out[rows, k] = np.add.reduceat(p, starts)
 
 
-def transport_product(T, L) -> np.ndarray:
+def _row_runs(ip, r0, r1, chunk) -> list:
+    """The runs of :func:`_rows_product` over rows ``r0:r1`` of a CSR with row pointers ``ip``:
+    (first entry, end entry, the run's non-empty rows (a slice where all are), their first
+    entries' offsets in the run), for runs of whole rows of about ``chunk`` entries (a relight's
+    products make them once per matrix)."""
+    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
+    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
+    runs = []
+    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
+        s, e = int(ip[a]), int(ip[b])
+        if e == s:
+            continue
+        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
+        rows = slice(a, b) if nz.size == b - a else a + nz
+        runs.append((s, e, rows, ip[a:b][nz] - s))
+    return runs
+
+
+def transport_product(T, L, transposed=False) -> np.ndarray:
     """``T @ L`` for a dense (P, M) transport (float32) and (M, 3) radiances, in float64, equal
     bit for bit to :func:`.direct.apply_transport` (each sum runs over m in order; with one
     band einsum sums otherwise, to the last bit) and, without BLAS either, several times
     faster: the sums run down the rows of T transposed, whole rows at a time (einsum's
     mixed-precision loop took 7.6 ms for the 13,249 x 37 transport of the dense room's shining
-    groups, this 1.1 ms)."""
+    groups, this 1.1 ms). ``transposed``: ``T`` is given as :func:`transposed_transport` made
+    it, (M, P) float64 (kept with a cached transport, so a relight neither transposes nor casts
+    it: 0.6 ms), the same sums."""
     L = np.asarray(L, dtype=np.float64)
-    Tt = np.ascontiguousarray(np.asarray(T).T)
+    Tt = np.asarray(T) if transposed else np.ascontiguousarray(np.asarray(T).T)
     if Tt.shape[0] == 0:
         return np.zeros((Tt.shape[1], L.shape[1]))
     return np.stack([np.add.reduce(Tt * L[:, k, None], axis=0) for k in range(L.shape[1])], 1)
+
+
+def transposed_transport(T) -> np.ndarray:
+    """(M, P) float64, contiguous: a (P, M) transport as :func:`transport_product` reads it with
+    ``transposed=True`` (float32 to float64 is exact: the same products)."""
+    return np.ascontiguousarray(np.asarray(T).T, dtype=np.float64)

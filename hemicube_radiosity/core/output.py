@@ -17,12 +17,12 @@ import hashlib
 
 import numpy as np
 
-from .cache import cache_key, cached, geometry_key
+from .cache import array_key, cache_key, cached, geometry_key
 from .clusters import _components
 from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
-from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product
+from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
@@ -701,15 +701,20 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts).tobytes() + polys.tobytes()
-                    + groups.tobytes() + power.tobytes() + np.ascontiguousarray(xv).tobytes(), ("shine", samples))
+    # the elements' geometry and the points hashed once per array (a relight's are cached): of
+    # ``verts`` only the cells' corners after the elements' own
+    V = len(elements.verts)
+    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts[V:]).tobytes() + polys.tobytes()
+                    + groups.tobytes() + power.tobytes() + array_key(xv), ("shine", samples, len(verts) - V, len(every)))
     T = cached(ctx.cache, key, lambda: emitter_transport(
         source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
         workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled)))
     G = int(groups.max()) + 1
     L = np.stack([np.bincount(groups, weights=area * L[:, k], minlength=G) for k in range(3)], 1) \
         / np.bincount(groups, weights=area, minlength=G)[:, None]
-    return transport_product(T, L)
+    # kept transposed beside T in memory: a relight neither transposes nor casts it
+    Tt = cached(ctx.cache, key + "-t", lambda: transposed_transport(T), disk=False)
+    return transport_product(Tt, L, transposed=True)
 
 
 def _gather_rays(ctx, elements, xv, nv):

@@ -112,14 +112,15 @@ def _checked(F, rho, S, B, gamma):
     return (Bj, rj, bj) if bj <= b0 else (B, r, b0)
 
 
-def residual(F: CSR, rho, source, B, row_ids=None) -> float:
-    """Relative residual ``max|B - S - rho F B| / max|B|`` (0 when B is all zero and S is too)."""
-    r = B - source - rho * F.matvec(B, row_ids)
+def residual(F: CSR, rho, source, B, row_ids=None, FB=None) -> float:
+    """Relative residual ``max|B - S - rho F B| / max|B|`` (0 when B is all zero and S is too).
+    ``FB``: ``F.matvec(B)`` when the caller has it."""
+    r = B - source - rho * (F.matvec(B, row_ids) if FB is None else FB)
     scale = np.abs(B).max()
     return float(np.abs(r).max() / scale) if scale > 0 else float(np.abs(r).max())
 
 
-def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None) -> dict:
+def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None, FB=None) -> dict:
     """Power bookkeeping per band, in radiance x area units (multiply by pi for watts).
 
     emitted  = sum A_i S_i
@@ -129,10 +130,11 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None) -
     ``imbalance`` is the relative difference, a check on both the form factors and the solve.
     ``computed`` (N,) bool marks rows that were computed; rows left out (patches with rho = 0,
     whose radiosity needs no gathering) get their row sum and incident radiance by reciprocity
-    from the computed rows: ``F_ji = A_i F_ij / A_j``.
+    from the computed rows: ``F_ji = A_i F_ij / A_j``. ``FB``: ``F.matvec(B)`` when the caller
+    has it.
     """
     areas = np.asarray(areas, dtype=np.float64)
-    H = F.matvec(B, row_ids)
+    H = F.matvec(B, row_ids) if FB is None else FB
     rs = F.row_sums()
     if computed is not None and not np.all(computed):
         miss = ~np.asarray(computed, bool)
@@ -220,25 +222,30 @@ def _gs_blocks(F, rho_max, size, omega):
     return blocks
 
 
-def _sor_sweep(blocks, rho, S, BT, B32, w):
+def _sor_sweep(blocks, rhoT, ST, BT, B32, w):
     """One over-relaxed block Gauss-Seidel sweep, in place; returns the largest change of a value.
 
-    ``blocks`` from :func:`_gs_blocks`; rho, S (N, 3); BT (bands, N) float64 radiosities,
-    updated block by block; B32 the copy the gathers read (a float32 copy of BT, kept up to
-    date, or BT itself); w the relaxation factor (1 = plain Gauss-Seidel)."""
+    ``blocks`` from :func:`_gs_blocks`; rhoT, ST (bands, N) reflectivity and source, band-major
+    as BT, the (bands, N) float64 radiosities, updated block by block (a block's values are
+    computed as (bands, rows), the same arithmetic per value as row-major, without transposes);
+    B32 the copy the gathers read (a float32 copy of BT, kept up to date, or BT itself); w the
+    relaxation factor (1 = plain Gauss-Seidel)."""
     change = 0.0
     for b0, b1, cols, vals, starts, nonempty in blocks:
-        acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0)
-        old = BT[:, b0:b1].T
-        new = S[b0:b1] + rho[b0:b1] * acc
+        if starts.size == b1 - b0:            # every row sees something: the sums are the rows
+            acc = np.add.reduceat(np.take(B32, cols, axis=1) * vals, starts, axis=1, dtype=np.float64)
+        else:
+            acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0).T
+        old = BT[:, b0:b1]
+        new = ST[:, b0:b1] + rhoT[:, b0:b1] * acc
         if w != 1.0:
             new = old + w * (new - old)
         d = np.abs(new - old).max(initial=0.0)
         if d > change:
             change = d
-        BT[:, b0:b1] = new.T
+        BT[:, b0:b1] = new
         if B32 is not BT:
-            B32[:, b0:b1] = new.T
+            B32[:, b0:b1] = new
     return change
 
 
@@ -311,11 +318,12 @@ def _gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None)
     relax = _Relaxation(F, rho.max(axis=1), block or max(1, min(256, F.shape[0] // 32)), omega)
     BT = np.ascontiguousarray(S.T).copy()   # (bands, N): contiguous gathers per band
     B32 = BT.astype(np.float32)             # what the gathers read (half the memory traffic)
+    rhoT, ST = np.ascontiguousarray(rho.T), np.ascontiguousarray(S.T)
     calib = 0.2          # exact bound / cheap bound, learnt at each exact check
     it, converged = 0, False
     for it in range(1, max_it + 1):
         w = relax.w
-        change = _sor_sweep(relax.blocks, rho, S, BT, B32, w)
+        change = _sor_sweep(relax.blocks, rhoT, ST, BT, B32, w)
         ticker.tick(it, max_it)
         scale = np.abs(BT).max()
         if scale == 0:
@@ -461,7 +469,8 @@ def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=2
     else:
         B, it, conv, more = _progressive(F, rho, S, tol, max_iterations, ticker, areas, gamma)
         extra.update(more)
-    res = residual(F, rho, S, B, rid)
+    FB = F.matvec(B)                  # once for the residual and the balance (a relight's solve is ms)
+    res = residual(F, rho, S, B, rid, FB)
     bound = error_bound(res, gamma)
-    energy = energy_balance(F, rho, S, B, areas, rid, computed) if areas is not None else {}
+    energy = energy_balance(F, rho, S, B, areas, rid, computed, FB) if areas is not None else {}
     return Solution(B, it, res, energy, method, bool(conv and bound <= tol), extra, bound)
