@@ -756,9 +756,15 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         idx, uv = locate(ctx.patches, xv, owner=owner_v, normals=nv)
         # a point beside small patches (refined along a partition) may not have the patch it
         # lies in among the nearest centres: clamped into a neighbour across the partition, it
-        # read the other side's light. Those off their patch look again, farther
+        # read the other side's light. Those off their patch along it look again, farther (off
+        # it across by a hair: a curved mesh's vertex moved in toward its elements lies a
+        # thousandth of a face or less under the faces, and is where it belongs)
         c = ctx.patches.corners()[idx]
-        off = np.linalg.norm(_bilinear(c, uv[:, :1], uv[:, 1:]) - xv, axis=1) > 1e-6 * np.sqrt(ctx.patches.areas[idx])
+        d = _bilinear(c, uv[:, :1], uv[:, 1:]) - xv
+        n = ctx.patches.normals[idx]
+        across = np.einsum("ij,ij->i", d, n)
+        size = np.sqrt(ctx.patches.areas[idx])
+        off = (np.linalg.norm(d - across[:, None] * n, axis=1) > 1e-6 * size) | (np.abs(across) > 1e-3 * size)
         if off.any():
             far = np.flatnonzero(off)
             i2, uv2 = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64)
