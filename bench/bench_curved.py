@@ -1,6 +1,6 @@
 """A dense curved mesh as artists make them: Suzanne with a Subdivision Surface in the Cornell box.
 
-    .venv/bin/python bench/bench_curved.py [--level 3] [--spp 64]
+    .venv/bin/python bench/bench_curved.py [--level 3] [--spp 64] [--quick]
 
 Issue 9 opened with "a Suzanne with a level-3 Subdivision Surface (31.7k faces) cannot be baked at
 all". This bench builds one (``bmesh.ops.create_monkey``, a SUBSURF modifier of ``--level``,
@@ -80,7 +80,10 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--level", type=int, default=3)
     ap.add_argument("--spp", type=int, default=64)
+    ap.add_argument("--quick", action="store_true", help="level 2, 16 samples")
     a = ap.parse_args(argv)
+    if a.quick:
+        a.level, a.spp = 2, 16
     import bpy  # noqa: F401
     import cycles_reference as cr
     from bench_dense import _Scene, build_scene

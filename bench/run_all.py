@@ -1,12 +1,13 @@
 """What `make bench` runs: the form-factor micro-benchmark (if present), the batch speed-up
 (``bench_batch.py``: -j 2 against -j 1), the stages on 1 and 2 worker threads
-(``bench_parallel.py``), then speed vs error.
+(``bench_parallel.py``), the tessellation sweep (``bench_dense.py``), a dense room's relight
+(``bench_relight_dense.py``), Suzanne subdivided in the Cornell box (``bench_curved.py``), then
+speed vs error.
 
     make bench                       # full run (~30 min on 2 cores; Cycles references cached)
     make bench BENCH_ARGS=--quick    # smoke run (~3 min)
 
-Arguments are passed to bench/speed_vs_error.py (``--quick`` also to bench_formfactors.py,
-bench_batch.py and bench_parallel.py). Exits non-zero when a benchmark script fails; targets that do not hold are printed,
+Arguments are passed to bench/speed_vs_error.py (``--quick`` also to the others). Exits non-zero when a benchmark script fails; targets that do not hold are printed,
 not failed (they are measurements, not tests).
 """
 from __future__ import annotations
@@ -35,6 +36,8 @@ def main(argv):
     rc |= run(os.path.join(HERE, "bench_batch.py"), ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "bench_parallel.py"), ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "bench_dense.py"), ["--quick"] if "--quick" in argv else [])
+    rc |= run(os.path.join(HERE, "bench_relight_dense.py"), ["--quick"] if "--quick" in argv else [])
+    rc |= run(os.path.join(HERE, "bench_curved.py"), ["--quick"] if "--quick" in argv else [])
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
     return 1 if rc else 0
 
