@@ -119,14 +119,19 @@ _SCENE_CACHE: dict = {}
 def embree_scene(patches: PatchSet) -> EmbreeScene:
     """The Embree scene for ``patches``, built once per geometry (the four most recent are kept
     until :func:`clear_ray_cache`)."""
+    return _per_geometry(_SCENE_CACHE, patches, EmbreeScene, 4)
+
+
+def _per_geometry(cache: dict, patches: PatchSet, make, keep: int):
+    """``make(patches)``, kept in ``cache`` by ``patches``' geometry (the ``keep`` most recent)."""
     key = patches.geometry_key()
-    sc = _SCENE_CACHE.get(key)
-    if sc is None:
-        sc = EmbreeScene(patches)
-        while len(_SCENE_CACHE) >= 4:
-            _SCENE_CACHE.pop(next(iter(_SCENE_CACHE)))
-        _SCENE_CACHE[key] = sc
-    return sc
+    got = cache.get(key)
+    if got is None:
+        got = make(patches)
+        while len(cache) >= keep:
+            cache.pop(next(iter(cache)))
+        cache[key] = got
+    return got
 
 
 def clear_ray_cache() -> None:
@@ -281,14 +286,7 @@ def _occluding(patches: PatchSet) -> PatchSet:
     ray), built once per geometry (the two most recent are kept)."""
     from .drawn import plane_outlines
 
-    key = patches.geometry_key()
-    got = _OCCLUDING_CACHE.get(key)
-    if got is None:
-        got = plane_outlines(patches)
-        while len(_OCCLUDING_CACHE) >= 2:
-            _OCCLUDING_CACHE.pop(next(iter(_OCCLUDING_CACHE)))
-        _OCCLUDING_CACHE[key] = got
-    return got
+    return _per_geometry(_OCCLUDING_CACHE, patches, plane_outlines, 2)
 
 
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
