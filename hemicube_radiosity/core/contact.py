@@ -142,6 +142,40 @@ def _contact_segments(face_corners, face_normal, cutters, cutter_normals, eps):
     return np.array(segs).reshape(-1, 2, 3), np.array(which, np.int64)
 
 
+def _on_face(segs, face, n, eps):
+    """Segments (k, 2, 3) in the plane of a convex face (corners (4, 3), a triangle repeating
+    its last; unit normal ``n``) clipped to the face, its border widened by ``eps``; and (k',)
+    which segments keep more than ``eps`` of their length."""
+    if not len(segs):
+        return segs, np.zeros(0, np.int64)
+    poly = face[np.r_[True, np.linalg.norm(np.diff(face, axis=0), axis=1) > 0]]
+    centre = poly.mean(axis=0)
+    a, b = segs[:, 0], segs[:, 1]
+    t0, t1 = np.zeros(len(segs)), np.ones(len(segs))
+    for i in range(len(poly)):
+        p, q = poly[i], poly[(i + 1) % len(poly)]
+        m = np.cross(n, q - p)
+        L = np.linalg.norm(m)
+        if L == 0:
+            continue
+        m /= L
+        if (centre - p) @ m < 0:
+            m = -m                                                        # inward
+        fa, fb = (a - p) @ m + eps, (b - p) @ m + eps                     # >= 0 inside
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = fa / (fa - fb)
+        enter = (fa < 0) & (fb >= 0)
+        leave = (fa >= 0) & (fb < 0)
+        out = (fa < 0) & (fb < 0)
+        t0 = np.where(enter, np.maximum(t0, t), t0)
+        t1 = np.where(leave, np.minimum(t1, t), t1)
+        t1 = np.where(out, -1.0, t1)
+    d = b - a
+    keep = np.flatnonzero((t1 - t0) * np.linalg.norm(d, axis=1) > eps)
+    clipped = np.stack([a + t0[:, None] * d, a + t1[:, None] * d], axis=1)
+    return clipped[keep], keep
+
+
 def _split(poly, a, m, tol):
     """A convex polygon (k, 3) split by the line through ``a`` with in-plane unit normal ``m``:
     (positive side, negative side), each None when the polygon lies on the other side (corners
@@ -202,10 +236,16 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     src = _face_corners(elements, order[start[gi_all]], faces)
     same = np.abs(src[:, :, None, :] - cut_corners[ci_all][:, None, :, :]).max(axis=-1) <= eps
     shared = same.any(axis=1)[:, :3].sum(axis=1) + (same.any(axis=1)[:, 3] & ~tri[keep])
-    gi_all, ci_all = gi_all[shared < 2], ci_all[shared < 2]
+    # nor does a face of the same object sharing a corner: the mesh going on (a subdivided
+    # surface's quads are a little warped, so their diagonal neighbours cross each other's
+    # planes: Suzanne at level 3 was cut along 60,000 such lines)
+    own = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
+    apart = (shared < 2) & ~(own & (shared >= 1))
+    gi_all, ci_all = gi_all[apart], ci_all[apart]
     by_group = np.split(ci_all[np.argsort(gi_all, kind="stable")],
                         np.searchsorted(np.sort(gi_all), np.arange(1, len(groups))))
     pieces = {}                       # element -> list of (polygon, tags)
+    own_face = _face_corners(elements, order[start[:-1]], faces)          # (groups, 4, 3)
     for gi in np.unique(gi_all):
         ids = order[start[gi]:start[gi + 1]]
         c = corners[ids]
@@ -214,6 +254,11 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
             continue
         near = by_group[gi]
         segs, which = _contact_segments(c[0], n, cut_corners[near], faces.normals[near], eps)
+        # the part of each segment on the group's own face: a cutter that crosses the face's
+        # plane beside the face (a curved mesh's diagonal neighbour, sharing one corner) meets
+        # it at that corner at most, and cuts nothing
+        segs, kept = _on_face(segs, own_face[gi], n, eps)
+        which = which[kept]
         if not len(segs):
             continue
         size = np.sqrt(elements.areas[ids])
