@@ -14,7 +14,8 @@ bright areas shine, judge both on the light arriving, and cast the lattice ray p
 and when patches and output elements began to be cut along contact lines, buried corners to take
 the open side's limit, the gather to run once more at the elements' level, the hemi-cube to sample
 pixels a hair off their centres and element vertices to be located in the patch they lie in
-(issues 11 and 12).
+(issues 11 and 12), and when contact segments began to be clipped to the face they cut (issue 9:
+the short block's top is no longer cut along the tall block's line beside it).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 
