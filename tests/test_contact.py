@@ -173,3 +173,39 @@ def test_a_partition_off_the_grids_leaks_no_light():
     p = r.patches
     dark_patches = (p.owner == 0) & (p.centers[:, 2] < 1e-9) & (p.centers[:, 0] > 1.03)
     assert np.abs(r.patch_radiosity[dark_patches]).max() < 1e-6 * lit
+
+
+def test_only_what_touches_a_face_cuts_it():
+    """The Cornell box's short block's top is cut by nothing: the tall block's sides cross its
+    plane beside it, not on it (they were cut along that line). The floor is cut along both
+    blocks' feet."""
+    meshes = scenes.cornell_box()
+    faces = build_patches(meshes, None)
+    els = build_patches(meshes, 0.4)                              # the top: 4 patches (were cut into 6)
+    out = cut_along_contacts(els, faces)
+    names = [m.name for m in meshes]
+
+    def count(ps, name, up):
+        o = ps.owner == names.index(name)
+        return int((o & (ps.normals[:, 2] > 0.99 if up else o)).sum())
+
+    assert count(out, "ShortBlock", True) == count(els, "ShortBlock", True) == 4
+    assert count(out, "Floor", False) > count(els, "Floor", False)
+
+
+def test_a_warped_mesh_does_not_cut_itself():
+    """A bumpy sheet of slightly warped quads (as a subdivision surface makes them): each quad's
+    diagonal neighbours cross its plane at the corner they share; the mesh going on cuts
+    nothing."""
+    k = 24
+    x, y = np.meshgrid(np.linspace(0, 1, k + 1), np.linspace(0, 1, k + 1))
+    z = 0.05 * np.sin(7 * x) * np.cos(5 * y) + 0.003 * np.sin(40 * x + 30 * y)
+    verts = np.stack([x, y, z], -1).reshape(-1, 3)
+    quads = [[j * (k + 1) + i, j * (k + 1) + i + 1, (j + 1) * (k + 1) + i + 1, (j + 1) * (k + 1) + i]
+             for j in range(k) for i in range(k)]
+    m = MeshInput.from_faces(verts, quads, name="sheet")
+    faces = build_patches([m], None)
+    c = faces.corners()
+    warp = np.abs(np.einsum("pkj,pj->pk", c - c[:, :1], faces.normals)).max(1)
+    assert warp.max() > 1e-3 * np.sqrt(faces.areas).max()         # warped well past the touch tolerance
+    assert len(cut_along_contacts(faces, faces)) == len(faces)
