@@ -269,3 +269,44 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     # the cone settles most pairs without a face-by-face test
     n_front, count = geometry._in_front(pts, outline)
     assert ((n_front == 0) | (n_front == count[None])).mean() > 0.8
+
+
+def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
+    """Issue 9: the direct stage lights a grouped cluster at 16 stand-in centres (area strata in
+    Morton order), not at every face's, so its cost follows the clusters. Each cluster's direct
+    source still matches the closed-form mean over all its faces (a Lambertian square lamp over
+    a floor of 20,000 triangles, nothing in between)."""
+    from hemicube_radiosity.core import direct_light
+    from hemicube_radiosity.core.direct_light import DirectLight
+
+    floor = scenes.tessellate([scenes.quad([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)], rho=(0.6,) * 3,
+                                           name="Floor")], 100)
+    lamp = scenes.quad([(0.3, 0.2, 0.8), (0.3, 0.9, 0.8), (1.0, 0.9, 0.8), (1.0, 0.2, 0.8)],
+                       emission=(5.0,) * 3, name="Lamp")               # faces down, off-centre
+    counted = []
+    at = DirectLight.at
+
+    def counting(self, x, n, where=""):
+        counted.append((where, len(x)))
+        return at(self, x, n, where)
+    monkeypatch.setattr(DirectLight, "at", counting)
+    r = bake(floor + [lamp], BakeSettings(patch_size=0.25))
+    c, p = r.clusters, r.patches
+    on_floor = c.owner == p.object_names.index("Floor")
+    assert (p.owner == 0).sum() == 20000 and on_floor.sum() == 64 and c.sizes[on_floor].min() > 250
+    # the solve's light: 16 points a floor cluster (4 x the 2 x 2 light points; the plain and the
+    # seen mean share them), 2 x 2 on each of the lamp's 9 patches; the output vertices apart
+    assert sorted(counted) == [("grouped-centres", 16 * 64), ("patch-points-2", 4 * 9), ("vertices", 10301)]
+    # truth: 5 x the form factor to the lamp at every face centre, area-weighted per cluster
+    lp = build_patches([lamp], None)
+    F = polygon_form_factors(p.centers, p.normals, lp.corners(), lp.normals).sum(1)
+    truth = np.bincount(c.of, weights=p.areas * 5.0 * F, minlength=len(c)) / c.areas
+    got = r.source[on_floor, 0] / 0.6
+    np.testing.assert_allclose(got, truth[on_floor], rtol=0.01)
+    assert abs(got @ c.areas[on_floor] / (truth[on_floor] @ c.areas[on_floor]) - 1) < 1e-3
+    # every face centre lit (no stand-ins): the same means, from 20,000 points
+    monkeypatch.setattr(direct_light, "STAND_INS", 10 ** 6)
+    every = bake(floor + [lamp], BakeSettings(patch_size=0.25))
+    err_stand = np.abs(got - truth[on_floor]) / truth[on_floor]
+    err_every = np.abs(every.source[on_floor, 0] / 0.6 - truth[on_floor]) / truth[on_floor]
+    assert err_every.max() < 1e-6 < err_stand.max()

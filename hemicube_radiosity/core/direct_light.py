@@ -208,7 +208,58 @@ def grid_points(patches: PatchSet, n: int, rng=None):
     return x, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
 
 
-def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=None, rng=None) -> np.ndarray:
+def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
+    """(N,) int: the piece whose centre stands for each piece's light. A piece stands for
+    itself, except in a cluster of more than ``k`` pieces: there the pieces are put in Morton
+    order of their centres (in the cluster's bounding box), the order is cut into ``k`` runs of
+    equal area, and each run's pieces take the light at the centre of the run's piece nearest
+    the run's area centroid (a k-point midpoint rule over compact regions). So a cluster's light costs ``k`` points however
+    finely it was modelled, and its area mean is a ``k``-point stratified estimate. The same
+    array for the same patch and cluster arrays (a relight's points keep their keys)."""
+    key = ("stand", id(patches.centers), id(patches.areas), id(clusters.of), k)
+    hit = _CENTRES.get(key)
+    if hit is not None and hit[0] is patches.centers and hit[1] is clusters.of:
+        return hit[2]
+    of, a, c = clusters.of, patches.areas, patches.centers
+    stand = np.arange(len(of))
+    big = np.flatnonzero(clusters.sizes[of] > k)
+    if len(big):
+        cl = of[big]
+        lo = np.full((len(clusters), 3), np.inf)
+        hi = np.full((len(clusters), 3), -np.inf)
+        np.minimum.at(lo, cl, c[big])
+        np.maximum.at(hi, cl, c[big])
+        span = np.maximum(hi - lo, 1e-12)[cl]
+        q = np.clip(((c[big] - lo[cl]) / span * 1023).astype(np.int64), 0, 1023)
+        code = np.zeros(len(big), np.int64)
+        for bit in range(10):                  # interleave the three axes' bits
+            for ax in range(3):
+                code |= ((q[:, ax] >> bit) & 1) << (3 * bit + ax)
+        order = np.lexsort((code, cl))
+        rows, cl = big[order], cl[order]
+        cum = np.cumsum(a[rows])
+        first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
+        start = np.repeat(cum[first] - a[rows[first]], np.diff(np.r_[first, len(rows)]))
+        total = np.bincount(cl, weights=a[rows], minlength=len(clusters))[cl]
+        run = np.minimum(((cum - 0.5 * a[rows] - start) / total * k).astype(np.int64), k - 1)
+        # each run's stand-in: its piece nearest the run's area centroid
+        rid = np.unique(cl * k + run, return_inverse=True)[1]
+        w = a[rows]
+        mid = np.stack([np.bincount(rid, weights=w * c[rows, ax]) for ax in range(3)], 1)
+        mid /= np.bincount(rid, weights=w)[:, None]
+        d = np.einsum("ij,ij->i", c[rows] - mid[rid], c[rows] - mid[rid])
+        near = np.lexsort((d, rid))
+        best = near[np.r_[0, np.flatnonzero(np.diff(rid[near])) + 1]]
+        stand[rows] = rows[best[rid]]
+    stand.flags.writeable = False
+    while len(_CENTRES) >= 8:
+        _CENTRES.pop(next(iter(_CENTRES)))
+    _CENTRES[key] = (patches.centers, clusters.of, stand)
+    return stand
+
+
+def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=None, rng=None,
+                  stand=None) -> np.ndarray:
     """(N, 3) area-weighted mean over n x n points of every patch of ``light_at(points, normals,
     where) -> (P, 3)`` (n = 1: at the centres). The points are the centres of an n x n grid of
     the patch's bilinear map (a triangle is a quad with two corners equal), weighted by the map's
@@ -216,17 +267,29 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
     a grouped cluster, whose mean over many faces already samples the light).
     ``weight_at(points, normals) -> (P,)`` in [0, 1]: how much each point counts besides its
     area (a point the rest of the scene cannot see, 0); a patch whose points all weigh 0 takes
-    the plain area mean. ``rng``: jittered points (see :func:`grid_points`)."""
-    if n <= 1 or (centre_only is not None and centre_only.all()):
+    the plain area mean. ``rng``: jittered points (see :func:`grid_points`). ``stand`` (N,)
+    int (:func:`stand_ins`): a centre-only piece takes the light at its stand-in's centre."""
+    some = centre_only is not None and centre_only.any()
+    if (not some or stand is None) and (n <= 1 or some and centre_only.all()):
         return light_at(patches.centers, patches.normals, "centres")
-    if centre_only is not None and centre_only.any():
+    if some:
+        lit = centre_only
+        if stand is not None:
+            lit = np.zeros(len(patches), bool)
+            lit[stand[centre_only]] = True      # the centres that stand for the rest
         out = np.empty((len(patches), 3))
-        out[centre_only] = light_at(*_centres(patches, centre_only), "grouped-centres")
+        if lit.all():
+            out[:] = light_at(patches.centers, patches.normals, "centres")
+        else:
+            out[lit] = light_at(*_centres(patches, lit), "grouped-centres")
+        if stand is not None:
+            out[centre_only] = out[stand[centre_only]]
         rest = np.flatnonzero(~centre_only)
-        sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
-                       patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
-                       patches.source_face[rest], patches.object_names)
-        out[rest] = patch_average(sub, n, light_at, weight_at=weight_at, rng=rng)
+        if len(rest):
+            sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
+                           patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
+                           patches.source_face[rest], patches.object_names)
+            out[rest] = patch_average(sub, n, light_at, weight_at=weight_at, rng=rng)
         return out
     x, w = grid_points(patches, n, rng)
     N, K = x.shape[:2]
@@ -239,6 +302,7 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
     return np.einsum("nk,nkc->nc", w, D)
 
 
+STAND_INS = 4            # a cluster's light from at most this many x patch_light_points^2 centres
 _CENTRES: dict = {}      # (id(centers), id(normals), mask bytes) -> (centers, normals, their rows)
 
 
@@ -304,16 +368,21 @@ def _seen_weight(ctx):
     return weight_at
 
 
-def _unknowns_direct(ctx, seen, rd) -> np.ndarray:
+def _unknowns_direct(ctx, seen, rd, stand) -> np.ndarray:
     """(K, 3) direct light reflected by each unknown: its patch's ``rd`` (N, 3), or over a
     cluster's pieces the mean weighted by area and by ``seen`` at the piece centres (pieces the
-    scene cannot see, a ceiling above a lamp, lend the cluster none of their light)."""
+    scene cannot see, a ceiling above a lamp, lend the cluster none of their light); a piece
+    takes ``seen`` at its stand-in's centre (:func:`stand_ins`)."""
     p, c = ctx.patches, ctx.clusters
     if c is None or seen is None:
         return ctx.to_unknowns(rd)
     w = p.areas.copy()
-    multi = np.flatnonzero(c.sizes[c.of] > 1)
-    w[multi] *= seen(p.centers[multi], p.normals[multi])
+    multi = c.sizes[c.of] > 1
+    lit = np.zeros(len(p), bool)
+    lit[stand[multi]] = True
+    e = np.zeros(len(p))
+    e[lit] = seen(*_centres(p, lit))
+    w[multi] *= e[stand[multi]]
     total = np.bincount(c.of, weights=w, minlength=len(c))
     mean = np.stack([np.bincount(c.of, weights=w * rd[:, k], minlength=len(c)) for k in range(3)], 1)
     return np.where(total[:, None] > 0, mean / np.where(total > 0, total, 1.0)[:, None], c.mean(rd, p.areas))
@@ -341,7 +410,10 @@ def direct_stage(ctx) -> None:
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
     ctx.say(0.0, f"exact direct light: {ctx.direct.emitters.size} emitting patches, "
                  f"{len(ctx.lights)} lamps")
-    grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1
+    grouped = stand = None
+    if ctx.clusters is not None:
+        grouped = ctx.clusters.sizes[ctx.clusters.of] > 1
+        stand = stand_ins(p, ctx.clusters, STAND_INS * s.patch_light_points ** 2)
     seen, memo = _seen_weight(ctx), {}
 
     def at(x, n, where):                      # the same points twice: light them once
@@ -351,13 +423,14 @@ def direct_stage(ctx) -> None:
         return memo[key]
     # the plain area mean is what lands on the patches (the energy report, the irradiance);
     # the solve takes the mean over the part of each patch the scene sees
-    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped)
+    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped, stand=stand)
     ctx.irradiance = np.pi * ctx.direct_patch
-    seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen)
-    ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch)
+    seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen,
+                                                                stand=stand)
+    ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch, stand)
     memo.clear()
     if ctx.direct.world is not None:          # the world's light, exact at the points above
-        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped)
+        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand)
     # the world is in the direct light: the source does not take it again from F's sky
     ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
     if not embree_available():
