@@ -96,7 +96,7 @@ def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:
 GATHER_PASSES = 1
 
 
-def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
+def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None):
     """Reflected light R at element vertices by a final gather (the gather's ray hits cached as a
     matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
     output mesh itself: the direct part exact at each of its vertices (as fine as the output, so
@@ -117,16 +117,19 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None):
     edge), lights the vertices as lamps do instead, by its form factor and shadow rays
     (:func:`_shine`), and the rays that land on it read nothing."""
     rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
+    if side is not None:          # buried vertices on an outline read as their open side
+        rest_e = side.spread(rest_e)
     light_v = ctx.direct.at(xv, nv, "vertices") if light_v is None else light_v
     direct_e = rho_v * light_v
     G, H = _gather_rays(ctx, elements, xv, nv)
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
-    return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers)
+    return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
+                         spread=None if side is None else side.spread)
 
 
-def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1):
+def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1, spread=None):
     """The gather again, reading the light reflected more than once as the elements reflect what
     it found (rho_v * out) instead of the patch solution's (``rest_e``); ``passes`` times, or
     until it changes by less than ``tol`` of its largest value (many passes: the element-level
@@ -138,8 +141,9 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers
     zero = np.zeros_like(G.sky)
     before = rest_e
     for _ in range(passes):
-        step = apply_gather(G, zero, rho_v * out - before, None, workers)
-        before = rho_v * out
+        now = rho_v * out if spread is None else spread(rho_v * out)
+        step = apply_gather(G, zero, now - before, None, workers)
+        before = now
         out = out + step
         if np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
             break
@@ -775,13 +779,13 @@ def _interpolated(ctx, elements, field_v, xv, nv):
     return interpolate_located(_sided(ctx, ctx.patches), field_v, *cached(ctx.cache, key, where))
 
 
-def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None):
+def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None):
     """Light reflected more than once arriving at element vertices, times their reflectivity
     (with ``in_v``, the patches' incoming indirect light at their vertices: as it arrives, for
     the lighting-only pass): gathered (Embree) or the patch solution's bilinear interpolation.
     ``light_v``: the direct light arriving at ``xv``, when the caller has it."""
     if ctx.settings.gather_rays > 0 and embree_available():
-        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v)
+        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v, side)
         return gathered if in_v is not None else rho_v * gathered
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
@@ -853,7 +857,7 @@ def vertex_stage(ctx) -> None:
         side = _open_side(ctx, ctx.elements, xv, nv)
         if side is not None:                            # before the gather: its rays read it
             D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
-        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert)
+        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side)
     else:
         ctx.elements = sided
         xv, nv, rho_v = frames(sided, _open_elements(ctx, sided), ctx.cache)
