@@ -115,65 +115,61 @@ def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
 # Cutting output elements along contact lines
 
 
-def _contact_segments(face_corners, face_normal, cutters, cutter_normals, eps):
-    """Segments (k, 2, 3) where the polygons ``cutters`` (G, 4, 3) (a triangle repeats its last
-    corner) meet the plane of a face (corners (4, 3), unit normal (3,)): a wall standing on it,
-    a block's side through it; and (k,) which cutter made each. Cutters parallel to the face
-    (coplanar or not) do not cut."""
-    n = face_normal
-    s = (cutters - face_corners[0]) @ n                                   # (G, 4) heights over the plane
-    cross = (s.min(axis=1) < eps) & (s.max(axis=1) > -eps) & (np.abs(cutter_normals @ n) < 1 - 1e-6)
-    segs, which = [], []
-    for g, c, h in zip(np.flatnonzero(cross), cutters[cross], s[cross]):
-        pts = [c[i] for i in range(4) if abs(h[i]) <= eps]
-        for i in range(4):
-            j = (i + 1) % 4
-            if (h[i] < -eps and h[j] > eps) or (h[i] > eps and h[j] < -eps):
-                t = h[i] / (h[i] - h[j])
-                pts.append(c[i] + t * (c[j] - c[i]))
-        if len(pts) < 2:
-            continue
-        pts = np.array(pts)
-        pts -= np.outer((pts - face_corners[0]) @ n, n)                    # onto the plane
-        i, j = np.unravel_index(np.argmax(((pts[:, None] - pts[None]) ** 2).sum(-1)), (len(pts),) * 2)
-        if np.linalg.norm(pts[j] - pts[i]) > eps:
-            segs.append((pts[i], pts[j]))
-            which.append(g)
-    return np.array(segs).reshape(-1, 2, 3), np.array(which, np.int64)
-
-
-def _on_face(segs, face, n, eps):
-    """Segments (k, 2, 3) in the plane of a convex face (corners (4, 3), a triangle repeating
-    its last; unit normal ``n``) clipped to the face, its border widened by ``eps``; and (k',)
-    which segments keep more than ``eps`` of their length."""
-    if not len(segs):
-        return segs, np.zeros(0, np.int64)
-    poly = face[np.r_[True, np.linalg.norm(np.diff(face, axis=0), axis=1) > 0]]
-    centre = poly.mean(axis=0)
-    a, b = segs[:, 0], segs[:, 1]
-    t0, t1 = np.zeros(len(segs)), np.ones(len(segs))
-    for i in range(len(poly)):
-        p, q = poly[i], poly[(i + 1) % len(poly)]
+def _pair_segments(origin, n, cutters, face, eps):
+    """Where P cutters meet the planes of P faces, clipped to the faces: the plane through
+    ``origin`` (P, 3) with unit normal ``n`` (P, 3), the cutters' corners (P, 4, 3) (a triangle
+    repeats its last corner: a wall standing on the face, a block's side through it), the
+    faces' corners (P, 4, 3). Returns (segments (P, 2, 3), kept (P,) bool): a segment is the
+    two farthest apart of the cutter's corners on the plane and its edges' crossings of it,
+    clipped to the face with its border widened by ``eps``; kept when the cutter reaches the
+    plane and more than ``eps`` of the segment is on the face. Cutters parallel to the face
+    are left out by the caller. Pair by pair in a loop this was most of the dense box's cut
+    (1,588 faces at 14k triangles: 0.67 s, now 0.23 s)."""
+    P = len(origin)
+    h = np.einsum("pkj,pj->pk", cutters - origin[:, None], n)              # (P, 4) heights
+    pts = np.zeros((P, 8, 3))
+    valid = np.zeros((P, 8), bool)
+    valid[:, :4] = np.abs(h) <= eps                                      # corners on the plane
+    pts[:, :4] = cutters
+    for i in range(4):                                                   # edges through it
+        j = (i + 1) % 4
+        hi, hj = h[:, i], h[:, j]
+        go = ((hi < -eps) & (hj > eps)) | ((hi > eps) & (hj < -eps))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = hi / (hi - hj)
+            pts[:, 4 + i] = cutters[:, i] + t[:, None] * (cutters[:, j] - cutters[:, i])
+        valid[:, 4 + i] = go
+    pts = pts - np.einsum("pk,pj->pkj", np.einsum("pkj,pj->pk", pts - origin[:, None], n), n)
+    d2 = ((pts[:, :, None] - pts[:, None]) ** 2).sum(-1)
+    d2 = np.where(valid[:, :, None] & valid[:, None], d2, -1.0).reshape(P, 64)
+    best = d2.argmax(axis=1)
+    a, b = pts[np.arange(P), best // 8], pts[np.arange(P), best % 8]
+    ok = (h.min(axis=1) < eps) & (h.max(axis=1) > -eps) & (valid.sum(axis=1) >= 2) & \
+        (np.linalg.norm(b - a, axis=1) > eps) & np.isfinite(n).all(axis=1)
+    # clipped to the face, its border widened by eps (a triangle repeats its last corner)
+    real = np.concatenate([np.ones((P, 1), bool), np.linalg.norm(np.diff(face, axis=1), axis=2) > 0], 1)
+    centre = (face * real[:, :, None]).sum(axis=1) / real.sum(axis=1)[:, None]
+    t0, t1 = np.zeros(P), np.ones(P)
+    for i in range(4):
+        p, q = face[:, i], face[:, (i + 1) % 4]
         m = np.cross(n, q - p)
-        L = np.linalg.norm(m)
-        if L == 0:
-            continue
-        m /= L
-        if (centre - p) @ m < 0:
-            m = -m                                                        # inward
-        fa, fb = (a - p) @ m + eps, (b - p) @ m + eps                     # >= 0 inside
+        L = np.linalg.norm(m, axis=1)
+        edge = L > 0
+        m = m / np.where(edge, L, 1.0)[:, None]
+        m = np.where((np.einsum("pj,pj->p", centre - p, m) < 0)[:, None], -m, m)     # inward
+        fa = np.einsum("pj,pj->p", a - p, m) + eps
+        fb = np.einsum("pj,pj->p", b - p, m) + eps
         with np.errstate(divide="ignore", invalid="ignore"):
             t = fa / (fa - fb)
-        enter = (fa < 0) & (fb >= 0)
-        leave = (fa >= 0) & (fb < 0)
-        out = (fa < 0) & (fb < 0)
+        enter = edge & (fa < 0) & (fb >= 0)
+        leave = edge & (fa >= 0) & (fb < 0)
+        out = edge & (fa < 0) & (fb < 0)
         t0 = np.where(enter, np.maximum(t0, t), t0)
         t1 = np.where(leave, np.minimum(t1, t), t1)
         t1 = np.where(out, -1.0, t1)
     d = b - a
-    keep = np.flatnonzero((t1 - t0) * np.linalg.norm(d, axis=1) > eps)
-    clipped = np.stack([a + t0[:, None] * d, a + t1[:, None] * d], axis=1)
-    return clipped[keep], keep
+    ok &= (t1 - t0) * np.linalg.norm(d, axis=1) > eps
+    return np.stack([a + t0[:, None] * d, a + t1[:, None] * d], axis=1), ok
 
 
 def _split(poly, a, m, tol):
@@ -242,27 +238,30 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     own = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
     apart = (shared < 2) & ~(own & (shared >= 1))
     gi_all, ci_all = gi_all[apart], ci_all[apart]
-    by_group = np.split(ci_all[np.argsort(gi_all, kind="stable")],
-                        np.searchsorted(np.sort(gi_all), np.arange(1, len(groups))))
+    by = np.argsort(gi_all, kind="stable")
+    gi_all, ci_all = gi_all[by], ci_all[by]
     pieces = {}                       # element -> list of (polygon, tags)
     own_face = _face_corners(elements, order[start[:-1]], faces)          # (groups, 4, 3)
-    for gi in np.unique(gi_all):
+    # where each cutter meets its group's plane, and the part of that segment on the group's
+    # own face (a cutter that crosses the face's plane beside the face, a curved mesh's
+    # diagonal neighbour sharing one corner, meets it at that corner at most and cuts
+    # nothing): every pair at once, in chunks
+    seg_all = np.zeros((len(gi_all), 2, 3))
+    kept_all = np.zeros(len(gi_all), bool)
+    for c0 in range(0, len(gi_all), 1 << 14):
+        sl = slice(c0, c0 + (1 << 14))
+        g = gi_all[sl]
+        seg_all[sl], kept_all[sl] = _pair_segments(flat[order[start[g]], 0], g_n[g], cut_corners[ci_all[sl]],
+                                                   own_face[g], eps)
+    gi_all, ci_all, seg_all = gi_all[kept_all], ci_all[kept_all], seg_all[kept_all]
+    bounds = np.r_[0, np.flatnonzero(np.diff(gi_all)) + 1, len(gi_all)] if len(gi_all) else [0]
+    for k0, k1 in zip(bounds[:-1], bounds[1:]):
+        gi = gi_all[k0]
         ids = order[start[gi]:start[gi + 1]]
         c = corners[ids]
         n = elements.normals[ids[0]]
-        if not np.all(np.isfinite(n)):
-            continue
-        near = by_group[gi]
-        segs, which = _contact_segments(c[0], n, cut_corners[near], faces.normals[near], eps)
-        # the part of each segment on the group's own face: a cutter that crosses the face's
-        # plane beside the face (a curved mesh's diagonal neighbour, sharing one corner) meets
-        # it at that corner at most, and cuts nothing
-        segs, kept = _on_face(segs, own_face[gi], n, eps)
-        which = which[kept]
-        if not len(segs):
-            continue
         size = np.sqrt(elements.areas[ids])
-        for (a, b), g in zip(segs, near[which]):
+        for (a, b), g in zip(seg_all[k0:k1], ci_all[k0:k1]):
             length = float(np.linalg.norm(b - a))
             d = (b - a) / length
             # sides: in front of the cutter (its normal's part in this plane) or behind it, the
