@@ -757,26 +757,56 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         for c in range(4):
             on = elements.polys[:, c] >= 0
             owner_v[elements.polys[on, c]] = elements.owner[on]
-        idx, uv = locate(ctx.patches, xv, owner=owner_v, normals=nv)
+        # a face kept whole as a patch and as an element (a dense object in a coarse room: its
+        # faces are finer than both sizes): its element's corners are its patch's, at (u, v) of
+        # the corner, with no search (Suzanne in the Cornell box: most of her vertices)
+        e, pid = _whole_faces(ctx.patches, elements)
+        idx, uv = np.zeros(len(xv), np.int64), np.zeros((len(xv), 2))
+        known = np.zeros(len(xv), bool)
+        for c, corner_uv in enumerate(((0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0))):
+            on = elements.polys[e, c] >= 0
+            v = elements.polys[e[on], c]
+            idx[v], uv[v], known[v] = pid[on], corner_uv, True
+        rest = np.flatnonzero(~known)
+        i1, uv1 = locate(ctx.patches, xv[rest], owner=owner_v[rest], normals=nv[rest])
         # a point beside small patches (refined along a partition) may not have the patch it
         # lies in among the nearest centres: clamped into a neighbour across the partition, it
         # read the other side's light. Those off their patch along it look again, farther (off
         # it across by a hair: a curved mesh's vertex moved in toward its elements lies a
         # thousandth of a face or less under the faces, and is where it belongs)
-        c = ctx.patches.corners()[idx]
-        d = _bilinear(c, uv[:, :1], uv[:, 1:]) - xv
-        n = ctx.patches.normals[idx]
+        c = ctx.patches.corners()[i1]
+        d = _bilinear(c, uv1[:, :1], uv1[:, 1:]) - xv[rest]
+        n = ctx.patches.normals[i1]
         across = np.einsum("ij,ij->i", d, n)
-        size = np.sqrt(ctx.patches.areas[idx])
+        size = np.sqrt(ctx.patches.areas[i1])
         off = (np.linalg.norm(d - across[:, None] * n, axis=1) > 1e-6 * size) | (np.abs(across) > 1e-3 * size)
         if off.any():
-            far = np.flatnonzero(off)
-            i2, uv2 = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64)
-            idx[far], uv[far] = i2, uv2
+            far = rest[off]
+            i1[off], uv1[off] = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64)
+        idx[rest], uv[rest] = i1, uv1
         return idx, uv
 
     key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
     return interpolate_located(_sided(ctx, ctx.patches), field_v, *cached(ctx.cache, key, where))
+
+
+def _whole_faces(patches: PatchSet, elements: PatchSet):
+    """(element ids (m,), patch ids (m,)): the input faces that are one element and one patch,
+    their corners at the same places in the same order."""
+    def one(ps):
+        key = ps.owner.astype(np.int64) * (1 << 32) + ps.source_face.astype(np.int64)
+        k, first, count = np.unique(key, return_index=True, return_counts=True)
+        return k[count == 1], first[count == 1]
+    ke, fe = one(elements)
+    kp, fp = one(patches)
+    common, ie, ip = np.intersect1d(ke, kp, assume_unique=True, return_indices=True)
+    e, p = fe[ie], fp[ip]
+    pe, pp = elements.polys[e], patches.polys[p]
+    same = np.all((pe < 0) == (pp < 0), axis=1)
+    ce = elements.verts[np.maximum(pe, 0)]
+    cp = patches.verts[np.maximum(pp, 0)]
+    same &= np.all((ce == cp).all(axis=2) | (pe < 0), axis=1)
+    return e[same], p[same]
 
 
 def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None):
