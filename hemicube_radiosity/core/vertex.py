@@ -136,9 +136,16 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
     for i in range(4):
         for k in range(B.shape[1]):
             rhs[:, i, k] = np.bincount(slot, weights=Xw[:, i] * sb[:, k], minlength=targets.size)
-    coef = np.linalg.solve(M, rhs)                             # (T, 4, bands)
     out = avg.copy()
-    out[targets] = np.maximum(0.0, coef[:, 0, :])
+    # a fit whose samples are all 0 (most of an emission field: only the lamps glow) is 0: solved
+    # only where some sample is not (LAPACK solves each 4 x 4 system alone: the same values)
+    some = rhs.reshape(targets.size, -1).any(axis=1)
+    if some.all():
+        out[targets] = np.maximum(0.0, np.linalg.solve(M, rhs)[:, 0, :])
+    else:
+        out[targets] = 0.0
+        if some.any():
+            out[targets[some]] = np.maximum(0.0, np.linalg.solve(M[some], rhs[some])[:, 0, :])
     return out
 
 
