@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cache import cache_key, cached, geometry_key
+from .cache import array_key, cache_key, cached, geometry_key
 from .patches import PatchSet
 
 __all__ = ["vertex_radiosity", "frames", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
@@ -121,11 +121,12 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
     if cache is None:
         fit = _fits(patches, weights, extrapolate)
     else:
-        wkey = b"" if weights is None else np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+        wkey = b"" if weights is None else array_key(np.asarray(weights, dtype=np.float64))
         key = cache_key(geometry_key(patches) + wkey, ("vertex-fits", weights is None, bool(extrapolate)))
         fit = cached(cache, key, lambda: _fits(patches, weights, extrapolate))
     p, v, wp, safe, V = fit[:5]
-    avg = np.stack([np.bincount(v, weights=wp * B[p, k], minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
+    Bt = np.ascontiguousarray(B.T)              # a band's values contiguous: B[p, k], taken faster
+    avg = np.stack([np.bincount(v, weights=wp * Bt[k].take(p), minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
     if len(fit) == 5:
         return avg
     pp, iv, slot, targets, Xw, M = fit[5:]
@@ -156,16 +157,17 @@ def frames(patches: PatchSet, weights=None, cache=None):
     from .direct import vertex_frames, vertex_weights
     if cache is None:
         return vertex_frames(patches, weights=weights)
-    wkey = b"" if weights is None else np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+    # the weights hashed once per array (a relight's are its cached elements' own)
+    wkey = b"" if weights is None else array_key(np.asarray(weights, dtype=np.float64))
 
     def make():
         x, n, _ = vertex_frames(patches, weights=weights)
         return (x, n) + vertex_weights(patches, weights)
     key = cache_key(geometry_key(patches) + wkey, ("vertex-frames", weights is None))
     x, n, p, v, w, total = cached(cache, key, make)
-    rho = patches.rho
+    rho = np.ascontiguousarray(patches.rho.T)
     V = len(patches.verts)
-    return x, n, np.stack([np.bincount(v, weights=w * rho[p, k], minlength=V) for k in range(rho.shape[1])], 1) / total
+    return x, n, np.stack([np.bincount(v, weights=w * rho[k].take(p), minlength=V) for k in range(rho.shape[0])], 1) / total
 
 
 def _fits(patches: PatchSet, weights, extrapolate=True):
@@ -228,7 +230,7 @@ def fill_buried(patches: PatchSet, values, weights, rings=16, cache=None) -> np.
     if cache is None:
         steps = _fill_rings(patches, weights, rings)
     else:
-        wkey = np.ascontiguousarray(weights, dtype=np.float64).tobytes()
+        wkey = array_key(np.asarray(weights, dtype=np.float64))
         steps = cached(cache, cache_key(geometry_key(patches) + wkey, ("fill-rings", rings)),
                        lambda: _fill_rings(patches, weights, rings))
     if not steps:
