@@ -859,7 +859,16 @@ def vertex_stage(ctx) -> None:
     radiance: irradiance / pi) without the surface's own colour or emission."""
     patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
-    weights = ctx.to_patches(exposure(ctx.form_factors, u.areas))
+    # F's and the geometry's only: kept on F, the same array every relight (the fits, frames and
+    # rings keyed on it hash it once)
+    F = ctx.form_factors
+    key = ("exposure-weights", array_key(u.areas), None if ctx.clusters is None else array_key(ctx.clusters.of))
+
+    def make():
+        w = np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)
+        w.flags.writeable = False
+        return w
+    weights = F._memo(key, make)
     ctx.elements = patches
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
