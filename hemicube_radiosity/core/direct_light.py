@@ -424,7 +424,9 @@ def _unknowns_direct(ctx, seen, rd, stand) -> np.ndarray:
     w[multi] *= e[stand[multi]]
     total = np.bincount(c.of, weights=w, minlength=len(c))
     mean = np.stack([np.bincount(c.of, weights=w * rd[:, k], minlength=len(c)) for k in range(3)], 1)
-    return np.where(total[:, None] > 0, mean / np.where(total > 0, total, 1.0)[:, None], c.mean(rd, p.areas))
+    out = mean / np.where(total > 0, total, 1.0)[:, None]
+    unseen = ~(total > 0)                     # the plain area mean, made only when wanted
+    return np.where(unseen[:, None], ctx.to_unknowns(rd), out) if unseen.any() else out
 
 
 def direct_stage(ctx) -> None:

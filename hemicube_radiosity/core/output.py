@@ -26,7 +26,7 @@ from .gather import apply_gather, correction_matrix, gather_matrix, product, tra
 from .interpolate import _inverse_bilinear, interpolate_located, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
-from .refine import LUMA, abrupt
+from .refine import LUMA
 from .rays import embree_available, embree_scene, occluder, open_fraction
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
 
@@ -157,9 +157,9 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
     # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
     # a relight that changes a colour or scales the lamps picks the same elements and finds
     # their grids and shine in the cache (no ray)
-    select = abrupt_elements(elements, light_v)
+    select = abrupt_elements(elements, light_v, cache=ctx.cache)
     opened = _open_elements(ctx, elements)
-    bar = HOT * _mean_light(elements, light_v, opened)
+    bar = HOT * _mean_light(elements, light_v, opened, ctx.cache)
     hot, shine = _hot_elements(ctx, elements, light_v, bar, ~select, opened)
     if not (select.any() or hot.any()):
         return out
@@ -196,14 +196,43 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
 HOT = 3.0
 
 
-def _mean_light(elements, values_v, opened=None) -> float:
+def _corner_columns(elements, cache=None):
+    """(cols (4, N) intp, quad (N,) float, count (N,) float): each element's corner vertices,
+    one contiguous row per corner (a triangle's fourth is its first), 1.0 where the fourth is
+    a corner, and how many corners: geometry only, kept in ``cache`` (a relight reads its
+    elements' light through them)."""
+    def make():
+        polys = elements.polys
+        quad = polys[:, 3] >= 0
+        cols = np.ascontiguousarray(np.where(polys < 0, polys[:, :1], polys).T, dtype=np.intp)
+        return cols, quad.astype(np.float64), (polys >= 0).sum(axis=1).astype(np.float64)
+    if cache is None:
+        return make()
+    return cached(cache, cache_key(geometry_key(elements), ("corner-columns",)), make)
+
+
+def _corner_sum(values, cols, quad):
+    """Each element's corners of ``values`` (V,) or (V, k) summed in order, one corner at a
+    time, the fourth times ``quad`` (as the (N, 4) array of corners times their validity sums
+    over its corners, bit for bit: a triangle adds 0), from :func:`_corner_columns`. Whole
+    columns at a time: summing the (N, 4) array over its short axis and taking
+    ``values[polys]`` were most of the dense room's relight in :func:`_hot_elements`,
+    :func:`_mean_light` (with the validity's sum over the corners)."""
+    q = quad if values.ndim == 1 else quad[:, None]
+    total = values.take(cols[0], axis=0) + values.take(cols[1], axis=0)
+    total += values.take(cols[2], axis=0)
+    total += values.take(cols[3], axis=0) * q
+    return total
+
+
+def _mean_light(elements, values_v, opened=None, cache=None) -> float:
     """The mean luminance of the vertex field ``values_v`` (V, 3) over the surfaces the scene
     sees: each element's corner mean, weighted by its area and ``opened`` (N,) (None: all). Not
     over vertices: a face cut into many, vertices repeated along a face's edges, a floor
-    running on under a block, would each weigh in."""
-    valid = elements.polys >= 0
-    Y = (np.asarray(values_v, dtype=np.float64) @ LUMA)[np.where(valid, elements.polys, 0)]
-    Y = (Y * valid).sum(axis=1) / valid.sum(axis=1)
+    running on under a block, would each weigh in. ``cache``: where :func:`_corner_columns`
+    are kept."""
+    cols, quad, count = _corner_columns(elements, cache)
+    Y = _corner_sum(np.asarray(values_v, dtype=np.float64) @ LUMA, cols, quad) / count
     w = elements.areas if opened is None else elements.areas * opened
     total = float(w.sum())
     return float((w * Y).sum()) / total if total > 0 else float(Y.mean())
@@ -225,15 +254,11 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     above a lamp's back), and at most ``budget`` groups of them (:func:`_shine_groups`), the
     brightest: each group costs every vertex a form factor and shadow rays, and a scene lit
     mostly in one area should not pay that for hundreds of them."""
-    valid = elements.polys >= 0
-    idx = np.where(valid, elements.polys, 0)
     # the corners summed in order, one at a time (as the (N, 4, 3) array's sum over its corners
     # adds them, bit for bit): that gather and its strided sum were 5.7 of this function's
     # 7 ms in the dense room's relight
-    total = light_v[idx[:, 0]] * valid[:, 0, None]
-    for c in range(1, idx.shape[1]):
-        total = total + light_v[idx[:, c]] * valid[:, c, None]
-    arriving = total / valid.sum(axis=1)[:, None]
+    cols, quad, count = _corner_columns(elements, ctx.cache)
+    arriving = _corner_sum(np.asarray(light_v, dtype=np.float64), cols, quad) / count[:, None]
     radiance = elements.rho * arriving
     hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
@@ -738,14 +763,19 @@ def _gather_rays(ctx, elements, xv, nv):
     return G, H
 
 
-def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02) -> np.ndarray:
+def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02, cache=None) -> np.ndarray:
     """(N,) bool: elements across which the vertex field ``values_v`` (V, 3) changes too
     abruptly to interpolate: the luminance at one corner is more than ``ratio`` times another's,
     and the difference is more than ``floor`` of the mean over the vertices (dark corners and
-    faint gradients stay interpolated)."""
+    faint gradients stay interpolated): :func:`.refine.abrupt`'s rule on the corners, their
+    largest and smallest taken a corner column at a time (:func:`_corner_columns`, kept in
+    ``cache``; the same values: the (N, 4) array's max and min over its short axis were 1.5 of
+    this function's 1.8 ms in the dense room's relight)."""
     Y = np.asarray(values_v, dtype=np.float64) @ LUMA
-    polys = np.where(elements.polys < 0, elements.polys[:, :1], elements.polys)
-    return abrupt(Y[polys], ratio, floor * max(float(Y.mean()), 1e-300))
+    c = Y.take(_corner_columns(elements, cache)[0])
+    hi = np.maximum(np.maximum(c[0], c[1]), np.maximum(c[2], c[3]))
+    lo = np.minimum(np.minimum(c[0], c[1]), np.minimum(c[2], c[3]))
+    return (hi > ratio * lo) & (hi - lo > floor * max(float(Y.mean()), 1e-300))
 
 
 def _interpolated(ctx, elements, field_v, xv, nv):
@@ -829,13 +859,18 @@ def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=N
 def _cut_elements(ctx) -> PatchSet:
     s = ctx.settings
     ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
-    elements = output_elements(ctx.meshes, s, ctx.cache)
+    # :func:`output_elements`' cached geometry, the meshes hashed once: its materials are read
+    # only onto the elements that are output (a relight read them twice, 0.75 ms each, on the
+    # dense Cornell room)
+    mkey = meshes_key(ctx.meshes)
+    elements = cached(ctx.cache, cache_key(mkey, ("elements", s.element_size)),
+                      lambda: build_patches(ctx.meshes, s.element_size))
     if geometry_key(elements) == geometry_key(ctx.patches):
         return ctx.patches                    # the input is finer than the detail: its own faces
     # no element across a wall's foot: cut along where surfaces stand on others
-    key = cache_key(meshes_key(ctx.meshes), ("elements-cut", s.element_size))
+    key = cache_key(mkey, ("elements-cut", s.element_size))
     elements = cached(ctx.cache, key, lambda: cut_along_contacts(
-        elements, build_patches(ctx.meshes, None))).with_mesh_materials(ctx.meshes)
+        elements.with_mesh_materials(ctx.meshes), build_patches(ctx.meshes, None))).with_mesh_materials(ctx.meshes)
     if len(elements) > s.max_elements:
         raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
                              f"output elements, more than the limit of {s.max_elements}: use a "
@@ -854,7 +889,16 @@ def vertex_stage(ctx) -> None:
     radiance: irradiance / pi) without the surface's own colour or emission."""
     patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
-    weights = ctx.to_patches(exposure(ctx.form_factors, u.areas))
+    # F's and the geometry's only: kept on F, the same array every relight (the fits, frames and
+    # rings keyed on it hash it once)
+    F = ctx.form_factors
+    key = ("exposure-weights", array_key(u.areas), None if ctx.clusters is None else array_key(ctx.clusters.of))
+
+    def make():
+        w = np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)
+        w.flags.writeable = False
+        return w
+    weights = F._memo(key, make)
     ctx.elements = patches
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None

@@ -109,8 +109,15 @@ class BakeContext:
         return self.patches if self.clusters is None else self.clusters
 
     def to_unknowns(self, per_patch):
-        """(K, ...) area-weighted mean per cluster of a per-patch array (itself without clusters)."""
-        return per_patch if self.clusters is None else self.clusters.mean(per_patch, self.patches.areas)
+        """(K, ...) area-weighted mean per cluster of a per-patch array (itself without clusters).
+        A (P, k) array by a bincount per band (``Clusters._area_mean``, the same sums bit for bit
+        as ``np.add.at``'s: 0.5 -> 0.05 ms for the dense Cornell room's 7,502 pieces, twice a
+        relight)."""
+        if self.clusters is None:
+            return per_patch
+        if np.ndim(per_patch) == 2:
+            return self.clusters._area_mean(per_patch, self.patches.areas)
+        return self.clusters.mean(per_patch, self.patches.areas)
 
     def to_patches(self, per_unknown):
         """(N, ...) per patch of a per-unknown array."""

@@ -93,8 +93,34 @@ def error_bound(residual_value: float, gamma: float) -> float:
     return float(residual_value / (1.0 - gamma))
 
 
+def _indices(F) -> np.ndarray:
+    """F's column indices as the platform's index type, kept on F (a relight solves the same F
+    again): ``take`` converts int32 indices on every call. The sweeps' blocks are views of it."""
+    if F.indices.dtype == np.intp:
+        return F.indices
+    return F._memo("indices64", lambda: F.indices.astype(np.intp))
+
+
+def _matvec(F, x) -> np.ndarray:
+    """``F.matvec(x)``, the same sums bit for bit (float32 entries times float64 values, each
+    non-empty row summed by one ``reduceat``), with F's index arrays kept on F: 0.62 -> 0.36 ms
+    for the dense Cornell room's 451 x 451 F (80k entries), three per solve."""
+    x = np.asarray(x, dtype=np.float64)
+    one = x.ndim == 1
+    xt = np.ascontiguousarray((x[:, None] if one else x).T)
+    nonempty, starts = F._memo("row-starts", lambda: (
+        np.flatnonzero(np.diff(F.indptr)), F.indptr[:-1][np.diff(F.indptr) > 0]))
+    out = np.zeros((F.shape[0], xt.shape[0]))
+    if starts.size:
+        cols, data = _indices(F), F.data
+        for k in range(xt.shape[0]):
+            # 'wrap': the columns are in range (the same values), without take's bounds check
+            out[nonempty, k] = np.add.reduceat(data * xt[k].take(cols, mode="wrap"), starts)
+    return out[:, 0] if one else out
+
+
 def _residual_vec(F, rho, S, B):
-    return S + rho * F.matvec(B) - B
+    return S + rho * _matvec(F, B) - B
 
 
 def _checked(F, rho, S, B, gamma):
@@ -105,7 +131,7 @@ def _checked(F, rho, S, B, gamma):
     it is close to the true error. Two products with F."""
     r = _residual_vec(F, rho, S, B)
     Bj = B + r
-    rj = rho * F.matvec(r)
+    rj = rho * _matvec(F, r)
     s0, sj = np.abs(B).max(), np.abs(Bj).max()
     b0 = np.abs(r).max() / (1.0 - gamma) / s0 if s0 > 0 else (0.0 if not r.any() else np.inf)
     bj = np.abs(rj).max() / (1.0 - gamma) / sj if sj > 0 else (0.0 if not rj.any() else np.inf)
@@ -166,7 +192,8 @@ def _segment_sums(vals, cols, x, starts, nonempty, nrows):
     rows. Returns (nrows, bands)."""
     out = np.zeros((nrows, x.shape[0]))
     if starts.size:   # every band at once: the same sums, bit for bit, a third of the calls
-        out[nonempty] = np.add.reduceat(np.take(x, cols, axis=1) * vals, starts, axis=1, dtype=np.float64).T
+        out[nonempty] = np.add.reduceat(x.take(cols, axis=1, mode="wrap") * vals, starts, axis=1,
+                                        dtype=np.float64).T
     return out
 
 
@@ -211,13 +238,14 @@ def _gs_blocks(F, rho_max, size, omega):
     for b0 in range(0, n, size):
         split(b0, min(n, b0 + size))
     blocks = []
+    cols64 = _indices(F)                        # a block's columns: a view of them
     for b0, b1 in bounds:
         if ("b", b0, b1) not in memo:
             s, e = ip[b0], ip[b1]
             counts = np.diff(ip[b0:b1 + 1])
             nonempty = np.flatnonzero(counts)
             starts = (ip[b0:b1][nonempty] - s).astype(np.int64)
-            memo["b", b0, b1] = (b0, b1, ix[s:e], dv[s:e], starts, nonempty)
+            memo["b", b0, b1] = (b0, b1, cols64[s:e], dv[s:e], starts, nonempty)
         blocks.append(memo["b", b0, b1])
     return blocks
 
@@ -229,24 +257,26 @@ def _sor_sweep(blocks, rhoT, ST, BT, B32, w):
     as BT, the (bands, N) float64 radiosities, updated block by block (a block's values are
     computed as (bands, rows), the same arithmetic per value as row-major, without transposes);
     B32 the copy the gathers read (a float32 copy of BT, kept up to date, or BT itself); w the
-    relaxation factor (1 = plain Gauss-Seidel)."""
-    change = 0.0
+    relaxation factor (1 = plain Gauss-Seidel).
+
+    Every value changes once a sweep, so the largest change is taken once, from a copy of BT
+    before it (the same differences as block by block), and the gathers' columns are intp
+    views (:func:`_indices`), read without take's bounds check: 3.7 -> 2.6 ms for the six
+    sweeps of the dense Cornell room's relight (451 unknowns in 33 blocks), the same values."""
+    before = BT.copy()
     for b0, b1, cols, vals, starts, nonempty in blocks:
         if starts.size == b1 - b0:            # every row sees something: the sums are the rows
-            acc = np.add.reduceat(np.take(B32, cols, axis=1) * vals, starts, axis=1, dtype=np.float64)
+            acc = np.add.reduceat(B32.take(cols, axis=1, mode="wrap") * vals, starts, axis=1, dtype=np.float64)
         else:
             acc = _segment_sums(vals, cols, B32, starts, nonempty, b1 - b0).T
-        old = BT[:, b0:b1]
         new = ST[:, b0:b1] + rhoT[:, b0:b1] * acc
         if w != 1.0:
+            old = BT[:, b0:b1]
             new = old + w * (new - old)
-        d = np.abs(new - old).max(initial=0.0)
-        if d > change:
-            change = d
         BT[:, b0:b1] = new
         if B32 is not BT:
             B32[:, b0:b1] = new
-    return change
+    return float(np.abs(BT - before).max(initial=0.0))
 
 
 class _Relaxation:
@@ -469,7 +499,7 @@ def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=2
     else:
         B, it, conv, more = _progressive(F, rho, S, tol, max_iterations, ticker, areas, gamma)
         extra.update(more)
-    FB = F.matvec(B)                  # once for the residual and the balance (a relight's solve is ms)
+    FB = _matvec(F, B)                # once for the residual and the balance (a relight's solve is ms)
     res = residual(F, rho, S, B, rid, FB)
     bound = error_bound(res, gamma)
     energy = energy_balance(F, rho, S, B, areas, rid, computed, FB) if areas is not None else {}
