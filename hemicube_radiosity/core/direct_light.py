@@ -280,12 +280,14 @@ def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
         first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
         start = np.repeat(cum[first] - a[rows[first]], np.diff(np.r_[first, len(rows)]))
         total = np.bincount(cl, weights=a[rows], minlength=len(clusters))[cl]
-        run = np.minimum(((cum - 0.5 * a[rows] - start) / total * k).astype(np.int64), k - 1)
+        with np.errstate(divide="ignore", invalid="ignore"):      # a cluster of no area: one run
+            frac = np.where(total > 0, (cum - 0.5 * a[rows] - start) / total, 0.0)
+        run = np.clip((frac * k).astype(np.int64), 0, k - 1)
         # each run's stand-in: its piece nearest the run's area centroid
         rid = np.unique(cl * k + run, return_inverse=True)[1]
         w = a[rows]
         mid = np.stack([np.bincount(rid, weights=w * c[rows, ax]) for ax in range(3)], 1)
-        mid /= np.bincount(rid, weights=w)[:, None]
+        mid /= np.maximum(np.bincount(rid, weights=w), 1e-300)[:, None]
         d = np.einsum("ij,ij->i", c[rows] - mid[rid], c[rows] - mid[rid])
         near = np.lexsort((d, rid))
         best = near[np.r_[0, np.flatnonzero(np.diff(rid[near])) + 1]]
