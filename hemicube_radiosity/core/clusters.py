@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
+from .unique import unique_rows
 
 __all__ = ["Clusters", "group_pieces", "DEFAULT_MAX_ANGLE"]
 
@@ -152,7 +153,7 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     if small.sum() < 2:
         return None
     if material is None:
-        material = np.unique(np.hstack([pieces.rho, pieces.emission]), axis=0, return_inverse=True)[1]
+        material = unique_rows(np.hstack([pieces.rho, pieces.emission]), return_inverse=True)[1]
     lo = pieces.verts.min(axis=0)
     # a piece's cell is that of its bounding box's centre, not its centroid: the two triangles
     # of a quad share the box's centre when the quad is aligned with the world's axes (a wall
@@ -167,7 +168,7 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
                       _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)
     # a piece that is not small keys on its own index: it stays alone
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
-    key = np.unique(parts, axis=0, return_inverse=True)[1].reshape(-1)
+    key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
     label = _components(key, pieces.polys)
     of = np.unique(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
+from .unique import unique_rows
 
 __all__ = ["OpenSide", "open_side"]
 
@@ -210,7 +211,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     cut_corners = faces.corners()
     lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
     key = np.stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64)], 1)
-    groups, inv, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    groups, inv, count = unique_rows(key, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     order = np.argsort(inv, kind="stable")
     start = np.r_[0, np.cumsum(count)]
@@ -320,7 +321,7 @@ def _direction_keys(normals) -> np.ndarray:
     n = np.asarray(normals, dtype=np.float64)
     big = np.take_along_axis(n, np.abs(n).argmax(axis=1)[:, None], axis=1)
     n = np.round(np.where(big < 0, -n, n), 6) + 0.0
-    return np.unique(n, axis=0, return_inverse=True)[1].reshape(-1)
+    return unique_rows(n, return_inverse=True)[1].reshape(-1)
 
 
 def _crossing_candidates(g_lo, g_hi, g_n, lo, hi, c_n, share=0.01):

@@ -30,6 +30,7 @@ import numpy as np
 
 from .clusters import Clusters
 from .patches import PatchSet
+from .unique import unique_rows
 
 __all__ = ["DrawSet", "draw_set"]
 
@@ -70,7 +71,7 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
     of = np.asarray(clusters.of, dtype=np.int64)
     K, P = len(clusters), len(pieces)
     diag = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) or 1.0
-    upos, weld = np.unique(verts, axis=0, return_inverse=True)
+    upos, weld = unique_rows(verts, return_inverse=True)
     weld = weld.reshape(-1)
     wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
 
@@ -143,7 +144,7 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     a, b, cl = a[keep], b[keep], cl[keep]
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     key = np.stack([cl, lo, hi], axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    _, inv, cnt = unique_rows(key, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     fwd = np.bincount(inv, weights=(a < b).astype(np.float64), minlength=cnt.size)
     bad = (cnt > 2) | ((cnt == 2) & (fwd != 1))
@@ -215,7 +216,7 @@ def _droppable(pos, loops, pinned, diag) -> np.ndarray:
         return drop
     a = np.concatenate([np.asarray(L) for L in loops])
     b = np.concatenate([np.roll(np.asarray(L), -1) for L in loops])
-    und = np.unique(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1), axis=0)
+    und = unique_rows(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1))
     ends = und.ravel()
     deg = np.bincount(ends, minlength=len(pos))
     cand = np.flatnonzero((deg == 2) & ~pinned)
@@ -322,9 +323,9 @@ def plane_outlines(patches: PatchSet) -> PatchSet:
     diag = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) or 1.0
     n = np.asarray(patches.normals, dtype=np.float64)
     d = np.einsum("ij,ij->i", n, np.asarray(patches.centers)) / diag
-    key = np.unique(np.round(np.column_stack([n, d]), 7) + 0.0, axis=0, return_inverse=True)[1].reshape(-1)
+    key = unique_rows(np.round(np.column_stack([n, d]), 7) + 0.0, return_inverse=True)[1].reshape(-1)
     key = np.where(np.all(np.isfinite(n), axis=1), key, -1 - np.arange(P))
-    weld = np.unique(verts, axis=0, return_inverse=True)[1].reshape(-1)
+    weld = unique_rows(verts, return_inverse=True)[1].reshape(-1)
     polys = np.asarray(patches.polys)
     wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
     of = np.unique(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)

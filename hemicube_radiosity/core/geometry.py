@@ -36,6 +36,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .unique import unique_rows
+
 __all__ = ["orthonormal_basis", "tangent_frames", "stratified_unit_square", "jittered_grid",
            "cosine_directions", "polygon_form_factor", "polygon_form_factors",
            "equal_area_scale", "disk_polygons", "disk_samples", "DISK_SIDES", "GroupOutline",
@@ -232,13 +234,13 @@ def _boundary_edges(polys, groups, coplanar=None, plane_normals=None):
     a, b, g = a[keep], b[keep], g[keep]
     # endpoints as exact coordinates (shared corners are the same vertex, bit for bit)
     pts = np.concatenate([a, b])
-    _, ib = np.unique(pts, axis=0, return_inverse=True)
+    _, ib = unique_rows(pts, return_inverse=True)
     ib = ib.reshape(-1)
     va, vb = ib[:len(a)], ib[len(a):]
     lo, hi = np.minimum(va, vb), np.maximum(va, vb)
     sign = np.where(va < vb, 1, -1)
     key = np.stack([g, lo, hi], axis=1)
-    uk, inv = np.unique(key, axis=0, return_inverse=True)
+    uk, inv = unique_rows(key, return_inverse=True)
     net = np.bincount(inv.reshape(-1), weights=sign, minlength=len(uk))
     first = np.full(len(uk), -1)
     first[inv.reshape(-1)[::-1]] = np.arange(len(inv))[::-1]
@@ -280,7 +282,7 @@ def _straighten(edges, eg, start, end, single, coplanar, normals):
     along them): the groups' sum is exact only for outlines that bound their regions."""
     E = len(edges)
     und = np.stack([np.minimum(start, end), np.maximum(start, end)], axis=1)
-    _, inv, cnt = np.unique(und, axis=0, return_inverse=True, return_counts=True)
+    _, inv, cnt = unique_rows(und, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     # the other group along each edge: an edge in exactly two groups' boundaries, walked once
     # each way

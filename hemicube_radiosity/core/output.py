@@ -29,6 +29,7 @@ from .progress import Ticker
 from .refine import LUMA
 from .rays import embree_available, embree_scene, occluder, open_fraction
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
+from .unique import unique_rows
 
 __all__ = ["meshes_key", "output_elements", "vertex_stage", "abrupt_elements"]
 
@@ -70,7 +71,7 @@ def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
     polys = np.where(elements.polys < 0, elements.polys[:, 2:3], elements.polys)
     ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
                          elements.verts[polys.reshape(-1)]], axis=1)
-    _, inv = np.unique(np.concatenate([keys, ek]), axis=0, return_inverse=True)
+    _, inv = unique_rows(np.concatenate([keys, ek]), return_inverse=True)
     inv = inv.reshape(-1)
     slot = np.full(inv.max() + 1, -1)
     slot[inv[:len(keys)]] = np.arange(len(keys))
@@ -616,14 +617,14 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         label = new
     # a vertex whose seen elements all join up (a floor around a block's corner, whose edge
     # grazes the segment across the corner) is not split: not even its buried corners
-    pairs = np.unique(np.column_stack([sv, label[slot]]), axis=0)
+    pairs = unique_rows(np.column_stack([sv, label[slot]]))
     split_v[:] = False
     split_v[pairs[1:, 0][pairs[1:, 0] == pairs[:-1, 0]]] = True
     if not split_v.any():
         return None
     flat = polys.reshape(-1).copy()
     at = np.flatnonzero((flat >= 0) & split_v[np.maximum(flat, 0)])
-    groups, inv = np.unique(np.column_stack([flat[at], label[at]]), axis=0, return_inverse=True)
+    groups, inv = unique_rows(np.column_stack([flat[at], label[at]]), return_inverse=True)
     inv = inv.reshape(-1)
     lead = np.ones(len(groups), bool)
     lead[1:] = groups[1:, 0] != groups[:-1, 0]
@@ -678,8 +679,8 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
 
     def groups():
         cell = np.floor((elements.centers[ids] - elements.verts.min(axis=0)) / size).astype(np.int64)
-        key = np.unique(np.column_stack([elements.owner[ids], cell]), axis=0, return_inverse=True)[1].reshape(-1)
-        place = np.unique(elements.verts, axis=0, return_inverse=True)[1].reshape(-1)
+        key = unique_rows(np.column_stack([elements.owner[ids], cell]), return_inverse=True)[1].reshape(-1)
+        place = unique_rows(elements.verts, return_inverse=True)[1].reshape(-1)
         polys = elements.polys[ids]
         polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
         return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)

@@ -20,6 +20,7 @@ from typing import NamedTuple
 
 import numpy as np
 from .errors import RadiosityError
+from .unique import unique_rows
 
 __all__ = ["MeshInput", "PatchSet", "build_patches", "PatchError"]
 
@@ -405,7 +406,7 @@ def _edge_segments(verts, polys, patch_size):
     ea = np.minimum(a, b)[valid]
     eb = np.maximum(a, b)[valid]
     key = np.stack([ea, eb], axis=1)
-    edges, inv = np.unique(key, axis=0, return_inverse=True)
+    edges, inv = unique_rows(key, return_inverse=True)
     inv = inv.reshape(-1)
     face_edges = np.full((F, 4), -1, dtype=np.int64)
     face_edges[valid] = inv
@@ -584,7 +585,7 @@ def _subdivide(verts, polys, patch_size):
     if q.size:
         nu = cuts.n[cuts.face_edges[q, 0]]
         nv = cuts.n[cuts.face_edges[q, 1]]
-        for (gu, gv) in np.unique(np.stack([nu, nv], 1), axis=0):
+        for (gu, gv) in unique_rows(np.stack([nu, nv], 1)):
             fid = q[(nu == gu) & (nv == gv)]
             pos, cells = _cut_quads(verts, polys, cuts, fid, gu, gv, next_v)
             next_v += len(pos)

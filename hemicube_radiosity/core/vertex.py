@@ -18,6 +18,7 @@ import numpy as np
 
 from .cache import array_key, cache_key, cached, geometry_key
 from .patches import PatchSet
+from .unique import unique_rows
 
 __all__ = ["vertex_radiosity", "frames", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
 
@@ -37,7 +38,7 @@ def boundary_vertices(polys, n_verts) -> np.ndarray:
     valid = np.ones(polys.shape, bool)
     valid[tri, 3] = False
     e = np.sort(np.stack([a[valid], b[valid]], axis=1), axis=1)
-    uniq, counts = np.unique(e, axis=0, return_counts=True)
+    uniq, counts = unique_rows(e, return_counts=True)
     on = np.zeros(n_verts, bool)
     on[uniq[counts == 1].ravel()] = True
     return on
@@ -82,7 +83,7 @@ def _boundary_interior_pairs(polys, boundary, interior):
     ok = (pv >= 0) & (qv >= 0) & (pv != qv)
     pv, qv = pv[ok], qv[ok]
     ok = boundary[pv] & interior[qv]
-    return np.unique(np.stack([pv[ok], qv[ok]], 1), axis=0)
+    return unique_rows(np.stack([pv[ok], qv[ok]], 1))
 
 
 _TOPOLOGY: dict = {}     # id(polys) -> (polys, (boundary, pairs)): a relight reuses the patches'
@@ -307,7 +308,7 @@ def _fill_rings(patches: PatchSet, weights, rings=16) -> list:
     a, b = a[ok], b[ok]
     # and vertices at one place (a vertex parted by a floor a block is sunk into: its copy
     # below the floor takes the one above)
-    place = np.unique(patches.verts, axis=0, return_inverse=True)[1].reshape(-1)
+    place = unique_rows(patches.verts, return_inverse=True)[1].reshape(-1)
     order = np.argsort(place, kind="stable")
     same = np.flatnonzero(place[order][1:] == place[order][:-1])
     if same.size:

@@ -1,0 +1,63 @@
+"""The distinct rows of a 2-D array: what ``np.unique(a, axis=0)`` returns, without its cost.
+
+NumPy finds unique rows by viewing each row as one structured record and sorting the records,
+which compares them field by field through a generic comparison: on this project's keys (edges
+as vertex pairs, pieces as (object, material, normal bin, cell) rows) that sort was most of a
+dense mesh's grouping (0.38 s of the 54k-triangle Cornell box's 0.58 s 'patches' stage).
+:func:`unique_rows` sorts integer rows as one packed int64 key when their ranges allow it, and
+any other rows with :func:`numpy.lexsort`, and returns the same arrays as ``np.unique``: the
+rows in lexicographic order, the inverse (always 1-D) and the counts.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["unique_rows"]
+
+
+def unique_rows(a, return_inverse=False, return_counts=False):
+    """The distinct rows of ``a`` (N, K), sorted lexicographically (column 0 first), as
+    ``np.unique(a, axis=0, return_inverse=..., return_counts=...)`` returns them: ``uniq`` (U, K)
+    alone, or a tuple with ``inverse`` (N,) intp (``uniq[inverse] == a``) and/or ``counts`` (U,)
+    intp. Rows compare by value (-0.0 equals 0.0; NaN equals nothing, as in NumPy)."""
+    a = np.asarray(a)
+    if a.ndim != 2 or len(a) == 0 or a.shape[1] == 0:
+        out = np.unique(a, axis=0, return_inverse=return_inverse, return_counts=return_counts)
+        if return_inverse:
+            out = (out[0], np.asarray(out[1]).reshape(-1), *out[2:])
+        return out
+    n = len(a)
+    order = _row_order(a)
+    s = a[order]
+    new = np.empty(n, bool)
+    new[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    first = np.flatnonzero(new)
+    uniq = a[order[first]]
+    if not (return_inverse or return_counts):
+        return uniq
+    out = [uniq]
+    if return_inverse:
+        inverse = np.empty(n, np.intp)
+        inverse[order] = np.cumsum(new) - 1
+        out.append(inverse)
+    if return_counts:
+        out.append(np.diff(np.append(first, n)))
+    return tuple(out)
+
+
+def _row_order(a) -> np.ndarray:
+    """A stable order of ``a``'s rows sorted lexicographically: one argsort of a packed int64 key
+    for integer rows whose value ranges multiply to under 2**62, else a lexsort."""
+    if a.dtype.kind in "bi" or (a.dtype.kind == "u" and a.dtype.itemsize < 8):
+        lo = a.min(axis=0).astype(np.int64)
+        span = [int(h) - int(l) + 1 for h, l in zip(a.max(axis=0).tolist(), lo.tolist())]
+        if math.prod(span) < 2 ** 62:
+            key = np.zeros(len(a), np.int64)
+            for j in range(a.shape[1]):
+                key *= span[j]
+                key += a[:, j].astype(np.int64) - lo[j]
+            return np.argsort(key, kind="stable")
+    return np.lexsort(a.T[::-1])

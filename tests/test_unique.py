@@ -1,0 +1,43 @@
+"""core.unique.unique_rows returns what np.unique(axis=0) returns, on the kinds of rows the
+bake keys on: small and huge integer ranges (the packed key and the lexsort), negative values,
+bools, floats with ties and signed zeros, one column and many."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.unique import unique_rows
+
+
+def _cases():
+    rng = np.random.default_rng(7)
+    yield rng.integers(0, 5, (2000, 2))                              # many ties, packed key
+    yield rng.integers(-3, 3, (500, 5))                              # negatives
+    yield rng.integers(-2 ** 40, 2 ** 40, (300, 3))                  # ranges too wide to pack
+    yield np.concatenate([rng.integers(0, 2 ** 62, (50, 1)), rng.integers(0, 3, (50, 1))], 1)
+    yield rng.integers(0, 4, (400, 1)).astype(np.int32)              # one column, int32
+    yield rng.random((300, 3)) > 0.5                                 # bools
+    f = np.round(rng.normal(size=(600, 3)), 1)
+    f[::7] = -0.0 * f[::7]                                           # signed zeros among ties
+    yield f
+    yield np.repeat(rng.normal(size=(20, 4)), 5, axis=0)[rng.permutation(100)]
+    yield np.zeros((1, 3), np.int64)
+
+
+@pytest.mark.parametrize("case", list(range(9)))
+def test_unique_rows_is_numpys_unique_along_rows(case):
+    a = list(_cases())[case]
+    want, inv, cnt = np.unique(a, axis=0, return_inverse=True, return_counts=True)
+    got, ginv, gcnt = unique_rows(a, return_inverse=True, return_counts=True)
+    assert got.dtype == want.dtype and got.shape == want.shape
+    assert np.array_equal(got, want)
+    assert np.array_equal(ginv, np.asarray(inv).reshape(-1)) and ginv.ndim == 1
+    assert np.array_equal(gcnt, cnt)
+    assert np.array_equal(got[ginv], a)
+    assert np.array_equal(unique_rows(a), want)
+    only_inv = unique_rows(a, return_inverse=True)
+    assert len(only_inv) == 2 and np.array_equal(only_inv[1], ginv)
+
+
+def test_unique_rows_of_nothing():
+    a = np.zeros((0, 2), np.int64)
+    got, inv, cnt = unique_rows(a, return_inverse=True, return_counts=True)
+    assert got.shape == (0, 2) and inv.shape == (0,) and cnt.shape == (0,)
