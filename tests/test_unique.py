@@ -4,7 +4,7 @@ bools, floats with ties and signed zeros, one column and many."""
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.unique import unique_rows
+from hemicube_radiosity.core.unique import unique_ints, unique_rows
 
 
 def _cases():
@@ -41,3 +41,26 @@ def test_unique_rows_of_nothing():
     a = np.zeros((0, 2), np.int64)
     got, inv, cnt = unique_rows(a, return_inverse=True, return_counts=True)
     assert got.shape == (0, 2) and inv.shape == (0,) and cnt.shape == (0,)
+
+
+def _int_cases():
+    rng = np.random.default_rng(11)
+    yield rng.integers(0, 50, 5000)
+    yield rng.integers(-7, 7, 300).astype(np.int32)
+    yield rng.integers(0, 2 ** 61, 1000)                             # too wide to pack: NumPy's
+    yield rng.integers(0, 3, (40, 7))                                # flattened, as NumPy does
+    yield np.array([5])
+    yield rng.random(100) > 0.3
+    yield rng.integers(0, 2 ** 20, 4096).astype(np.uint32)
+
+
+@pytest.mark.parametrize("case", list(range(7)))
+def test_unique_ints_is_numpys_unique(case):
+    x = list(_int_cases())[case]
+    want = np.unique(x, return_index=True, return_inverse=True, return_counts=True)
+    got = unique_ints(x, return_index=True, return_inverse=True, return_counts=True)
+    assert got[0].dtype == want[0].dtype
+    for g, w in zip(got, want):
+        assert np.array_equal(g, np.asarray(w).reshape(-1))
+    assert np.array_equal(unique_ints(x), want[0])
+    assert np.array_equal(unique_ints(x, return_inverse=True)[1], np.asarray(want[2]).reshape(-1))

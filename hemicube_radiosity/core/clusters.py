@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
-from .unique import unique_rows
+from .unique import unique_ints, unique_rows
 
 __all__ = ["Clusters", "group_pieces", "DEFAULT_MAX_ANGLE"]
 
@@ -99,7 +99,7 @@ def _small(pieces: PatchSet, size) -> np.ndarray:
     from a coarse face already have about the patch's area (a quad more than a quarter of it on
     each side, a triangle half of that) and stay alone."""
     face = pieces.owner.astype(np.int64) * (1 << 32) + pieces.source_face
-    whole = np.unique(face, return_inverse=True, return_counts=True)
+    whole = unique_ints(face, return_inverse=True, return_counts=True)
     uncut = whole[2][whole[1].reshape(-1)] == 1
     return uncut | (pieces.areas < size * size / 3)
 
@@ -170,7 +170,7 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
     key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
     label = _components(key, pieces.polys)
-    of = np.unique(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
+    of = unique_ints(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):
         return None
     return _make(pieces, of)

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
-from .unique import unique_rows
+from .unique import unique_ints, unique_rows
 
 __all__ = ["OpenSide", "open_side"]
 
@@ -400,7 +400,7 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         pairs.append(np.stack([i, np.full(len(i), k)], 1))
     p = np.concatenate(pairs).astype(np.int64)
     B = max(len(blo), 1)
-    k = np.unique(p[:, 0] * B + p[:, 1])
+    k = unique_ints(p[:, 0] * B + p[:, 1])
     p = np.stack([k // B, k % B], 1)
     if not len(p):
         return p[:, 0], p[:, 1]

@@ -24,6 +24,7 @@ from .lights import direct_irradiance
 from .patches import PatchSet
 from .progress import Ticker
 from .rays import embree_available, embree_scene, occluder, open_fraction, sky_fraction
+from .unique import unique_ints
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
 
@@ -71,7 +72,7 @@ class DirectLight:
             return None
         samples, groups = settings.direct_samples, None
         if emitters.size and clusters is not None:
-            groups = np.unique(clusters.of[emitters], return_inverse=True)[1].reshape(-1)
+            groups = unique_ints(clusters.of[emitters], return_inverse=True)[1].reshape(-1)
             if isinstance(settings.patch_size, (int, float)) and settings.patch_size > 0:   # resolved
                 groups = _whole_groups(patches, emitters, groups, 0.5 * float(settings.patch_size) ** 2)
         elif emitters.size:
@@ -244,7 +245,7 @@ def _whole_groups(patches: PatchSet, emitters, groups, min_area) -> np.ndarray:
             (np.abs(d @ nrm[g]) <= 1e-6 * reach) & (np.linalg.norm(d, axis=1) <= reach)
         if same.any():
             to[g] = big[same][np.argmin(np.linalg.norm(d[same], axis=1))]
-    return np.unique(to[groups], return_inverse=True)[1].reshape(-1)
+    return unique_ints(to[groups], return_inverse=True)[1].reshape(-1)
 
 
 def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
@@ -284,7 +285,7 @@ def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
             frac = np.where(total > 0, (cum - 0.5 * a[rows] - start) / total, 0.0)
         run = np.clip((frac * k).astype(np.int64), 0, k - 1)
         # each run's stand-in: its piece nearest the run's area centroid
-        rid = np.unique(cl * k + run, return_inverse=True)[1]
+        rid = unique_ints(cl * k + run, return_inverse=True)[1]
         w = a[rows]
         mid = np.stack([np.bincount(rid, weights=w * c[rows, ax]) for ax in range(3)], 1)
         mid /= np.maximum(np.bincount(rid, weights=w), 1e-300)[:, None]

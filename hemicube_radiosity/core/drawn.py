@@ -30,7 +30,7 @@ import numpy as np
 
 from .clusters import Clusters
 from .patches import PatchSet
-from .unique import unique_rows
+from .unique import unique_ints, unique_rows
 
 __all__ = ["DrawSet", "draw_set"]
 
@@ -328,7 +328,7 @@ def plane_outlines(patches: PatchSet) -> PatchSet:
     weld = unique_rows(verts, return_inverse=True)[1].reshape(-1)
     polys = np.asarray(patches.polys)
     wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
-    of = np.unique(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
+    of = unique_ints(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == P:
         return patches
     d_set = draw_set(patches, _make(patches, of))

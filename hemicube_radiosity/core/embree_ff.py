@@ -33,6 +33,7 @@ from .parallel import ordered_map, resolve_workers
 from .progress import Ticker
 from .rays import embree_scene, import_embreex
 from .sparse import CSR
+from .unique import unique_ints
 
 __all__ = ["embree_hemicube_form_factors", "embree_stochastic_form_factors", "hemicube_directions"]
 
@@ -108,7 +109,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
             pid_h = column[pid_h]
         ok = front & (pid_h != batch[rid_h])
         key = rid_h[ok] * n + pid_h[ok]
-        uk, inv = np.unique(key, return_inverse=True)
+        uk, inv = unique_ints(key, return_inverse=True)
         vals = np.bincount(inv.reshape(-1), weights=w_h[ok], minlength=uk.size)
         return (batch, sky_b, np.bincount(uk // n, minlength=B), (uk % n).astype(np.int32),
                 vals.astype(np.float32))

@@ -21,6 +21,7 @@ from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
+from .unique import unique_ints
 
 #: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
 #: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). The
@@ -154,7 +155,7 @@ def _cast(patches, params, scene, points, normals, local, step, hits, s):
         H = np.column_stack([s + f // R, pid[f], y]).astype(np.float32 if exact else np.float64)
     # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
     V = len(patches.verts)
-    key, inv = np.unique(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True)
+    key, inv = unique_ints(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True)
     summed = np.bincount(inv.reshape(-1), weights=w.ravel() / R, minlength=key.size)
     keep = summed != 0
     key, summed = key[keep], summed[keep]
@@ -198,7 +199,7 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0) -> CS
         vals.append(np.asarray(r, np.float64).ravel())
     rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
     n = V + int(extra)
-    key, inv = np.unique(rows * n + cols, return_inverse=True)
+    key, inv = unique_ints(rows * n + cols, return_inverse=True)
     summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
     keep = summed != 0
     key, summed = key[keep], summed[keep]

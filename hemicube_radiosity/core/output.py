@@ -29,7 +29,7 @@ from .progress import Ticker
 from .refine import LUMA
 from .rays import embree_available, embree_scene, occluder, open_fraction
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
-from .unique import unique_rows
+from .unique import unique_ints, unique_rows
 
 __all__ = ["meshes_key", "output_elements", "vertex_stage", "abrupt_elements"]
 
@@ -683,7 +683,7 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
         place = unique_rows(elements.verts, return_inverse=True)[1].reshape(-1)
         polys = elements.polys[ids]
         polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
-        return np.unique(_components(key, polys), return_inverse=True)[1].reshape(-1)
+        return unique_ints(_components(key, polys), return_inverse=True)[1].reshape(-1)
     # geometry only (a relight that shines the same elements finds them grouped)
     ids = np.ascontiguousarray(ids, dtype=np.int64)
     return cached(ctx.cache, cache_key(geometry_key(elements) + ids.tobytes(), ("shine-groups", size)), groups)
@@ -706,7 +706,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     verts, polys = elements.verts, elements.polys[ids]
     if cells is not None and len(cells[0]):
         parent, corners, cell_light = cells
-        first, inv = np.unique(parent, return_inverse=True)
+        first, inv = unique_ints(parent, return_inverse=True)
         after = int(groups.max()) + 1 if groups.size else 0
         # half-patch cells: a lamp's glow seen beside the lamp and hidden behind it across the
         # lamp must not share one group's visibility (a patch-size group made the walls of a
@@ -826,7 +826,7 @@ def _whole_faces(patches: PatchSet, elements: PatchSet):
     their corners at the same places in the same order."""
     def one(ps):
         key = ps.owner.astype(np.int64) * (1 << 32) + ps.source_face.astype(np.int64)
-        k, first, count = np.unique(key, return_index=True, return_counts=True)
+        k, first, count = unique_ints(key, return_index=True, return_counts=True)
         return k[count == 1], first[count == 1]
     ke, fe = one(elements)
     kp, fp = one(patches)

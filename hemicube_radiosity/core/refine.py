@@ -19,6 +19,7 @@ from .cache import cache_key, cached
 from .clusters import _make
 from .direct_light import LUMA, DirectLight, grid_points
 from .patches import PatchSet, _poly_geometry
+from .unique import unique_ints
 
 __all__ = ["LUMA", "split_patches", "abrupt", "refine", "refine_stage"]
 
@@ -54,7 +55,7 @@ def split_patches(patches: PatchSet, select) -> tuple[PatchSet, np.ndarray]:
     valid = np.arange(4)[None, :] < k[:, None]
     lo, hi = np.minimum(a, b)[valid], np.maximum(a, b)[valid]
     V = len(patches.verts)
-    uniq, inv = np.unique(lo * V + hi, return_inverse=True)
+    uniq, inv = unique_ints(lo * V + hi, return_inverse=True)
     mids = 0.5 * (patches.verts[uniq // V] + patches.verts[uniq % V])
     mid = np.full(P.shape, -1, np.int64)
     mid[valid] = V + inv.reshape(-1)
@@ -197,6 +198,6 @@ def refine_stage(ctx) -> None:
         of = ctx.clusters.of[parent]
         child = np.flatnonzero(np.bincount(parent, minlength=len(p))[parent] > 1)
         of[child] = of.max() + 1 + np.arange(child.size)
-        ctx.clusters = _make(refined, np.unique(of, return_inverse=True)[1].reshape(-1))
+        ctx.clusters = _make(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
     ctx.notes.append(f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
     ctx.patches = refined

@@ -12,6 +12,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .unique import unique_ints
+
 __all__ = ["CSR"]
 
 
@@ -59,7 +61,7 @@ class CSR:
         cols = np.asarray(cols, dtype=np.int64)
         vals = np.asarray(vals, dtype=np.float64)
         key = rows * shape[1] + cols
-        uk, inv = np.unique(key, return_inverse=True)
+        uk, inv = unique_ints(key, return_inverse=True)
         summed = np.bincount(inv.reshape(-1), weights=vals, minlength=uk.size)
         keep = summed != 0
         uk, summed = uk[keep], summed[keep]

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .unique import unique_ints
+
 __all__ = ["Grid", "k_nearest", "sq_dist"]
 
 _MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
@@ -72,7 +74,7 @@ class _Level:
         self.dims = ci.max(0) + 1
         key = self._key(ci)
         self.order = np.argsort(key, kind="stable")
-        self.keys, self.start, self.count = np.unique(key[self.order], return_index=True, return_counts=True)
+        self.keys, self.start, self.count = unique_ints(key[self.order], return_index=True, return_counts=True)
 
     def _key(self, ci):
         return (ci[..., 0] * self.dims[1] + ci[..., 1]) * self.dims[2] + ci[..., 2]

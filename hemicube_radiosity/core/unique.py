@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["unique_rows"]
+__all__ = ["unique_ints", "unique_rows"]
 
 
 def unique_rows(a, return_inverse=False, return_counts=False):
@@ -48,6 +48,56 @@ def unique_rows(a, return_inverse=False, return_counts=False):
     return tuple(out)
 
 
+def unique_ints(x, return_index=False, return_inverse=False, return_counts=False):
+    """``np.unique(x, return_index=..., return_inverse=..., return_counts=...)`` for an integer
+    array (flattened; the inverse is 1-D), the same arrays, faster: each value is packed with its
+    position into one int64 and the packed values are sorted, not argsorted (a gather's chunk of
+    a million hits: 60 ms in ``np.unique``, 7 ms to sort). Falls back to ``np.unique`` for other
+    dtypes or where value range and position do not fit in 63 bits."""
+    x = np.asarray(x).reshape(-1)
+    flags = dict(return_index=return_index, return_inverse=return_inverse, return_counts=return_counts)
+    packed = _packed(x)
+    if packed is None:
+        out = np.unique(x, **flags)
+        return (out[0], *(np.asarray(a).reshape(-1) for a in out[1:])) if isinstance(out, tuple) else out
+    packed, bits, lo = packed
+    packed.sort()
+    order = packed & ((1 << bits) - 1)
+    packed >>= bits
+    new = np.empty(len(x), bool)
+    new[0] = True
+    np.not_equal(packed[1:], packed[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    uniq = (packed[first] + lo).astype(x.dtype)
+    if not (return_index or return_inverse or return_counts):
+        return uniq
+    out = [uniq]
+    if return_index:
+        out.append(order[first].astype(np.intp))
+    if return_inverse:
+        inverse = np.empty(len(x), np.intp)
+        inverse[order] = np.cumsum(new) - 1
+        out.append(inverse)
+    if return_counts:
+        out.append(np.diff(np.append(first, len(x))))
+    return tuple(out)
+
+
+def _packed(x):
+    """(x - min) shifted left past the positions, or'ed with each one's position: (int64 (n,),
+    bits of the position, min), or None (empty, not integers, or over 63 bits)."""
+    if len(x) == 0 or x.dtype.kind not in "biu" or (x.dtype.kind == "u" and x.dtype.itemsize == 8):
+        return None
+    lo, hi = int(x.min()), int(x.max())
+    bits = max(1, (len(x) - 1).bit_length())
+    if (hi - lo).bit_length() + bits > 63:
+        return None
+    packed = x.astype(np.int64) - lo
+    packed <<= bits
+    packed |= np.arange(len(x), dtype=np.int64)
+    return packed, bits, lo
+
+
 def _row_order(a) -> np.ndarray:
     """A stable order of ``a``'s rows sorted lexicographically: one argsort of a packed int64 key
     for integer rows whose value ranges multiply to under 2**62, else a lexsort."""
@@ -59,5 +109,10 @@ def _row_order(a) -> np.ndarray:
             for j in range(a.shape[1]):
                 key *= span[j]
                 key += a[:, j].astype(np.int64) - lo[j]
+            packed = _packed(key)
+            if packed is not None:          # sorted with its positions: a stable order
+                packed, bits, _ = packed
+                packed.sort()
+                return packed & ((1 << bits) - 1)
             return np.argsort(key, kind="stable")
     return np.lexsort(a.T[::-1])

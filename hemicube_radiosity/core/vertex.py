@@ -18,7 +18,7 @@ import numpy as np
 
 from .cache import array_key, cache_key, cached, geometry_key
 from .patches import PatchSet
-from .unique import unique_rows
+from .unique import unique_ints, unique_rows
 
 __all__ = ["vertex_radiosity", "frames", "exposure", "boundary_vertices", "BURIED", "fill_buried"]
 
@@ -242,7 +242,7 @@ def _fits(patches: PatchSet, weights, extrapolate=True):
     sv = np.concatenate([v[pb], bv])
     sx = np.concatenate([patches.centers[p[pb]], patches.verts[iv]])
     sw = np.concatenate([wp[pb], np.ones(bv.size)])
-    order = np.unique(sv, return_inverse=True)
+    order = unique_ints(sv, return_inverse=True)
     targets, slot = order[0], order[1].reshape(-1)
     d = sx - patches.verts[sv]                                # offsets from the vertex
     X = np.concatenate([np.ones((len(sv), 1)), d], axis=1)     # (S, 4): [1, dx, dy, dz]
