@@ -113,3 +113,18 @@ def test_transport_product_transposed_is_apply_transport_bit_for_bit():
     assert np.array_equal(transport_product(T, L), ref)
     assert np.array_equal(transport_product(Tt, L, transposed=True), ref)
     assert transport_product(np.zeros((4, 0), np.float32), np.zeros((0, 3))).shape == (4, 3)
+
+
+def test_gather_directions_are_the_einsum_of_the_frames_bit_for_bit():
+    """`geometry.in_frames` (the gather's and the open fraction's rays in world space) sums the
+    three axes as einsum did: a relight's cached G and the reference bakes keep every bit."""
+    from hemicube_radiosity.core.geometry import in_frames, tangent_frames
+    from hemicube_radiosity.core.rays import cosine_lattice
+    rng = np.random.default_rng(3)
+    n = rng.normal(size=(500, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    local, frames = cosine_lattice(64, 2), tangent_frames(n, rng.uniform(0, 6, 500))
+    d = in_frames(local, frames)
+    assert d.shape == (500, len(local), 3)
+    assert np.array_equal(d, np.einsum("rj,mjc->mrc", local, frames))
+    assert np.allclose(np.linalg.norm(d, axis=2), 1.0) and (np.einsum("mrc,mc->mr", d, n) > 0).all()

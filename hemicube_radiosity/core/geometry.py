@@ -77,6 +77,17 @@ def tangent_frames(normals, angles=None):
     return np.stack([u, v, n], axis=1)
 
 
+def in_frames(local, frames):
+    """(M, R, 3) the directions ``local`` (R, 3), given in each frame's (u, v, n), in world
+    space for every frame of ``frames`` (M, 3, 3) (from :func:`tangent_frames`): the sum over
+    the three axes in order, as ``np.einsum("rj,mjc->mrc", local, frames)`` sums it (the same
+    values, bit for bit, in half its time on a gather's quarter million rays)."""
+    d = local[None, :, 0, None] * frames[:, None, 0, :]
+    d += local[None, :, 1, None] * frames[:, None, 1, :]
+    d += local[None, :, 2, None] * frames[:, None, 2, :]
+    return d
+
+
 # --------------------------------------------------------------------------------------------
 # Sampling the unit square
 
@@ -421,23 +432,31 @@ def _merge_collinear(edges, groups, tol=1e-9):
     E = len(edges)
     if E < 2:
         return edges, groups
-    key = lambda p: (p[0].tobytes(), p[1].tobytes(), p[2].tobytes())
-    starts = {}
-    for i in range(E):
-        starts.setdefault((groups[i], key(edges[i, 0])), []).append(i)
+    # each end point as an id (group and the coordinates' exact bits): edge i runs on into the
+    # edge that starts where it ends, when exactly one does (all at once: this ran a Python loop
+    # with a cross product per edge, 0.25 s for the 5,500 outline edges of a 54k-triangle box)
+    g = np.asarray(groups, np.int64)
+    ends = np.concatenate([edges[:, 0], edges[:, 1]])
+    bits = np.ascontiguousarray(ends, dtype=np.float64).view(np.int64).reshape(-1, 3)
+    pid = unique_rows(np.column_stack([np.tile(g, 2), bits]), return_inverse=True)[1]
+    start, end = pid[:E], pid[E:]
+    order = np.argsort(start, kind="stable")
+    lo = np.searchsorted(start[order], end, side="left")
+    hi = np.searchsorted(start[order], end, side="right")
     d = edges[:, 1] - edges[:, 0]
     n = np.linalg.norm(d, axis=1, keepdims=True)
     u = d / np.where(n > 0, n, 1.0)
     nxt = np.full(E, -1)
-    for i in range(E):
-        cand = starts.get((groups[i], key(edges[i, 1])), [])
-        if len(cand) == 1 and np.linalg.norm(np.cross(u[i], u[cand[0]])) < tol and u[i] @ u[cand[0]] > 0:
-            nxt[i] = cand[0]
+    one = np.flatnonzero(hi - lo == 1)
+    c = order[lo[one]]
+    straight = (np.linalg.norm(np.cross(u[one], u[c]), axis=1) < tol) & ((u[one] * u[c]).sum(axis=1) > 0)
+    nxt[one[straight]] = c[straight]
     has_prev = np.zeros(E, bool)
     has_prev[nxt[nxt >= 0]] = True
-    seen = np.zeros(E, bool)
-    out_e, out_g = [], []
-    for i in list(np.flatnonzero(~has_prev)) + list(range(E)):
+    seen = [False] * E
+    nxt = nxt.tolist()
+    first, last = [], []
+    for i in np.flatnonzero(~has_prev).tolist() + list(range(E)):
         if seen[i]:
             continue
         j = i
@@ -445,9 +464,9 @@ def _merge_collinear(edges, groups, tol=1e-9):
         while nxt[j] >= 0 and not seen[nxt[j]]:
             j = nxt[j]
             seen[j] = True
-        out_e.append((edges[i, 0], edges[j, 1]))
-        out_g.append(groups[i])
-    return np.array(out_e), np.array(out_g)
+        first.append(i)
+        last.append(j)
+    return np.stack([edges[first, 0], edges[last, 1]], axis=1), np.asarray(groups)[first]
 
 
 @dataclass(frozen=True)

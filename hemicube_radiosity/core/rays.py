@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import RadiosityError
-from .geometry import cosine_directions, jittered_grid, tangent_frames
+from .geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
 from .patches import PatchSet
 
 __all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "EmbreeUnavailable", "embree_available",
@@ -307,7 +307,7 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     step = max(1, chunk_rays // R)
     for s in range(0, len(points), step):
         x, n = points[s:s + step], normals[s:s + step]
-        d = np.einsum("rj,mjc->mrc", local, tangent_frames(n)).reshape(-1, 3)
+        d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         pid, t = scene.intersect(np.repeat(x + eps * n, R, axis=0), d)
         pid = np.asarray(pid)
         hit = pid >= 0
@@ -354,7 +354,7 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     step = max(1, chunk_rays // R)
     for s in range(0, len(points), step):
         x, n = points[s:s + step], normals[s:s + step]
-        d = np.einsum("rj,mjc->mrc", local, tangent_frames(n)).reshape(-1, 3)
+        d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         hit = np.asarray(scene.occluded(np.repeat(x + eps * n, R, axis=0), d))
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     return out
