@@ -145,6 +145,28 @@ def test_a_lamp_modelled_as_many_faces_lights_like_one():
     np.testing.assert_allclose(group_form_factors(pts, nrm, p.corners(), groups, p.normals), ref, atol=1e-12)
 
 
+def test_group_form_factors_group_by_group_equal_the_flat_pairs_bit_for_bit(monkeypatch):
+    """A few groups are evaluated group by group (points x edges blocks, in blocks of points),
+    many groups as flat (point, group) pairs: the same sums in the same order, bit for bit,
+    including the points below part of a group (clipped contours) and a small block size."""
+    from hemicube_radiosity.core import geometry
+    rng = np.random.default_rng(8)
+    lamp = scenes.tessellate([scenes.cornell_box()[5]], 9)
+    p = build_patches(lamp, None)
+    groups = (p.centers[:, 0] > 1.0).astype(int) + 2 * (p.centers[:, 2] > 1.0)
+    groups = np.unique(groups, return_inverse=True)[1]
+    pts = rng.uniform((-0.5, -0.5, 1.0), (2.5, 2.5, 2.2), (600, 3))
+    nrm = rng.normal(size=(600, 3))
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    by_group = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
+    monkeypatch.setattr(geometry, "BLOCK_PAIRS", 97)
+    small_blocks = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
+    monkeypatch.setattr(geometry, "GROUP_LOOP", 0)
+    flat = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
+    assert (flat > 0).sum() > 100 and groups.max() >= 1
+    assert np.array_equal(by_group, flat) and np.array_equal(small_blocks, flat)
+
+
 def test_dense_cornell_box_bakes_like_the_coarse_one():
     """The same box modelled as 8,192 triangles: a few hundred patches, and the floor and back
     wall within 5% of the coarse model's bake at the defaults (the light is the same; only the

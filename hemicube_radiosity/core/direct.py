@@ -158,8 +158,9 @@ class _Transport:
         if self.scene is None:
             return s, F, None, None, None, None, None
         pi, mi = np.nonzero(F > 0)
-        o = x[pi] + self.eps * nx[pi]                                     # (r, 3)
-        v = _visible_fraction(self.scene, o, self.ys[mi]) if pi.size else np.zeros(0)
+        # rows by ``take``: indexing a 2-D array with an index array is several times slower
+        o = x.take(pi, axis=0) + self.eps * nx.take(pi, axis=0)          # (r, 3)
+        v = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0)) if pi.size else np.zeros(0)
         # penumbra: where some rays pass and some do not, cast ``refine`` times more
         part = (v > 0) & (v < 1)
         return s, F, pi, mi, o, v, part if self.refine > 0 and part.any() else None
@@ -174,7 +175,9 @@ class _Transport:
         if part is not None:
             refine = self.refine
             extra = self.draw(refine * self.S, np.random.default_rng((self.seed, 1 + s)))
-            v[part] = (v[part] + refine * _visible_fraction(self.scene, o[part], extra[mi[part]])) / (1 + refine)
+            on = np.flatnonzero(part)
+            v[on] = (v[on] + refine * _visible_fraction(self.scene, o.take(on, axis=0),
+                                                        extra.take(mi[on], axis=0))) / (1 + refine)
         vis = np.zeros(F.shape)
         vis[pi, mi] = v
         return s, (F * vis).astype(np.float32)

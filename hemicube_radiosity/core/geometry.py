@@ -520,6 +520,15 @@ class GroupOutline:
             object.__setattr__(self, "_cones", (cone, ball * (1 + 1e-9) + 1e-300, mid))
         return self._cones
 
+    @property
+    def edge_columns(self):
+        """``edges`` by component: ((x, y, z) of the edges' starts, (x, y, z) of their ends),
+        contiguous (E,) arrays; computed once."""
+        if getattr(self, "_columns", None) is None:
+            cols = tuple(tuple(np.ascontiguousarray(self.edges[:, k, c]) for c in range(3)) for k in range(2))
+            object.__setattr__(self, "_columns", cols)
+        return self._columns
+
     @classmethod
     def of(cls, polys, groups, poly_normals) -> "GroupOutline":
         polys = np.asarray(polys, dtype=np.float64)
@@ -573,24 +582,35 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
     below = np.zeros((P, G), bool)
     n_front, count = _in_front(points, o)
     # the contour only for the pairs whose point is in front of the group (a lamp's back is in
-    # front of the ceiling above it alone): each pair's group's edges, flat
-    pi, gi = np.nonzero(n_front > 0)
-    if pi.size:
-        k = o.edge_count[gi]
-        pair = np.repeat(np.arange(pi.size), k)
-        e = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + np.repeat(o.edge_start[gi], k)
-        # by components (3 arrays of the pairs' edges): NumPy's cross and norm of (N, 3) rows
-        # cost more than the arithmetic
-        p_of = pi[pair]
-        a = [o.edges[e, 0, c] - points[p_of, c] for c in range(3)]
-        b = [o.edges[e, 1, c] - points[p_of, c] for c in range(3)]
-        n = [normals[p_of, c] for c in range(3)]
-        term = _edge_terms_xyz(a, b, n)
-        F[pi, gi] = np.abs(np.bincount(pair, weights=term, minlength=pi.size)) / (2 * np.pi)
-        # where the contour does not stand for the group: some corner at or below the horizon,
-        # or the point not in front of every polygon of the group
-        h = a[0] * n[0] + a[1] * n[1] + a[2] * n[2]
-        below[pi, gi] = np.bincount(pair, weights=h <= 0, minlength=pi.size) > 0
+    # front of the ceiling above it alone)
+    front = n_front > 0
+    live = np.flatnonzero(front.any(axis=0))
+    if live.size > GROUP_LOOP:
+        _contours_flat(points, normals, o, front, F, below)
+    else:
+        # a few groups (a scene's lamps): each group's edges against the points in front of it
+        # as a (points x edges) block, no index arrays; the terms summed edge after edge, as
+        # the flat path's bincount sums them (the same values, bit for bit)
+        cols = [np.ascontiguousarray(points[:, c]) for c in range(3)]
+        ncols = [np.ascontiguousarray(normals[:, c]) for c in range(3)]
+        for g in live.tolist():
+            s0, k = int(o.edge_start[g]), int(o.edge_count[g])
+            ea = [o.edge_columns[0][c][None, s0:s0 + k] for c in range(3)]
+            eb = [o.edge_columns[1][c][None, s0:s0 + k] for c in range(3)]
+            pg = np.flatnonzero(front[:, g])
+            for lo in range(0, pg.size, max(1, BLOCK_PAIRS // max(k, 1))):
+                p = pg[lo:lo + max(1, BLOCK_PAIRS // max(k, 1))]
+                x = [cols[c].take(p)[:, None] for c in range(3)]
+                n = [ncols[c].take(p)[:, None] for c in range(3)]
+                a = [ea[c] - x[c] for c in range(3)]
+                term = _edge_terms_xyz(a, [eb[c] - x[c] for c in range(3)], n)
+                total = np.zeros(p.size)
+                for j in range(k):
+                    total += term[:, j]
+                F[p, g] = np.abs(total) / (2 * np.pi)
+                # where the contour does not stand for the group: some corner at or below the
+                # horizon, or the point not in front of every polygon of the group
+                below[p, g] = (a[0] * n[0] + a[1] * n[1] + a[2] * n[2] <= 0).any(axis=1)
     partial = (n_front > 0) & (n_front < count[None])
     for g in np.flatnonzero((below & ~partial & (n_front > 0)).any(axis=0)):
         p = np.flatnonzero(below[:, g] & ~partial[:, g] & (n_front[:, g] > 0))
@@ -601,6 +621,36 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
         m = np.flatnonzero(groups == g)
         F[p, g] = front_polygon_sum(points[p], normals[p], polys[m], pn[m], o.centre[m], o.size[m])
     return F
+
+
+#: :func:`group_form_factors` takes the groups one by one (a block of points x edges each) up to
+#: this many groups in front of some point, else every (point, group) pair's edges flat.
+GROUP_LOOP = 64
+#: Point-edge pairs per block in :func:`group_form_factors`' group-by-group path (memory).
+BLOCK_PAIRS = 1 << 18
+
+
+def _contours_flat(points, normals, o, front, F, below):
+    """:func:`group_form_factors`' contour terms for many groups: each (point, group) pair in
+    front, its group's edges, all flat; fills ``F`` and ``below`` (P, G) where ``front``."""
+    pi, gi = np.nonzero(front)
+    if not pi.size:
+        return
+    k = o.edge_count[gi]
+    pair = np.repeat(np.arange(pi.size), k)
+    e = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + np.repeat(o.edge_start[gi], k)
+    # by components (3 arrays of the pairs' edges): NumPy's cross and norm of (N, 3) rows
+    # cost more than the arithmetic; each a contiguous column read with ``take`` (indexing the
+    # (.., 3) arrays with index arrays cost twice as much)
+    p_of = pi[pair]
+    x = [np.ascontiguousarray(points[:, c]).take(p_of) for c in range(3)]
+    a = [o.edge_columns[0][c].take(e) - x[c] for c in range(3)]
+    b = [o.edge_columns[1][c].take(e) - x[c] for c in range(3)]
+    n = [np.ascontiguousarray(normals[:, c]).take(p_of) for c in range(3)]
+    term = _edge_terms_xyz(a, b, n)
+    F[pi, gi] = np.abs(np.bincount(pair, weights=term, minlength=pi.size)) / (2 * np.pi)
+    h = a[0] * n[0] + a[1] * n[1] + a[2] * n[2]
+    below[pi, gi] = np.bincount(pair, weights=h <= 0, minlength=pi.size) > 0
 
 
 def front_polygon_sum(points, normals, polys, poly_normals, centre=None, size=None, pairs=1 << 18):
