@@ -15,7 +15,10 @@ and when patches and output elements began to be cut along contact lines, buried
 the open side's limit, the gather to run once more at the elements' level, the hemi-cube to sample
 pixels a hair off their centres and element vertices to be located in the patch they lie in
 (issues 11 and 12), and when contact segments began to be clipped to the face they cut (issue 9:
-the short block's top is no longer cut along the tall block's line beside it).
+the short block's top is no longer cut along the tall block's line beside it), and when the
+penumbra's extra shadow rays began to aim at targets shared by every point instead of drawn
+per chunk of the transport (issue 9: the chunks are cut to share the work between workers, and T
+no longer depends on how they are cut).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 

@@ -127,9 +127,11 @@ class _Transport:
     ``points``, ``normals`` (P, 3) float64; ``corners`` (M, 4, 3) and ``em_normals`` (M, 3) of
     the emitter patches; ``groups`` (M,) int64 or None; ``eps`` the lift off the surfaces
     (scene units); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
-    ``samples`` targets per emitter unit (from ``seed``), shared by every chunk; a chunk's
-    penumbra draws from its own stream (``seed`` and the chunk's first point), so chunks are
-    independent and T is the same whoever computes them.
+    ``samples`` targets per emitter unit (from ``seed``) and the penumbra's ``refine`` times
+    as many more (their own stream), both shared by every point: T is the same for any chunk
+    size and whoever computes the chunks (they are cut to share the work evenly), and
+    neighbouring points, whichever chunk they fall in, aim at the same targets (a penumbra
+    varies smoothly, and two coplanar faces read the same light).
     """
 
     def __init__(self, points, normals, corners, em_normals, groups, scene, refine, eps, draw,
@@ -143,6 +145,7 @@ class _Transport:
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
         self.step = max(1, min(len(points), chunk_rays // max(units * self.S, 1), 4096))
+        self.extra = draw(refine * self.S, np.random.default_rng((seed, 1))) if refine > 0 else None
 
     def first_pass(self, s):
         """Form factors of the chunk starting at point ``s`` and the visible fraction from the
@@ -168,16 +171,15 @@ class _Transport:
     def chunk(self, s):
         """(s, T rows (p, units) float32) of the chunk starting at point ``s``: its
         :meth:`first_pass`, then ``refine * S`` more rays where it has a penumbra, aimed at
-        targets drawn from the chunk's own random stream."""
+        the penumbra's shared targets."""
         s, F, pi, mi, o, v, part = self.first_pass(s)
         if self.scene is None:
             return s, F.astype(np.float32)
         if part is not None:
             refine = self.refine
-            extra = self.draw(refine * self.S, np.random.default_rng((self.seed, 1 + s)))
             on = np.flatnonzero(part)
-            v[on] = (v[on] + refine * _visible_fraction(self.scene, o.take(on, axis=0),
-                                                        extra.take(mi[on], axis=0))) / (1 + refine)
+            targets = self.extra.take(mi[on], axis=0)
+            v[on] = (v[on] + refine * _visible_fraction(self.scene, o.take(on, axis=0), targets)) / (1 + refine)
         vis = np.zeros(F.shape)
         vis[pi, mi] = v
         return s, (F * vis).astype(np.float32)
@@ -191,8 +193,10 @@ class _Transport:
         it casts them) and the many small NumPy steps of the contour integrals both scale
         there, where threads did not; otherwise on threads."""
         P, step = len(self.points), self.step
-        starts = list(range(0, P, step))
         rays = P * self.ys.shape[0] * max(self.S, 1) * (self.scene is not None)
+        if workers > 1:          # a few chunks a worker, so that they end together
+            step = self.step = max(1, min(step, -(-P // (CHUNKS_PER_WORKER * workers))))
+        starts = list(range(0, P, step))
         forked = workers > 1 and len(starts) > 1 and rays >= PROCESS_RAYS
         if forked and self.scene is not None:     # Embree commits its BVH on the first query:
             self.scene.occluded(self.points[:1], self.normals[:1], np.ones(1))  # here, before the fork
@@ -202,6 +206,11 @@ class _Transport:
             done = min(s + step, P)
             if ticker is not None:
                 ticker.tick(done, P)
+
+
+#: Chunks per worker a transport on several workers is cut into (they take different times: a
+#: penumbra casts four times the rays), so the workers end close together.
+CHUNKS_PER_WORKER = 4
 
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
