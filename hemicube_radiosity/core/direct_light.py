@@ -58,6 +58,7 @@ class DirectLight:
     world: np.ndarray | None = None           # (3,) constant world radiance, or None (black)
     sky_rays: int = 256                       # rays per point that look for the world
     _scene: object = field(default=None, repr=False)
+    _emitted: object = field(default=None, repr=False)
 
     @classmethod
     def plan(cls, patches: PatchSet, settings, lights, cancelled=None, cache=None, clusters=None,
@@ -101,14 +102,18 @@ class DirectLight:
 
     def emitted(self) -> np.ndarray:
         """(M, 3) radiance of each column of the transport: per emitting patch, or the
-        area-weighted mean of each group."""
-        L = self.patches.emission[self.emitters]
-        if self.groups is None:
-            return L
-        a = self.patches.areas[self.emitters]
-        G = int(self.groups.max()) + 1
-        return np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
-            / np.bincount(self.groups, weights=a, minlength=G)[:, None]
+        area-weighted mean of each group. Made once (read-only): every point set lit asks for it
+        (a relight's dozen, 0.45 ms)."""
+        if self._emitted is None:
+            L = self.patches.emission[self.emitters]
+            if self.groups is not None:
+                a = self.patches.areas[self.emitters]
+                G = int(self.groups.max()) + 1
+                L = np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
+                    / np.bincount(self.groups, weights=a, minlength=G)[:, None]
+            L.flags.writeable = False
+            self._emitted = L
+        return self._emitted
 
     def _emitters_at(self, points, normals, where, samples=None, transposed=False):
         """(P, units) the emitters' transport to ``points`` (cached: geometry only);
