@@ -23,7 +23,7 @@ from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
-from .interpolate import _inverse_bilinear, interpolate_located, locate
+from .interpolate import _inverse_bilinear, interpolate_corners, located_corners, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
 from .refine import LUMA
@@ -817,7 +817,11 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         return idx, uv
 
     key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
-    return interpolate_located(_sided(ctx, ctx.patches), field_v, *cached(ctx.cache, key, where))
+    sided = _sided(ctx, ctx.patches)
+    # the located points' corners and weights, geometry only: a relight reads its field through them
+    corners = cached(ctx.cache, cache_key(geometry_key(sided) + geometry_key(elements), ("located-corners",)),
+                     lambda: located_corners(sided, *cached(ctx.cache, key, where)))
+    return interpolate_corners(field_v, corners)
 
 
 def _whole_faces(patches: PatchSet, elements: PatchSet):
