@@ -73,6 +73,26 @@ def test_cached_fits_and_frames_are_the_same_bit_for_bit():
     assert all(np.array_equal(a, b) for a, b in zip(frames(other, w, cache), vertex_frames(other, weights=w)))
 
 
+def test_a_field_zero_on_most_patches_sums_only_the_rest_bit_for_bit():
+    # an emission field (a few patches glow) skips the zero terms of its sums: each band's
+    # values are those it has beside a band that is nowhere 0 (which sums every term)
+    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core.cache import FormFactorCache
+    ps = build_patches(scenes.tessellate(scenes.cornell_box(), 2), 0.25)
+    rng = np.random.default_rng(7)
+    w = rng.random(len(ps)) * (rng.random(len(ps)) > 0.2)
+    lit = rng.random(len(ps)) < 0.05
+    for B in (np.where(lit[:, None], rng.random((len(ps), 3)), 0.0),
+              np.where(lit[:, None], rng.random((len(ps), 3)) - 0.5, 0.0),
+              np.zeros((len(ps), 3))):
+        dense = np.column_stack([B, rng.random(len(ps)) + 0.1])
+        for weights in (None, w):
+            for extrapolate in (True, False):
+                for cache in (None, FormFactorCache()):
+                    got = vertex_radiosity(ps, B, extrapolate, weights, cache=cache)
+                    assert np.array_equal(got, vertex_radiosity(ps, dense, extrapolate, weights)[:, :3])
+
+
 def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
     from hemicube_radiosity.core.cache import FormFactorCache
     from hemicube_radiosity.core.vertex import fill_buried

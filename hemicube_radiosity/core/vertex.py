@@ -128,11 +128,25 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
         fit = cached(cache, key, lambda: _fits(patches, weights, extrapolate))
     p, v, wp, safe, V = fit[:5]
     Bt = np.ascontiguousarray(B.T)              # a band's values contiguous: B[p, k], taken faster
+    # a field that is 0 on most patches (an emission field: only the lamps glow) sums only the
+    # rest: a sum in order that skips terms of 0 is the same sum, bit for bit (it starts at +0,
+    # so no partial sum is -0, and s + 0 = s)
+    live = _nonzero_rows(Bt)
+    sparse = live is not None and 4 * np.count_nonzero(live) < len(live)
+    if sparse:                                  # the live patches' incidences (p is sorted)
+        lp = np.flatnonzero(live)
+        a, b = np.searchsorted(p, lp), np.searchsorted(p, lp, side="right")
+        n = b - a
+        i = np.repeat(a - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+        p, v, wp = p[i], v[i], wp[i]
     avg = np.stack([np.bincount(v, weights=wp * Bt[k].take(p), minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
     if len(fit) == 5:
         return avg
     pp, iv, slot, targets, Xw, M, lu = fit[5:]
     sb = np.concatenate([B[pp], avg[iv]])
+    if sparse:
+        i = np.flatnonzero(_nonzero_rows(np.ascontiguousarray(sb.T)))
+        sb, slot, Xw = sb[i], slot[i], Xw[i]
     # the normal equations' right-hand sides, (T, 4, bands): per entry, the samples summed in
     # order (as np.add.at sums them, bit for bit)
     rhs = np.empty((targets.size, 4, B.shape[1]))
@@ -151,6 +165,18 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
             lu_some = None if lu is None else (lu[0][some], lu[1][some])
             out[targets[some]] = np.maximum(0.0, _fit_solve(M[some], lu_some, rhs[some])[:, 0, :])
     return out
+
+
+def _nonzero_rows(Bt):
+    """(N,) bool: the rows of B not all 0, from Bt = B.T (bands, N) contiguous, a band at a time
+    (``B.any(axis=1)`` over its short rows took 0.3 ms for the dense Cornell room's 25k
+    elements); None without bands."""
+    if Bt.ndim != 2 or Bt.shape[0] == 0:
+        return None
+    live = Bt[0] != 0
+    for band in Bt[1:]:
+        live |= band != 0
+    return live
 
 
 def _lu(M):
