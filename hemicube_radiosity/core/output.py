@@ -493,14 +493,20 @@ def _open_elements(ctx, elements):
     """(N,) 1 for an element the scene can see, 0 for one buried in a solid (its centre's rays
     all end on back faces or within a twentieth of the patch size: :func:`.rays.open_fraction`),
     so output vertices on a block's outline are evaluated on the open side. None without
-    Embree (every element counts)."""
+    Embree (every element counts). Read-only, kept beside the fractions: the same array at
+    every call (a relight's frames and fits key on it, hashing it once)."""
     if not embree_available():
         return None
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach))
-    return (f > 0.05).astype(np.float64)
+
+    def weights():
+        w = (f > 0.05).astype(np.float64)
+        w.flags.writeable = False
+        return w
+    return cached(ctx.cache, key + "-weights", weights, disk=False)
 
 
 def _sided(ctx, mesh: PatchSet) -> PatchSet:
@@ -640,7 +646,7 @@ def _seen(ctx, elements, x, nrm):
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
     millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+    key = cache_key(geometry_key(elements) + array_key(x), ("exposure", reach))   # x hashed once per array
     f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach))
     return np.minimum(1.0, f / 0.5)
 
@@ -664,7 +670,7 @@ def _open_side(ctx, elements, xv, nv):
     buried = _seen(ctx, elements, xv, nv) < 0.5
     if not buried.any():
         return None
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(xv).tobytes(), ("open-side",))
+    key = cache_key(geometry_key(elements) + array_key(xv), ("open-side",))
     return cached(ctx.cache, key, lambda: open_side(elements, buried, embree_scene(elements),
                                                     _open_elements(ctx, elements)))
 
