@@ -184,7 +184,7 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
     C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
     out += product(C, np.concatenate([direct_e, x]))
     if hot.any() or (cells is not None and len(cells[0])):
-        out += _shine(ctx, elements, np.flatnonzero(hot), shine[hot], xv, nv, cells)
+        out += _shine(ctx, elements, np.flatnonzero(hot), shine, xv, nv, cells)
     return out
 
 
@@ -239,10 +239,10 @@ def _mean_light(elements, values_v, opened=None, cache=None) -> float:
 
 
 def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
-    """(hot (N,) bool, radiance (N, 3)): of the elements whose direct light changes ``smooth``-ly,
+    """(hot (N,) bool, radiance (h, 3)): of the elements whose direct light changes ``smooth``-ly,
     those whose direct light arriving (the mean of ``light_v`` (V, 3) over their corners)
     passes the luminance ``bar`` (:data:`HOT` times its :func:`_mean_light`), with
-    ``radiance`` their reflectivity times it (0 for the others): the spot a pendant lamp's back lights on a
+    ``radiance`` their reflectivity times it (the hot ones', in order): the spot a pendant lamp's back lights on a
     ceiling, the floor under a lamp, a block's top beside it. A gather's rays find such a spot
     by chance, a few at a vertex and one more or fewer at its neighbour: each ray there
     carries many times the light of the others, so the vertices blotch (a room whose lamp
@@ -259,7 +259,6 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     # 7 ms in the dense room's relight
     cols, quad, count = _corner_columns(elements, ctx.cache)
     arriving = _corner_sum(np.asarray(light_v, dtype=np.float64), cols, quad) / count[:, None]
-    radiance = elements.rho * arriving
     hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
         hot &= opened > 0
@@ -270,7 +269,8 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
             a = elements.areas[ids]
             Y = np.bincount(groups, weights=a * (arriving[ids] @ LUMA)) / np.bincount(groups, weights=a)
             hot[ids[~np.isin(groups, np.argsort(-Y, kind="stable")[:budget])]] = False
-    return hot, np.where(hot[:, None], radiance, 0.0)
+            ids = np.flatnonzero(hot)
+    return hot, elements.rho[ids] * arriving[ids]
 
 
 def _place_uniforms(points, verts, count) -> np.ndarray:
