@@ -66,7 +66,7 @@ class DirectLight:
         """The exact direct light for ``settings``, or None when it is off or there is none.
         ``world`` (3,) radiance: the world's light is direct light too, seen where rays from a
         point find no surface (:meth:`world_at`)."""
-        emitters = np.flatnonzero(patches.emission.max(axis=1) > 0)
+        emitters = np.flatnonzero(patches.emitting())
         world = None if world is None or not np.any(np.asarray(world) > 0) else np.asarray(world, float)
         if settings.direct == "hemicube" or (emitters.size == 0 and not lights and world is None):
             return None

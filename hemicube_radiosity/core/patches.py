@@ -95,6 +95,18 @@ class PatchSet:
     def __len__(self) -> int:
         return int(self.polys.shape[0])
 
+    def emitting(self) -> np.ndarray:
+        """(N,) bool: the patches that emit, ``emission.max(axis=1) > 0`` (the same values, NaN
+        included), its bands compared a column at a time: the max over each short row took 0.2
+        ms of the dense Cornell room's 7.5k patches, three times a relight."""
+        e = np.asarray(self.emission)
+        if e.ndim != 2 or e.shape[1] == 0:
+            return e.max(axis=1) > 0
+        m = e[:, 0]
+        for k in range(1, e.shape[1]):
+            m = np.maximum(m, e[:, k])
+        return m > 0
+
     @property
     def nsides(self) -> np.ndarray:
         """(N,) 3 or 4."""

@@ -320,7 +320,7 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     zero = np.zeros(3)
     if ctx.direct is not None:
         D = ctx.direct_patch
-        e = p.emission.max(axis=1) > 0
+        e = p.emitting()
         sides = 2.0 if ctx.direct.two_sided else 1.0
         surf = sides * (a[e] * p.emission[e]).sum(axis=0)
     else:

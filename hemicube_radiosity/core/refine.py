@@ -179,7 +179,7 @@ def refine_stage(ctx) -> None:
     if plan is None:
         return
     p = ctx.patches
-    frozen = p.emission.max(axis=1) > 0
+    frozen = p.emitting()
     if ctx.clusters is not None:
         frozen |= ctx.clusters.sizes[ctx.clusters.of] > 1
     min_area = (float(s.patch_size) / 16) ** 2 if s.patch_size else 0.0
