@@ -332,20 +332,64 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
             out[centre_only] = out[stand[centre_only]]
         rest = np.flatnonzero(~centre_only)
         if len(rest):
-            sub = PatchSet(patches.verts, patches.polys[rest], patches.centers[rest], patches.normals[rest],
-                           patches.areas[rest], patches.rho[rest], patches.emission[rest], patches.owner[rest],
-                           patches.source_face[rest], patches.object_names)
-            out[rest] = patch_average(sub, n, light_at, weight_at=weight_at, rng=rng)
+            if n <= 1 or rng is not None:
+                out[rest] = patch_average(_rows(patches, rest), n, light_at, weight_at=weight_at, rng=rng)
+            else:
+                out[rest] = _grid_average(grid_of(patches, rest, n), n, light_at, weight_at)
         return out
+    if rng is None:
+        return _grid_average(grid_of(patches, None, n), n, light_at, weight_at)
     x, w = grid_points(patches, n, rng)
     N, K = x.shape[:2]
-    nrm = np.repeat(patches.normals, K, axis=0)
+    return _grid_average((x, x.reshape(N * K, 3), np.repeat(patches.normals, K, axis=0), w), n, light_at,
+                         weight_at)
+
+
+def _grid_average(grid, n, light_at, weight_at=None) -> np.ndarray:
+    """:func:`patch_average` over the points of ``grid`` (:func:`grid_of`)."""
+    _, x, nrm, w = grid
+    N, K = w.shape
     if weight_at is not None:
-        seen = w * np.asarray(weight_at(x.reshape(N * K, 3), nrm), dtype=np.float64).reshape(N, K)
+        seen = w * np.asarray(weight_at(x, nrm), dtype=np.float64).reshape(N, K)
         total = seen.sum(axis=1, keepdims=True)
         w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
-    D = light_at(x.reshape(N * K, 3), nrm, f"patch-points-{n}").reshape(N, K, 3)
+    D = light_at(x, nrm, f"patch-points-{n}").reshape(N, K, 3)
     return np.einsum("nk,nkc->nc", w, D)
+
+
+def _rows(patches: PatchSet, rows) -> PatchSet:
+    """The patches ``rows`` (the same vertex array)."""
+    return PatchSet(patches.verts, patches.polys[rows], patches.centers[rows], patches.normals[rows],
+                    patches.areas[rows], patches.rho[rows], patches.emission[rows], patches.owner[rows],
+                    patches.source_face[rows], patches.object_names)
+
+
+_GRIDS: dict = {}        # (id(verts), id(polys), n, N, rows) -> (verts, polys, grid)
+
+
+def grid_of(patches: PatchSet, rows, n: int):
+    """:func:`grid_points` (n x n, not jittered) of the patches ``rows`` (int array; None: all)
+    as (points (R, K, 3), the same as (R K, 3), their normals (R K, 3), weights (R, K)),
+    read-only, kept for the last few patch arrays and rows: the same arrays for the same
+    geometry, so the point sets a relight lights again (the keys of their transports, exposure
+    and crossings) are hashed once, and the points are not made again (the dense Cornell room's
+    patch grids, twice a relight, and its refine grids)."""
+    rk = b"" if rows is None else np.ascontiguousarray(rows, dtype=np.int64).tobytes()
+    key = (id(patches.verts), id(patches.polys), int(n), len(patches), rk)
+    hit = _GRIDS.pop(key, None)
+    if hit is not None and hit[0] is patches.verts and hit[1] is patches.polys:
+        _GRIDS[key] = hit                     # the most recently used last
+        return hit[2]
+    sub = patches if rows is None else _rows(patches, rows)
+    x, w = grid_points(sub, n)
+    N, K = x.shape[:2]
+    grid = (x, x.reshape(N * K, 3), np.repeat(sub.normals, K, axis=0), w)
+    for a in grid:
+        a.flags.writeable = False
+    while len(_GRIDS) >= 8:
+        _GRIDS.pop(next(iter(_GRIDS)))
+    _GRIDS[key] = (patches.verts, patches.polys, grid)
+    return grid
 
 
 STAND_INS = 4            # a cluster's light from at most this many x patch_light_points^2 centres
