@@ -872,7 +872,7 @@ def _cut_elements(ctx) -> PatchSet:
     # :func:`output_elements`' cached geometry, the meshes hashed once: its materials are read
     # only onto the elements that are output (a relight read them twice, 0.75 ms each, on the
     # dense Cornell room)
-    mkey = meshes_key(ctx.meshes)
+    mkey = ctx.meshes_key() if hasattr(ctx, "meshes_key") else meshes_key(ctx.meshes)
     elements = cached(ctx.cache, cache_key(mkey, ("elements", s.element_size)),
                       lambda: build_patches(ctx.meshes, s.element_size))
     if geometry_key(elements) == geometry_key(ctx.patches):

@@ -103,6 +103,14 @@ class BakeContext:
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
     error_estimate: object = None            # core.estimate.ErrorEstimate (estimate stage)
+    _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
+
+    def meshes_key(self) -> bytes:
+        """:func:`.output.meshes_key` of the meshes, hashed once a bake (the patch and the
+        vertex stages key their cached geometry on it)."""
+        if self._meshes_key is None:
+            self._meshes_key = meshes_key(self.meshes)
+        return self._meshes_key
 
     @property
     def unknowns(self):
@@ -156,7 +164,7 @@ def patch_stage(ctx) -> None:
     ctx.say(0.0, "cutting meshes into patches")
     if ctx.patches is None:
         # geometry only, cached: a relight re-reads the materials onto the same patches
-        key = cache_key(meshes_key(ctx.meshes), ("patches", s.patch_size, s.group_faces, s.group_angle))
+        key = cache_key(ctx.meshes_key(), ("patches", s.patch_size, s.group_faces, s.group_angle))
         pieces, clusters = cached(ctx.cache, key, lambda: _cut(ctx.meshes, s))
         ctx.patches = _with_mesh_materials(pieces, ctx.meshes)
         ctx.clusters = None if clusters is None else clusters.with_materials(ctx.patches)
