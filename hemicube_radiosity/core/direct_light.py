@@ -329,7 +329,7 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
         else:
             out[lit] = light_at(*_centres(patches, lit), "grouped-centres")
         if stand is not None:
-            out[centre_only] = out[stand[centre_only]]
+            out[centre_only] = out.take(stand[centre_only], axis=0)
         rest = np.flatnonzero(~centre_only)
         if len(rest):
             if n <= 1 or rng is not None:

@@ -331,7 +331,7 @@ class _AbruptGrid:
          loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
         n = self.n
         light = ctx.direct.at(x, nrm, "abrupt-grid")
-        self.values = elements.rho[owner] * light
+        self.values = elements.rho.take(owner, axis=0) * light     # take: rows 3x as fast as [owner]
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
         Yc = Y[k.T]
         # spiky: the brightest corner, seen or not, against the darkest seen one (a corner
@@ -341,13 +341,13 @@ class _AbruptGrid:
         # each cell's mean over the part seen, and how much of it is seen
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
-        mean = np.einsum("cq,cqk->ck", w, self.values[k.T])
+        mean = np.einsum("cq,cqk->ck", w, self.values.take(k.T, axis=0))
         mean /= w.sum(axis=1)[:, None]
         s = self.spiky
         if s.any():
             mean[s], seen[s] = self._means(ctx, ids, loc[s], i[s], j[s])
         self.cell_mean = mean
-        rho = elements.rho[ids[loc]]
+        rho = elements.rho.take(ids[loc], axis=0)
         arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
         self.hot = (seen > 0) & (arriving @ LUMA > bar)
         self.ids, self.cell_loc, self.cell_i, self.cell_j = ids, loc, i, j
@@ -433,7 +433,7 @@ class _AbruptGrid:
                          self.inset))
         x, el, nrm, w = cached(ctx.cache, key, points)
         # one shadow ray per emitting patch and point: the mean over the points is what counts
-        D = self.elements.rho[el] * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
+        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
         D = D.reshape(loc.size, S * S, 3)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
@@ -722,14 +722,14 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
         polys = np.concatenate([polys, V + np.arange(4 * c).reshape(c, 4)])
         every, L = np.concatenate([ids, parent]), np.concatenate([radiance, cell_light])
     centers, _, area = _poly_geometry(verts, polys)
-    rho = elements.rho[every]
+    rho = elements.rho.take(every, axis=0)
     arriving = np.where(rho > 0, L / np.where(rho > 0, rho, 1.0), 0.0)
     power = area * np.maximum(arriving @ LUMA, 1e-300)     # where the shadow rays go (light arriving:
                                                            # the same after a change of colour)
     # relative power to 6 digits: a relight that scales the light finds the same transport in
     # the cache (no ray), and a first bake draws from exactly what a relight would
     power = np.maximum(np.round(power / power.max(), 6), 1e-12)
-    source = PatchSet(verts, polys, centers, elements.normals[every], power, elements.rho[every],
+    source = PatchSet(verts, polys, centers, elements.normals.take(every, axis=0), power, rho,
                       np.zeros((len(every), 3)), elements.owner[every], elements.source_face[every],
                       list(elements.object_names))
     # a quarter of the lamps' shadow rays (penumbrae refined all the same): what shines here is a

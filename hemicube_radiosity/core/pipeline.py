@@ -205,8 +205,8 @@ def _with_mesh_materials(pieces: PatchSet, meshes) -> PatchSet:
             _MATERIAL_INDEX.pop(next(iter(_MATERIAL_INDEX)))
         _MATERIAL_INDEX[id(pieces.source_face)] = hit
     index = hit[3]
-    rho = np.concatenate([np.asarray(m.face_rho, float).reshape(-1, 3) for m in meshes])[index]
-    em = np.concatenate([np.asarray(m.face_emission, float).reshape(-1, 3) for m in meshes])[index]
+    rho = np.concatenate([np.asarray(m.face_rho, float).reshape(-1, 3) for m in meshes]).take(index, axis=0)
+    em = np.concatenate([np.asarray(m.face_emission, float).reshape(-1, 3) for m in meshes]).take(index, axis=0)
     return pieces.with_materials(rho, em)
 
 

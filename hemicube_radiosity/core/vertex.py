@@ -143,7 +143,7 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
     if len(fit) == 5:
         return avg
     pp, iv, slot, targets, Xw, M, lu = fit[5:]
-    sb = np.concatenate([B[pp], avg[iv]])
+    sb = np.concatenate([B.take(pp, axis=0), avg.take(iv, axis=0)])
     if sparse:
         i = np.flatnonzero(_nonzero_rows(np.ascontiguousarray(sb.T)))
         sb, slot, Xw = sb[i], slot[i], Xw[i]
