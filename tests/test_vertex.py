@@ -107,3 +107,22 @@ def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
         assert not np.array_equal(ref, vals)              # something was filled
         assert np.array_equal(fill_buried(ps, vals, w, cache=cache), ref)
     assert fill_buried(ps, vals, np.ones(len(ps)), cache=cache) is vals   # nothing buried
+
+
+def test_fit_substitution_is_the_row_major_one_bit_for_bit():
+    # _fit_solve substitutes in (n, k, T) copies: the same operations as on (T, n, k) rows
+    from hemicube_radiosity.core.vertex import _fit_solve, _lu
+    rng = np.random.default_rng(11)
+    M = rng.random((500, 4, 4)) + 4 * np.eye(4) * rng.random((500, 1, 1))
+    rhs = rng.random((500, 4, 3)) - 0.5
+    A, perm = _lu(M)
+    x = np.take_along_axis(rhs, perm[:, :, None], axis=1)
+    for i in range(1, 4):
+        for j in range(i):
+            x[:, i] -= A[:, i, j, None] * x[:, j]
+    for i in range(3, -1, -1):
+        for j in range(i + 1, 4):
+            x[:, i] -= A[:, i, j, None] * x[:, j]
+        x[:, i] /= A[:, i, i, None]
+    assert np.array_equal(_fit_solve(M, (A, perm), rhs), x)
+    np.testing.assert_allclose(x, np.linalg.solve(M, rhs), rtol=1e-9, atol=1e-12)
