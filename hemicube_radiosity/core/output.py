@@ -721,7 +721,15 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
         verts = np.concatenate([verts, corners.reshape(-1, 3)])
         polys = np.concatenate([polys, V + np.arange(4 * c).reshape(c, 4)])
         every, L = np.concatenate([ids, parent]), np.concatenate([radiance, cell_light])
-    centers, _, area = _poly_geometry(verts, polys)
+    # the shining pieces' geometry hashed once (the cells' corners after the elements' own
+    # vertices, and the pieces), their centres and areas kept under it: a relight that shines
+    # the same pieces does not make them again
+    V = len(elements.verts)
+    h = hashlib.sha256(np.ascontiguousarray(verts[V:]).tobytes())
+    h.update(np.ascontiguousarray(polys).tobytes())
+    shape = geometry_key(elements) + h.digest()
+    centers, area = cached(ctx.cache, cache_key(shape, ("shine-geometry",)),
+                           lambda: _poly_geometry(verts, polys)[::2], disk=False)
     rho = elements.rho.take(every, axis=0)
     arriving = np.where(rho > 0, L / np.where(rho > 0, rho, 1.0), 0.0)
     power = area * np.maximum(arriving @ LUMA, 1e-300)     # where the shadow rays go (light arriving:
@@ -736,11 +744,9 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    # the elements' geometry and the points hashed once per array (a relight's are cached): of
-    # ``verts`` only the cells' corners after the elements' own
-    V = len(elements.verts)
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts[V:]).tobytes() + polys.tobytes()
-                    + groups.tobytes() + power.tobytes() + array_key(xv), ("shine", samples, len(verts) - V, len(every)))
+    # the elements' geometry and the points hashed once per array (a relight's are cached)
+    key = cache_key(shape + groups.tobytes() + power.tobytes() + array_key(xv),
+                    ("shine", samples, len(verts) - V, len(every)))
     T = cached(ctx.cache, key, lambda: emitter_transport(
         source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
         workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled)))
