@@ -197,28 +197,32 @@ HOT = 3.0
 
 
 def _corner_columns(elements, cache=None):
-    """(cols (4, N) intp, quad (N,) float, count (N,) float): each element's corner vertices,
-    one contiguous row per corner (a triangle's fourth is its first), 1.0 where the fourth is
-    a corner, and how many corners: geometry only, kept in ``cache`` (a relight reads its
-    elements' light through them)."""
+    """(cols (4, N) intp, quad (N,) float, count (N,) float, quad3 (N, 3), count3 (N, 3)): each
+    element's corner vertices, one contiguous row per corner (a triangle's fourth is its first),
+    1.0 where the fourth is a corner, and how many corners, the last two also repeated over
+    three bands (for (N, 3) values: a (N, 1) factor broadcast along the short axis took 5x as
+    long): geometry only, kept in ``cache`` (a relight reads its elements' light through them)."""
     def make():
         polys = elements.polys
-        quad = polys[:, 3] >= 0
+        quad = (polys[:, 3] >= 0).astype(np.float64)
         cols = np.ascontiguousarray(np.where(polys < 0, polys[:, :1], polys).T, dtype=np.intp)
-        return cols, quad.astype(np.float64), (polys >= 0).sum(axis=1).astype(np.float64)
+        count = (polys >= 0).sum(axis=1).astype(np.float64)
+        return (cols, quad, count) + tuple(np.ascontiguousarray(np.repeat(a[:, None], 3, axis=1))
+                                           for a in (quad, count))
     if cache is None:
         return make()
     return cached(cache, cache_key(geometry_key(elements), ("corner-columns",)), make)
 
 
-def _corner_sum(values, cols, quad):
+def _corner_sum(values, cols, quad, quad3=None):
     """Each element's corners of ``values`` (V,) or (V, k) summed in order, one corner at a
     time, the fourth times ``quad`` (as the (N, 4) array of corners times their validity sums
     over its corners, bit for bit: a triangle adds 0), from :func:`_corner_columns`. Whole
     columns at a time: summing the (N, 4) array over its short axis and taking
     ``values[polys]`` were most of the dense room's relight in :func:`_hot_elements`,
-    :func:`_mean_light` (with the validity's sum over the corners)."""
-    q = quad if values.ndim == 1 else quad[:, None]
+    :func:`_mean_light` (with the validity's sum over the corners). ``quad3``: ``quad`` over
+    three bands, for (N, 3) values."""
+    q = quad if values.ndim == 1 else quad3 if quad3 is not None and values.shape[1] == 3 else quad[:, None]
     total = values.take(cols[0], axis=0) + values.take(cols[1], axis=0)
     total += values.take(cols[2], axis=0)
     total += values.take(cols[3], axis=0) * q
@@ -231,7 +235,7 @@ def _mean_light(elements, values_v, opened=None, cache=None) -> float:
     over vertices: a face cut into many, vertices repeated along a face's edges, a floor
     running on under a block, would each weigh in. ``cache``: where :func:`_corner_columns`
     are kept."""
-    cols, quad, count = _corner_columns(elements, cache)
+    cols, quad, count = _corner_columns(elements, cache)[:3]
     Y = _corner_sum(np.asarray(values_v, dtype=np.float64) @ LUMA, cols, quad) / count
     w = elements.areas if opened is None else elements.areas * opened
     total = float(w.sum())
@@ -257,8 +261,9 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     # the corners summed in order, one at a time (as the (N, 4, 3) array's sum over its corners
     # adds them, bit for bit): that gather and its strided sum were 5.7 of this function's
     # 7 ms in the dense room's relight
-    cols, quad, count = _corner_columns(elements, ctx.cache)
-    arriving = _corner_sum(np.asarray(light_v, dtype=np.float64), cols, quad) / count[:, None]
+    cols, quad, count, quad3, count3 = _corner_columns(elements, ctx.cache)
+    light_v = np.asarray(light_v, dtype=np.float64)
+    arriving = _corner_sum(light_v, cols, quad, quad3) / (count3 if light_v.shape[1] == 3 else count[:, None])
     hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
         hot &= opened > 0
