@@ -237,7 +237,8 @@ def product(M, x, workers=1) -> np.ndarray:
     xt = np.ascontiguousarray((x[:, None] if one else x).T)     # (k, n): contiguous gathers
     out = np.zeros((M.shape[0], xt.shape[0]))
     n = min(resolve_workers(workers), max(1, M.nnz >> 20))
-    bounds = [0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]]
+    bounds = M._memo(("product-bounds", n), lambda: [   # the threads' rows, kept on M
+        0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]])
     with closing(ordered_map(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), range(n), n)) as done:
         for _ in done:
             pass
