@@ -324,7 +324,9 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     :func:`.solve.energy_balance` (the direct part balances by construction: its escape is
     measured as what did not arrive, checked against closed forms in tests/test_hard_cases.py)."""
     p, u = ctx.patches, ctx.unknowns
-    a = p.areas[:, None]
+    # the areas over three bands: the same products as p.areas[:, None]'s, without broadcasting
+    # a (N, 1) factor along the short axis (5x as long)
+    a = np.repeat(np.asarray(p.areas, dtype=np.float64)[:, None], 3, axis=1)
     zero = np.zeros(3)
     if ctx.direct is not None:
         D = ctx.direct_patch
