@@ -140,13 +140,13 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers
     1.13%. One sparse product per pass: a relight casts no ray."""
     zero = np.zeros_like(G.sky)
     before = rest_e
-    for _ in range(passes):
+    for i in range(passes):
         now = rho_v * out if spread is None else spread(rho_v * out)
         step = apply_gather(G, zero, now - before, None, workers)
         before = now
         out = out + step
-        if np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
-            break
+        if i + 1 < passes and np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
+            break                              # (after the last pass there is nothing to decide)
     return out
 
 
