@@ -54,3 +54,29 @@ def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
     np.testing.assert_allclose(D[1], full * np.array([2.0, 1.0, 0.5]), rtol=1e-6)  # float32 transport
     # far left under the blocker: fully shadowed
     np.testing.assert_allclose(D[2], 0.0, atol=1e-12)
+
+
+def test_grid_of_is_grid_points_kept_for_the_geometry():
+    # the patch grids a relight lights again: grid_points' values, the same arrays the second time
+    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core.direct_light import _rows, grid_of, grid_points, patch_average
+    ps = build_patches(scenes.cornell_box(), 0.25)
+    rows = np.arange(3, len(ps), 2)
+    x, w = grid_points(_rows(ps, rows), 3)
+    got = grid_of(ps, rows, 3)
+    assert np.array_equal(got[0], x) and np.array_equal(got[3], w)
+    assert np.array_equal(got[1], x.reshape(-1, 3))
+    assert np.array_equal(got[2], np.repeat(ps.normals[rows], 9, axis=0))
+    again = grid_of(ps, rows, 3)
+    assert all(a is b for a, b in zip(got, again)) and not got[1].flags.writeable
+    # patch_average through the kept grid: its mean over the grid, whatever part is centre-only
+    light = lambda p, n, where: np.column_stack([p[:, 0] ** 2, p[:, 1], n[:, 2] + p[:, 2]])  # noqa: E731
+    centre = np.zeros(len(ps), bool)
+    centre[::3] = True
+    xs, ws = grid_points(_rows(ps, np.flatnonzero(~centre)), 2)
+    want = np.einsum("nk,nkc->nc", ws, light(xs.reshape(-1, 3), np.repeat(ps.normals[~centre], 4, axis=0), "")
+                     .reshape(len(ws), 4, 3))
+    for _ in range(2):
+        got = patch_average(ps, 2, light, centre)
+        assert np.array_equal(got[~centre], want)
+        assert np.array_equal(got[centre], light(ps.centers[centre], ps.normals[centre], ""))

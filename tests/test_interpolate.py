@@ -187,3 +187,19 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
     lum = np.array([0.2126, 0.7152, 0.0722])
     d = np.abs(fast.vertex_radiosity - slow.vertex_radiosity) @ lum
     assert d.mean() < 1e-6 * (slow.vertex_radiosity @ lum).mean()
+
+
+def test_interpolate_located_is_the_corners_bilinear_bit_for_bit():
+    # the corners and weights kept for a relight (located_corners) give _bilinear's values
+    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core.interpolate import _bilinear, interpolate_located
+    P = build_patches(scenes.tessellate(scenes.cornell_box()[:3], 2) + scenes.cornell_box()[3:], 0.3)
+    rng = np.random.default_rng(3)
+    idx = rng.integers(0, len(P), 4000)
+    uv = rng.random((4000, 2))
+    vals = rng.random((len(P.verts), 3)) - 0.3
+    polys = P.polys[idx].copy()
+    tri = polys[:, 3] < 0
+    assert tri.any() and (~tri).any()
+    polys[tri, 3] = polys[tri, 2]
+    assert np.array_equal(interpolate_located(P, vals, idx, uv), _bilinear(vals[polys], uv[:, 0], uv[:, 1]))

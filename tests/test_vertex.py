@@ -73,6 +73,26 @@ def test_cached_fits_and_frames_are_the_same_bit_for_bit():
     assert all(np.array_equal(a, b) for a, b in zip(frames(other, w, cache), vertex_frames(other, weights=w)))
 
 
+def test_a_field_zero_on_most_patches_sums_only_the_rest_bit_for_bit():
+    # an emission field (a few patches glow) skips the zero terms of its sums: each band's
+    # values are those it has beside a band that is nowhere 0 (which sums every term)
+    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core.cache import FormFactorCache
+    ps = build_patches(scenes.tessellate(scenes.cornell_box(), 2), 0.25)
+    rng = np.random.default_rng(7)
+    w = rng.random(len(ps)) * (rng.random(len(ps)) > 0.2)
+    lit = rng.random(len(ps)) < 0.05
+    for B in (np.where(lit[:, None], rng.random((len(ps), 3)), 0.0),
+              np.where(lit[:, None], rng.random((len(ps), 3)) - 0.5, 0.0),
+              np.zeros((len(ps), 3))):
+        dense = np.column_stack([B, rng.random(len(ps)) + 0.1])
+        for weights in (None, w):
+            for extrapolate in (True, False):
+                for cache in (None, FormFactorCache()):
+                    got = vertex_radiosity(ps, B, extrapolate, weights, cache=cache)
+                    assert np.array_equal(got, vertex_radiosity(ps, dense, extrapolate, weights)[:, :3])
+
+
 def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
     from hemicube_radiosity.core.cache import FormFactorCache
     from hemicube_radiosity.core.vertex import fill_buried
@@ -87,3 +107,22 @@ def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
         assert not np.array_equal(ref, vals)              # something was filled
         assert np.array_equal(fill_buried(ps, vals, w, cache=cache), ref)
     assert fill_buried(ps, vals, np.ones(len(ps)), cache=cache) is vals   # nothing buried
+
+
+def test_fit_substitution_is_the_row_major_one_bit_for_bit():
+    # _fit_solve substitutes in (n, k, T) copies: the same operations as on (T, n, k) rows
+    from hemicube_radiosity.core.vertex import _fit_solve, _lu
+    rng = np.random.default_rng(11)
+    M = rng.random((500, 4, 4)) + 4 * np.eye(4) * rng.random((500, 1, 1))
+    rhs = rng.random((500, 4, 3)) - 0.5
+    A, perm = _lu(M)
+    x = np.take_along_axis(rhs, perm[:, :, None], axis=1)
+    for i in range(1, 4):
+        for j in range(i):
+            x[:, i] -= A[:, i, j, None] * x[:, j]
+    for i in range(3, -1, -1):
+        for j in range(i + 1, 4):
+            x[:, i] -= A[:, i, j, None] * x[:, j]
+        x[:, i] /= A[:, i, i, None]
+    assert np.array_equal(_fit_solve(M, (A, perm), rhs), x)
+    np.testing.assert_allclose(x, np.linalg.solve(M, rhs), rtol=1e-9, atol=1e-12)

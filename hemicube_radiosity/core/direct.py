@@ -254,7 +254,7 @@ def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16
                    emitters=None, ticker=None) -> np.ndarray:
     """(P, 3) radiance arriving directly from the emissive patches at ``points`` with ``normals``
     (``emitters`` default: every patch with emission > 0). See :func:`emitter_transport`."""
-    em = np.flatnonzero(patches.emission.max(axis=1) > 0) if emitters is None else np.asarray(emitters)
+    em = np.flatnonzero(patches.emitting()) if emitters is None else np.asarray(emitters)
     T = emitter_transport(patches, points, normals, em, scene=scene, samples=samples, seed=seed,
                           ticker=ticker)
     return apply_transport(T, patches.emission[em])

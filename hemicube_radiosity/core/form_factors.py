@@ -11,7 +11,7 @@ import time
 import numpy as np
 
 from . import embree_ff
-from .cache import cache_key
+from .cache import cache_key, geometry_key
 from .hemicube import hemicube_form_factors
 from .patches import PatchSet
 from .sparse import CSR
@@ -48,7 +48,8 @@ def form_factor_stage(ctx) -> None:
     key = None
     if cache is not None:
         grouping = b"" if ctx.clusters is None else np.ascontiguousarray(ctx.clusters.of).tobytes()
-        key = cache_key(patches.geometry_key() + grouping, ctx.settings.form_factor_key())
+        # the patches' key hashed once per geometry (a relight's patches share their cached arrays)
+        key = cache_key(geometry_key(patches) + grouping, ctx.settings.form_factor_key())
     F = cache.get(key) if cache is not None else None
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:

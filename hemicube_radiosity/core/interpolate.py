@@ -12,7 +12,7 @@ import numpy as np
 from .patches import PatchSet
 from .spatial import _PAIRS, Grid, sq_dist
 
-__all__ = ["interpolate_located", "locate", "interpolate_at"]
+__all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners", "interpolate_corners"]
 
 _CELL = 2.0     # locate's grid cells, in patch sizes: the 8 nearest centres mostly in the 27 cells around
 _BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
@@ -149,8 +149,29 @@ def interpolate_at(patches: PatchSet, vertex_values, points, owner=None, normals
 def interpolate_located(patches: PatchSet, vertex_values, idx, uv) -> np.ndarray:
     """(P, k) per-vertex values (V, k) at points already located (``idx``, ``uv`` of
     :func:`locate`: geometry only, so a relight can keep them)."""
-    vals = np.asarray(vertex_values, dtype=np.float64)
+    return interpolate_corners(vertex_values, located_corners(patches, idx, uv))
+
+
+def located_corners(patches: PatchSet, idx, uv):
+    """(corner vertex ids (4, P) intp, bilinear weights (4, P)) of points located at ``idx``,
+    ``uv`` (:func:`locate`): what :func:`interpolate_corners` reads, geometry only (a relight
+    keeps it and only reads its new values through it)."""
     polys = patches.polys[idx].copy()
     tri = polys[:, 3] < 0
     polys[tri, 3] = polys[tri, 2]
-    return _bilinear(vals[polys], uv[:, 0], uv[:, 1])
+    u, v = uv[:, 0], uv[:, 1]
+    w = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v])
+    return np.ascontiguousarray(polys.T, dtype=np.intp), w
+
+
+def interpolate_corners(vertex_values, corners) -> np.ndarray:
+    """(P, k) the bilinear interpolation of per-vertex values (V, k) through ``corners``
+    (:func:`located_corners`): the same arithmetic as :func:`_bilinear` on the corners' values,
+    bit for bit, a band's corners taken and weighted as contiguous rows (weighing the (P, 1)
+    weights into (P, k) corner values, broadcast along the short axis, was most of it)."""
+    cols, w = corners
+    vt = np.ascontiguousarray(np.asarray(vertex_values, dtype=np.float64).T)      # (k, V)
+    total = vt.take(cols[0], axis=1) * w[0]
+    for c in range(1, 4):
+        total += vt.take(cols[c], axis=1) * w[c]
+    return np.ascontiguousarray(total.T)

@@ -23,7 +23,7 @@ from .contact import cut_along_contacts, open_side
 from .direct import _bilinear, apply_transport, emitter_transport, vertex_frames
 from .errors import RadiosityError
 from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
-from .interpolate import _inverse_bilinear, interpolate_located, locate
+from .interpolate import _inverse_bilinear, interpolate_corners, located_corners, locate
 from .patches import PatchSet, _poly_geometry, build_patches
 from .progress import Ticker
 from .refine import LUMA
@@ -141,13 +141,13 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers
     1.13%. One sparse product per pass: a relight casts no ray."""
     zero = np.zeros_like(G.sky)
     before = rest_e
-    for _ in range(passes):
+    for i in range(passes):
         now = rho_v * out if spread is None else spread(rho_v * out)
         step = apply_gather(G, zero, now - before, None, workers)
         before = now
         out = out + step
-        if np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
-            break
+        if i + 1 < passes and np.abs(step).max() <= tol * max(float(np.abs(out).max()), 1e-300):
+            break                              # (after the last pass there is nothing to decide)
     return out
 
 
@@ -185,7 +185,7 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
     C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
     out += product(C, np.concatenate([direct_e, x]))
     if hot.any() or (cells is not None and len(cells[0])):
-        out += _shine(ctx, elements, np.flatnonzero(hot), shine[hot], xv, nv, cells)
+        out += _shine(ctx, elements, np.flatnonzero(hot), shine, xv, nv, cells)
     return out
 
 
@@ -198,28 +198,32 @@ HOT = 3.0
 
 
 def _corner_columns(elements, cache=None):
-    """(cols (4, N) intp, quad (N,) float, count (N,) float): each element's corner vertices,
-    one contiguous row per corner (a triangle's fourth is its first), 1.0 where the fourth is
-    a corner, and how many corners: geometry only, kept in ``cache`` (a relight reads its
-    elements' light through them)."""
+    """(cols (4, N) intp, quad (N,) float, count (N,) float, quad3 (N, 3), count3 (N, 3)): each
+    element's corner vertices, one contiguous row per corner (a triangle's fourth is its first),
+    1.0 where the fourth is a corner, and how many corners, the last two also repeated over
+    three bands (for (N, 3) values: a (N, 1) factor broadcast along the short axis took 5x as
+    long): geometry only, kept in ``cache`` (a relight reads its elements' light through them)."""
     def make():
         polys = elements.polys
-        quad = polys[:, 3] >= 0
+        quad = (polys[:, 3] >= 0).astype(np.float64)
         cols = np.ascontiguousarray(np.where(polys < 0, polys[:, :1], polys).T, dtype=np.intp)
-        return cols, quad.astype(np.float64), (polys >= 0).sum(axis=1).astype(np.float64)
+        count = (polys >= 0).sum(axis=1).astype(np.float64)
+        return (cols, quad, count) + tuple(np.ascontiguousarray(np.repeat(a[:, None], 3, axis=1))
+                                           for a in (quad, count))
     if cache is None:
         return make()
     return cached(cache, cache_key(geometry_key(elements), ("corner-columns",)), make)
 
 
-def _corner_sum(values, cols, quad):
+def _corner_sum(values, cols, quad, quad3=None):
     """Each element's corners of ``values`` (V,) or (V, k) summed in order, one corner at a
     time, the fourth times ``quad`` (as the (N, 4) array of corners times their validity sums
     over its corners, bit for bit: a triangle adds 0), from :func:`_corner_columns`. Whole
     columns at a time: summing the (N, 4) array over its short axis and taking
     ``values[polys]`` were most of the dense room's relight in :func:`_hot_elements`,
-    :func:`_mean_light` (with the validity's sum over the corners)."""
-    q = quad if values.ndim == 1 else quad[:, None]
+    :func:`_mean_light` (with the validity's sum over the corners). ``quad3``: ``quad`` over
+    three bands, for (N, 3) values."""
+    q = quad if values.ndim == 1 else quad3 if quad3 is not None and values.shape[1] == 3 else quad[:, None]
     total = values.take(cols[0], axis=0) + values.take(cols[1], axis=0)
     total += values.take(cols[2], axis=0)
     total += values.take(cols[3], axis=0) * q
@@ -232,7 +236,7 @@ def _mean_light(elements, values_v, opened=None, cache=None) -> float:
     over vertices: a face cut into many, vertices repeated along a face's edges, a floor
     running on under a block, would each weigh in. ``cache``: where :func:`_corner_columns`
     are kept."""
-    cols, quad, count = _corner_columns(elements, cache)
+    cols, quad, count = _corner_columns(elements, cache)[:3]
     Y = _corner_sum(np.asarray(values_v, dtype=np.float64) @ LUMA, cols, quad) / count
     w = elements.areas if opened is None else elements.areas * opened
     total = float(w.sum())
@@ -240,10 +244,10 @@ def _mean_light(elements, values_v, opened=None, cache=None) -> float:
 
 
 def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
-    """(hot (N,) bool, radiance (N, 3)): of the elements whose direct light changes ``smooth``-ly,
+    """(hot (N,) bool, radiance (h, 3)): of the elements whose direct light changes ``smooth``-ly,
     those whose direct light arriving (the mean of ``light_v`` (V, 3) over their corners)
     passes the luminance ``bar`` (:data:`HOT` times its :func:`_mean_light`), with
-    ``radiance`` their reflectivity times it (0 for the others): the spot a pendant lamp's back lights on a
+    ``radiance`` their reflectivity times it (the hot ones', in order): the spot a pendant lamp's back lights on a
     ceiling, the floor under a lamp, a block's top beside it. A gather's rays find such a spot
     by chance, a few at a vertex and one more or fewer at its neighbour: each ray there
     carries many times the light of the others, so the vertices blotch (a room whose lamp
@@ -258,9 +262,9 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
     # the corners summed in order, one at a time (as the (N, 4, 3) array's sum over its corners
     # adds them, bit for bit): that gather and its strided sum were 5.7 of this function's
     # 7 ms in the dense room's relight
-    cols, quad, count = _corner_columns(elements, ctx.cache)
-    arriving = _corner_sum(np.asarray(light_v, dtype=np.float64), cols, quad) / count[:, None]
-    radiance = elements.rho * arriving
+    cols, quad, count, quad3, count3 = _corner_columns(elements, ctx.cache)
+    light_v = np.asarray(light_v, dtype=np.float64)
+    arriving = _corner_sum(light_v, cols, quad, quad3) / (count3 if light_v.shape[1] == 3 else count[:, None])
     hot = smooth & (arriving @ LUMA > bar)
     if opened is not None:
         hot &= opened > 0
@@ -271,7 +275,8 @@ def _hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=64):
             a = elements.areas[ids]
             Y = np.bincount(groups, weights=a * (arriving[ids] @ LUMA)) / np.bincount(groups, weights=a)
             hot[ids[~np.isin(groups, np.argsort(-Y, kind="stable")[:budget])]] = False
-    return hot, np.where(hot[:, None], radiance, 0.0)
+            ids = np.flatnonzero(hot)
+    return hot, elements.rho[ids] * arriving[ids]
 
 
 def _place_uniforms(points, verts, count) -> np.ndarray:
@@ -332,7 +337,7 @@ class _AbruptGrid:
          loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
         n = self.n
         light = ctx.direct.at(x, nrm, "abrupt-grid")
-        self.values = elements.rho[owner] * light
+        self.values = elements.rho.take(owner, axis=0) * light     # take: rows 3x as fast as [owner]
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
         Yc = Y[k.T]
         # spiky: the brightest corner, seen or not, against the darkest seen one (a corner
@@ -342,13 +347,13 @@ class _AbruptGrid:
         # each cell's mean over the part seen, and how much of it is seen
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
-        mean = np.einsum("cq,cqk->ck", w, self.values[k.T])
+        mean = np.einsum("cq,cqk->ck", w, self.values.take(k.T, axis=0))
         mean /= w.sum(axis=1)[:, None]
         s = self.spiky
         if s.any():
             mean[s], seen[s] = self._means(ctx, ids, loc[s], i[s], j[s])
         self.cell_mean = mean
-        rho = elements.rho[ids[loc]]
+        rho = elements.rho.take(ids[loc], axis=0)
         arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
         self.hot = (seen > 0) & (arriving @ LUMA > bar)
         self.ids, self.cell_loc, self.cell_i, self.cell_j = ids, loc, i, j
@@ -434,7 +439,7 @@ class _AbruptGrid:
                          self.inset))
         x, el, nrm, w = cached(ctx.cache, key, points)
         # one shadow ray per emitting patch and point: the mean over the points is what counts
-        D = self.elements.rho[el] * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
+        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
         D = D.reshape(loc.size, S * S, 3)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
@@ -494,14 +499,20 @@ def _open_elements(ctx, elements):
     """(N,) 1 for an element the scene can see, 0 for one buried in a solid (its centre's rays
     all end on back faces or within a twentieth of the patch size: :func:`.rays.open_fraction`),
     so output vertices on a block's outline are evaluated on the open side. None without
-    Embree (every element counts)."""
+    Embree (every element counts). Read-only, kept beside the fractions: the same array at
+    every call (a relight's frames and fits key on it, hashing it once)."""
     if not embree_available():
         return None
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach))
-    return (f > 0.05).astype(np.float64)
+
+    def weights():
+        w = (f > 0.05).astype(np.float64)
+        w.flags.writeable = False
+        return w
+    return cached(ctx.cache, key + "-weights", weights, disk=False)
 
 
 def _sided(ctx, mesh: PatchSet) -> PatchSet:
@@ -641,7 +652,7 @@ def _seen(ctx, elements, x, nrm):
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
     millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(x).tobytes(), ("exposure", reach))
+    key = cache_key(geometry_key(elements) + array_key(x), ("exposure", reach))   # x hashed once per array
     f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach))
     return np.minimum(1.0, f / 0.5)
 
@@ -665,7 +676,7 @@ def _open_side(ctx, elements, xv, nv):
     buried = _seen(ctx, elements, xv, nv) < 0.5
     if not buried.any():
         return None
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(xv).tobytes(), ("open-side",))
+    key = cache_key(geometry_key(elements) + array_key(xv), ("open-side",))
     return cached(ctx.cache, key, lambda: open_side(elements, buried, embree_scene(elements),
                                                     _open_elements(ctx, elements)))
 
@@ -716,26 +727,32 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
         verts = np.concatenate([verts, corners.reshape(-1, 3)])
         polys = np.concatenate([polys, V + np.arange(4 * c).reshape(c, 4)])
         every, L = np.concatenate([ids, parent]), np.concatenate([radiance, cell_light])
-    centers, _, area = _poly_geometry(verts, polys)
-    rho = elements.rho[every]
+    # the shining pieces' geometry hashed once (the cells' corners after the elements' own
+    # vertices, and the pieces), their centres and areas kept under it: a relight that shines
+    # the same pieces does not make them again
+    V = len(elements.verts)
+    h = hashlib.sha256(np.ascontiguousarray(verts[V:]).tobytes())
+    h.update(np.ascontiguousarray(polys).tobytes())
+    shape = geometry_key(elements) + h.digest()
+    centers, area = cached(ctx.cache, cache_key(shape, ("shine-geometry",)),
+                           lambda: _poly_geometry(verts, polys)[::2], disk=False)
+    rho = elements.rho.take(every, axis=0)
     arriving = np.where(rho > 0, L / np.where(rho > 0, rho, 1.0), 0.0)
     power = area * np.maximum(arriving @ LUMA, 1e-300)     # where the shadow rays go (light arriving:
                                                            # the same after a change of colour)
     # relative power to 6 digits: a relight that scales the light finds the same transport in
     # the cache (no ray), and a first bake draws from exactly what a relight would
     power = np.maximum(np.round(power / power.max(), 6), 1e-12)
-    source = PatchSet(verts, polys, centers, elements.normals[every], power, elements.rho[every],
+    source = PatchSet(verts, polys, centers, elements.normals.take(every, axis=0), power, rho,
                       np.zeros((len(every), 3)), elements.owner[every], elements.source_face[every],
                       list(elements.object_names))
     # a quarter of the lamps' shadow rays (penumbrae refined all the same): what shines here is a
     # few percent of the light (3.4% of the Cornell box's), and at 4 or 16 rays its part of the
     # bench's smoothness figure is the same (0.24-0.25%); the rays were most of its cost
     samples = max(4, int(ctx.settings.direct_samples) // 4)
-    # the elements' geometry and the points hashed once per array (a relight's are cached): of
-    # ``verts`` only the cells' corners after the elements' own
-    V = len(elements.verts)
-    key = cache_key(geometry_key(elements) + np.ascontiguousarray(verts[V:]).tobytes() + polys.tobytes()
-                    + groups.tobytes() + power.tobytes() + array_key(xv), ("shine", samples, len(verts) - V, len(every)))
+    # the elements' geometry and the points hashed once per array (a relight's are cached)
+    key = cache_key(shape + groups.tobytes() + power.tobytes() + array_key(xv),
+                    ("shine", samples, len(verts) - V, len(every)))
     T = cached(ctx.cache, key, lambda: emitter_transport(
         source, xv, nv, np.arange(len(every)), scene=occluder(elements), samples=samples, groups=groups,
         workers=ctx.settings.workers, ticker=Ticker(None, ctx.cancelled)))
@@ -818,7 +835,11 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         return idx, uv
 
     key = cache_key(geometry_key(ctx.patches) + geometry_key(elements), ("located",))
-    return interpolate_located(_sided(ctx, ctx.patches), field_v, *cached(ctx.cache, key, where))
+    sided = _sided(ctx, ctx.patches)
+    # the located points' corners and weights, geometry only: a relight reads its field through them
+    corners = cached(ctx.cache, cache_key(geometry_key(sided) + geometry_key(elements), ("located-corners",)),
+                     lambda: located_corners(sided, *cached(ctx.cache, key, where)))
+    return interpolate_corners(field_v, corners)
 
 
 def _whole_faces(patches: PatchSet, elements: PatchSet):
@@ -863,7 +884,7 @@ def _cut_elements(ctx) -> PatchSet:
     # :func:`output_elements`' cached geometry, the meshes hashed once: its materials are read
     # only onto the elements that are output (a relight read them twice, 0.75 ms each, on the
     # dense Cornell room)
-    mkey = meshes_key(ctx.meshes)
+    mkey = ctx.meshes_key() if hasattr(ctx, "meshes_key") else meshes_key(ctx.meshes)
     elements = cached(ctx.cache, cache_key(mkey, ("elements", s.element_size)),
                       lambda: build_patches(ctx.meshes, s.element_size))
     if geometry_key(elements) == geometry_key(ctx.patches):

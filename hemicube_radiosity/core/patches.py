@@ -96,6 +96,18 @@ class PatchSet:
     def __len__(self) -> int:
         return int(self.polys.shape[0])
 
+    def emitting(self) -> np.ndarray:
+        """(N,) bool: the patches that emit, ``emission.max(axis=1) > 0`` (the same values, NaN
+        included), its bands compared a column at a time: the max over each short row took 0.2
+        ms of the dense Cornell room's 7.5k patches, three times a relight."""
+        e = np.asarray(self.emission)
+        if e.ndim != 2 or e.shape[1] == 0:
+            return e.max(axis=1) > 0
+        m = e[:, 0]
+        for k in range(1, e.shape[1]):
+            m = np.maximum(m, e[:, k])
+        return m > 0
+
     @property
     def nsides(self) -> np.ndarray:
         """(N,) 3 or 4."""
@@ -131,8 +143,9 @@ class PatchSet:
         mats = [(np.asarray(m.face_rho, float), np.asarray(m.face_emission, float)) for m in meshes]
         index = _material_index(self, mats)
         if index is not None:
-            return self.with_materials(np.concatenate([r for r, _ in mats])[index],
-                                       np.concatenate([e for _, e in mats])[index])
+            # take: the rows 3x as fast as fancy indexing (25k elements: 0.22 -> 0.07 ms an array)
+            return self.with_materials(np.concatenate([r for r, _ in mats]).take(index, axis=0),
+                                       np.concatenate([e for _, e in mats]).take(index, axis=0))
         rho = np.empty((len(self), 3))
         em = np.empty((len(self), 3))
         for oi, m in enumerate(meshes):

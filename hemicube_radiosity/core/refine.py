@@ -15,9 +15,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cache import cache_key, cached
+from .cache import array_key, cache_key, cached, geometry_key
 from .clusters import _make
-from .direct_light import LUMA, DirectLight, grid_points
+from .direct_light import LUMA, DirectLight, grid_of
 from .patches import PatchSet, _poly_geometry
 from .unique import unique_ints
 
@@ -106,9 +106,9 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         if ids.size == 0:
             break
         sub = _subset(patches, ids)
-        x, w = grid_points(sub, n)
+        x, flat, nrm, w = grid_of(patches, ids, n)      # kept for the geometry: a relight's are hashed once
         K = x.shape[1]
-        Y = np.asarray(light_at(x.reshape(-1, 3), np.repeat(sub.normals, K, axis=0)))
+        Y = np.asarray(light_at(flat, nrm))
         Y = Y.reshape(len(ids), K, -1)                                            # (n, K, S)
         if absolute is None:
             mean = np.einsum("nk,nks,n->s", w, Y, sub.areas) / max(sub.areas.sum(), 1e-300)
@@ -148,7 +148,7 @@ def _crossing(patches, cache=None):
         return None
 
     def crossed(x, sub):
-        key = cache_key(patches.geometry_key() + np.ascontiguousarray(x).tobytes(), ("crossed",))
+        key = cache_key(geometry_key(patches) + array_key(x), ("crossed",))    # each hashed once
         return cached(cache, key, lambda: test(x, sub).astype(np.uint8)).astype(bool)
 
     def test(x, sub):
@@ -180,7 +180,7 @@ def refine_stage(ctx) -> None:
     if plan is None:
         return
     p = ctx.patches
-    frozen = p.emission.max(axis=1) > 0
+    frozen = p.emitting()
     if ctx.clusters is not None:
         frozen |= ctx.clusters.sizes[ctx.clusters.of] > 1
     min_area = (float(s.patch_size) / 16) ** 2 if s.patch_size else 0.0

@@ -165,11 +165,11 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None, F
     if computed is not None and not np.all(computed):
         miss = ~np.asarray(computed, bool)
         # column sums of A_i F_ij over computed rows i, without forming the transpose
-        # (only the entries in the left-out columns matter: few, e.g. the lights)
-        sel = np.flatnonzero(miss[F.indices])
-        rid = (F.row_ids() if row_ids is None else row_ids)[sel]
-        col = F.indices[sel]
-        w = F.data[sel].astype(np.float64) * (areas * computed)[rid]
+        # (only the entries in the left-out columns matter: few, e.g. the lights); which
+        # entries those are is kept on F for the rows left out (a relight's are the same)
+        rid, col, data = F._memo(("left-out-columns", np.packbits(miss).tobytes(), miss.size),
+                                 lambda: _left_out_entries(F, miss))
+        w = data * (areas * computed)[rid]
         n = F.shape[1]
         rs_recip = np.bincount(col, weights=w, minlength=n) / areas
         H_recip = np.stack([np.bincount(col, weights=w * B[rid, k], minlength=n)
@@ -184,6 +184,13 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None, F
         imb = np.where(emitted > 0, np.abs(emitted - absorbed - escaped) / emitted, 0.0)
     return {"emitted": emitted.tolist(), "absorbed": absorbed.tolist(), "escaped": escaped.tolist(),
             "imbalance": float(np.max(imb))}
+
+
+def _left_out_entries(F, miss):
+    """(row (e,), column (e,), value (e,) float64) of F's entries in the columns ``miss`` (N,)
+    bool, in F's order."""
+    sel = np.flatnonzero(miss[F.indices])
+    return F.row_ids()[sel], F.indices[sel], F.data[sel].astype(np.float64)
 
 
 def _segment_sums(vals, cols, x, starts, nonempty, nrows):
