@@ -11,6 +11,7 @@ import multiprocessing
 import os
 import sys
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -334,6 +335,40 @@ def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
     G3, s3 = gather_matrix(box, x, n, embree_scene(box), rays=16, workers=1)
     assert np.array_equal(G3.indptr, G1.indptr) and np.array_equal(G3.data, G1.data)
     assert np.array_equal(G3.indices, G1.indices) and np.array_equal(s3, s1)
+    # started in the background (collected on a thread while the caller goes on): the same
+    before = threading.active_count()
+    pending = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=2, hits=True,
+                            background=True)
+    assert isinstance(pending, parallel.Background)
+    G4, s4, H4 = pending.result()
+    assert np.array_equal(G4.indptr, G1.indptr) and np.array_equal(G4.indices, G1.indices)
+    assert np.array_equal(G4.data, G1.data) and np.array_equal(s4, s1) and np.array_equal(H4, H1)
+    assert threading.active_count() == before and multiprocessing.active_children() == []
+
+
+def test_background_returns_raises_and_stops():
+    """:class:`.parallel.Background`: the value made on its thread, the error raised on the
+    caller's, and a stop asked for (cancelled while waiting) reaches the thread's loop."""
+    assert parallel.Background(lambda stop: 42).result() == 42
+    assert parallel.Background.ready("made").result() == "made"
+
+    def fails(stop):
+        raise ValueError("in the thread")
+    with pytest.raises(ValueError, match="in the thread"):
+        parallel.Background(fails).result()
+    steps = []
+
+    def loop(stop):
+        while not stop.is_set():
+            steps.append(1)
+            time.sleep(0.01)
+        return "stopped"
+    before = threading.active_count()
+    b = parallel.Background(loop)
+    polls = []
+    with pytest.raises(Cancelled):
+        b.result(cancelled=lambda: polls.append(1) or len(polls) > 2, poll=0.01)
+    assert steps and threading.active_count() == before        # the thread saw the stop and ended
 
 
 # ------------------------------------------------------------------ the whole bake
@@ -344,8 +379,35 @@ def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
     monkeypatch.setattr(embree_ff, "RAYS_PER_BATCH", 1 << 13)
     s = dict(patch_size=0.5, element_size=0.25, resolution=16, method=method,
              gather_rays=16 if embree_available() else 0)
+    from hemicube_radiosity.core import gather, output
+    monkeypatch.setattr(gather, "PROCESS_RAYS", 0)           # the gather forked, in the background
+    started = []
+    start = output._start_gather
+    monkeypatch.setattr(output, "_start_gather", lambda *a: started.append(start(*a)) or started[-1])
     r1 = bake(scenes.cornell_box(), BakeSettings(workers=1, **s))
+    assert started == [] or started == [None]
+    before = threading.active_count()
     r2 = bake(scenes.cornell_box(), BakeSettings(workers=2, **s))
+    if embree_available():
+        assert isinstance(started[-1], parallel.Background)
+    assert threading.active_count() == before and multiprocessing.active_children() == []
     assert same_csr(r1.form_factors, r2.form_factors)
     assert np.array_equal(r1.solution.B, r2.solution.B)
     assert np.array_equal(r1.vertex_radiosity, r2.vertex_radiosity)
+
+
+@needs_embree
+def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
+    """Cancelled after the vertex stage started its gather in the background: the bake stops,
+    and neither the collecting thread nor a worker outlives it."""
+    from hemicube_radiosity.core import gather, output
+    monkeypatch.setattr(gather, "PROCESS_RAYS", 0)
+    started = []
+    start = output._start_gather
+    monkeypatch.setattr(output, "_start_gather", lambda *a: started.append(start(*a)) or started[-1])
+    before = threading.active_count()
+    with pytest.raises(Cancelled):
+        bake(scenes.cornell_box(), BakeSettings(workers=2, patch_size=0.5, element_size=0.25, resolution=16,
+                                                gather_rays=16), cancelled=lambda: bool(started))
+    assert isinstance(started[-1], parallel.Background)
+    assert threading.active_count() == before and multiprocessing.active_children() == []

@@ -11,13 +11,14 @@ that hit the back of a patch see nothing.
 """
 from __future__ import annotations
 
+import itertools
 from contextlib import closing
 from functools import partial
 
 import numpy as np
 
 from .geometry import in_frames, tangent_frames
-from .parallel import ordered_map, resolve_workers
+from .parallel import Background, ordered_map, resolve_workers
 from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
@@ -86,7 +87,7 @@ def surface_values(params, polys, vertex_values, pid, y):
 
 
 def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
-                  chunk_rays=1 << 18, ticker=None, workers=1, hits=False):
+                  chunk_rays=1 << 18, ticker=None, workers=1, hits=False, background=False):
     """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
@@ -101,7 +102,11 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     13k vertices of the 2k-triangle box took 2.0-2.3 s in chunks of a million, 1.0 s in these,
     its temporaries then fitting the caches better). ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
-    :func:`correct_hits`; each hit carries weight ``1 / rays`` in G).
+    :func:`correct_hits`; each hit carries weight ``1 / rays`` in G). ``background``: return a
+    :class:`.parallel.Background` whose ``result()`` is what the call returns, so the caller can
+    go on with other work while the workers cast (only when the chunks run on forked processes:
+    otherwise the result is made before the call returns); ``ticker`` is then used only before
+    the call returns: poll cancellation with ``result(cancelled)``.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -123,20 +128,33 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
-    with closing(ordered_map(cast, range(0, P, step), workers, processes=forked)) as results:
-        for s, m, sky_s, n, c, w, H in results:
-            sky[s:s + m] = sky_s
-            counts[s + 1:s + m + 1] = n
-            found.append(H)
-            cols.append(c)
-            vals.append(w)
-            if ticker is not None:
-                ticker.tick(s + m, P)
-    G = CSR(np.cumsum(counts), np.concatenate(cols) if cols else np.zeros(0, np.int32),
-            np.concatenate(vals) if vals else np.zeros(0, np.float32), (P, V), {"rays": R, "seed": seed})
-    if hits:
-        return G, sky, np.concatenate(found) if found else np.zeros((0, 5), np.float32)
-    return G, sky
+    results = ordered_map(cast, range(0, P, step), workers, processes=forked)
+
+    def collect(stop=None, first=(), tick=ticker):
+        with closing(results):
+            for s, m, sky_s, n, c, w, H in itertools.chain(first, results):
+                sky[s:s + m] = sky_s
+                counts[s + 1:s + m + 1] = n
+                found.append(H)
+                cols.append(c)
+                vals.append(w)
+                if tick is not None:
+                    tick.tick(s + m, P)
+                if stop is not None and stop.is_set():
+                    return None
+        G = CSR(np.cumsum(counts), np.concatenate(cols) if cols else np.zeros(0, np.int32),
+                np.concatenate(vals) if vals else np.zeros(0, np.float32), (P, V), {"rays": R, "seed": seed})
+        if hits:
+            return G, sky, np.concatenate(found) if found else np.zeros((0, 5), np.float32)
+        return G, sky
+    if not background:
+        return collect()
+    if not forked:                   # threads or serial: nothing would be left to overlap
+        return Background.ready(collect())
+    # the first chunk on this thread: the workers are forked here, not beside the caller's
+    # code running on; the rest is collected on a thread while the caller goes on
+    first = next(results, None)
+    return Background(partial(collect, first=() if first is None else (first,), tick=None))
 
 
 def _cast(patches, params, scene, points, normals, local, step, hits, s):

@@ -25,6 +25,7 @@ from .errors import RadiosityError
 from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
 from .interpolate import _inverse_bilinear, interpolate_corners, located_corners, locate
 from .patches import PatchSet, _poly_geometry, build_patches
+from .parallel import resolve_workers
 from .progress import Ticker
 from .refine import LUMA
 from .rays import embree_available, embree_scene, occluder, open_fraction
@@ -97,7 +98,7 @@ def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:
 GATHER_PASSES = 1
 
 
-def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None):
+def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pending=None):
     """Reflected light R at element vertices by a final gather (the gather's ray hits cached as a
     matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
     output mesh itself: the direct part exact at each of its vertices (as fine as the output, so
@@ -116,16 +117,26 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None):
     the spot a pendant lamp's back lights on a ceiling, the floor under a lamp) or a cell of an
     abrupt element's grid (the glow a lamp's back casts on a ceiling within millimetres of its
     edge), lights the vertices as lamps do instead, by its form factor and shadow rays
-    (:func:`_shine`), and the rays that land on it read nothing."""
+    (:func:`_shine`), and the rays that land on it read nothing.
+
+    ``pending``: the gather's rays started by :func:`_start_gather`; what does not read them
+    (the corrections' choice of elements, what shines) is done before waiting for them."""
     rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
     if side is not None:          # buried vertices on an outline read as their open side
         rest_e = side.spread(rest_e)
     light_v = ctx.direct.at(xv, nv, "vertices") if light_v is None else light_v
     direct_e = rho_v * light_v
-    G, H = _gather_rays(ctx, elements, xv, nv)
+    got = []
+
+    def rays():                   # G and H, once, when first read
+        if not got:
+            got.append(_gather_rays(ctx, elements, xv, nv, pending))
+        return got[0]
+    corrections = _corrections(ctx, elements, rays, xv, nv, light_v, direct_e)
+    G, H = rays()
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
-    out += _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e)
+    out += corrections
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
                          spread=None if side is None else side.spread)
 
@@ -151,9 +162,10 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers
     return out
 
 
-def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
+def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     """What the gather of ``direct_e`` misses: the exact light of abrupt elements' grids and
-    what shines (see :func:`_gathered`); (V, 3)."""
+    what shines (see :func:`_gathered`); (V, 3). ``rays()``: the gather's (G, H), asked for
+    only after what shines is found (a gather started in the background casts meanwhile)."""
     out = np.zeros((len(xv), 3))
     # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
     # a relight that changes a colour or scales the lamps picks the same elements and finds
@@ -182,10 +194,13 @@ def _corrections(ctx, elements, G, H, xv, nv, light_v, direct_e):
     s = ctx.settings
     key = cache_key(geometry_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
-    C = cached(ctx.cache, key, lambda: correction_matrix(G, H, elements, select | hot, read, len(x)))
-    out += product(C, np.concatenate([direct_e, x]))
+    shone = None
     if hot.any() or (cells is not None and len(cells[0])):
-        out += _shine(ctx, elements, np.flatnonzero(hot), shine, xv, nv, cells)
+        shone = _shine(ctx, elements, np.flatnonzero(hot), shine, xv, nv, cells)
+    C = cached(ctx.cache, key, lambda: correction_matrix(*rays(), elements, select | hot, read, len(x)))
+    out += product(C, np.concatenate([direct_e, x]))
+    if shone is not None:
+        out += shone
     return out
 
 
@@ -764,16 +779,41 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     return transport_product(Tt, L, transposed=True)
 
 
-def _gather_rays(ctx, elements, xv, nv):
+def _gather_key(ctx, elements):
+    return cache_key(geometry_key(elements), ("gather-elements", ctx.settings.gather_rays))
+
+
+def _start_gather(ctx, elements, xv, nv):
+    """The gather of :func:`_gather_rays` started on its forked workers, collected on a thread
+    while the vertex stage goes on (the vertices' direct light, the open side, what shines: the
+    work that does not read G); a :class:`.parallel.Background` for :func:`_gather_rays`, or
+    None where G is cached or the gather would not run on forked workers (one worker, few rays,
+    no Embree): then it is made where it is read, as before. The same G, bit for bit."""
+    if ctx.settings.gather_rays <= 0 or not embree_available() or resolve_workers(ctx.settings.workers) <= 1:
+        return None
+    if ctx.cache is not None:
+        key = _gather_key(ctx, elements)
+        if ctx.cache.get(key) is not None and ctx.cache.get(key + "-hits") is not None:
+            return None
+    return gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
+                         ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
+                         hits=True, background=True)
+
+
+def _gather_rays(ctx, elements, xv, nv, pending=None):
     """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
-    H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only."""
-    key = cache_key(geometry_key(elements), ("gather-elements", ctx.settings.gather_rays))
+    H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only.
+    ``pending``: the gather started by :func:`_start_gather` (its result is taken here)."""
+    key = _gather_key(ctx, elements)
     G = ctx.cache.get(key) if ctx.cache is not None else None
     H = ctx.cache.get(key + "-hits") if ctx.cache is not None else None
     if G is None or H is None:
-        G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
-                                  ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
-                                  hits=True)
+        if pending is not None:
+            G, sky, H = pending.result(ctx.cancelled)
+        else:
+            G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
+                                      ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
+                                      hits=True)
         G.sky = sky
         if ctx.cache is not None:
             ctx.cache.put(key, G)
@@ -861,13 +901,15 @@ def _whole_faces(patches: PatchSet, elements: PatchSet):
     return e[same], p[same]
 
 
-def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None):
+def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None,
+                      pending=None):
     """Light reflected more than once arriving at element vertices, times their reflectivity
     (with ``in_v``, the patches' incoming indirect light at their vertices: as it arrives, for
     the lighting-only pass): gathered (Embree) or the patch solution's bilinear interpolation.
-    ``light_v``: the direct light arriving at ``xv``, when the caller has it."""
+    ``light_v``: the direct light arriving at ``xv``, when the caller has it. ``pending``: the
+    gather started by :func:`_start_gather`."""
     if ctx.settings.gather_rays > 0 and embree_available():
-        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v, side)
+        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v, side, pending)
         return gathered if in_v is not None else rho_v * gathered
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
@@ -949,11 +991,20 @@ def vertex_stage(ctx) -> None:
         elements = _cut_elements(ctx)
         ctx.elements = sided if elements is patches else _sided(ctx, elements)
         xv, nv, rho_v = frames(ctx.elements, _open_elements(ctx, ctx.elements), ctx.cache)
-        D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
-        side = _open_side(ctx, ctx.elements, xv, nv)
-        if side is not None:                            # before the gather: its rays read it
-            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
-        rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side)
+        # the gather's rays (geometry only) cast on the workers while this thread finds the
+        # direct light, the open side and what shines: with two workers the vertices stage
+        # left a core idle for ~2 s of its ~5 s on the 54k-triangle box
+        pending = _start_gather(ctx, ctx.elements, xv, nv)
+        try:
+            D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
+            side = _open_side(ctx, ctx.elements, xv, nv)
+            if side is not None:                            # before the gather: its rays read it
+                D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
+            rest_v = _element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side,
+                                       pending)
+        finally:
+            if pending is not None:                     # stopped early: the workers with it
+                pending.close()
     else:
         ctx.elements = sided
         xv, nv, rho_v = frames(sided, _open_elements(ctx, sided), ctx.cache)

@@ -35,6 +35,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 import warnings
 from collections import deque
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
@@ -42,7 +43,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from .errors import RadiosityError
 
-__all__ = ["resolve_workers", "ordered_map", "cpu_count", "processes_available", "PROCESSES"]
+__all__ = ["resolve_workers", "ordered_map", "cpu_count", "processes_available", "Background", "PROCESSES"]
 
 #: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
 #: for a host where forking misbehaves).
@@ -227,3 +228,65 @@ def _noop():
 
 def _call(token, item):
     return _TASKS[token](item)
+
+
+class Background:
+    """A result made on a thread while the caller goes on: ``collect(stop)`` runs on its own
+    thread and returns the value; it should look at ``stop`` (a :class:`threading.Event`)
+    between its steps and return early when it is set. Made for a forked :func:`ordered_map`
+    whose results are collected while the caller does other work: start the map on the caller's
+    thread (its first ``next()`` forks the workers there, not beside the caller's running
+    code), then hand the rest of the loop to ``collect``.
+
+    :meth:`result` waits for the value (or raises what ``collect`` raised) and polls
+    ``cancelled()`` on the caller's thread while it waits (progress and cancellation stay on the
+    calling thread, as everywhere else): on cancellation, or whenever the caller stops early,
+    :meth:`close` sets ``stop`` and waits for the thread, whose map then terminates its workers.
+    :meth:`ready` wraps a value made already (nothing runs)."""
+
+    def __init__(self, collect=None):
+        self._stop = threading.Event()
+        self._done = threading.Event()
+        self._value = self._error = None
+        self._thread = None
+        if collect is None:
+            self._done.set()
+            return
+        self._thread = threading.Thread(target=self._run, args=(collect,), daemon=True,
+                                        name="radiosity-background")
+        self._thread.start()
+
+    @classmethod
+    def ready(cls, value) -> "Background":
+        out = cls()
+        out._value = value
+        return out
+
+    def _run(self, collect):
+        try:
+            self._value = collect(self._stop)
+        except BaseException as exc:       # raised again on the caller's thread by result()
+            self._error = exc
+        finally:
+            self._done.set()
+
+    def result(self, cancelled=None, poll=0.05):
+        """The value (once; the handle lets go of it), after waiting for the thread; raises
+        :class:`.progress.Cancelled` (after :meth:`close`) when ``cancelled()`` turns true."""
+        from .progress import Cancelled
+        while not self._done.wait(poll):
+            if cancelled is not None and cancelled():
+                self.close()
+                raise Cancelled("cancelled")
+        self.close()
+        if self._error is not None:
+            error, self._error = self._error, None
+            raise error
+        value, self._value = self._value, None
+        return value
+
+    def close(self) -> None:
+        """Ask the thread to stop and wait for it (nothing when it is done)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
