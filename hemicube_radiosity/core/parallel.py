@@ -182,6 +182,28 @@ def _worker_init():
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with_parent()
     _one_blas_thread()
+    _keep_freed_memory()
+
+
+#: glibc's ``mallopt`` parameters (malloc.h): M_TRIM_THRESHOLD, M_TOP_PAD.
+_M_TRIM_THRESHOLD, _M_TOP_PAD = -1, -2
+
+
+def _keep_freed_memory():
+    """glibc, in a worker (best effort; the process that bakes is left as it is): keep freed
+    memory in the worker's heap for its next batch instead of handing it back to the system
+    and faulting fresh zeroed pages in again, and grow the heap 64 MB at a time. A worker's
+    batches make and drop the same large temporaries (a gather chunk's quarter million rays)
+    again and again: on the 54k-triangle box with two workers the workers took 405k page
+    faults and 1.0 s of system time, 130k and 0.4 s with this (the whole bake's CPU time
+    6.9-7.1 -> 5.9-6.0 s, alternating runs). A worker lives for one map: what it keeps is
+    freed when it exits."""
+    try:
+        libc = ctypes.CDLL(None)
+        libc.mallopt(_M_TRIM_THRESHOLD, (1 << 31) - 1)
+        libc.mallopt(_M_TOP_PAD, 1 << 26)
+    except (OSError, AttributeError):
+        pass
 
 
 def _die_with_parent():
