@@ -411,3 +411,17 @@ def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
                                                 gather_rays=16), cancelled=lambda: bool(started))
     assert isinstance(started[-1], parallel.Background)
     assert threading.active_count() == before and multiprocessing.active_children() == []
+
+
+@needs_embree
+def test_open_fraction_identical_with_two_workers(box):
+    """:func:`.rays.open_fraction` cast by two threads in chunks: the same fractions as one
+    thread in one chunk (each point's rays do not depend on the chunk it is in)."""
+    from hemicube_radiosity.core.rays import open_fraction
+    x, n, _ = vertex_frames(box)
+    x = np.concatenate([x] * 40)                     # past one chunk of 4,096 points a worker
+    n = np.concatenate([n] * 40)
+    one = open_fraction(box, x, n, embree_scene(box), 0.05)
+    two = open_fraction(box, x, n, embree_scene(box), 0.05, workers=2)
+    assert len(x) > 2 * 4096 and np.array_equal(one, two)
+    assert 0 < one.mean() < 1 and (one == 1).any()

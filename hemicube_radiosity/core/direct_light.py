@@ -454,7 +454,7 @@ def _seen_weight(ctx):
 
     def weight_at(x, n):
         key = cache_key(geometry_key(p) + array_key(x), ("exposure", reach))
-        e = cached(ctx.cache, key, lambda: open_fraction(p, x, n, embree_scene(p), reach))
+        e = cached(ctx.cache, key, lambda: open_fraction(p, x, n, embree_scene(p), reach, workers=s.workers))
         return np.minimum(1.0, e / 0.5)
     return weight_at
 

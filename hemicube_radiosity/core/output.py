@@ -521,7 +521,8 @@ def _open_elements(ctx, elements):
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
-                                                     embree_scene(elements), reach))
+                                                     embree_scene(elements), reach,
+                                                     workers=ctx.settings.workers))
 
     def weights():
         w = (f > 0.05).astype(np.float64)
@@ -606,7 +607,7 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         if k.size:
             x2 = np.concatenate([x[k] + d1[k], x[k] + d2[k]])
             n2 = np.concatenate([mesh.normals[e1[k]], mesh.normals[e2[k]]])
-            f = open_fraction(mesh, x2, n2, scene, reach).reshape(2, -1)
+            f = open_fraction(mesh, x2, n2, scene, reach, workers=ctx.settings.workers).reshape(2, -1)
             out[k] = (f > 0.05).all(axis=0)
         return out
 
@@ -668,7 +669,8 @@ def _seen(ctx, elements, x, nrm):
     millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     key = cache_key(geometry_key(elements) + array_key(x), ("exposure", reach))   # x hashed once per array
-    f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach))
+    f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach,
+                                                     workers=ctx.settings.workers))
     return np.minimum(1.0, f / 0.5)
 
 

@@ -23,6 +23,7 @@ import numpy as np
 
 from .errors import RadiosityError
 from .geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
+from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
 
 __all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "EmbreeUnavailable", "embree_available",
@@ -290,13 +291,16 @@ def _occluding(patches: PatchSet) -> PatchSet:
 
 
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
-             chunk_rays: int = 1 << 20) -> np.ndarray:
+                  chunk_rays: int = 1 << 20, workers: int = 1) -> np.ndarray:
     """(P,) fraction of ``rays`` cosine rays from each point (P, 3) with unit ``normals`` that
     leave it into the open: neither hitting a surface closer than ``reach`` (world units) nor
     the back of one at any distance. A point a few millimetres above a lamp's back, or on a
     floor buried inside a block, has none; a point in the open has all, one in a corner about
     half. ``scene``: :func:`.rays.embree_scene` of ``patches``. One jittered pattern (seeded)
-    for every point, in its normal's frame. Geometry only."""
+    for every point, in its normal's frame. Geometry only. ``workers`` (0 = every core):
+    threads casting a few chunks of points each (Embree lets go of the GIL: the 54k-triangle
+    box's 53,792 centres took 0.23-0.26 s on one thread, 0.14-0.25 s on two); each point's
+    value does not depend on the chunks, so the result is the same for any count."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
@@ -305,7 +309,13 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     eps = 1e-5 * scene.scale
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
-    for s in range(0, len(points), step):
+    workers = resolve_workers(workers)
+    if workers > 1:                  # two chunks a worker, of at least 4,096 points
+        step = max(1, min(step, max(4096, -(-len(points) // (2 * workers)))))
+    if len(points) and (workers > 1 and len(points) > step):
+        scene.intersect(points[:1], normals[:1])      # commit the scene before threads share it
+
+    def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         pid, t = scene.intersect(np.repeat(x + eps * n, R, axis=0), d)
@@ -315,6 +325,8 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
         back[hit] = np.einsum("ij,ij->i", d[hit], patches.normals[pid[hit]]) > 0
         closed = back | (hit & (np.asarray(t) < reach))
         out[s:s + step] = 1.0 - closed.reshape(len(x), R).mean(axis=1)
+    for _ in ordered_map(chunk, range(0, len(points), step), workers if len(points) > step else 1):
+        pass
     return out
 
 
