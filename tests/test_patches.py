@@ -195,3 +195,16 @@ def test_bake_is_scale_invariant_to_1e4_at_decimal_scales():
     # (an F entry moved by 0.002); vertices on a sub-pixel grid and a fill rule decide it the
     # same at every scale (measured 1.5e-8 of max B)
     _assert_same(_bakes((1e-3, 1.0, 1e3)), 1e-4)
+
+
+def test_corners_of_some_patches_are_those_of_all():
+    """``corners(ids)`` is ``corners()[ids]``, triangles repeating their last corner, for a set
+    of quads and triangles, any order and repeats."""
+    from hemicube_radiosity.core.scenes import tessellate
+    p = build_patches(cornell_box() + tessellate(cornell_box(), 2), None)
+    tri = p.polys[:, 3] < 0
+    assert tri.any() and (~tri).any()
+    c = p.corners()
+    assert np.array_equal(c[tri, 3], c[tri, 2]) and np.array_equal(c[~tri, 3], p.verts[p.polys[~tri, 3]])
+    ids = np.array([len(p) - 1, 0, 3, 3, int(np.flatnonzero(tri)[0])])
+    assert np.array_equal(p.corners(ids), c[ids]) and p.corners(np.zeros(0, int)).shape == (0, 4, 3)

@@ -312,7 +312,7 @@ def _face_corners(elements, ids, faces):
     want = elements.owner[ids].astype(np.int64) * (1 << 32) + elements.source_face[ids].astype(np.int64)
     order = np.argsort(key, kind="stable")
     at = order[np.minimum(np.searchsorted(key[order], want), len(order) - 1)]
-    return faces.corners()[at]
+    return faces.corners(at)
 
 
 def _direction_keys(normals) -> np.ndarray:

@@ -241,7 +241,7 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
         return T
     if groups is not None:
         groups = np.asarray(groups, dtype=np.int64)
-    corners = patches.corners()[em]
+    corners = patches.corners(em)
     eps = 1e-5 * (float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0)
     draw = _sample_drawer(patches, em, corners, groups, units, eps)
     work = _Transport(points, normals, corners, patches.normals[em], groups, scene, refine, eps, draw,

@@ -864,7 +864,7 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         # read the other side's light. Those off their patch along it look again, farther (off
         # it across by a hair: a curved mesh's vertex moved in toward its elements lies a
         # thousandth of a face or less under the faces, and is where it belongs)
-        c = ctx.patches.corners()[i1]
+        c = ctx.patches.corners(i1)
         d = _bilinear(c, uv1[:, :1], uv1[:, 1:]) - xv[rest]
         n = ctx.patches.normals[i1]
         across = np.einsum("ij,ij->i", d, n)
