@@ -118,6 +118,30 @@ def test_ordered_map_processes_keep_order_and_inherit_fn():
 
 
 @needs_fork
+def test_started_map_forks_before_it_returns_and_collects_on_another_thread():
+    """:func:`.parallel.started_map`: the workers exist when the call returns (forked on the
+    calling thread), the results come in order to whichever thread reads them, and closing
+    early terminates the workers."""
+    def f(i):
+        return os.getpid(), i * i
+
+    results = parallel.started_map(f, range(40), 2, processes=True)
+    assert len(multiprocessing.active_children()) == 2           # forked already, nothing read yet
+    got = []
+    t = threading.Thread(target=lambda: got.extend(results))
+    t.start()
+    t.join()
+    assert [v for _, v in got] == [i * i for i in range(40)] and os.getpid() not in {p for p, _ in got}
+    assert multiprocessing.active_children() == []
+    results = parallel.started_map(f, range(40), 2, processes=True)
+    next(results)
+    results.close()
+    assert multiprocessing.active_children() == []
+    # threads, or one worker: an ordinary ordered_map
+    assert [v for _, v in parallel.started_map(f, range(5), 1, processes=True)] == [0, 1, 4, 9, 16]
+
+
+@needs_fork
 def test_ordered_map_processes_raise_the_error_at_its_turn():
     seen = []
 

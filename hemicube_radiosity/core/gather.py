@@ -11,14 +11,13 @@ that hit the back of a patch see nothing.
 """
 from __future__ import annotations
 
-import itertools
 from contextlib import closing
 from functools import partial
 
 import numpy as np
 
 from .geometry import in_frames, tangent_frames
-from .parallel import Background, ordered_map, resolve_workers
+from .parallel import Background, ordered_map, resolve_workers, started_map
 from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
@@ -128,11 +127,12 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
-    results = ordered_map(cast, range(0, P, step), workers, processes=forked)
+    starts = range(0, P, step)
+    results = (started_map if background and forked else ordered_map)(cast, starts, workers, processes=forked)
 
-    def collect(stop=None, first=(), tick=ticker):
+    def collect(stop=None, tick=ticker):
         with closing(results):
-            for s, m, sky_s, n, c, w, H in itertools.chain(first, results):
+            for s, m, sky_s, n, c, w, H in results:
                 sky[s:s + m] = sky_s
                 counts[s + 1:s + m + 1] = n
                 found.append(H)
@@ -151,10 +151,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
         return collect()
     if not forked:                   # threads or serial: nothing would be left to overlap
         return Background.ready(collect())
-    # the first chunk on this thread: the workers are forked here, not beside the caller's
-    # code running on; the rest is collected on a thread while the caller goes on
-    first = next(results, None)
-    return Background(partial(collect, first=() if first is None else (first,), tick=None))
+    # the workers were forked on this thread (started_map), not beside the caller's code
+    # running on; their chunks are collected on a thread while the caller goes on
+    return Background(partial(collect, tick=None))
 
 
 def _cast(patches, params, scene, points, normals, local, step, hits, s):

@@ -43,7 +43,7 @@ from concurrent.futures.process import BrokenProcessPool
 
 from .errors import RadiosityError
 
-__all__ = ["resolve_workers", "ordered_map", "cpu_count", "processes_available", "Background", "PROCESSES"]
+__all__ = ["resolve_workers", "ordered_map", "started_map", "cpu_count", "processes_available", "Background", "PROCESSES"]
 
 #: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
 #: for a host where forking misbehaves).
@@ -138,8 +138,22 @@ def _ordered(pool, fn, items, workers, in_flight, *args):
             f.cancel()
 
 
-def _process_map(fn, items, workers, in_flight):
-    """:func:`ordered_map` on ``workers`` forked processes (threads when the fork fails)."""
+def started_map(fn, items, workers=1, *, in_flight=None, processes=False):
+    """:func:`ordered_map`'s results, with its worker processes (if it forks) forked before this
+    returns, on the calling thread: the results can then be collected on another thread
+    (:class:`Background`) without waiting here for the first of them, and no fork happens
+    beside the calling thread's own work."""
+    workers = int(workers or 1)
+    if processes and workers > 1 and not _IN_WORKER and processes_available():
+        results = _process_map(fn, items, workers, in_flight, announce=True)
+        next(results)                        # forks (or falls back to threads) and stops there
+        return results
+    return ordered_map(fn, items, workers, in_flight=in_flight, processes=processes)
+
+
+def _process_map(fn, items, workers, in_flight, announce=False):
+    """:func:`ordered_map` on ``workers`` forked processes (threads when the fork fails);
+    ``announce``: first yield None once the workers are forked (:func:`started_map`)."""
     global _PARENT_PID
     token = next(_TOKENS)
     _TASKS[token] = fn                       # before the fork: the workers inherit it
@@ -153,10 +167,14 @@ def _process_map(fn, items, workers, in_flight):
                 warnings.simplefilter("ignore", DeprecationWarning)
                 pool.submit(_noop).result()  # the first submit forks every worker
         except OSError:                      # no memory or processes left to fork: threads
+            if announce:
+                yield None
             with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="radiosity") as tp:
                 yield from _ordered(tp, fn, items, workers, in_flight)
             done = True
             return
+        if announce:
+            yield None
         try:
             yield from _ordered(pool, _call, items, workers, in_flight, token)
         except BrokenProcessPool as exc:     # a worker was killed (out of memory, a signal)
