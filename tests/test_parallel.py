@@ -20,8 +20,8 @@ from hemicube_radiosity.core.clusters import group_pieces
 from hemicube_radiosity.core.direct import emitter_transport, vertex_frames
 from hemicube_radiosity.core.gather import gather_matrix
 from hemicube_radiosity.core.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.parallel import (cpu_count, ordered_map, processes_available,
-                                               resolve_workers, shares)
+from hemicube_radiosity.core.parallel import (cpu_count, one_blas_thread, ordered_map,
+                                               processes_available, resolve_workers, shares)
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.progress import Cancelled, Ticker
@@ -124,6 +124,39 @@ def test_shares_raise_once_every_started_share_stopped(bad):
         shares(f, 2)
     assert threading.active_count() == before
     assert done == [1 - bad]                                   # the other share ran to its end
+
+
+def test_a_bake_runs_on_one_blas_thread_and_puts_the_count_back(monkeypatch):
+    """OpenBLAS's second thread spins for 0.1 s after each call it takes part in (a relight's
+    luminance products): the stages run with one BLAS thread, overlapping bakes share the
+    setting, and what was set before is back afterwards, also when a stage fails."""
+    from hemicube_radiosity.core import pipeline
+    if not parallel._openblas():
+        pytest.skip("NumPy's BLAS here is not OpenBLAS")
+    set_threads, get_threads = parallel._openblas()[0]
+    before = get_threads()
+    seen = []
+    try:
+        set_threads(2)
+        with one_blas_thread():
+            assert get_threads() == 1
+            with one_blas_thread():                 # a second bake (the CLI's jobs)
+                assert get_threads() == 1
+            assert get_threads() == 1               # the first still runs
+        assert get_threads() == 2
+        monkeypatch.setattr(pipeline, "STAGES", pipeline.STAGES[:1] + (
+            ("spy", lambda ctx: seen.append(get_threads())),))
+        pipeline.bake(scenes.cornell_box(), BakeSettings())
+        assert seen == [1] and get_threads() == 2
+
+        def fails(ctx):
+            raise RuntimeError("a stage failed")
+        monkeypatch.setattr(pipeline, "STAGES", (("fails", fails),))
+        with pytest.raises(RuntimeError):
+            pipeline.bake(scenes.cornell_box(), BakeSettings())
+        assert get_threads() == 2
+    finally:
+        set_threads(before)
 
 
 def test_processes_on_linux_only_where_fork_is():
