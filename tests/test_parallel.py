@@ -21,8 +21,8 @@ from hemicube_radiosity.core.clusters import group_pieces
 from hemicube_radiosity.core.direct import emitter_transport, vertex_frames
 from hemicube_radiosity.core.gather import gather_matrix
 from hemicube_radiosity.core.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.parallel import (cpu_count, ordered_map, processes_available,
-                                               resolve_workers)
+from hemicube_radiosity.core.parallel import (cpu_count, one_blas_thread, ordered_map,
+                                               processes_available, resolve_workers, shares)
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.progress import Cancelled, Ticker
@@ -91,6 +91,73 @@ def test_ordered_map_stops_its_threads_when_the_consumer_stops():
                 raise Cancelled("cancelled")
     assert threading.active_count() == before
     assert len(started) < 20                                   # at most a few batches ahead
+
+
+def test_shares_run_the_first_in_the_caller_and_the_others_on_threads():
+    me = threading.current_thread().name
+    names = {}
+
+    def f(i):
+        names[i] = threading.current_thread().name
+        return i * i
+
+    before = threading.active_count()
+    assert shares(f, 3) == [0, 1, 4]
+    assert names[0] == me and me not in (names[1], names[2])
+    assert threading.active_count() == before                  # nothing outlives the call
+    names.clear()
+    assert shares(f, 1) == [0] and names == {0: me}
+    assert shares(f, 0) == []
+
+
+@pytest.mark.parametrize("bad", [0, 1])
+def test_shares_raise_once_every_started_share_stopped(bad):
+    done = []
+
+    def f(i):
+        if i == bad:
+            raise ValueError(f"share {i}")
+        done.append(i)
+        return i
+
+    before = threading.active_count()
+    with pytest.raises(ValueError, match=f"share {bad}"):
+        shares(f, 2)
+    assert threading.active_count() == before
+    assert done == [1 - bad]                                   # the other share ran to its end
+
+
+def test_a_bake_runs_on_one_blas_thread_and_puts_the_count_back(monkeypatch):
+    """OpenBLAS's second thread spins for 0.1 s after each call it takes part in (a relight's
+    luminance products): the stages run with one BLAS thread, overlapping bakes share the
+    setting, and what was set before is back afterwards, also when a stage fails."""
+    from hemicube_radiosity.core import pipeline
+    if not parallel._openblas():
+        pytest.skip("NumPy's BLAS here is not OpenBLAS")
+    set_threads, get_threads = parallel._openblas()[0]
+    before = get_threads()
+    seen = []
+    try:
+        set_threads(2)
+        with one_blas_thread():
+            assert get_threads() == 1
+            with one_blas_thread():                 # a second bake (the CLI's jobs)
+                assert get_threads() == 1
+            assert get_threads() == 1               # the first still runs
+        assert get_threads() == 2
+        monkeypatch.setattr(pipeline, "STAGES", pipeline.STAGES[:1] + (
+            ("spy", lambda ctx: seen.append(get_threads())),))
+        pipeline.bake(scenes.cornell_box(), BakeSettings())
+        assert seen == [1] and get_threads() == 2
+
+        def fails(ctx):
+            raise RuntimeError("a stage failed")
+        monkeypatch.setattr(pipeline, "STAGES", (("fails", fails),))
+        with pytest.raises(RuntimeError):
+            pipeline.bake(scenes.cornell_box(), BakeSettings())
+        assert get_threads() == 2
+    finally:
+        set_threads(before)
 
 
 def test_processes_on_linux_only_where_fork_is():

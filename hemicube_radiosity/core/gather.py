@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from .geometry import in_frames, tangent_frames
-from .parallel import Background, ordered_map, resolve_workers, started_map
+from .parallel import Background, ordered_map, resolve_workers, shares, started_map
 from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
@@ -259,7 +259,8 @@ def apply_gather(G, sky, vertex_values, world=None, workers=1) -> np.ndarray:
 def product(M, x, workers=1) -> np.ndarray:
     """``M @ x`` for a CSR ``M`` and ``x`` (n,) or (n, k), float64, as :meth:`.sparse.CSR.matvec`
     computes it (bit for bit), faster on large matrices (:func:`_rows_product`); ``workers``
-    threads (0 = every core) take a share of the rows each, at most one per million entries."""
+    (0 = every core) take a share of the rows each, at most one per million entries: the
+    calling thread and ``workers - 1`` threads (:func:`.parallel.shares`)."""
     x = np.asarray(x, dtype=np.float64)
     one = x.ndim == 1
     xt = np.ascontiguousarray((x[:, None] if one else x).T)     # (k, n): contiguous gathers
@@ -267,9 +268,7 @@ def product(M, x, workers=1) -> np.ndarray:
     n = min(resolve_workers(workers), max(1, M.nnz >> 20))
     bounds = M._memo(("product-bounds", n), lambda: [   # the threads' rows, kept on M
         0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]])
-    with closing(ordered_map(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), range(n), n)) as done:
-        for _ in done:
-            pass
+    shares(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), n)   # the caller takes one
     return out[:, 0] if one else out
 
 

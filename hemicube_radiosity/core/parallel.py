@@ -38,12 +38,14 @@ import sys
 import threading
 import warnings
 from collections import deque
+from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
 from .errors import RadiosityError
 
-__all__ = ["resolve_workers", "ordered_map", "started_map", "cpu_count", "processes_available", "Background", "PROCESSES"]
+__all__ = ["resolve_workers", "ordered_map", "started_map", "shares", "one_blas_thread", "cpu_count",
+           "processes_available", "Background", "PROCESSES"]
 
 #: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
 #: for a host where forking misbehaves).
@@ -114,6 +116,35 @@ def ordered_map(fn, items, workers=1, *, in_flight=None, processes=False):
         yield from _ordered(pool, fn, items, workers, in_flight)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def shares(fn, n) -> list:
+    """``[fn(0), ..., fn(n - 1)]`` for work cut into ``n`` shares that take about as long (a
+    sparse product's rows): the calling thread runs ``fn(0)`` itself while ``n - 1`` threads
+    run the others, and it returns when every share is done. Threads only; serial (in order)
+    for ``n`` <= 1 or inside a worker process. An exception in a share is raised once the
+    shares that had started have stopped (those not started are dropped).
+
+    Why not :func:`ordered_map` with ``n`` threads: the caller would only wait, and each share
+    would start on a thread started for it while the first share already runs and takes the
+    GIL between its NumPy calls. The relight's two 3.7M-entry products (the dense Cornell room,
+    bench_relight_dense.py) started their second share 0.3-4.5 ms late, and the same relights
+    took a median 47.2 and 59.1 ms with the caller taking a share against 66.3 and 76.7 ms
+    without (two paired runs of 80 relights, alternating in one process on this shared 2-core
+    machine; the paired ratio 0.75-0.93 in six runs, 1.07 in one), with less spread."""
+    n = int(n)
+    if n <= 1 or _IN_WORKER:
+        return [fn(i) for i in range(n)]
+    pool = ThreadPoolExecutor(max_workers=n - 1, thread_name_prefix="radiosity")
+    rest = []
+    try:
+        rest = [pool.submit(fn, i) for i in range(1, n)]
+        first = fn(0)
+        return [first] + [f.result() for f in rest]
+    finally:
+        for f in rest:
+            f.cancel()
+        pool.shutdown(wait=True)
 
 
 def _ordered(pool, fn, items, workers, in_flight, *args):
@@ -243,23 +274,75 @@ def _one_blas_thread():
     threads only spin beside the rasteriser's small products (3 x V): in the serial bake they
     burn a second core for nothing, and two workers with two BLAS threads each would fight over
     two cores."""
-    try:
-        with open("/proc/self/maps") as f:
-            paths = {line.split()[-1] for line in f if "openblas" in line.lower()}
-    except OSError:
-        return
-    for path in paths:
+    for set_threads, _ in _openblas():
+        set_threads(1)
+
+
+def _openblas() -> list:
+    """(set, get) of the thread count of every OpenBLAS that NumPy loaded (none elsewhere: MKL,
+    Accelerate), looked up once (NumPy loads its BLAS when it is imported, before any bake)."""
+    global _BLAS
+    if _BLAS is None:
+        import numpy  # noqa: F401  (loads its BLAS, if it was not imported yet)
+        found = []
         try:
-            lib = ctypes.CDLL(path)
+            with open("/proc/self/maps") as f:
+                paths = {line.split()[-1] for line in f if "openblas" in line.lower()}
         except OSError:
-            continue
-        for name in ("openblas_set_num_threads64_", "openblas_set_num_threads",
-                     "scipy_openblas_set_num_threads64_", "scipy_openblas_set_num_threads"):
-            fn = getattr(lib, name, None)
-            if fn is not None:
-                fn.argtypes, fn.restype = [ctypes.c_int], None
-                fn(1)
-                break
+            paths = set()
+        for path in sorted(paths):
+            try:
+                lib = ctypes.CDLL(path)
+            except OSError:
+                continue
+            for prefix, suffix in (("openblas", "64_"), ("openblas", ""), ("scipy_openblas", "64_"),
+                                   ("scipy_openblas", "")):
+                set_threads = getattr(lib, f"{prefix}_set_num_threads{suffix}", None)
+                get_threads = getattr(lib, f"{prefix}_get_num_threads{suffix}", None)
+                if set_threads is not None and get_threads is not None:
+                    set_threads.argtypes, set_threads.restype = [ctypes.c_int], None
+                    get_threads.argtypes, get_threads.restype = [], ctypes.c_int
+                    found.append((set_threads, get_threads))
+                    break
+        _BLAS = found
+    return _BLAS
+
+
+_BLAS = None                   # :func:`_openblas`, once looked up
+_BLAS_LOCK = threading.Lock()
+_BLAS_HELD = []                # one entry per bake inside one_blas_thread() now
+_BLAS_BEFORE = []              # (set, thread count) to put back when the last of them ends
+
+
+@contextmanager
+def one_blas_thread():
+    """NumPy's OpenBLAS on one thread while the block runs (a bake), as before afterwards.
+
+    A bake's BLAS calls are tiny: the luminance of a (V, 3) field (``values @ LUMA``), a few per
+    relight. Above 9,216 products OpenBLAS hands half of such a call to its second thread,
+    which then spins (sched_yield) for about 0.1 s waiting for more: through a whole relight of
+    the dense Cornell room (41 ms), beside the two threads of its sparse products on this
+    2-core machine (gdb: OpenBLAS's ``blas_thread_server`` in ``sched_yield``, 67% of a core
+    over 30 relights). The same relights in processes started with OPENBLAS_NUM_THREADS=1:
+    median 38.4 / 40.0 / 46.7 / 42.7 ms against 44.0 / 46.2 / 49.5 / 45.0 ms (alternating
+    processes, 30 relights each), the same arrays bit for bit (each output of those products is
+    summed by one thread either way). Bakes that overlap (the CLI's jobs) share the setting:
+    the first sets it, the last puts back what the first found."""
+    with _BLAS_LOCK:
+        if not _BLAS_HELD:
+            _BLAS_BEFORE[:] = [(set_threads, get_threads()) for set_threads, get_threads in _openblas()]
+            for set_threads, _ in _BLAS_BEFORE:
+                set_threads(1)
+        _BLAS_HELD.append(None)
+    try:
+        yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS_HELD.pop()
+            if not _BLAS_HELD:
+                for set_threads, count in _BLAS_BEFORE:
+                    set_threads(count)
+                _BLAS_BEFORE.clear()
 
 
 def _noop():

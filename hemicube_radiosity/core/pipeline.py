@@ -24,6 +24,7 @@ from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .contact import cut_along_contacts
 from .output import meshes_key, output_elements, vertex_stage
+from .parallel import one_blas_thread
 from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
 from .refine import refine_stage
@@ -417,7 +418,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
                       progress, cancelled, patches=patches, given=patches is not None)
     t0 = time.perf_counter()
-    with small_pages():
+    with small_pages(), one_blas_thread():       # (parallel.one_blas_thread: why)
         ctx.check()
         for name, stage in STAGES:
             ctx.run(name, stage)
