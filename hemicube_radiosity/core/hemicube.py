@@ -473,15 +473,7 @@ def _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R):
     R : int
         Pixels across a face.
     """
-    lo_y, hi_y = _reduce(np.minimum, py), _reduce(np.maximum, py)
-    j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
-    j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
-    rows = j1 - j0 + 1
-    # no pixel-centre column within SNAP of the polygon's x-range: nothing to cover (rounding in
-    # the edge inequalities moves a boundary by far less than SNAP)
-    lo_x, hi_x = _reduce(np.minimum, px), _reduce(np.maximum, px)
-    i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
-    i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
+    j0, rows, i0, i1 = _pixel_range(px, py, face_rows, R)
     bounds, table = _classes(_ROW_CLASSES, R)
     cls = table[np.clip(rows, 0, R)]
     cls[(rows <= 0) | (i1 < i0)] = -1
@@ -513,6 +505,31 @@ def _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R):
         sl = slice(lo, hi)
         _draw_spans(q0[sl], dq[sl], start[sl], ids[sl], n[sl], keys, R)
         lo = hi
+
+
+def _pixel_range(px, py, face_rows, R):
+    """Candidate pixels of polygons: first row j0 (M,) int64, rows (M,) int64 (<= 0: none),
+    first and last column i0, i1 (M,) float32 (i1 < i0: none).
+
+    Rows are those whose centres lie in the polygon's y-range; columns those whose centres lie
+    within ``SNAP`` of its x-range (rounding in the edge inequalities moves a boundary by far
+    less than SNAP), both clamped to the face.
+    """
+    lo_y, hi_y = _reduce(np.minimum, py), _reduce(np.maximum, py)
+    j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
+    j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
+    lo_x, hi_x = _reduce(np.minimum, px), _reduce(np.maximum, px)
+    i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
+    i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
+    return j0, j1 - j0 + 1, i0, i1
+
+
+def _can_cover(px, py, face_rows, R):
+    """(M,) bool: polygons with a candidate pixel (:func:`_pixel_range`); the others are left
+    out by :func:`_rasterise` anyway."""
+    with np.errstate(invalid="ignore"):
+        _, rows, i0, i1 = _pixel_range(px, py, face_rows, R)
+        return (rows > 0) & (i1 >= i0)
 
 
 def _reduce(op, arrays):
@@ -749,11 +766,13 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     bi, ni = np.nonzero(whole)
     vpx, vpy = _vertex_projection(x, y, z, vface, R)
     vpx, vpy = vpx.ravel(), vpy.ravel()
-    seen = _seen(ctx, bi, ni)
-    bi, ni = bi[seen], ni[seen]
     faces = (c0[bi, ni] - 9).astype(np.intp)
     corner = scene.corners_t[:, ni] + bi * V                          # (4, M)
-    _draw(ctx, bi, ni, faces, [vpx[c] for c in corner], [vpy[c] for c in corner])
+    px, py = [vpx[c] for c in corner], [vpy[c] for c in corner]
+    keep = _can_cover(px, py, face_rows[faces], R)
+    keep[keep] = np.abs(dist[bi[keep] * N + ni[keep]]) > scene.near  # and not edge-on (_seen)
+    keep = np.flatnonzero(keep)
+    _draw(ctx, bi[keep], ni[keep], faces[keep], [p[keep] for p in px], [p[keep] for p in py])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
@@ -779,7 +798,9 @@ def _batch_item_buffer(scene, recv, frames, eyes):
         seen = _seen(ctx, bi, ni)
         bi, ni, fi, poly, count = bi[seen], ni[seen], fi[seen], poly[seen], count[seen]
         px, py, m = _fans(*_project(poly, fi, R), count)
-        _draw(ctx, bi[m], ni[m], fi[m], px, py)
+        keep = np.flatnonzero(_can_cover(px, py, face_rows[fi[m]], R))
+        m = m[keep]
+        _draw(ctx, bi[m], ni[m], fi[m], [p[keep] for p in px], [p[keep] for p in py])
     return keys.reshape(B, P)
 
 
