@@ -711,22 +711,85 @@ def _face_uvw(f, x, y, z):
     return x, z, -y
 
 
+def _pair_dist(ctx, bi, ni):
+    """``n . (c - eye)`` (M,) float64 of patches ``ni`` seen from batch receivers ``bi``: < 0
+    when the front is seen, within ``near`` of 0 when the eye is in the patch plane (edge-on).
+    Per pair, the same products and sums as over every pair of the batch (einsum)."""
+    scene, eyes = ctx[0], ctx[3]
+    return scene.plane[ni] - np.einsum("mj,mj->m", scene.normals[ni], eyes[bi])
+
+
 def _seen(ctx, bi, ni):
     """Indices of the (receiver, patch) pairs whose patch plane the eye is not in (edge-on)."""
-    scene, _, _, dist = ctx[:4]
-    return np.flatnonzero(np.abs(dist[bi * scene.n + ni]) > scene.near)
+    return np.flatnonzero(np.abs(_pair_dist(ctx, bi, ni)) > ctx[0].near)
 
 
 def _draw(ctx, bi, ni, faces, px, py):
     """Rasterise polygons (pixel coordinates ``px``, ``py`` on ``faces``) of patches ``ni``
     into the item buffers of batch receivers ``bi``."""
-    scene, keys, nl, dist, face_rows, face_base = ctx
+    scene, keys, fr, _, face_rows, face_base = ctx
     N, R = scene.n, scene.resolution
-    d = dist[bi * N + ni]
-    k = bi * (3 * N) + ni
-    plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
+    d = _pair_dist(ctx, bi, ni)
+    nl = np.einsum("mjk,mk->jm", fr[bi], scene.normals[ni])          # normals in the frames
+    plane = _depth_planes(scene, R, nl, d, faces)
     item = np.where(d < 0, ni, N).astype(np.int32)
     _rasterise(px, py, face_rows[faces], bi * (3 * R * R) + face_base[faces], plane, item, keys, R)
+
+
+# Per-vertex code bits (:func:`_vertex_codes`): face + 1 in bits 0-2, above the horizon in bit 3,
+# then whether no candidate column (row) boundary lies at the vertex, and the pixel cell's
+# column and row + 1 (11 bits each: R <= 1024 keeps them in 0..1024).
+_ABOVE = np.int32(1 << 3)
+_CLEAR_X = np.int32(1 << 4)
+_CLEAR_Y = np.int32(1 << 5)
+_CELL_X = np.int32(0x7FF << 6)
+_CELL_Y = np.int32(0x7FF << 17)
+
+
+def _vertex_codes(vface, z, vpx, vpy):
+    """(B, V) int32 codes of vertices on their own face, for the per-pair tests of
+    :func:`_batch_item_buffer`.
+
+    Face + 1 and "above the horizon" say which patches lie wholly in one face's frustum (equal
+    low bits at every corner). The cell bits say which of those cover no candidate pixel of
+    :func:`_pixel_range` without projecting them: that range's first column is the least of
+    the corners' ``ceil(px - (1/2 + SNAP))``, its last the greatest ``floor(px - (1/2 - SNAP))``
+    (float32 rounding is monotonic, so taking the extreme before or after it is the same), and
+    rows alike with 1/2. A vertex is x-clear when its two column values differ by one (no
+    centre column within SNAP of it); a patch whose corners are all x-clear in the same cell
+    column has its first candidate column past its last: it covers nothing, and neither does
+    one whose corners are all y-clear in the same cell row.
+    """
+    with np.errstate(invalid="ignore"):
+        gx = np.floor(vpx - np.float32(0.5 - SNAP))
+        gy = np.floor(vpy - np.float32(0.5))
+        cx = (np.ceil(vpx - np.float32(0.5 + SNAP)) == gx + 1) & (gx >= -1) & (gx < 0x7FF - 1)
+        cy = (np.ceil(vpy - np.float32(0.5)) == gy + 1) & (gy >= -1) & (gy < 0x7FF - 1)
+    code = (vface + 1).astype(np.int32)
+    code |= (z >= 0).astype(np.int32) << 3
+    code |= cx.astype(np.int32) << 4
+    code |= cy.astype(np.int32) << 5
+    code |= (np.where(cx, gx, -1).astype(np.int32) + 1) << 6
+    code |= (np.where(cy, gy, -1).astype(np.int32) + 1) << 17
+    return code
+
+
+def _corner_tests(code):
+    """Per-pair tests from the corners' :func:`_vertex_codes` ``code`` (B, 4, N) int32.
+
+    Returns (B, N) arrays: ``visible`` (a corner above the horizon), ``whole`` (every corner in
+    one face's frustum, above the horizon), ``empty`` (meaningful where whole: every corner
+    x-clear in one cell column, or y-clear in one cell row, so no candidate pixel) and ``low``
+    (int32, face + 1 + 8 where whole).
+    """
+    c0 = code[:, 0]
+    diff = (c0 ^ code[:, 1]) | (c0 ^ code[:, 2]) | (c0 ^ code[:, 3])
+    visible = ((c0 | code[:, 1] | code[:, 2] | code[:, 3]) & _ABOVE) != 0
+    low = c0 & np.int32(0xF)
+    whole = ((diff & np.int32(0xF)) == 0) & (low >= 9)
+    empty = (((diff & (_CLEAR_X | _CELL_X)) == 0) & ((c0 & _CLEAR_X) != 0)) \
+        | (((diff & (_CLEAR_Y | _CELL_Y)) == 0) & ((c0 & _CLEAR_Y) != 0))
+    return visible, whole, empty, low
 
 
 def _batch_item_buffer(scene, recv, frames, eyes):
@@ -742,41 +805,32 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     local = local.reshape(B, 3, V)
     x, y, z = local[:, 0], local[:, 1], local[:, 2]
     vface = _vertex_faces(x, y, z, scene.near)                       # (B, V)
-    # per corner: face + 1 in the low bits, "above the horizon" in bit 3; four corners as a word
-    code = (vface + 1).astype(np.uint8) | ((z >= 0).astype(np.uint8) << 3)
-    word = np.take(code, scene.corner_ids, axis=1).view(np.uint32).reshape(B, N)
-    c0 = word & np.uint32(0xFF)
-    whole = (word == c0 * np.uint32(0x01010101)) & (c0 >= 9)
-    visible = (word & np.uint32(0x08080808)) != 0
+    vpx, vpy = _vertex_projection(x, y, z, vface, R)
+    visible, whole, empty, low = _corner_tests(
+        np.take(_vertex_codes(vface, z, vpx, vpy), scene.corners_t, axis=1))
     if scene.item_of is None:
         visible[np.arange(B), recv] = False
     else:                                     # a cluster does not see its own pieces
         visible &= scene.item_of[None, :] != recv[:, None]
-    whole &= visible
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
     keys = np.full(B * P, _empty_key(N), dtype=np.int64)
-    # patch normals in the receiver frames and n . (c - eye): < 0 when the front is seen
-    nl = np.einsum("bjk,nk->bjn", fr, scene.normals).reshape(B * 3 * N)
-    dist = (scene.plane - np.einsum("nj,bj->bn", scene.normals, eyes[recv])).ravel()
-
-    ctx = (scene, keys, nl, dist, face_rows, face_base)
+    ctx = (scene, keys, fr, eyes[recv], face_rows, face_base)
 
     # patches wholly inside one face's frustum: their corners' own projections
-    bi, ni = np.nonzero(whole)
-    vpx, vpy = _vertex_projection(x, y, z, vface, R)
+    bi, ni = np.nonzero(whole & visible & ~empty)
     vpx, vpy = vpx.ravel(), vpy.ravel()
-    faces = (c0[bi, ni] - 9).astype(np.intp)
-    corner = scene.corners_t[:, ni] + bi * V                          # (4, M)
+    faces = (low[bi, ni] - 9).astype(np.intp)
+    corner = np.take(scene.corners_t, ni, axis=1) + bi * V            # (4, M)
     px, py = [vpx[c] for c in corner], [vpy[c] for c in corner]
     keep = _can_cover(px, py, face_rows[faces], R)
-    keep[keep] = np.abs(dist[bi[keep] * N + ni[keep]]) > scene.near  # and not edge-on (_seen)
+    keep[keep] = np.abs(_pair_dist(ctx, bi[keep], ni[keep])) > scene.near  # and not edge-on (_seen)
     keep = np.flatnonzero(keep)
     _draw(ctx, bi[keep], ni[keep], faces[keep], [p[keep] for p in px], [p[keep] for p in py])
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
-        corner = scene.corners_t[:, ni] + bi * V
+        corner = np.take(scene.corners_t, ni, axis=1) + bi * V
         xyz = [c.ravel()[corner] for c in (x, y, z)]                 # each (4, S)
         polys, faces, pairs = [], [], []
         for f in range(5):
