@@ -719,17 +719,11 @@ def _pair_dist(ctx, bi, ni):
     return scene.plane[ni] - np.einsum("mj,mj->m", scene.normals[ni], eyes[bi])
 
 
-def _seen(ctx, bi, ni):
-    """Indices of the (receiver, patch) pairs whose patch plane the eye is not in (edge-on)."""
-    return np.flatnonzero(np.abs(_pair_dist(ctx, bi, ni)) > ctx[0].near)
-
-
-def _draw(ctx, bi, ni, faces, px, py):
+def _draw(ctx, bi, ni, d, faces, px, py):
     """Rasterise polygons (pixel coordinates ``px``, ``py`` on ``faces``) of patches ``ni``
-    into the item buffers of batch receivers ``bi``."""
+    into the item buffers of batch receivers ``bi``; ``d`` is their :func:`_pair_dist`."""
     scene, keys, fr, _, face_rows, face_base = ctx
     N, R = scene.n, scene.resolution
-    d = _pair_dist(ctx, bi, ni)
     nl = np.einsum("mjk,mk->jm", fr[bi], scene.normals[ni])          # normals in the frames
     plane = _depth_planes(scene, R, nl, d, faces)
     item = np.where(d < 0, ni, N).astype(np.int32)
@@ -823,10 +817,12 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     faces = (low[bi, ni] - 9).astype(np.intp)
     corner = np.take(scene.corners_t, ni, axis=1) + bi * V            # (4, M)
     px, py = [vpx[c] for c in corner], [vpy[c] for c in corner]
-    keep = _can_cover(px, py, face_rows[faces], R)
-    keep[keep] = np.abs(_pair_dist(ctx, bi[keep], ni[keep])) > scene.near  # and not edge-on (_seen)
-    keep = np.flatnonzero(keep)
-    _draw(ctx, bi[keep], ni[keep], faces[keep], [p[keep] for p in px], [p[keep] for p in py])
+    keep = np.flatnonzero(_can_cover(px, py, face_rows[faces], R))
+    d = _pair_dist(ctx, bi[keep], ni[keep])
+    seen = np.abs(d) > scene.near                                     # not edge-on
+    keep = keep[seen]
+    # drawn in one pass with the clipped ones below (fewer, larger rasteriser calls)
+    todo = [(bi[keep], ni[keep], d[seen], faces[keep], [p[keep] for p in px], [p[keep] for p in py])]
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
@@ -849,12 +845,20 @@ def _batch_item_buffer(scene, recv, frames, eyes):
         si = np.concatenate(pairs)
         poly, count, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
         bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
-        seen = _seen(ctx, bi, ni)
-        bi, ni, fi, poly, count = bi[seen], ni[seen], fi[seen], poly[seen], count[seen]
+        d = _pair_dist(ctx, bi, ni)
+        seen = np.flatnonzero(np.abs(d) > scene.near)                # not edge-on
+        bi, ni, d, fi, poly, count = bi[seen], ni[seen], d[seen], fi[seen], poly[seen], count[seen]
         px, py, m = _fans(*_project(poly, fi, R), count)
         keep = np.flatnonzero(_can_cover(px, py, face_rows[fi[m]], R))
         m = m[keep]
-        _draw(ctx, bi[m], ni[m], fi[m], [p[keep] for p in px], [p[keep] for p in py])
+        # fan triangles as quads repeating their last corner (as triangle patches are): a
+        # zero-length edge excludes nothing and adds 0 to the area, so they cover as before
+        px, py = [p[keep] for p in px], [p[keep] for p in py]
+        todo.append((bi[m], ni[m], d[m], fi[m], px + px[2:], py + py[2:]))
+    bi, ni, d, faces = (np.concatenate([t[k] for t in todo]) for k in range(4))
+    px = [np.concatenate(c) for c in zip(*(t[4] for t in todo))]
+    py = [np.concatenate(c) for c in zip(*(t[5] for t in todo))]
+    _draw(ctx, bi, ni, d, faces, px, py)
     return keys.reshape(B, P)
 
 
