@@ -87,11 +87,17 @@ SAMPLE_Y = 79 / SUBPIXEL
 DRAW_OUTLINES = True
 #: Bound on the fragments expanded at once in the rasteriser (about 40 bytes each).
 FRAGMENTS_PER_CHUNK = 1 << 21
-#: Bound on receivers x patches transformed per batch (about 100 bytes each).  Batches this
-#: small keep the per-pair arrays near the CPU caches: larger ones measured slower.
-PATCHES_PER_BATCH = 1 << 17
-#: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys).
-PIXELS_PER_BATCH = 1 << 20
+#: Bound on receivers x patches transformed per batch (about 85 bytes each: 1<<20 pairs peaked
+#: 85 MB above 2^17's on Suzanne level 3).  Only a few passes run over every pair (the culled
+#: ones are never listed), so what a small batch saves in cache it loses in per-call overhead
+#: of the rasteriser's row and span classes: on Suzanne level 3 (32.6k pieces, 1 worker) 4
+#: receivers a batch took 9.4 s of CPU, 8 7.6 s, 16 6.8-7.1 s, 32 7.1-7.4 s; level 2 (9k pieces)
+#: 14 receivers 3.0-3.3 s, 32 2.7-2.9 s, 58 2.7 s. Workers halve the batch.
+PATCHES_PER_BATCH = 1 << 20
+#: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys): 85 receivers at
+#: R = 32. The Cornell box tessellated 16 (1,059 drawn polygons, bound by this) took 0.34-0.36 s
+#: at 64 receivers a batch, 0.39-0.40 s at 131 and 0.42 s at 341 (2^20 pixels).
+PIXELS_PER_BATCH = 1 << 18
 
 # Face f maps receiver-frame (x, y, z) to face coordinates (u, v, w) = _FACE_AXES[f] @ (x, y, z):
 # u runs along the face (table column), v up the face (table row), w is the depth along the
