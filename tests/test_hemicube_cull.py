@@ -80,12 +80,16 @@ def test_a_polygon_culled_by_its_corners_cells_has_no_candidate_pixel(R):
         py[c][on] = py[0][on]
     px.append(px[2])                                                  # triangles: corner 3 = 2
     py.append(py[2])
+    # corners inside their face, as every corner of a pair wholly in one face is
+    # (_vertex_projection): px in [-SAMPLE_X, R - SAMPLE_X], py up to the face's rows
+    rows = np.array([R, R // 2, R // 2, R // 2, R // 2])[face]
+    px = [np.clip(p, np.float32(-H.SAMPLE_X), np.float32(R - H.SAMPLE_X)) for p in px]
+    py = [np.clip(p, np.float32(-H.SAMPLE_Y), (rows - H.SAMPLE_Y).astype(np.float32)) for p in py]
     vface = np.repeat(face[None, :], 4, axis=0).reshape(1, -1).astype(np.int8)   # (1, 4M)
     code = H._vertex_codes(vface, np.ones(vface.shape, np.float32),
                            np.concatenate(px)[None, :], np.concatenate(py)[None, :])
     _, whole, empty, low = H._corner_tests(code.reshape(1, 4, M))
     assert whole.all() and np.array_equal(low[0], face + 9)
-    rows = np.array([R, R // 2, R // 2, R // 2, R // 2])[face]
     can = H._can_cover(px, py, rows, R)
     assert not (empty[0] & can).any()
     # exercised: most polygons without a candidate are culled by their cells (measured 68% at

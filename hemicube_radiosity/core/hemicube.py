@@ -228,14 +228,22 @@ class _Scene:
 
 
 def _vertex_faces(x, y, z, near):
-    """Face (0..4) whose frustum holds each vertex; -1 below the horizon or at the eye."""
-    ax, ay = np.abs(x), np.abs(y)
-    side = np.where(ax >= ay, np.where(x >= 0, 1, 2), np.where(y >= 0, 3, 4)).astype(np.int8)
-    m = np.maximum(ax, ay)
-    face = np.where(z >= m, np.int8(0), side)
-    face[(z < 0) | (np.maximum(z, m) < near)] = -1
-    return face
+    """Face (0..4) whose frustum holds each vertex, -1 below the horizon or at the eye, (B, V)
+    int8; and ``max(|x|, |y|)`` (B, V) float32, a side face's depth ``w`` (:func:`_face_uvw`:
+    the coordinate along its axis, which is that maximum on the face it holds).
 
+    In int8 and in place: side 1, 2, 3, 4 (+x, -x, +y, -y) is 2 - [on the positive side] + 2
+    [not x-major]; the (B, V) passes cost as much as the projection.
+    """
+    ax, ay = np.abs(x), np.abs(y)
+    xs = ax >= ay
+    m = np.maximum(ax, ay)
+    face = np.where(xs, x >= 0, y >= 0).view(np.int8)
+    np.subtract(np.int8(2), face, out=face)
+    face += (~xs).view(np.int8) << 1
+    face[z >= m] = 0
+    face[(z < 0) | (np.maximum(z, m) < near)] = -1
+    return face, m
 
 def _plane_distance(u, v, w, v0, p, near):
     """Signed distance of points in face coordinates to clip plane ``p`` of their face; inside
@@ -685,24 +693,30 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
         lo = hi
 
 
-def _vertex_projection(x, y, z, face, R):
-    """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`).
+def _vertex_projection(x, y, z, face, m, R):
+    """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`,
+    which gives ``m``, the depth on a side face).
 
-    The same float32 operations as :func:`_project` on the vertex's :func:`_face_uvw`, so a
-    patch wholly inside one face gets bit-identical corners either way.  Vertices with
-    face -1 get meaningless values.
+    The same float32 values as :func:`_project` on the vertex's :func:`_face_uvw`, so a patch
+    wholly inside one face gets bit-identical corners either way: ``w`` is ``m`` on a side face
+    (the same value as +-x or +-y there), and ``v / w - v0`` is ``v / w + 1`` on top and
+    ``v / w`` on a side (``v0`` of :data:`_FACE_V0`). Vertices with face -1 get meaningless
+    values. A vertex inside its face's frustum has ``|u| <= w`` and ``0 <= v <= w`` on a side,
+    so px lies in [-SAMPLE_X, R - SAMPLE_X], py in [-SAMPLE_Y, R - SAMPLE_Y] (R / 2 on a side).
     """
     half = np.float32(R / 2)
     top = face == 0
     u = np.where((face == 1) | (face == 2), y, x)
     v = np.where(top, y, z)
-    w = np.where(top, z, np.where(face <= 2, x, y))
-    w = np.where((face == 2) | (face == 4), -w, w)
+    w = np.where(top, z, m)
     with np.errstate(divide="ignore", invalid="ignore"):
-        px = (u / w + 1) * half
-        py = (v / w - _FACE_V0[face]) * half
+        px = u / w
+        px += np.float32(1)
+        px *= half
+        py = v / w
+        np.add(py, np.float32(1), out=py, where=top)
+        py *= half
     return _subpixel(px) - np.float32(SAMPLE_X), _subpixel(py) - np.float32(SAMPLE_Y)
-
 
 def _face_uvw(f, x, y, z):
     """Face coordinates (u, v, w) on face ``f`` of receiver-frame coordinates (:data:`_FACE_AXES`)."""
@@ -738,17 +752,17 @@ def _draw(ctx, bi, ni, d, faces, px, py):
 
 # Per-vertex code bits (:func:`_vertex_codes`): face + 1 in bits 0-2, above the horizon in bit 3,
 # then whether no candidate column (row) boundary lies at the vertex, and the pixel cell's
-# column and row + 1 (11 bits each: R <= 1024 keeps them in 0..1024).
+# column and row + 1 (12 bits each: 0..R for R <= 2048, the settings' maximum).
 _ABOVE = np.int32(1 << 3)
 _CLEAR_X = np.int32(1 << 4)
 _CLEAR_Y = np.int32(1 << 5)
-_CELL_X = np.int32(0x7FF << 6)
-_CELL_Y = np.int32(0x7FF << 17)
+_CELL_X = np.int32(0xFFF << 6)
+_CELL_Y = np.int32(0xFFF << 18)
 
 
 def _vertex_codes(vface, z, vpx, vpy):
     """(B, V) int32 codes of vertices on their own face, for the per-pair tests of
-    :func:`_batch_item_buffer`.
+    :func:`_corner_tests`.
 
     Face + 1 and "above the horizon" say which patches lie wholly in one face's frustum (equal
     low bits at every corner). The cell bits say which of those cover no candidate pixel of
@@ -758,21 +772,30 @@ def _vertex_codes(vface, z, vpx, vpy):
     rows alike with 1/2. A vertex is x-clear when its two column values differ by one (no
     centre column within SNAP of it); a patch whose corners are all x-clear in the same cell
     column has its first candidate column past its last: it covers nothing, and neither does
-    one whose corners are all y-clear in the same cell row.
+    one whose corners are all y-clear in the same cell row. The cell is ``floor(px - (1/2 -
+    SNAP))``, in [-1, R - 1] for a vertex in its face (:func:`_vertex_projection`), so cell + 1
+    fills its 12 bits exactly; a vertex with face -1 may write anything above bit 5 (its pairs
+    are never whole).
     """
     with np.errstate(invalid="ignore"):
         gx = np.floor(vpx - np.float32(0.5 - SNAP))
+        cx = np.ceil(vpx - np.float32(0.5 + SNAP))
+        cx -= gx
         gy = np.floor(vpy - np.float32(0.5))
-        cx = (np.ceil(vpx - np.float32(0.5 + SNAP)) == gx + 1) & (gx >= -1) & (gx < 0x7FF - 1)
-        cy = (np.ceil(vpy - np.float32(0.5)) == gy + 1) & (gy >= -1) & (gy < 0x7FF - 1)
-    code = (vface + 1).astype(np.int32)
-    code |= (z >= 0).astype(np.int32) << 3
-    code |= cx.astype(np.int32) << 4
-    code |= cy.astype(np.int32) << 5
-    code |= (np.where(cx, gx, -1).astype(np.int32) + 1) << 6
-    code |= (np.where(cy, gy, -1).astype(np.int32) + 1) << 17
+        cy = np.ceil(vpy - np.float32(0.5))
+        cy -= gy
+        gx += np.float32(1)
+        gy += np.float32(1)
+        code = gx.astype(np.int32)
+        code <<= 6
+        cell_y = gy.astype(np.int32)
+    cell_y <<= 18
+    code |= cell_y
+    code |= np.where(cx == 1, _CLEAR_X, np.int32(0))
+    code |= np.where(cy == 1, _CLEAR_Y, np.int32(0))
+    code |= (vface + 1).astype(np.int32)
+    code |= np.where(z >= 0, _ABOVE, np.int32(0))
     return code
-
 
 def _corner_tests(code):
     """Per-pair tests from the corners' :func:`_vertex_codes` ``code`` (B, 4, N) int32.
@@ -804,8 +827,8 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     local -= np.einsum("bij,bj->bi", fr, eyes[recv]).reshape(B * 3, 1).astype(np.float32)
     local = local.reshape(B, 3, V)
     x, y, z = local[:, 0], local[:, 1], local[:, 2]
-    vface = _vertex_faces(x, y, z, scene.near)                       # (B, V)
-    vpx, vpy = _vertex_projection(x, y, z, vface, R)
+    vface, m = _vertex_faces(x, y, z, scene.near)                    # (B, V)
+    vpx, vpy = _vertex_projection(x, y, z, vface, m, R)
     visible, whole, empty, low = _corner_tests(
         np.take(_vertex_codes(vface, z, vpx, vpy), scene.corners_t, axis=1))
     if scene.item_of is None:
