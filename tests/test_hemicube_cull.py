@@ -123,3 +123,30 @@ def test_culling_keeps_the_item_buffers_of_drawing_every_piece(monkeypatch):
     assert np.array_equal(new, old)
     c, w = np.sum(culled, axis=0)
     assert c > 0.5 * w                                                # measured 0.76
+
+
+@pytest.mark.parametrize("R", [8, 32, 64])
+def test_pieces_across_faces_culled_before_clipping_keep_the_item_buffers(monkeypatch, R):
+    """Pieces crossing a face's frustum whose corners' projections (widened by CLIP_MARGIN)
+    hold no candidate pixel are left out before clipping: the same item buffers as clipping
+    and testing every one, on the sphere of tiny faces (many straddle the faces' borders)."""
+    pieces, clusters = _grouped(scenes.cornell_box() + [sphere(40)])
+    scene = H._Scene(pieces, R, clusters)
+    frames = H.receiver_frames(clusters.normals, rotate_seed=5)
+    recv = np.arange(0, len(clusters), max(1, len(clusters) // 40))
+    hits = []
+    test = H._hull_misses_centres
+
+    def counting(u, v, w, f, R_):
+        out = test(u, v, w, f, R_)
+        hits.append((int(out.sum()), out.size))
+        return out
+
+    monkeypatch.setattr(H, "_hull_misses_centres", counting)
+    new = H._batch_item_buffer(scene, recv, frames, scene.eyes)
+    monkeypatch.setattr(H, "CLIP_CULL", False)
+    old = H._batch_item_buffer(scene, recv, frames, scene.eyes)
+    assert np.array_equal(new, old)
+    culled, tested = np.sum(hits, axis=0)
+    # exercised: of the (piece, face) pairs looked at, measured 35% at R = 8, 24% at 32, 19% at 64
+    assert culled > 0.15 * tested
