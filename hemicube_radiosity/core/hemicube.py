@@ -7,11 +7,22 @@ receiver frame (normal = +Z) once per receiver, each is assigned the face whose 
 holds it and projected onto that face; a patch is then classified from its corners' faces
 (packed into one 32-bit word per patch):
 
-* a patch whose corners all fall in one face's frustum takes its corners' projections directly;
+* a patch whose corners all fall in one face's frustum takes its corners' projections directly,
+  unless its corners all lie in one pixel cell column or row (the word holds each corner's
+  cell, :func:`_vertex_codes`): then it covers no pixel centre and is culled before it is
+  listed (on Suzanne with a level-3 Subdivision Surface, 32.6k pieces, about 90% of the pieces
+  a hemi-cube holds are too small to cover a centre; culled on the per-pair words rather
+  than after projecting and setting up each, and with the larger batches that allows, the
+  form-factor stage went from 26 s to about 5 s on one core);
 * a patch wholly below the horizon is culled;
 * the others are clipped (Sutherland-Hodgman, vectorised over polygons) against the frustum of
   every face they may touch (the near plane and the horizon included), each polygon only by
-  the planes it crosses, and the clipped polygons are rasterised as triangle fans.
+  the planes it crosses, and the clipped polygons are rasterised as triangle fans; a polygon
+  whose corners' projections on a face hold no candidate pixel is left out of that face
+  before clipping (:func:`_hull_misses_centres`).
+
+Every cull takes only polygons the rasteriser's own candidate range (:func:`_pixel_range`)
+rejects, so the item buffers are those of drawing everything.
 
 The projected convex polygons are rasterised as pixel spans: per polygon and pixel row, the
 edge functions bound the run of pixel centres inside.  Polygons are grouped by height and their
