@@ -7,11 +7,22 @@ receiver frame (normal = +Z) once per receiver, each is assigned the face whose 
 holds it and projected onto that face; a patch is then classified from its corners' faces
 (packed into one 32-bit word per patch):
 
-* a patch whose corners all fall in one face's frustum takes its corners' projections directly;
+* a patch whose corners all fall in one face's frustum takes its corners' projections directly,
+  unless its corners all lie in one pixel cell column or row (the word holds each corner's
+  cell, :func:`_vertex_codes`): then it covers no pixel centre and is culled before it is
+  listed (on Suzanne with a level-3 Subdivision Surface, 32.6k pieces, about 90% of the pieces
+  a hemi-cube holds are too small to cover a centre; culled on the per-pair words rather
+  than after projecting and setting up each, and with the larger batches that allows, the
+  form-factor stage went from 26 s to about 5 s on one core);
 * a patch wholly below the horizon is culled;
 * the others are clipped (Sutherland-Hodgman, vectorised over polygons) against the frustum of
   every face they may touch (the near plane and the horizon included), each polygon only by
-  the planes it crosses, and the clipped polygons are rasterised as triangle fans.
+  the planes it crosses, and the clipped polygons are rasterised as triangle fans; a polygon
+  whose corners' projections on a face hold no candidate pixel is left out of that face
+  before clipping (:func:`_hull_misses_centres`).
+
+Every cull takes only polygons the rasteriser's own candidate range (:func:`_pixel_range`)
+rejects, so the item buffers are those of drawing everything.
 
 The projected convex polygons are rasterised as pixel spans: per polygon and pixel row, the
 edge functions bound the run of pixel centres inside.  Polygons are grouped by height and their
@@ -85,13 +96,25 @@ SAMPLE_Y = 79 / SUBPIXEL
 #: Draw a planar cluster of pieces as its outline (:mod:`drawn`): the same pixels, drawn at a
 #: cost that follows the clusters, not the modelling. False draws every piece (for comparison).
 DRAW_OUTLINES = True
+#: Leave out pieces crossing a face's frustum whose corners' projections, widened by
+#: CLIP_MARGIN pixels, hold no candidate pixel (:func:`_hull_misses_centres`), before clipping.
+CLIP_CULL = True
+CLIP_MARGIN = 1.0 / 64
+CLIP_SLOPE = 8.0
+CLIP_DEPTH_RATIO = 4.0
 #: Bound on the fragments expanded at once in the rasteriser (about 40 bytes each).
 FRAGMENTS_PER_CHUNK = 1 << 21
-#: Bound on receivers x patches transformed per batch (about 100 bytes each).  Batches this
-#: small keep the per-pair arrays near the CPU caches: larger ones measured slower.
-PATCHES_PER_BATCH = 1 << 17
-#: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys).
-PIXELS_PER_BATCH = 1 << 20
+#: Bound on receivers x patches transformed per batch (about 85 bytes each: 1<<20 pairs peaked
+#: 85 MB above 2^17's on Suzanne level 3).  Only a few passes run over every pair (the culled
+#: ones are never listed), so what a small batch saves in cache it loses in per-call overhead
+#: of the rasteriser's row and span classes: on Suzanne level 3 (32.6k pieces, 1 worker) 4
+#: receivers a batch took 9.4 s of CPU, 8 7.6 s, 16 6.8-7.1 s, 32 7.1-7.4 s; level 2 (9k pieces)
+#: 14 receivers 3.0-3.3 s, 32 2.7-2.9 s, 58 2.7 s. Workers halve the batch.
+PATCHES_PER_BATCH = 1 << 20
+#: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys): 85 receivers at
+#: R = 32. The Cornell box tessellated 16 (1,059 drawn polygons, bound by this) took 0.34-0.36 s
+#: at 64 receivers a batch, 0.39-0.40 s at 131 and 0.42 s at 341 (2^20 pixels).
+PIXELS_PER_BATCH = 1 << 18
 
 # Face f maps receiver-frame (x, y, z) to face coordinates (u, v, w) = _FACE_AXES[f] @ (x, y, z):
 # u runs along the face (table column), v up the face (table row), w is the depth along the
@@ -222,14 +245,22 @@ class _Scene:
 
 
 def _vertex_faces(x, y, z, near):
-    """Face (0..4) whose frustum holds each vertex; -1 below the horizon or at the eye."""
-    ax, ay = np.abs(x), np.abs(y)
-    side = np.where(ax >= ay, np.where(x >= 0, 1, 2), np.where(y >= 0, 3, 4)).astype(np.int8)
-    m = np.maximum(ax, ay)
-    face = np.where(z >= m, np.int8(0), side)
-    face[(z < 0) | (np.maximum(z, m) < near)] = -1
-    return face
+    """Face (0..4) whose frustum holds each vertex, -1 below the horizon or at the eye, (B, V)
+    int8; and ``max(|x|, |y|)`` (B, V) float32, a side face's depth ``w`` (:func:`_face_uvw`:
+    the coordinate along its axis, which is that maximum on the face it holds).
 
+    In int8 and in place: side 1, 2, 3, 4 (+x, -x, +y, -y) is 2 - [on the positive side] + 2
+    [not x-major]; the (B, V) passes cost as much as the projection.
+    """
+    ax, ay = np.abs(x), np.abs(y)
+    xs = ax >= ay
+    m = np.maximum(ax, ay)
+    face = np.where(xs, x >= 0, y >= 0).view(np.int8)
+    np.subtract(np.int8(2), face, out=face)
+    face += (~xs).view(np.int8) << 1
+    face[z >= m] = 0
+    face[(z < 0) | (np.maximum(z, m) < near)] = -1
+    return face, m
 
 def _plane_distance(u, v, w, v0, p, near):
     """Signed distance of points in face coordinates to clip plane ``p`` of their face; inside
@@ -473,15 +504,7 @@ def _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R):
     R : int
         Pixels across a face.
     """
-    lo_y, hi_y = _reduce(np.minimum, py), _reduce(np.maximum, py)
-    j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
-    j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
-    rows = j1 - j0 + 1
-    # no pixel-centre column within SNAP of the polygon's x-range: nothing to cover (rounding in
-    # the edge inequalities moves a boundary by far less than SNAP)
-    lo_x, hi_x = _reduce(np.minimum, px), _reduce(np.maximum, px)
-    i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
-    i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
+    j0, rows, i0, i1 = _pixel_range(px, py, face_rows, R)
     bounds, table = _classes(_ROW_CLASSES, R)
     cls = table[np.clip(rows, 0, R)]
     cls[(rows <= 0) | (i1 < i0)] = -1
@@ -513,6 +536,31 @@ def _rasterise_quiet(px, py, face_rows, pixel_base, depth, item, keys, R):
         sl = slice(lo, hi)
         _draw_spans(q0[sl], dq[sl], start[sl], ids[sl], n[sl], keys, R)
         lo = hi
+
+
+def _pixel_range(px, py, face_rows, R):
+    """Candidate pixels of polygons: first row j0 (M,) int64, rows (M,) int64 (<= 0: none),
+    first and last column i0, i1 (M,) float32 (i1 < i0: none).
+
+    Rows are those whose centres lie in the polygon's y-range; columns those whose centres lie
+    within ``SNAP`` of its x-range (rounding in the edge inequalities moves a boundary by far
+    less than SNAP), both clamped to the face.
+    """
+    lo_y, hi_y = _reduce(np.minimum, py), _reduce(np.maximum, py)
+    j0 = np.maximum(np.ceil(lo_y - np.float32(0.5)), 0).astype(np.int64)
+    j1 = np.minimum(np.floor(hi_y - np.float32(0.5)), face_rows - 1).astype(np.int64)
+    lo_x, hi_x = _reduce(np.minimum, px), _reduce(np.maximum, px)
+    i0 = np.maximum(np.ceil(lo_x - np.float32(0.5 + SNAP)), 0)
+    i1 = np.minimum(np.floor(hi_x - np.float32(0.5 - SNAP)), R - 1)
+    return j0, j1 - j0 + 1, i0, i1
+
+
+def _can_cover(px, py, face_rows, R):
+    """(M,) bool: polygons with a candidate pixel (:func:`_pixel_range`); the others are left
+    out by :func:`_rasterise` anyway."""
+    with np.errstate(invalid="ignore"):
+        _, rows, i0, i1 = _pixel_range(px, py, face_rows, R)
+        return (rows > 0) & (i1 >= i0)
 
 
 def _reduce(op, arrays):
@@ -662,24 +710,30 @@ def _draw_spans(q0, dq, start, ids, n, keys, R):
         lo = hi
 
 
-def _vertex_projection(x, y, z, face, R):
-    """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`).
+def _vertex_projection(x, y, z, face, m, R):
+    """Pixel coordinates (px, py) of vertices on their own face (see :func:`_vertex_faces`,
+    which gives ``m``, the depth on a side face).
 
-    The same float32 operations as :func:`_project` on the vertex's :func:`_face_uvw`, so a
-    patch wholly inside one face gets bit-identical corners either way.  Vertices with
-    face -1 get meaningless values.
+    The same float32 values as :func:`_project` on the vertex's :func:`_face_uvw`, so a patch
+    wholly inside one face gets bit-identical corners either way: ``w`` is ``m`` on a side face
+    (the same value as +-x or +-y there), and ``v / w - v0`` is ``v / w + 1`` on top and
+    ``v / w`` on a side (``v0`` of :data:`_FACE_V0`). Vertices with face -1 get meaningless
+    values. A vertex inside its face's frustum has ``|u| <= w`` and ``0 <= v <= w`` on a side,
+    so px lies in [-SAMPLE_X, R - SAMPLE_X], py in [-SAMPLE_Y, R - SAMPLE_Y] (R / 2 on a side).
     """
     half = np.float32(R / 2)
     top = face == 0
     u = np.where((face == 1) | (face == 2), y, x)
     v = np.where(top, y, z)
-    w = np.where(top, z, np.where(face <= 2, x, y))
-    w = np.where((face == 2) | (face == 4), -w, w)
+    w = np.where(top, z, m)
     with np.errstate(divide="ignore", invalid="ignore"):
-        px = (u / w + 1) * half
-        py = (v / w - _FACE_V0[face]) * half
+        px = u / w
+        px += np.float32(1)
+        px *= half
+        py = v / w
+        np.add(py, np.float32(1), out=py, where=top)
+        py *= half
     return _subpixel(px) - np.float32(SAMPLE_X), _subpixel(py) - np.float32(SAMPLE_Y)
-
 
 def _face_uvw(f, x, y, z):
     """Face coordinates (u, v, w) on face ``f`` of receiver-frame coordinates (:data:`_FACE_AXES`)."""
@@ -694,22 +748,122 @@ def _face_uvw(f, x, y, z):
     return x, z, -y
 
 
-def _seen(ctx, bi, ni):
-    """Indices of the (receiver, patch) pairs whose patch plane the eye is not in (edge-on)."""
-    scene, _, _, dist = ctx[:4]
-    return np.flatnonzero(np.abs(dist[bi * scene.n + ni]) > scene.near)
+def _pair_dist(ctx, bi, ni):
+    """``n . (c - eye)`` (M,) float64 of patches ``ni`` seen from batch receivers ``bi``: < 0
+    when the front is seen, within ``near`` of 0 when the eye is in the patch plane (edge-on).
+    Per pair, the same products and sums as over every pair of the batch (einsum)."""
+    scene, eyes = ctx[0], ctx[3]
+    return scene.plane[ni] - np.einsum("mj,mj->m", scene.normals[ni], eyes[bi])
 
 
-def _draw(ctx, bi, ni, faces, px, py):
+def _draw(ctx, bi, ni, d, faces, px, py):
     """Rasterise polygons (pixel coordinates ``px``, ``py`` on ``faces``) of patches ``ni``
-    into the item buffers of batch receivers ``bi``."""
-    scene, keys, nl, dist, face_rows, face_base = ctx
+    into the item buffers of batch receivers ``bi``; ``d`` is their :func:`_pair_dist`."""
+    scene, keys, fr, _, face_rows, face_base = ctx
     N, R = scene.n, scene.resolution
-    d = dist[bi * N + ni]
-    k = bi * (3 * N) + ni
-    plane = _depth_planes(scene, R, (nl[k], nl[k + N], nl[k + 2 * N]), d, faces)
+    nl = np.einsum("mjk,mk->jm", fr[bi], scene.normals[ni])          # normals in the frames
+    plane = _depth_planes(scene, R, nl, d, faces)
     item = np.where(d < 0, ni, N).astype(np.int32)
     _rasterise(px, py, face_rows[faces], bi * (3 * R * R) + face_base[faces], plane, item, keys, R)
+
+
+# Per-vertex code bits (:func:`_vertex_codes`): face + 1 in bits 0-2, above the horizon in bit 3,
+# then whether no candidate column (row) boundary lies at the vertex, and the pixel cell's
+# column and row + 1 (12 bits each: 0..R for R <= 2048, the settings' maximum; a larger R
+# is drawn without the cull by cell).
+_ABOVE = np.int32(1 << 3)
+_CLEAR_X = np.int32(1 << 4)
+_CLEAR_Y = np.int32(1 << 5)
+_CELL_X = np.int32(0xFFF << 6)
+_CELL_Y = np.int32(0xFFF << 18)
+
+
+def _vertex_codes(vface, z, vpx, vpy):
+    """(B, V) int32 codes of vertices on their own face, for the per-pair tests of
+    :func:`_corner_tests`.
+
+    Face + 1 and "above the horizon" say which patches lie wholly in one face's frustum (equal
+    low bits at every corner). The cell bits say which of those cover no candidate pixel of
+    :func:`_pixel_range` without projecting them: that range's first column is the least of
+    the corners' ``ceil(px - (1/2 + SNAP))``, its last the greatest ``floor(px - (1/2 - SNAP))``
+    (float32 rounding is monotonic, so taking the extreme before or after it is the same), and
+    rows alike with 1/2. A vertex is x-clear when its two column values differ by one (no
+    centre column within SNAP of it); a patch whose corners are all x-clear in the same cell
+    column has its first candidate column past its last: it covers nothing, and neither does
+    one whose corners are all y-clear in the same cell row. The cell is ``floor(px - (1/2 -
+    SNAP))``, in [-1, R - 1] for a vertex in its face (:func:`_vertex_projection`), so cell + 1
+    fills its 12 bits exactly; a vertex with face -1 may write anything above bit 5 (its pairs
+    are never whole).
+    """
+    with np.errstate(invalid="ignore"):
+        gx = np.floor(vpx - np.float32(0.5 - SNAP))
+        cx = np.ceil(vpx - np.float32(0.5 + SNAP))
+        cx -= gx
+        gy = np.floor(vpy - np.float32(0.5))
+        cy = np.ceil(vpy - np.float32(0.5))
+        cy -= gy
+        gx += np.float32(1)
+        gy += np.float32(1)
+        code = gx.astype(np.int32)
+        code <<= 6
+        cell_y = gy.astype(np.int32)
+    cell_y <<= 18
+    code |= cell_y
+    code |= np.where(cx == 1, _CLEAR_X, np.int32(0))
+    code |= np.where(cy == 1, _CLEAR_Y, np.int32(0))
+    code |= (vface + 1).astype(np.int32)
+    code |= np.where(z >= 0, _ABOVE, np.int32(0))
+    return code
+
+def _hull_misses_centres(u, v, w, f, R):
+    """(S,) bool: polygons (face coordinates ``u``, ``v``, ``w`` on face ``f``, each (4, S)
+    float32) whose part inside the face's frustum surely has no candidate pixel of
+    :func:`_pixel_range`, so clipping and drawing them is left out.
+
+    Clipping keeps a polygon inside its corners' convex hull, and the hull's projection lies
+    within its corners' projections' bounding box; when that box, widened by
+    :data:`CLIP_MARGIN` pixels (R / 2048 at larger R), holds no candidate column or row of the
+    face, neither do the clipped fan triangles :func:`_rasterise` would be given. Decided only
+    where every corner lies in front of the face (``w > 0``), within ``CLIP_SLOPE`` of its axis
+    (``max(|u|, |v|) <= CLIP_SLOPE w``) and the corners' depths within ``CLIP_DEPTH_RATIO`` of
+    each other: there a clipped point's float32 rounding (a few units in the last place of
+    coordinates up to ``sqrt(1 + 2 CLIP_SLOPE^2) w_max``, through five planes) moves its
+    projection by at most about ``2e-5 R`` pixels, under 1e-3 at R = 32 (the margin is 1/64),
+    plus the 3e-5 of snapping.
+    """
+    half = np.float32(R / 2)
+    w_lo, w_hi = w.min(axis=0), w.max(axis=0)
+    ok = (w_lo > 0) & (w_hi <= np.float32(CLIP_DEPTH_RATIO) * w_lo)
+    for k in range(u.shape[0]):
+        ok &= np.maximum(np.abs(u[k]), np.abs(v[k])) <= np.float32(CLIP_SLOPE) * w[k]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        px = (u / w + 1) * half - np.float32(SAMPLE_X)
+        py = (v / w - _FACE_V0[f]) * half - np.float32(SAMPLE_Y)
+    m = np.float32(max(CLIP_MARGIN, R / 2048))
+    rows = R if f == 0 else R // 2
+    j0 = np.maximum(np.ceil(py.min(axis=0) - m - np.float32(0.5)), 0)
+    j1 = np.minimum(np.floor(py.max(axis=0) + m - np.float32(0.5)), rows - 1)
+    i0 = np.maximum(np.ceil(px.min(axis=0) - m - np.float32(0.5 + SNAP)), 0)
+    i1 = np.minimum(np.floor(px.max(axis=0) + m - np.float32(0.5 - SNAP)), R - 1)
+    return ok & ((j1 < j0) | (i1 < i0))
+
+
+def _corner_tests(code):
+    """Per-pair tests from the corners' :func:`_vertex_codes` ``code`` (B, 4, N) int32.
+
+    Returns (B, N) arrays: ``visible`` (a corner above the horizon), ``whole`` (every corner in
+    one face's frustum, above the horizon), ``empty`` (meaningful where whole: every corner
+    x-clear in one cell column, or y-clear in one cell row, so no candidate pixel) and ``low``
+    (int32, face + 1 + 8 where whole).
+    """
+    c0 = code[:, 0]
+    diff = (c0 ^ code[:, 1]) | (c0 ^ code[:, 2]) | (c0 ^ code[:, 3])
+    visible = ((c0 | code[:, 1] | code[:, 2] | code[:, 3]) & _ABOVE) != 0
+    low = c0 & np.int32(0xF)
+    whole = ((diff & np.int32(0xF)) == 0) & (low >= 9)
+    empty = (((diff & (_CLEAR_X | _CELL_X)) == 0) & ((c0 & _CLEAR_X) != 0)) \
+        | (((diff & (_CLEAR_Y | _CELL_Y)) == 0) & ((c0 & _CLEAR_Y) != 0))
+    return visible, whole, empty, low
 
 
 def _batch_item_buffer(scene, recv, frames, eyes):
@@ -724,40 +878,37 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     local -= np.einsum("bij,bj->bi", fr, eyes[recv]).reshape(B * 3, 1).astype(np.float32)
     local = local.reshape(B, 3, V)
     x, y, z = local[:, 0], local[:, 1], local[:, 2]
-    vface = _vertex_faces(x, y, z, scene.near)                       # (B, V)
-    # per corner: face + 1 in the low bits, "above the horizon" in bit 3; four corners as a word
-    code = (vface + 1).astype(np.uint8) | ((z >= 0).astype(np.uint8) << 3)
-    word = np.take(code, scene.corner_ids, axis=1).view(np.uint32).reshape(B, N)
-    c0 = word & np.uint32(0xFF)
-    whole = (word == c0 * np.uint32(0x01010101)) & (c0 >= 9)
-    visible = (word & np.uint32(0x08080808)) != 0
+    vface, m = _vertex_faces(x, y, z, scene.near)                    # (B, V)
+    vpx, vpy = _vertex_projection(x, y, z, vface, m, R)
+    visible, whole, empty, low = _corner_tests(
+        np.take(_vertex_codes(vface, z, vpx, vpy), scene.corners_t, axis=1))
+    if R > 0xFFF - 1:                         # cells past 12 bits: no cull by cell
+        empty[:] = False
     if scene.item_of is None:
         visible[np.arange(B), recv] = False
     else:                                     # a cluster does not see its own pieces
         visible &= scene.item_of[None, :] != recv[:, None]
-    whole &= visible
     face_rows = np.array([R, R // 2, R // 2, R // 2, R // 2])
     face_base = np.array([0, R * R, 3 * R * R // 2, 2 * R * R, 5 * R * R // 2])
     keys = np.full(B * P, _empty_key(N), dtype=np.int64)
-    # patch normals in the receiver frames and n . (c - eye): < 0 when the front is seen
-    nl = np.einsum("bjk,nk->bjn", fr, scene.normals).reshape(B * 3 * N)
-    dist = (scene.plane - np.einsum("nj,bj->bn", scene.normals, eyes[recv])).ravel()
-
-    ctx = (scene, keys, nl, dist, face_rows, face_base)
+    ctx = (scene, keys, fr, eyes[recv], face_rows, face_base)
 
     # patches wholly inside one face's frustum: their corners' own projections
-    bi, ni = np.nonzero(whole)
-    vpx, vpy = _vertex_projection(x, y, z, vface, R)
+    bi, ni = np.nonzero(whole & visible & ~empty)
     vpx, vpy = vpx.ravel(), vpy.ravel()
-    seen = _seen(ctx, bi, ni)
-    bi, ni = bi[seen], ni[seen]
-    faces = (c0[bi, ni] - 9).astype(np.intp)
-    corner = scene.corners_t[:, ni] + bi * V                          # (4, M)
-    _draw(ctx, bi, ni, faces, [vpx[c] for c in corner], [vpy[c] for c in corner])
+    faces = (low[bi, ni] - 9).astype(np.intp)
+    corner = np.take(scene.corners_t, ni, axis=1) + bi * V            # (4, M)
+    px, py = [vpx[c] for c in corner], [vpy[c] for c in corner]
+    keep = np.flatnonzero(_can_cover(px, py, face_rows[faces], R))
+    d = _pair_dist(ctx, bi[keep], ni[keep])
+    seen = np.abs(d) > scene.near                                     # not edge-on
+    keep = keep[seen]
+    # drawn in one pass with the clipped ones below (fewer, larger rasteriser calls)
+    todo = [(bi[keep], ni[keep], d[seen], faces[keep], [p[keep] for p in px], [p[keep] for p in py])]
     # the rest: clip against every face whose frustum they may reach
     bi, ni = np.nonzero(visible & ~whole)
     if bi.size:
-        corner = scene.corners_t[:, ni] + bi * V
+        corner = np.take(scene.corners_t, ni, axis=1) + bi * V
         xyz = [c.ravel()[corner] for c in (x, y, z)]                 # each (4, S)
         polys, faces, pairs = [], [], []
         for f in range(5):
@@ -768,6 +919,8 @@ def _batch_item_buffer(scene, recv, frames, eyes):
                 d = _plane_distance(u, v, w, _FACE_V0[f], p, scene.near) < 0
                 d = d[0] & d[1] & d[2] & d[3]
                 out = d if out is None else out | d
+            if CLIP_CULL:
+                out |= _hull_misses_centres(u, v, w, f, R)
             s = np.flatnonzero(~out)
             polys.append(np.stack([u[:, s], v[:, s], w[:, s]], axis=-1).transpose(1, 0, 2))
             faces.append(np.full(s.size, f))
@@ -776,10 +929,20 @@ def _batch_item_buffer(scene, recv, frames, eyes):
         si = np.concatenate(pairs)
         poly, count, src = _clip_to_faces(np.concatenate(polys), fi, scene.near)
         bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
-        seen = _seen(ctx, bi, ni)
-        bi, ni, fi, poly, count = bi[seen], ni[seen], fi[seen], poly[seen], count[seen]
+        d = _pair_dist(ctx, bi, ni)
+        seen = np.flatnonzero(np.abs(d) > scene.near)                # not edge-on
+        bi, ni, d, fi, poly, count = bi[seen], ni[seen], d[seen], fi[seen], poly[seen], count[seen]
         px, py, m = _fans(*_project(poly, fi, R), count)
-        _draw(ctx, bi[m], ni[m], fi[m], px, py)
+        keep = np.flatnonzero(_can_cover(px, py, face_rows[fi[m]], R))
+        m = m[keep]
+        # fan triangles as quads repeating their last corner (as triangle patches are): a
+        # zero-length edge excludes nothing and adds 0 to the area, so they cover as before
+        px, py = [p[keep] for p in px], [p[keep] for p in py]
+        todo.append((bi[m], ni[m], d[m], fi[m], px + px[2:], py + py[2:]))
+    bi, ni, d, faces = (np.concatenate([t[k] for t in todo]) for k in range(4))
+    px = [np.concatenate(c) for c in zip(*(t[4] for t in todo))]
+    py = [np.concatenate(c) for c in zip(*(t[5] for t in todo))]
+    _draw(ctx, bi, ni, d, faces, px, py)
     return keys.reshape(B, P)
 
 
