@@ -62,9 +62,14 @@ def cli_bake(addon, cornell_blend, tmp_path_factory):
 def test_cli_bake_exit_code_and_stage_lines(cli_bake):
     assert cli_bake["rc"] == 0, cli_bake["err"]
     assert cli_bake["err"] == ""
-    stages = [ln.split(":")[1].strip() for ln in cli_bake["out"].splitlines() if ln.startswith("radiosity: ")]
+    lines = [ln for ln in cli_bake["out"].splitlines() if ln.startswith("radiosity: ")]
+    expected = [i for i, ln in enumerate(lines) if ln.startswith("radiosity: form factors: expected about ")]
+    stages = [ln.split(":")[1].strip() for i, ln in enumerate(lines) if i not in expected]
     for st in ("patches", "form factors", "solve", "write"):
         assert stages.count(st) == 1, cli_bake["out"]
+    # the time the bake expects, printed before the form factors' work (their line when done)
+    done = [i for i, ln in enumerate(lines) if ln.startswith("radiosity: form factors: ") and i not in expected]
+    assert len(expected) == 1 and expected[0] < done[0], cli_bake["out"]
 
 
 def test_cli_report(cli_bake):
@@ -72,6 +77,7 @@ def test_cli_report(cli_bake):
     for k in ("patches", "form_factors", "solve", "write", "total"):
         assert rep["timings"][k] >= 0
     assert rep["timings"]["total"] >= rep["timings"]["form_factors"] + rep["timings"]["solve"]
+    assert rep["forecast"]["seconds"] > 0 and rep["forecast"]["receivers"] > 0
     z = np.load(cli_bake["patches"])
     assert rep["patches"] == len(z["areas"]) > 100
     assert rep["nonzeros"] > rep["patches"]

@@ -17,6 +17,7 @@ import bpy
 
 from ..core.cache import FormFactorCache
 from ..core.errors import RadiosityError
+from ..core.forecast import SAID as FORECAST_SAID
 from ..core.pipeline import STAGES, BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
 from . import read, write
@@ -112,6 +113,9 @@ class StagePrinter:
         if stage != self._stage:
             self.finish()
             self._stage, self._start, self._last, self._message = stage, now, now, ""
+        if message.startswith(FORECAST_SAID):     # the time a bake expects: before the work, at once
+            self._line(f"{self.NAMES.get(stage, stage)}: {message}")
+            return
         if message:
             self._message = message
         if fraction < 1.0 and now - self._last >= self.interval:
@@ -213,6 +217,7 @@ class BakeJob:
             "converged": bool(r.solution.converged),
             "energy": _jsonable(r.solution.energy),
             "error_estimate": None if r.error_estimate is None else r.error_estimate.as_dict(),
+            "forecast": None if r.forecast is None else r.forecast.as_dict(),
             "form_factor_source": r.form_factor_source,
             "objects": [o.name for o in self.scene_input.objects if o.bake],
             "occluders": [o.name for o in self.scene_input.objects if not o.bake],

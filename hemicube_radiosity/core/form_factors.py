@@ -54,6 +54,8 @@ def form_factor_stage(ctx) -> None:
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:
         recv = receivers_needed(ctx.unknowns)
+        ctx.forecast = _forecast(ctx, recv.size)
+        ctx.say(0.0, ctx.forecast.describe())
         started = time.perf_counter()
 
         def progress(fr):
@@ -68,3 +70,12 @@ def form_factor_stage(ctx) -> None:
             cache.put(key, F)
     ctx.form_factors = F
     ctx.say(1.0, f"{ctx.form_factor_source}: {F.nnz} nonzeros, {F.nbytes / 1e6:.1f} MB")
+
+
+def _forecast(ctx, receivers):
+    """:func:`.forecast.forecast` of this bake, before its form factors: the output vertices are
+    the output elements' (cut here already: cached, the vertex stage finds them)."""
+    from .forecast import forecast
+    from .output import _cut_elements
+    mesh = _cut_elements(ctx) if ctx.settings.uses_elements() else ctx.patches
+    return forecast(ctx, receivers, len(mesh.verts))

@@ -57,6 +57,7 @@ class BakeResult:
     settings: BakeSettings | None = None      # as used: 'auto' sizes resolved to world units
     clusters: Clusters | None = None          # small faces grouped: solution.B is per cluster
     error_estimate: object = None             # core.estimate.ErrorEstimate with settings.estimate_error
+    forecast: object = None                   # core.forecast.Forecast: the time expected (None: F was cached)
 
     def __post_init__(self):
         if self.elements is None:
@@ -104,6 +105,7 @@ class BakeContext:
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
     error_estimate: object = None            # core.estimate.ErrorEstimate (estimate stage)
+    forecast: object = None                  # core.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
 
     def meshes_key(self) -> bytes:
@@ -155,7 +157,8 @@ class BakeContext:
     def result(self) -> BakeResult:
         return BakeResult(self.patches, self.form_factors, self.solution, self.vertex_radiosity,
                           self.timings, self.form_factor_source, self.source, self.irradiance,
-                          self.notes, self.elements, self.settings, self.clusters, self.error_estimate)
+                          self.notes, self.elements, self.settings, self.clusters, self.error_estimate,
+                          self.forecast)
 
 
 def patch_stage(ctx) -> None:
