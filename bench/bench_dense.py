@@ -179,6 +179,7 @@ def ours_child(n, probes_path, out_path):
     rec = {"n": n, "triangles": n_triangles(meshes), "pieces": len(res.patches), "patches": int(res.unknowns),
            "output_vertices": int(len(res.elements.verts)), "output_faces": int(len(res.elements)),
            "core_seconds": core_s, "stages": {k: float(v) for k, v in res.timings.items()},
+           "forecast": None if res.forecast is None else float(res.forecast.seconds),
            "iterations": int(res.solution.iterations), "nnz": int(res.form_factors.nnz),
            "peak_mb": peak, "start_mb": before,
            "settings": {k: getattr(res.settings, k) for k in ("patch_size", "element_size", "gather_rays",
@@ -408,6 +409,12 @@ def section(res):
                     f" {ce['red_ratio']:.3f} | {ratio:.2f}x |" if "seconds" in c else
                     f" failed: {c.get('error', c.get('timeout', '?'))!s:.120} | | | | | |")
                  + f" {o['load'][0][0]:.1f} |")
+    said = [(r["ours"]["triangles"], r["ours"]["forecast"], r["ours"]["core_seconds"]) for r in res["rows"]
+            if "core_seconds" in r.get("ours", {}) and r["ours"].get("forecast")]
+    if said:
+        L += ["", "The time each bake said it expected before its form factors (`result.forecast`, core/forecast.py),"
+              " against the bake's time: " + "; ".join(f"{t:,} triangles {f:.1f} s / {b:.1f} s ({f / b:.2f}x)"
+                                                        for t, f, b in said) + "."]
     L += ["", "Times in seconds. Stages are `result.timings` of `pipeline.bake` ('vertices' = exact direct light at every"
           " output vertex plus the 64-ray final gather); 'bake total' = `pipeline.bake`; Cycles / ours = Cycles' bake"
           " time / (bake total + read + write). Pieces = faces after cutting (`len(result.patches)`), patches ="
@@ -524,6 +531,7 @@ def main(argv=None):
                 + " / ".join(f"{x:.2f}" for x in o["core_runs"]) + "; "
                 + ", ".join(f"{k} {v:.2f}" for k, v in st.items() if k != "total")
                 + f"), read {o.get('read_seconds', float('nan')):.2f}, write {o.get('write_seconds', float('nan')):.2f};"
+                f" forecast {o.get('forecast') or float('nan'):.2f} s;"
                 f" peak {o['peak_mb']:.0f} MB; probe rms {100 * o['error']['rms']:.2f}% floor {o['error']['floor_ratio']:.3f}"
                 f" red {o['error']['red_ratio']:.3f}  (load {o['load'][0][0]:.1f})")
         else:
