@@ -356,10 +356,10 @@ def _call(token, item):
 class Background:
     """A result made on a thread while the caller goes on: ``collect(stop)`` runs on its own
     thread and returns the value; it should look at ``stop`` (a :class:`threading.Event`)
-    between its steps and return early when it is set. Made for a forked :func:`ordered_map`
-    whose results are collected while the caller does other work: start the map on the caller's
-    thread (its first ``next()`` forks the workers there, not beside the caller's running
-    code), then hand the rest of the loop to ``collect``.
+    between its steps and return early when it is set. Made for a forked map whose results
+    are collected while the caller does other work: start it with :func:`started_map` on the
+    caller's thread (the workers are forked there, not beside the caller's running code), then
+    hand the loop over its results to ``collect``.
 
     :meth:`result` waits for the value (or raises what ``collect`` raised) and polls
     ``cancelled()`` on the caller's thread while it waits (progress and cancellation stay on the
