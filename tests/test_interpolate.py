@@ -203,3 +203,49 @@ def test_interpolate_located_is_the_corners_bilinear_bit_for_bit():
     assert tri.any() and (~tri).any()
     polys[tri, 3] = polys[tri, 2]
     assert np.array_equal(interpolate_located(P, vals, idx, uv), _bilinear(vals[polys], uv[:, 0], uv[:, 1]))
+
+
+def _vector_inverse_bilinear(c, p, iterations=8):
+    """The Gauss-Newton as it was written on (..., 3) vectors, before it was worked one
+    coordinate at a time: the reference the faster one must equal bit for bit."""
+    u = np.full(p.shape[:-1], 0.5)
+    v = np.full(p.shape[:-1], 0.5)
+    for _ in range(iterations):
+        r = _bilinear(c, u, v) - p
+        du = (1 - v)[..., None] * (c[..., 1, :] - c[..., 0, :]) + v[..., None] * (c[..., 2, :] - c[..., 3, :])
+        dv = (1 - u)[..., None] * (c[..., 3, :] - c[..., 0, :]) + u[..., None] * (c[..., 2, :] - c[..., 1, :])
+        a, b, d = (np.einsum("...i,...i", x, y) for x, y in ((du, du), (du, dv), (dv, dv)))
+        gu, gv = np.einsum("...i,...i", du, r), np.einsum("...i,...i", dv, r)
+        det = a * d - b * b
+        tiny = det <= 1e-30 * np.maximum(a * d, 1e-300)
+        det = np.where(tiny, 1.0, det)
+        u = np.clip(u - np.where(tiny, 0.0, (d * gu - b * gv) / det), -0.5, 1.5)
+        v = np.clip(v - np.where(tiny, 0.0, (a * gv - b * gu) / det), -0.5, 1.5)
+    return u, v
+
+
+def test_inverse_bilinear_is_the_vector_gauss_newton_bit_for_bit():
+    """Warped quads, points on and off them, degenerate quads (a triangle's last two corners
+    equal, a quad folded to a segment), a batch of (points, candidates) as locate passes them
+    (the points broadcast along the candidates); and it really inverts: an exact point's (u, v)
+    comes back."""
+    rng = np.random.default_rng(5)
+    h = 20000
+    c = (rng.random((h, 1, 3)) * 3 + np.array([[0, 0, 0], [0.1, 0, 0.01], [0.1, 0.1, 0.02], [0, 0.1, -0.01]])
+         * rng.random((h, 1, 1)) + rng.normal(0, 0.005, (h, 4, 3)))
+    c[:500, 3] = c[:500, 2]
+    c[500:600, 2:] = c[500:600, :2]
+    u0, v0 = rng.random(h), rng.random(h)
+    exact = _bilinear(c, u0, v0)
+    for p in (exact, exact + rng.normal(0, 0.02, exact.shape)):
+        got, ref = _inverse_bilinear(c, p), _vector_inverse_bilinear(c, p)
+        np.testing.assert_array_equal(got[0], ref[0])
+        np.testing.assert_array_equal(got[1], ref[1])
+    cand = c[:8000].reshape(1000, 8, 4, 3)
+    pp = np.broadcast_to(exact[:1000, None, :], (1000, 8, 3))
+    for g, r in zip(_inverse_bilinear(cand, pp), _vector_inverse_bilinear(cand, pp)):
+        np.testing.assert_array_equal(g, r)
+    good = (rng.random((h, 1, 3)) * 3 + np.array([[0, 0, 0], [0.1, 0, 0.01], [0.1, 0.1, 0.02], [0, 0.1, -0.01]])
+            * (0.5 + 0.5 * rng.random((h, 1, 1))) + rng.normal(0, 0.002, (h, 4, 3)))
+    u, v = _inverse_bilinear(good, _bilinear(good, u0, v0))
+    assert np.abs(u - u0).max() < 1e-9 and np.abs(v - v0).max() < 1e-9

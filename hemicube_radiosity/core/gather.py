@@ -208,28 +208,51 @@ def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.nd
     return out / G.meta["rays"]
 
 
-def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0) -> CSR:
+#: The fewest hits a thread of :func:`correction_matrix` takes.
+CORRECTION_SHARE = 1 << 17
+
+
+def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, workers=1) -> CSR:
     """:func:`correct_hits` as a matrix, for values that change while the hits and their choice
     do not (a relight): C (P x (V + ``extra``)), float64, such that ``C @ [vertex_values; x]``
     is what :func:`correct_hits` adds when ``exact(y, pid)`` reads ``x`` (``extra``, k) through
-    ``read(y, pid) -> (columns (h, m) into x, weights (h, m))`` (None: reads nothing, 0)."""
+    ``read(y, pid) -> (columns (h, m) into x, weights (h, m))`` (None: reads nothing, 0; it is
+    called from ``workers`` threads at once, each on its own hits).
+
+    ``workers`` (0 = every core): the hits are cut at row boundaries into shares of at least
+    :data:`CORRECTION_SHARE`, each made into its rows of C on its own thread (:func:`.parallel.shares`; NumPy lets
+    go of the GIL in the large array operations). H's rows are in order (the gather's chunks
+    are), so each share's entries come sorted and summed in the same order as in one piece: C
+    is the same, bit for bit, for any count. Suzanne (level 3) in the Cornell box: 612k hits on
+    abrupt elements, 1.6 s on the bake's thread while the other core waited."""
     P, V = G.shape
     R = G.meta["rays"]
     H = H[select[H[:, 1].astype(np.int64)]]
-    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:].astype(np.float64)
-    ids, w = surface_weights(patch_parameters(patches), patches.polys, pid, y)
-    rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
-    if read is not None and len(H):
-        c, r = read(y, pid)
-        rows.append(np.repeat(row, c.shape[1]))
-        cols.append(V + np.asarray(c, np.int64).ravel())
-        vals.append(np.asarray(r, np.float64).ravel())
-    rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
     n = V + int(extra)
-    key, inv = unique_ints(rows * n + cols, return_inverse=True)
-    summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
-    keep = summed != 0
-    key, summed = key[keep], summed[keep]
+    params = patch_parameters(patches)
+    k = max(1, min(resolve_workers(workers), len(H) // CORRECTION_SHARE))
+    cuts = np.searchsorted(H[:, 0], H[np.linspace(0, len(H), k + 1)[1:-1].astype(np.int64), 0]).tolist() if k > 1 else []
+    bounds = [0, *cuts, len(H)]
+
+    def share(i):
+        h = H[bounds[i]:bounds[i + 1]]
+        row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:].astype(np.float64)
+        ids, w = surface_weights(params, patches.polys, pid, y)
+        rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
+        if read is not None and len(h):
+            c, r = read(y, pid)
+            rows.append(np.repeat(row, c.shape[1]))
+            cols.append(V + np.asarray(c, np.int64).ravel())
+            vals.append(np.asarray(r, np.float64).ravel())
+        rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
+        if not len(rows):
+            return np.zeros(0, np.int64), np.zeros(0)
+        key, inv = unique_ints(rows * n + cols, return_inverse=True)
+        summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
+        keep = summed != 0
+        return key[keep], summed[keep]
+    parts = shares(share, len(bounds) - 1)
+    key, summed = (np.concatenate([p[j] for p in parts]) for j in (0, 1))
     indptr = np.zeros(P + 1, np.int64)
     np.cumsum(np.bincount(key // n, minlength=P), out=indptr[1:])
     return CSR(indptr, (key % n).astype(np.int32 if n < 2 ** 31 else np.int64), summed, (P, n),

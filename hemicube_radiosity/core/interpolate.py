@@ -27,19 +27,34 @@ def _bilinear(c, u, v):
 
 
 def _inverse_bilinear(c, p, iterations=8):
-    """(u, v) with bilinear(c, u, v) closest to p (Gauss-Newton from the centre); c (..., 4, 3)."""
+    """(u, v) with bilinear(c, u, v) closest to p (Gauss-Newton from the centre); c (..., 4, 3).
+
+    Worked one coordinate at a time on contiguous (...,) arrays: the same operations as on the
+    (..., 3) vectors, in the same order, so bit for bit the same (u, v), about 2.5x as fast (a
+    dot product over a short last axis, ``np.einsum("...i,...i")``, took 25 ms for 600k points;
+    it sums x0 y0 + x2 y2 first, then x1 y1, without fused multiply-adds, as :func:`_dot` does).
+    Suzanne's gather hits on abrupt elements, 600k points, spent 0.74 s here."""
     shape = p.shape[:-1]
+    c = np.asarray(c, dtype=np.float64)
+    p = np.asarray(p, dtype=np.float64)
+    cc = [[np.ascontiguousarray(np.broadcast_to(c[..., k, i], shape)) for i in range(3)] for k in range(4)]
+    pp = [np.ascontiguousarray(np.broadcast_to(p[..., i], shape)) for i in range(3)]
+    e10, e23, e30, e21 = ([cc[a][i] - cc[b][i] for i in range(3)] for a, b in ((1, 0), (2, 3), (3, 0), (2, 1)))
     u = np.full(shape, 0.5)
     v = np.full(shape, 0.5)
     for _ in range(iterations):
-        r = _bilinear(c, u, v) - p
-        du = (1 - v)[..., None] * (c[..., 1, :] - c[..., 0, :]) + v[..., None] * (c[..., 2, :] - c[..., 3, :])
-        dv = (1 - u)[..., None] * (c[..., 3, :] - c[..., 0, :]) + u[..., None] * (c[..., 2, :] - c[..., 1, :])
-        a = np.einsum("...i,...i", du, du)
-        b = np.einsum("...i,...i", du, dv)
-        d = np.einsum("...i,...i", dv, dv)
-        gu = np.einsum("...i,...i", du, r)
-        gv = np.einsum("...i,...i", dv, r)
+        mu, mv = 1 - u, 1 - v
+        w = (mu * mv, u * mv, u * v, mu * v)             # as _bilinear weighs the corners
+        r = []
+        for i in range(3):
+            x = w[0] * cc[0][i]
+            for k in (1, 2, 3):
+                x += w[k] * cc[k][i]
+            x -= pp[i]
+            r.append(x)
+        du = [mv * e10[i] + v * e23[i] for i in range(3)]
+        dv = [mu * e30[i] + u * e21[i] for i in range(3)]
+        a, b, d, gu, gv = _dot(du, du), _dot(du, dv), _dot(dv, dv), _dot(du, r), _dot(dv, r)
         det = a * d - b * b
         tiny = det <= 1e-30 * np.maximum(a * d, 1e-300)
         det = np.where(tiny, 1.0, det)
@@ -48,6 +63,15 @@ def _inverse_bilinear(c, p, iterations=8):
         u = np.clip(u - step_u, -0.5, 1.5)
         v = np.clip(v - step_v, -0.5, 1.5)
     return u, v
+
+
+def _dot(x, y):
+    """x . y for vectors given as three coordinate arrays, summed as ``np.einsum("...i,...i")``
+    sums a last axis of 3 (x0 y0 + x2 y2, then + x1 y1; no fused multiply-add): bit for bit."""
+    out = x[0] * y[0]
+    out += x[2] * y[2]
+    out += x[1] * y[1]
+    return out
 
 
 def _pick(patches, corners, size, cand, p, normals):

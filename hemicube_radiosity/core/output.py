@@ -197,7 +197,8 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
         shone = _shine(ctx, elements, np.flatnonzero(hot), shine, xv, nv, cells)
-    C = cached(ctx.cache, key, lambda: correction_matrix(*rays(), elements, select | hot, read, len(x)))
+    C = cached(ctx.cache, key, lambda: correction_matrix(*rays(), elements, select | hot, read, len(x),
+                                                        workers=ctx.settings.workers))
     out += product(C, np.concatenate([direct_e, x]))
     if shone is not None:
         out += shone
