@@ -462,6 +462,66 @@ def test_background_returns_raises_and_stops():
     assert steps and threading.active_count() == before        # the thread saw the stop and ended
 
 
+@needs_fork
+def test_ahead_makes_its_value_on_a_forked_process_and_is_terminated_when_stopped():
+    """:class:`.parallel.Ahead`: forked when made (on the calling thread), the value made in the
+    other process, its error raised on the caller's thread; closed early, or cancelled while
+    the caller waits, the process is terminated at once (here it would sleep ten minutes)."""
+    a = parallel.Ahead.start(lambda: (os.getpid(), np.arange(5) ** 2))
+    assert len(multiprocessing.active_children()) == 1          # forked already
+    pid, value = a.result()
+    assert pid != os.getpid() and value.tolist() == [0, 1, 4, 9, 16]
+    assert multiprocessing.active_children() == []
+    a.close()                                                   # again: nothing
+
+    def fails():
+        raise ValueError("in the process")
+    with pytest.raises(ValueError, match="in the process"):
+        parallel.Ahead.start(fails).result()
+    slow = parallel.Ahead.start(lambda: time.sleep(600))
+    t = time.perf_counter()
+    slow.close()
+    assert multiprocessing.active_children() == [] and time.perf_counter() - t < 60
+    slow = parallel.Ahead.start(lambda: time.sleep(600))
+    polls = []
+    with pytest.raises(Cancelled):
+        slow.result(cancelled=lambda: polls.append(1) or len(polls) > 2, poll=0.01)
+    assert multiprocessing.active_children() == []
+
+
+def test_ahead_is_not_started_where_processes_are_not(monkeypatch):
+    monkeypatch.setattr(parallel, "PROCESSES", False)
+    assert parallel.Ahead.start(lambda: 1) is None
+
+
+@needs_embree
+def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_kind):
+    """On two workers the output elements' cut along contacts starts on a process of its own
+    when the bake starts (:func:`.output.start_elements`) and the vertex stage takes it: the
+    bake's own process cuts nothing, and the bake is the one-worker bake, bit for bit. On one
+    worker, or with threads only, it is cut in place, as before. A bake stopped early leaves no
+    process behind."""
+    from hemicube_radiosity.core import output
+    calls = []
+    real = output.cut_along_contacts
+    monkeypatch.setattr(output, "cut_along_contacts", lambda *a, **k: calls.append(os.getpid()) or real(*a, **k))
+    s = dict(patch_size=0.5, element_size=0.2, resolution=16, gather_rays=16)
+    r1 = bake(scenes.cornell_box(), BakeSettings(workers=1, **s))
+    assert calls == [os.getpid()]
+    calls.clear()
+    r2 = bake(scenes.cornell_box(), BakeSettings(workers=2, **s))
+    assert calls == ([] if pool_kind == "processes" else [os.getpid()])
+    assert multiprocessing.active_children() == []
+    for a in ("verts", "polys"):
+        assert np.array_equal(getattr(r1.elements, a), getattr(r2.elements, a))
+    assert np.array_equal(r1.vertex_radiosity, r2.vertex_radiosity)
+    if pool_kind == "processes":              # cancelled while the cut runs on its process
+        with pytest.raises(Cancelled):
+            bake(scenes.cornell_box(), BakeSettings(workers=2, **s),
+                 cancelled=lambda: len(multiprocessing.active_children()) > 0)
+        assert multiprocessing.active_children() == []
+
+
 # ------------------------------------------------------------------ the whole bake
 
 @pytest.mark.parametrize("method", ["hemicube", pytest.param("embree", marks=needs_embree)])

@@ -73,9 +73,9 @@ def form_factor_stage(ctx) -> None:
 
 
 def _forecast(ctx, receivers):
-    """:func:`.forecast.forecast` of this bake, before its form factors: the output vertices are
-    the output elements' (cut here already: cached, the vertex stage finds them)."""
+    """:func:`.forecast.forecast` of this bake, before its form factors, for about as many
+    output vertices as it will have (:func:`.output.output_vertices_ahead`: the elements before
+    their cut along contacts, which is made meanwhile on a process of its own)."""
     from .forecast import forecast
-    from .output import _cut_elements
-    mesh = _cut_elements(ctx) if ctx.settings.uses_elements() else ctx.patches
-    return forecast(ctx, receivers, len(mesh.verts))
+    from .output import output_vertices_ahead
+    return forecast(ctx, receivers, output_vertices_ahead(ctx))

@@ -25,7 +25,7 @@ from .errors import RadiosityError
 from .gather import apply_gather, correction_matrix, gather_matrix, product, transport_product, transposed_transport
 from .interpolate import _inverse_bilinear, interpolate_corners, located_corners, locate
 from .patches import PatchSet, _poly_geometry, build_patches
-from .parallel import resolve_workers
+from .parallel import Ahead, resolve_workers
 from .progress import Ticker
 from .refine import LUMA
 from .rays import embree_available, embree_scene, occluder, open_fraction
@@ -926,23 +926,82 @@ def _element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=N
 def _cut_elements(ctx) -> PatchSet:
     s = ctx.settings
     ctx.say(0.0, f"cutting output elements of {s.element_size:g}")
-    # :func:`output_elements`' cached geometry, the meshes hashed once: its materials are read
-    # only onto the elements that are output (a relight read them twice, 0.75 ms each, on the
-    # dense Cornell room)
-    mkey = ctx.meshes_key() if hasattr(ctx, "meshes_key") else meshes_key(ctx.meshes)
-    elements = cached(ctx.cache, cache_key(mkey, ("elements", s.element_size)),
-                      lambda: build_patches(ctx.meshes, s.element_size))
+    elements = _uncut_elements(ctx)
     if geometry_key(elements) == geometry_key(ctx.patches):
         return ctx.patches                    # the input is finer than the detail: its own faces
     # no element across a wall's foot: cut along where surfaces stand on others
-    key = cache_key(mkey, ("elements-cut", s.element_size))
-    elements = cached(ctx.cache, key, lambda: cut_along_contacts(
-        elements.with_mesh_materials(ctx.meshes), build_patches(ctx.meshes, None))).with_mesh_materials(ctx.meshes)
-    if len(elements) > s.max_elements:
-        raise RadiosityError(f"a detail size of {s.element_size} cuts the scene into {len(elements)} "
-                             f"output elements, more than the limit of {s.max_elements}: use a "
-                             "larger detail size")
+    key = cache_key(_meshes_key(ctx), ("elements-cut", s.element_size))
+    ahead = ctx.ahead.pop("elements", None) if hasattr(ctx, "ahead") else None
+    if ahead is not None:                     # cut on a process of its own since the bake began
+        cut = ahead.result(ctx.cancelled)
+        if cut is not None and ctx.cache is not None and ctx.cache.get(key) is None:
+            ctx.cache.put(key, cut)
+    elements = cached(ctx.cache, key, lambda: _cut(ctx.meshes, elements)).with_mesh_materials(ctx.meshes)
+    _refuse_elements(s, len(elements))
     return elements
+
+
+def _meshes_key(ctx):
+    # :func:`output_elements`' cached geometry, the meshes hashed once: its materials are read
+    # only onto the elements that are output (a relight read them twice, 0.75 ms each, on the
+    # dense Cornell room)
+    return ctx.meshes_key() if hasattr(ctx, "meshes_key") else meshes_key(ctx.meshes)
+
+
+def _uncut_elements(ctx) -> PatchSet:
+    """The meshes cut to the detail size (geometry only, cached), before the cut along contacts."""
+    s = ctx.settings
+    return cached(ctx.cache, cache_key(_meshes_key(ctx), ("elements", s.element_size)),
+                  lambda: build_patches(ctx.meshes, s.element_size))
+
+
+def _cut(meshes, elements) -> PatchSet:
+    """``elements`` cut along the contacts of the meshes' faces (:func:`.contact.cut_along_contacts`)."""
+    return cut_along_contacts(elements.with_mesh_materials(meshes), build_patches(meshes, None))
+
+
+def _refuse_elements(settings, count) -> None:
+    if count > settings.max_elements:
+        raise RadiosityError(f"a detail size of {settings.element_size} cuts the scene into {count} "
+                             f"output elements, more than the limit of {settings.max_elements}: use a "
+                             "larger detail size")
+
+
+def output_vertices_ahead(ctx) -> int:
+    """About how many vertices the output will have, before the form factors (the forecast's
+    count, :mod:`.forecast`): the elements before their cut along contacts (a few more vertices
+    come with the cut), or the patches when they are the output; refuses, as the vertex stage
+    would, more elements than ``max_elements`` (the cut only adds)."""
+    if not ctx.settings.uses_elements():
+        return len(ctx.patches.verts)
+    elements = _uncut_elements(ctx)
+    if geometry_key(elements) == geometry_key(ctx.patches):
+        return len(ctx.patches.verts)
+    _refuse_elements(ctx.settings, len(elements))
+    return len(elements.verts)
+
+
+def start_elements(ctx):
+    """The output elements' cut along contacts (:func:`_cut_elements`: the bake's one long piece
+    of geometry work done on one core; Suzanne at level 3 in the Cornell box, 1.1 s) started on
+    a forked process at the start of the bake, beside the patches, the refinement, the form
+    factors and the direct light; :func:`_cut_elements` takes it. A :class:`.parallel.Ahead`,
+    or None: one worker, no elements, the cut cached, no process forked. The process returns
+    the same cut as :func:`_cut_elements` makes (None where no face is cut to the detail size:
+    then the elements are the input's faces and the patches, and nothing is cut)."""
+    s = ctx.settings
+    if not s.uses_elements() or ctx.meshes is None or resolve_workers(s.workers) <= 1:
+        return None
+    if ctx.cache is not None and ctx.cache.get(cache_key(_meshes_key(ctx), ("elements-cut", s.element_size))) is not None:
+        return None
+    meshes, size = ctx.meshes, s.element_size
+
+    def cut():
+        elements = build_patches(meshes, size)
+        if geometry_key(elements) == geometry_key(build_patches(meshes, None)):
+            return None
+        return _cut(meshes, elements)
+    return Ahead.start(cut)
 
 
 def _incoming(reflected, rho):

@@ -45,7 +45,7 @@ from concurrent.futures.process import BrokenProcessPool
 from .errors import RadiosityError
 
 __all__ = ["resolve_workers", "ordered_map", "started_map", "shares", "one_blas_thread", "cpu_count",
-           "processes_available", "Background", "PROCESSES"]
+           "processes_available", "Background", "Ahead", "PROCESSES"]
 
 #: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
 #: for a host where forking misbehaves).
@@ -413,3 +413,75 @@ class Background:
         self._stop.set()
         if self._thread is not None:
             self._thread.join()
+
+
+class Ahead:
+    """``fn()`` made on one forked process while the caller goes on with other work: a bake's
+    geometry-only work that a later stage reads (the output elements' cut along contacts,
+    :func:`.output.start_elements`) runs beside the stages before it, which leave a core idle
+    (the patches, the refinement, the direct light: one core each). The process is forked on
+    the calling thread when this is made and inherits ``fn`` and what it holds; only the value
+    comes back (pickled). Use :meth:`start`, which returns None where no process can be forked
+    (then the caller makes the value itself, where it reads it, as before).
+
+    :meth:`result` waits for the value (raising what ``fn`` raised), polling ``cancelled()``
+    on the caller's thread; :meth:`close` terminates the process at once if it still runs (a
+    cancelled or failed bake leaves nothing behind). Both can be called more than once."""
+
+    def __init__(self, fn):
+        global _PARENT_PID
+        token = next(_TOKENS)
+        _TASKS[token] = lambda _: fn()       # before the fork: the process inherits it
+        _PARENT_PID = os.getpid()
+        self._pool = ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("fork"),
+                                         initializer=_worker_init)
+        try:
+            with warnings.catch_warnings():  # Python >= 3.12 warns of fork() beside threads
+                warnings.simplefilter("ignore", DeprecationWarning)
+                self._future = self._pool.submit(_call, token, None)    # forks, on this thread
+        except BaseException:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            raise
+        finally:
+            _TASKS.pop(token, None)
+
+    @classmethod
+    def start(cls, fn) -> "Ahead | None":
+        """An :class:`Ahead` of ``fn``, or None where processes are not forked (not Linux,
+        :data:`PROCESSES` off, inside a worker) or the fork fails (no memory or processes)."""
+        if not processes_available():
+            return None
+        try:
+            return cls(fn)
+        except OSError:
+            return None
+
+    def result(self, cancelled=None, poll=0.05):
+        """``fn()``'s value, once it is made; raises :class:`.progress.Cancelled` (after
+        :meth:`close`) when ``cancelled()`` turns true while it waits."""
+        from concurrent.futures import wait
+        from .progress import Cancelled
+        while not wait([self._future], timeout=poll).done:
+            if cancelled is not None and cancelled():
+                self.close()
+                raise Cancelled("cancelled")
+        try:
+            return self._future.result()
+        except BrokenProcessPool as exc:     # the process was killed (out of memory, a signal)
+            raise RadiosityError(f"a worker process stopped during the bake ({exc}); bake with "
+                                 "fewer workers") from exc
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Terminate the process if it still runs, and let go of it."""
+        if self._pool is None:
+            return
+        if not self._future.done():
+            for p in list((getattr(self._pool, "_processes", None) or {}).values()):
+                try:
+                    p.terminate()
+                except (OSError, AttributeError):
+                    pass
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._pool = None

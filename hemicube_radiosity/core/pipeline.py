@@ -23,7 +23,7 @@ from .estimate import estimate_stage
 from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .contact import cut_along_contacts
-from .output import meshes_key, output_elements, vertex_stage
+from .output import meshes_key, output_elements, start_elements, vertex_stage
 from .parallel import one_blas_thread
 from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
@@ -107,6 +107,7 @@ class BakeContext:
     error_estimate: object = None            # core.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
+    ahead: dict = field(default_factory=dict)   # name -> parallel.Ahead: work started at the bake's start
 
     def meshes_key(self) -> bytes:
         """:func:`.output.meshes_key` of the meshes, hashed once a bake (the patch and the
@@ -423,7 +424,14 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     t0 = time.perf_counter()
     with small_pages(), one_blas_thread():       # (parallel.one_blas_thread: why)
         ctx.check()
-        for name, stage in STAGES:
-            ctx.run(name, stage)
+        try:
+            # geometry a later stage reads, made on a core the first stages leave idle
+            ctx.ahead["elements"] = start_elements(ctx)
+            for name, stage in STAGES:
+                ctx.run(name, stage)
+        finally:                                 # taken, or left by a stop: terminated
+            for pending in ctx.ahead.values():
+                if pending is not None:
+                    pending.close()
     ctx.timings["total"] = time.perf_counter() - t0
     return ctx.result()
