@@ -1,8 +1,9 @@
 """Both cores (issue 9): every bake stage with ``workers=1`` against ``workers=2``, in one run.
 
 Scenes: the dense Cornell box (``scenes.tessellate(scenes.cornell_box(), 40)``: 51,200 triangles,
-grouped into ~555 patches by the default settings) and the coarse ``cornell_box()`` cut into 0.1 m
-patches; each baked by the NumPy hemi-cube and by Embree, in turn with 1 worker, 2 workers (the
+grouped into ~555 patches by the default settings), the coarse ``cornell_box()`` cut into 0.1 m
+patches, each baked by the NumPy hemi-cube and by Embree, and Suzanne at subdivision level 3 in
+the box (bench_curved.py's scene, the hemi-cube only), in turn with 1 worker, 2 workers (the
 hemi-cube's form factors on two forked processes, :mod:`core.parallel`) and, unless
 ``--no-threads``, 2 workers with processes switched off (``parallel.PROCESSES = False``:
 everything on threads, as before), ``--repeat`` times (each stage's best wall time kept, with
@@ -11,9 +12,10 @@ wall and CPU seconds (CPU of this process and of its worker processes: with two 
 ~ 2 x wall) and the speed-ups, checks that every worker count gave identical F and vertex
 colours, and says how loaded the machine was: the load average before and after, and the CPU
 the rest of the machine used during each case and the whole run, from /proc/stat (a shared
-machine's other sessions take their share whatever this run asks for; see bench_batch.py).
+machine's other sessions take their share whatever this run asks for; see bench_batch.py), and
+what two cores give this machine at best (:func:`two_process_ceiling`).
 
-    .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse]
+    .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse|curved]
                                              [--method hemicube|embree]
                                              [--no-threads] [--gather-threads]
     .venv/bin/python bench/bench_parallel.py --gather ROUNDS     (the final gather alone)
@@ -93,17 +95,59 @@ def timed_bake(meshes, settings):
 
 
 def cases(only, method=None):
-    dense = scenes.tessellate(scenes.cornell_box(), 40)
-    coarse = scenes.cornell_box()
     methods = ["hemicube"] + (["embree"] if embree_available() else [])
     methods = [m for m in methods if method in (None, m)]
     out = []
-    for name, meshes, kw in (("dense", dense, {}), ("coarse", coarse, {"patch_size": 0.1})):
+    for name in ("dense", "coarse", "curved"):
         if only and name != only:
             continue
+        if name == "curved":                 # the NumPy rasteriser's heaviest case (bench_curved.py)
+            if "hemicube" in methods:
+                out.append(("curved / hemicube", curved_scene(), {"method": "hemicube"}))
+            continue
+        meshes = scenes.tessellate(scenes.cornell_box(), 40) if name == "dense" else scenes.cornell_box()
         for m in methods:
-            out.append((f"{name} / {m}", meshes, dict(kw, method=m)))
+            out.append((f"{name} / {m}", meshes, dict({"patch_size": 0.1} if name == "coarse" else {}, method=m)))
     return out
+
+
+def curved_scene():
+    """Suzanne with a level-3 Subdivision Surface on the Cornell box's floor, as bench_curved.py
+    bakes her (31,488 faces; bpy makes her)."""
+    sys.path.insert(0, HERE)
+    from bench_curved import suzanne
+    return scenes.cornell_box() + [suzanne(3)[0]]
+
+
+def _spin(n):
+    x = 0
+    for i in range(n):
+        x += i * i % 7
+    return x
+
+
+def two_process_ceiling(rounds=3, n=6_000_000):
+    """What two cores give this machine at best: one process runs a loop of plain Python
+    arithmetic (no memory traffic, no GIL between processes) alone, then two forked processes
+    run it at once; ``2 x alone / together`` is the work two cores do in the time one does
+    one's (2.0 on two free cores; less where the two virtual CPUs share a physical core, or
+    run slower together). The rounds alternate; the median is kept. A bake's speed-up on two
+    workers is bounded by this number, not by 2."""
+    import multiprocessing
+    ctx = multiprocessing.get_context("fork")
+    ratios = []
+    for _ in range(rounds):
+        t = time.perf_counter()
+        _spin(n)
+        alone = time.perf_counter() - t
+        procs = [ctx.Process(target=_spin, args=(n,)) for _ in range(2)]
+        t = time.perf_counter()
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join()
+        ratios.append(2 * alone / (time.perf_counter() - t))
+    return float(np.median(ratios)), ratios
 
 
 #: (label, workers, processes on): the configurations baked in turn, in this order
@@ -195,7 +239,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=2, help="runs of each worker count (best kept)")
     ap.add_argument("--quick", action="store_true", help="one run of each, the coarse box only")
-    ap.add_argument("--only", choices=("dense", "coarse"))
+    ap.add_argument("--only", choices=("dense", "coarse", "curved"))
     ap.add_argument("--method", choices=("hemicube", "embree"), help="this method only")
     ap.add_argument("--no-threads", action="store_true",
                     help="leave out '2 thr' (2 workers on threads only, as before processes)")
@@ -218,9 +262,14 @@ def main(argv=None):
     print("configurations: 1 = one worker; 2 = two workers (form factors, large transports and "
           "the final gather on forked processes); 2 thr = two workers on threads only; 2 gthr = "
           "two workers, the final gather on threads", flush=True)
+    ceiling, rounds = two_process_ceiling()
+    print(f"this machine's ceiling: two processes of plain Python arithmetic at once did {ceiling:.2f}x "
+          f"the work of one in the same time (rounds: {', '.join(f'{r:.2f}' for r in rounds)}; 2.00 on "
+          "two free cores)", flush=True)
     m0, w0 = machine_cpu() or (0, 0), time.perf_counter()
     own0 = cpu_time()
-    report = {"cpus": cpu_count(), "load_before": load0, "cases": {}}
+    report = {"cpus": cpu_count(), "load_before": load0, "ceiling": ceiling, "ceiling_rounds": rounds,
+              "cases": {}}
     all_ok = True
     for label, meshes, kw in cases("coarse" if args.quick else args.only, args.method):
         best, results = {}, {}
@@ -234,6 +283,9 @@ def main(argv=None):
                     if st not in b["wall"] or t < b["wall"][st]:
                         b["wall"][st], b["cpu"][st] = t, cpu.get(st, 0.0)
         case = print_case(label, results, best, configs)
+        whole = case["stages"]["total"]["speedup"]["2"]
+        print(f"  whole bake on 2 workers: {whole:.2f}x, {whole / ceiling:.0%} of this machine's ceiling "
+              f"({ceiling:.2f}x)")
         case["other_cpus"] = others_cpu(c0, machine_cpu() or (0, 0), cpu_time() - o0,
                                         time.perf_counter() - t0)
         print(f"  other processes used {case['other_cpus']:.2f} of {cpu_count()} CPUs during "
