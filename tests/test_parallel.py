@@ -522,6 +522,42 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
         assert multiprocessing.active_children() == []
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's heap settings")
+def test_a_bake_keeps_its_freed_heap_and_hands_it_back_after(tmp_path):
+    """:func:`.parallel.kept_heap` (around every bake): temporaries of 20 MB made and dropped
+    again and again fault their pages in once, not every time; after the block the heap kept
+    goes back to the system. In a fresh process, whose glibc has moved its own threshold to
+    30 MB (as a NumPy program does), ten rounds of ten such arrays."""
+    import subprocess
+    script = tmp_path / "heap.py"
+    script.write_text("""
+import resource, sys, numpy as np
+from hemicube_radiosity.core.parallel import kept_heap
+def rss():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 >> 20
+def rounds():
+    f0 = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    for _ in range(10):
+        a = [np.ones(20 << 17) for _ in range(10)]
+        del a
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - f0
+b = np.ones(30 << 17)
+del b
+out = rounds()
+with kept_heap():
+    inside = rounds()
+    held = rss()
+print(out, inside, held, rss())
+""")
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    got = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True,
+                         env={**os.environ, "PYTHONPATH": root}).stdout.split()
+    out, inside, held, after = map(int, got)
+    assert out > 20000 and inside < out / 4          # 200 MB a round faulted in once, not ten times
+    assert held > 150 and after < held - 100         # kept while the bake runs, handed back after
+
+
 # ------------------------------------------------------------------ the whole bake
 
 @pytest.mark.parametrize("method", ["hemicube", pytest.param("embree", marks=needs_embree)])

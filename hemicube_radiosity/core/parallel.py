@@ -345,6 +345,54 @@ def one_blas_thread():
                 _BLAS_BEFORE.clear()
 
 
+#: glibc's ``mallopt`` parameter M_MMAP_THRESHOLD (malloc.h), and the heap a bake keeps.
+_M_MMAP_THRESHOLD = -3
+_HEAP_MMAP, _HEAP_TRIM, _HEAP_TRIM_AFTER = 32 << 20, 256 << 20, 64 << 20
+_HEAP_LOCK = threading.Lock()
+_HEAP_HELD: list = []
+
+
+@contextmanager
+def kept_heap():
+    """glibc, while the block runs (a bake; best effort, nothing elsewhere): arrays below 32 MB
+    come from the heap, and up to 256 MB of freed heap is kept for the next ones, instead of each
+    temporary being mapped fresh and unmapped (every page faulted in again, zeroed by the
+    kernel). A bake makes and drops the same large temporaries thousands of times: on one
+    worker Suzanne at level 3 took 1.67M page faults and 3.7 s of system time in a 23.8 s bake,
+    0.41M and 0.8 s in 19.3 s so; the 54k-triangle box 0.36M and 0.7 s, 0.11M and 0.2 s. Peak
+    memory did not change (1,197 / 1,198 MB; 482 / 489 MB). glibc moves to the same 32 MB on its
+    own once a NumPy program frees an array that large; afterwards it keeps 64 MB of freed heap
+    (what it would keep then) and hands the rest back to the system (``malloc_trim``). Bakes
+    that overlap share the setting (the last one out trims). Workers forked meanwhile inherit
+    it (:func:`_keep_freed_memory` adds their own)."""
+    libc = _glibc()
+    with _HEAP_LOCK:
+        if not _HEAP_HELD and libc is not None:
+            libc.mallopt(_M_MMAP_THRESHOLD, _HEAP_MMAP)
+            libc.mallopt(_M_TRIM_THRESHOLD, _HEAP_TRIM)
+        _HEAP_HELD.append(None)
+    try:
+        yield
+    finally:
+        with _HEAP_LOCK:
+            _HEAP_HELD.pop()
+            if not _HEAP_HELD and libc is not None:
+                libc.mallopt(_M_TRIM_THRESHOLD, _HEAP_TRIM_AFTER)
+                libc.malloc_trim(0)
+
+
+def _glibc():
+    """glibc's ``mallopt`` and ``malloc_trim`` (a ctypes CDLL), or None (not glibc)."""
+    if not sys.platform.startswith("linux"):
+        return None
+    try:
+        libc = ctypes.CDLL(None)
+        libc.mallopt, libc.malloc_trim      # noqa: B018 (both, or None)
+        return libc
+    except (OSError, AttributeError, TypeError):
+        return None
+
+
 def _noop():
     return None
 

@@ -24,7 +24,7 @@ from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .contact import cut_along_contacts
 from .output import meshes_key, output_elements, start_elements, vertex_stage
-from .parallel import one_blas_thread
+from .parallel import kept_heap, one_blas_thread
 from .patches import PatchError, PatchSet, build_patches
 from .progress import Cancelled
 from .refine import refine_stage
@@ -422,7 +422,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
                       progress, cancelled, patches=patches, given=patches is not None)
     t0 = time.perf_counter()
-    with small_pages(), one_blas_thread():       # (parallel.one_blas_thread: why)
+    with small_pages(), one_blas_thread(), kept_heap():   # (parallel.one_blas_thread, kept_heap: why)
         ctx.check()
         try:
             # geometry a later stage reads, made on a core the first stages leave idle
