@@ -525,9 +525,9 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's heap settings")
 def test_a_bake_keeps_its_freed_heap_and_hands_it_back_after(tmp_path):
     """:func:`.parallel.kept_heap` (around every bake): temporaries of 20 MB made and dropped
-    again and again fault their pages in once, not every time; after the block the heap kept
-    goes back to the system. In a fresh process, whose glibc has moved its own threshold to
-    30 MB (as a NumPy program does), ten rounds of ten such arrays."""
+    again and again fault their pages in once, not every time; after the block the next free
+    hands the heap kept back to the system. In a fresh process, whose glibc has moved its own
+    threshold to 30 MB (as a NumPy program does), ten rounds of ten such arrays."""
     import subprocess
     script = tmp_path / "heap.py"
     script.write_text("""
@@ -548,6 +548,8 @@ out = rounds()
 with kept_heap():
     inside = rounds()
     held = rss()
+c = np.ones(1 << 17)
+del c
 print(out, inside, held, rss())
 """)
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -555,7 +557,7 @@ print(out, inside, held, rss())
                          env={**os.environ, "PYTHONPATH": root}).stdout.split()
     out, inside, held, after = map(int, got)
     assert out > 20000 and inside < out / 4          # 200 MB a round faulted in once, not ten times
-    assert held > 150 and after < held - 100         # kept while the bake runs, handed back after
+    assert held > 150 and after < held - 100         # kept while the bake runs, handed back after it
 
 
 # ------------------------------------------------------------------ the whole bake

@@ -362,9 +362,10 @@ def kept_heap():
     0.41M and 0.8 s in 19.3 s so; the 54k-triangle box 0.36M and 0.7 s, 0.11M and 0.2 s. Peak
     memory did not change (1,197 / 1,198 MB; 482 / 489 MB). glibc moves to the same 32 MB on its
     own once a NumPy program frees an array that large; afterwards it keeps 64 MB of freed heap
-    (what it would keep then) and hands the rest back to the system (``malloc_trim``). Bakes
-    that overlap share the setting (the last one out trims). Workers forked meanwhile inherit
-    it (:func:`_keep_freed_memory` adds their own)."""
+    at its top (what it would keep then), and the next free hands the rest back to the system.
+    Not trimmed at once (``malloc_trim``): a relight (40 ms) then faulted its pages in again
+    every time, 8-15% slower. Bakes that overlap share the setting (the last one out puts it
+    back). Workers forked meanwhile inherit it (:func:`_keep_freed_memory` adds their own)."""
     libc = _glibc()
     with _HEAP_LOCK:
         if not _HEAP_HELD and libc is not None:
@@ -378,16 +379,15 @@ def kept_heap():
             _HEAP_HELD.pop()
             if not _HEAP_HELD and libc is not None:
                 libc.mallopt(_M_TRIM_THRESHOLD, _HEAP_TRIM_AFTER)
-                libc.malloc_trim(0)
 
 
 def _glibc():
-    """glibc's ``mallopt`` and ``malloc_trim`` (a ctypes CDLL), or None (not glibc)."""
+    """glibc's ``mallopt`` (a ctypes CDLL), or None (not glibc)."""
     if not sys.platform.startswith("linux"):
         return None
     try:
         libc = ctypes.CDLL(None)
-        libc.mallopt, libc.malloc_trim      # noqa: B018 (both, or None)
+        libc.mallopt                        # noqa: B018 (there, or None)
         return libc
     except (OSError, AttributeError, TypeError):
         return None
