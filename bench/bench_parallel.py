@@ -115,6 +115,7 @@ def curved_scene():
     """Suzanne with a level-3 Subdivision Surface on the Cornell box's floor, as bench_curved.py
     bakes her (31,488 faces; bpy makes her)."""
     sys.path.insert(0, HERE)
+    import bpy  # noqa: F401  (bmesh comes with it)
     from bench_curved import suzanne
     return scenes.cornell_box() + [suzanne(3)[0]]
 
@@ -126,7 +127,7 @@ def _spin(n):
     return x
 
 
-def two_process_ceiling(rounds=3, n=6_000_000):
+def two_process_ceiling(rounds=5, n=15_000_000):
     """What two cores give this machine at best: one process runs a loop of plain Python
     arithmetic (no memory traffic, no GIL between processes) alone, then two forked processes
     run it at once; ``2 x alone / together`` is the work two cores do in the time one does
