@@ -515,6 +515,23 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
     for a in ("verts", "polys"):
         assert np.array_equal(getattr(r1.elements, a), getattr(r2.elements, a))
     assert np.array_equal(r1.vertex_radiosity, r2.vertex_radiosity)
+    # a relight (the same geometry, the lamp brighter) finds the elements in the cache: no fork
+    from hemicube_radiosity.core.cache import FormFactorCache
+    # (the box as modelled: its elements are cut; tessellated finer than the detail size: its
+    # faces are the elements, and nothing is cut)
+    started = []
+    start = parallel.Ahead.start
+    monkeypatch.setattr(parallel.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
+    for meshes in (scenes.cornell_box(), scenes.tessellate(scenes.cornell_box(), 8)):
+        cache = FormFactorCache()
+        started.clear()
+        bake(meshes, BakeSettings(workers=2, **s), cache=cache)
+        assert started == [1]                 # (None where nothing is forked: threads only)
+        started.clear()
+        brighter = [scenes.MeshInput(m.verts, m.face_offsets, m.face_indices, m.face_rho,
+                                     1.3 * np.asarray(m.face_emission), m.name) for m in meshes]
+        again = bake(brighter, BakeSettings(workers=2, **s), cache=cache)
+        assert again.form_factor_source == "cached" and started == []
     if pool_kind == "processes":              # cancelled while the cut runs on its process
         with pytest.raises(Cancelled):
             bake(scenes.cornell_box(), BakeSettings(workers=2, **s),
