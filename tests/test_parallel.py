@@ -489,6 +489,35 @@ def test_ahead_makes_its_value_on_a_forked_process_and_is_terminated_when_stoppe
     assert multiprocessing.active_children() == []
 
 
+@needs_fork
+def test_a_worker_killed_half_way_through_its_result_does_not_hang_the_stop():
+    """A worker terminated while it writes its result leaves half a message in the pool's
+    results pipe; the pool's reading thread waited for the rest for ever, and so did the stop
+    that terminated it (the background gather's cancel test hung so). Here the worker writes
+    a header for 1,000 bytes and only 10, then sleeps: stopping it must return."""
+    import struct
+    holder = {}
+
+    class Spy(parallel.Ahead):
+        def __init__(self, fn):
+            holder["self"] = self
+            super().__init__(fn)
+
+    def half_a_result():
+        writer = holder["self"]._pool._result_queue._writer
+        writer._send(struct.pack("!i", 1000))
+        writer._send(b"x" * 10)
+        time.sleep(600)
+    before = threading.active_count()
+    a = Spy(half_a_result)
+    time.sleep(1.0)                                   # the pool's thread now waits for 990 bytes
+    stopper = threading.Thread(target=a.close, daemon=True)
+    stopper.start()
+    stopper.join(60)
+    assert not stopper.is_alive(), "the stop hung"
+    assert multiprocessing.active_children() == [] and threading.active_count() == before
+
+
 def test_ahead_is_not_started_where_processes_are_not(monkeypatch):
     monkeypatch.setattr(parallel, "PROCESSES", False)
     assert parallel.Ahead.start(lambda: 1) is None

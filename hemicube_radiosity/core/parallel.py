@@ -215,12 +215,37 @@ def _process_map(fn, items, workers, in_flight, announce=False):
     finally:
         _TASKS.pop(token, None)
         if not done:                         # stopped early: do not wait for running batches
-            for p in list((getattr(pool, "_processes", None) or {}).values()):
-                try:
-                    p.terminate()
-                except (OSError, AttributeError):
-                    pass
+            _terminate(pool)
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _terminate(pool) -> None:
+    """Terminate ``pool``'s worker processes at once, so that its ``shutdown`` returns.
+
+    A worker killed while it writes a result leaves half a message in the results pipe, and the
+    pool's manager thread, reading it, would wait for the rest for ever: this process holds the
+    pipe's writing end too (it made the pipe before forking), so the read never meets its end.
+    Once the workers are gone, that end is closed here: the read ends, the pool counts itself
+    broken, and its threads stop. (The test of a cancel during the background gather hung so,
+    once.)"""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        try:
+            p.terminate()
+        except (OSError, AttributeError):
+            pass
+    for p in procs:
+        try:
+            p.join(5.0)
+        except (OSError, AttributeError, AssertionError):
+            pass
+    if all(getattr(p, "exitcode", None) is not None for p in procs):
+        writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+        try:
+            if writer is not None:
+                writer.close()
+        except OSError:
+            pass
 
 
 def _worker_init():
@@ -526,10 +551,6 @@ class Ahead:
         if self._pool is None:
             return
         if not self._future.done():
-            for p in list((getattr(self._pool, "_processes", None) or {}).values()):
-                try:
-                    p.terminate()
-                except (OSError, AttributeError):
-                    pass
+            _terminate(self._pool)
         self._pool.shutdown(wait=True, cancel_futures=True)
         self._pool = None
