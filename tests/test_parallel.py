@@ -160,6 +160,19 @@ def test_a_bake_runs_on_one_blas_thread_and_puts_the_count_back(monkeypatch):
         set_threads(before)
 
 
+@needs_fork
+def test_a_worker_forked_by_a_bake_starts_no_blas_thread():
+    """OpenBLAS stops its threads at a fork and starts them again in the child whenever its thread
+    count is set there, even to the one it has; a new one spins for 0.1 s. A worker forked inside
+    a bake (one BLAS thread already) leaves the count alone: it runs on its one thread."""
+    if not parallel._openblas():
+        pytest.skip("NumPy's BLAS here is not OpenBLAS")
+    with one_blas_thread():
+        got = list(ordered_map(lambda i: (len(os.listdir("/proc/self/task")), parallel._openblas()[0][1]()),
+                               range(4), 2, processes=True))
+    assert got == [(1, 1)] * 4
+
+
 def test_processes_on_linux_only_where_fork_is():
     if sys.platform.startswith("linux"):
         assert processes_available()                # the form-factor tests below fork here

@@ -295,12 +295,19 @@ def _die_with_parent():
 
 
 def _one_blas_thread():
-    """Ask the OpenBLAS that NumPy loaded for one thread, if it is there (best effort). Its
-    threads only spin beside the rasteriser's small products (3 x V): in the serial bake they
-    burn a second core for nothing, and two workers with two BLAS threads each would fight over
-    two cores."""
-    for set_threads, _ in _openblas():
-        set_threads(1)
+    """Ask the OpenBLAS that NumPy loaded for one thread, if it is there and has more (best
+    effort). Its threads only spin beside the rasteriser's small products (3 x V): in the serial
+    bake they burn a second core for nothing, and two workers with two BLAS threads each would
+    fight over two cores.
+
+    A count of one already (a worker forked by a bake, which holds :func:`one_blas_thread`) is
+    left alone: OpenBLAS stops its threads at a fork, and ``openblas_set_num_threads`` in the
+    child starts them again whatever the count, and a new thread spins (sched_yield) for about
+    0.1 s. The 54k-triangle box's two-worker bake forks 10 workers: perf counted 31,971
+    sched_yield calls in OpenBLAS's ``blas_thread_server``, one such spin in every worker."""
+    for set_threads, get_threads in _openblas():
+        if get_threads() != 1:
+            set_threads(1)
 
 
 def _openblas() -> list:
