@@ -371,7 +371,8 @@ def section(res):
          "The Cornell box (`core.scenes.cornell_box`, 16 quads) modelled densely: `tessellate(cornell_box(), n)` cuts every"
          " quad into n x n quads of two triangles (2 n^2 triangles a quad). Each size runs in its own child process"
          f" (ours {res.get('repeat', 1)} times, each in a new process, the fastest kept: this machine's noise moved a"
-         " size's time by 10-15% from run to run, more than the steps the time rule compares):"
+         " size's time by 10-15% from run to run, more than the steps the time rule compares; the runs go in rounds over"
+         " every size, all of ours before any Cycles bake, so that the sizes compared ran minutes apart):"
          " ours = `pipeline.bake` with `BakeSettings()` as shipped (no world, no lamps, as the bench's Cornell scene),"
          " then the add-on's `read_scene` + `write_copies` on the same scene as Blender objects; Cycles = a COMBINED"
          f" vertex bake of the same tessellated objects at {CYCLES_SPP} spp, 32 bounces, 2 threads"
@@ -478,7 +479,7 @@ def main(argv=None):
     ap.add_argument("--ref-spp", type=int, default=None)
     ap.add_argument("--spp", type=int, default=CYCLES_SPP)
     ap.add_argument("--timeout", type=float, default=1800)
-    ap.add_argument("--repeat", type=int, default=2,
+    ap.add_argument("--repeat", type=int, default=3,
                     help="our bake runs per size, each in a new child process; the fastest is kept (this shared"
                          " machine's noise is larger than the steps the time rule compares)")
     ap.add_argument("--no-cycles", action="store_true")
@@ -517,9 +518,17 @@ def main(argv=None):
     os.makedirs(OUT_DIR, exist_ok=True)
     probes_path = os.path.join(OUT_DIR, "dense_probes.npz")
     res["reference"] = make_probes(ref_spp, probes_path)
+    # ours first, in rounds over every size (the sizes' runs minutes apart, not tens of minutes with
+    # Cycles' bakes between them: this machine's speed drifts by the hour), then Cycles
+    rounds = {n: [] for n in ns}
+    for i in range(max(1, args.repeat)):
+        for n in ns:
+            rounds[n].append(run_child("ours", [n, probes_path], args.timeout))
+            r = rounds[n][-1]
+            log(f"  round {i + 1}, n={n}: " + (f"bake {r['core_seconds']:.2f} s" if "core_seconds" in r else f"failed: {r}"))
     for n in ns:
         row = {"n": n}
-        runs = [run_child("ours", [n, probes_path], args.timeout) for _ in range(max(1, args.repeat))]
+        runs = rounds[n]
         done = [r for r in runs if "core_seconds" in r]
         row["ours"] = min(done, key=lambda r: r["core_seconds"]) if done else runs[0]
         row["ours"]["core_runs"] = [r["core_seconds"] for r in done]
