@@ -18,10 +18,13 @@ To add a format: one writer function and one row in :data:`EXPORTERS` (and its t
 """
 from __future__ import annotations
 
+import gc
+import io
 import json
 import os
 import re
 import shutil
+import sys
 
 import bpy
 import numpy as np
@@ -135,7 +138,25 @@ def export(path, job, report=None) -> str:
     finally:
         if os.path.exists(tmp):
             os.remove(tmp)
+            _close_dropped_files(tmp)
     return path
+
+
+def _close_dropped_files(tmp):
+    """Close the files under the temporary path ``tmp`` that a failed writer left open.
+
+    Blender's glTF exporter opens its output without ``with``. When a write fails (a full
+    disk), Blender prints the operator's error, which keeps its traceback in
+    ``sys.last_traceback``, and with it the exporter's frame and the open file: the removed
+    partial file would hold its space on the full disk until the next error replaced it."""
+    tb = getattr(sys, "last_traceback", None)
+    while tb is not None:
+        for value in list(tb.tb_frame.f_locals.values()):
+            # type(), not isinstance(): that asks a removed Blender struct for its __class__
+            if issubclass(type(value), io.IOBase) and str(getattr(value, "name", "")).startswith(tmp):
+                value.close()
+        tb = tb.tb_next
+    gc.collect()
 
 
 def _export_folder(writer, path, job, report):
@@ -149,6 +170,8 @@ def _export_folder(writer, path, job, report):
         for f in files:
             os.replace(os.path.join(tmp_dir, f), os.path.join(folder, f))
     except (OSError, RuntimeError) as ex:
+        shutil.rmtree(tmp_dir, ignore_errors=True)
+        _close_dropped_files(tmp_dir)
         raise _fail(path, ex) from None
     finally:
         shutil.rmtree(tmp_dir, ignore_errors=True)
