@@ -450,6 +450,22 @@ def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
     assert threading.active_count() == before and multiprocessing.active_children() == []
 
 
+@needs_fork
+def test_forked_workers_write_into_a_shared_array():
+    """:func:`.parallel.shared_array`: what forked workers write in place is what the caller
+    reads; each writes its own rows, and only counts travel back through the pipe."""
+    out = parallel.shared_array((6, 3), np.float64)
+    assert out.shape == (6, 3) and not out.any()
+
+    def fill(i):
+        out[2 * i:2 * i + 2] = np.arange(6).reshape(2, 3) + 10 * i
+        return os.getpid()
+    pids = list(ordered_map(fill, range(3), 2, processes=True))
+    assert os.getpid() not in pids                                  # written by the workers
+    assert np.array_equal(out, np.vstack([np.arange(6).reshape(2, 3) + 10 * i for i in range(3)]))
+    assert parallel.shared_array(0, np.int32).shape == (0,)
+
+
 def test_background_returns_raises_and_stops():
     """:class:`.parallel.Background`: the value made on its thread, the error raised on the
     caller's, and a stop asked for (cancelled while waiting) reaches the thread's loop."""

@@ -17,7 +17,7 @@ from functools import partial
 import numpy as np
 
 from .geometry import in_frames, tangent_frames
-from .parallel import Background, ordered_map, resolve_workers, shares, started_map
+from .parallel import Background, ordered_map, resolve_workers, shared_array, shares, started_map
 from .patches import PatchSet
 from .rays import cosine_lattice
 from .sparse import CSR
@@ -124,7 +124,10 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     if workers > 1:        # a few chunks a worker, so they end together (rows never span chunks:
         step = max(1, min(step, -(-P // (4 * workers))))      # G is the same for any chunking)
     forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
-    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits)
+    # forked workers write their rows and hits into shared memory, each chunk of points at its
+    # own place (at most 4 entries and one hit per ray), and send back only how many
+    out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches))) if forked else None
+    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits, out)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
     starts = range(0, P, step)
@@ -133,6 +136,8 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     def collect(stop=None, tick=ticker):
         with closing(results):
             for s, m, sky_s, n, c, w, H in results:
+                if out is not None:                    # (c, w, H): how many entries and hits
+                    c, w, H = out.read(s, c, H)
                 sky[s:s + m] = sky_s
                 counts[s + 1:s + m + 1] = n
                 found.append(H)
@@ -156,10 +161,43 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     return Background(partial(collect, tick=None))
 
 
-def _cast(patches, params, scene, points, normals, local, step, hits, s):
+def _hit_dtype(points, patches):
+    """float32 holds ids exactly below 2^24 and positions to 1e-7 of the scene."""
+    return np.float32 if max(points, patches) < (1 << 24) else np.float64
+
+
+class _SharedRows:
+    """Where forked gather workers put a chunk's rows of G and hits (:func:`.parallel.
+    shared_array`): the chunk of points from ``s`` at entries ``4 R s`` and hits ``R s`` on
+    (a point's rays make at most 4 entries and one hit each), so chunks never overlap."""
+
+    def __init__(self, P, R, hits, hit_dtype):
+        self.R = R
+        self.cols = shared_array(4 * R * P, np.int32)
+        self.vals = shared_array(4 * R * P, np.float32)
+        self.hits = shared_array((R * P if hits else 0, 5), hit_dtype)
+
+    def write(self, s, cols, vals, H):
+        """Store a chunk's entries and hits; (entries, hits or None) to send back."""
+        e = len(cols)
+        self.cols[4 * self.R * s:4 * self.R * s + e] = cols
+        self.vals[4 * self.R * s:4 * self.R * s + e] = vals
+        if H is None:
+            return e, None
+        self.hits[self.R * s:self.R * s + len(H)] = H
+        return e, len(H)
+
+    def read(self, s, e, h):
+        """(columns, values, hits or None) of the chunk at ``s``: views."""
+        a, b = 4 * self.R * s, self.R * s
+        return self.cols[a:a + e], self.vals[a:a + e], None if h is None else self.hits[b:b + h]
+
+
+def _cast(patches, params, scene, points, normals, local, step, hits, out, s):
     """The gather rays ``local`` (R, 3) of the points ``s:s + step``: (s, m, sky (m,), the
     chunk's rows of G as entries per row (m,), columns (e,) int32 and values (e,) float32, its
-    hits (h, 5) or None)."""
+    hits (h, 5) or None); with ``out`` (a :class:`_SharedRows`), the columns, values and hits
+    go there and their counts come back in their place."""
     R = len(local)
     x, n = points[s:s + step], normals[s:s + step]
     m = len(x)
@@ -177,17 +215,19 @@ def _cast(patches, params, scene, points, normals, local, step, hits, s):
     y = lifted.take(f // R, axis=0) + np.asarray(tfar, np.float64)[f, None] * df
     ids, w = surface_weights(params, patches.polys, pf, y)
     H = None
-    if hits:   # float32 holds ids exactly below 2^24 and positions to 1e-7 of the scene
-        exact = max(len(points), len(patches)) < (1 << 24)
-        H = np.column_stack([s + f // R, pf, y]).astype(np.float32 if exact else np.float64)
+    if hits:
+        H = np.column_stack([s + f // R, pf, y]).astype(_hit_dtype(len(points), len(patches)))
     # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
     V = len(patches.verts)
     key, inv = unique_ints(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True)
     summed = np.bincount(inv.reshape(-1), weights=w.ravel() / R, minlength=key.size)
     keep = summed != 0
     key, summed = key[keep], summed[keep]
-    return (s, m, sky_s, np.bincount(key // V, minlength=m), (key % V).astype(np.int32),
-            summed.astype(np.float32), H)
+    cols, vals = (key % V).astype(np.int32), summed.astype(np.float32)
+    if out is not None:
+        e, h = out.write(s, cols, vals, H)
+        return s, m, sky_s, np.bincount(key // V, minlength=m), e, None, h
+    return s, m, sky_s, np.bincount(key // V, minlength=m), cols, vals, H
 
 
 def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.ndarray:

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import ctypes
 import itertools
+import mmap
 import multiprocessing
 import os
 import signal
@@ -42,10 +43,12 @@ from contextlib import contextmanager
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 
+import numpy as np
+
 from .errors import RadiosityError
 
 __all__ = ["resolve_workers", "ordered_map", "started_map", "shares", "one_blas_thread", "cpu_count",
-           "processes_available", "Background", "Ahead", "PROCESSES"]
+           "processes_available", "Background", "Ahead", "PROCESSES", "shared_array"]
 
 #: False: ``ordered_map(..., processes=True)`` runs on threads too (a switch for benchmarks and
 #: for a host where forking misbehaves).
@@ -116,6 +119,27 @@ def ordered_map(fn, items, workers=1, *, in_flight=None, processes=False):
         yield from _ordered(pool, fn, items, workers, in_flight)
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+
+
+def shared_array(shape, dtype) -> np.ndarray:
+    """A zero-filled array in memory shared with the processes forked after this call
+    (anonymous ``MAP_SHARED``, no swap reserved: only the pages written take memory): a
+    forked map's workers write their results into it, in place, and send back only where,
+    instead of pickling the arrays through the pool's pipe. Freed when the last array that
+    views it is. Linux (where maps fork) and other POSIX systems.
+
+    Why: the final gather of the 54k-triangle box sends 117 MB of rows and hits back from its
+    workers. Sent as pickles through the pipe, 118 MB in 14 chunks took 0.37-0.42 s of CPU
+    (pickled, written, read and unpickled: four copies) against 0.03-0.05 s for the same map
+    returning nothing."""
+    shape = tuple(int(x) for x in np.atleast_1d(shape))
+    dtype = np.dtype(dtype)
+    size = max(1, int(np.prod(shape, dtype=np.int64)) * dtype.itemsize)
+    flags = getattr(mmap, "MAP_SHARED", 1) | getattr(mmap, "MAP_ANONYMOUS", 0x20)
+    if sys.platform.startswith("linux"):
+        flags |= 0x4000                                    # MAP_NORESERVE
+    mm = mmap.mmap(-1, size, flags=flags)
+    return np.frombuffer(mm, dtype=dtype, count=int(np.prod(shape, dtype=np.int64))).reshape(shape)
 
 
 def shares(fn, n) -> list:
