@@ -13,7 +13,8 @@ wall and CPU seconds (CPU of this process and of its worker processes: with two 
 colours, and says how loaded the machine was: the load average before and after, and the CPU
 the rest of the machine used during each case and the whole run, from /proc/stat (a shared
 machine's other sessions take their share whatever this run asks for; see bench_batch.py), and
-what two cores give this machine at best (:func:`two_process_ceiling`).
+what two cores give this machine at best: for plain Python arithmetic (:func:`two_process_ceiling`)
+and, after each case, for that case's own one-worker bake (:func:`bake_ceiling`; not with ``--quick``).
 
     .venv/bin/python bench/bench_parallel.py [--quick] [--repeat 2] [--only dense|coarse|curved]
                                              [--method hemicube|embree]
@@ -148,6 +149,37 @@ def two_process_ceiling(rounds=5, n=15_000_000):
         for p in procs:
             p.join()
         ratios.append(2 * alone / (time.perf_counter() - t))
+    return float(np.median(ratios)), ratios
+
+
+def _bake_alone(meshes, kw):
+    t = time.perf_counter()
+    timed_bake(meshes, BakeSettings(workers=1, **kw))
+    return time.perf_counter() - t
+
+
+def bake_ceiling(meshes, kw, rounds=2):
+    """What two cores give this machine on this very bake: the one-worker bake in a forked
+    process alone, then in two forked processes at once (nothing shared between them but the
+    machine: its cores, caches and memory bandwidth); ``2 x alone / together`` per round, the
+    rounds alternating, the median kept. Unlike :func:`two_process_ceiling` this counts what the
+    bake's own work (Embree, NumPy over arrays larger than the caches) loses when two run side
+    by side: a two-worker bake does its one bake's work, so it can reach this at best."""
+    import multiprocessing
+    ctx = multiprocessing.get_context("fork")
+
+    def together(k):
+        procs = [ctx.Process(target=_bake_alone, args=(meshes, kw)) for _ in range(k)]
+        t = time.perf_counter()
+        for p in procs:
+            p.start()
+        for p in procs:
+            p.join()
+        return time.perf_counter() - t
+    ratios = []
+    for _ in range(rounds):
+        alone = together(1)
+        ratios.append(2 * alone / together(2))
     return float(np.median(ratios)), ratios
 
 
@@ -286,7 +318,13 @@ def main(argv=None):
         case = print_case(label, results, best, configs)
         whole = case["stages"]["total"]["speedup"]["2"]
         print(f"  whole bake on 2 workers: {whole:.2f}x, {whole / ceiling:.0%} of this machine's ceiling "
-              f"({ceiling:.2f}x)")
+              f"({ceiling:.2f}x)", flush=True)
+        if not args.quick:
+            own, own_rounds = bake_ceiling(meshes, kw)
+            case.update(bake_ceiling=own, bake_ceiling_rounds=own_rounds)
+            print(f"  this bake's own ceiling: two one-worker bakes at once did {own:.2f}x the work of one in"
+                  f" the same time (rounds: {', '.join(f'{r:.2f}' for r in own_rounds)}); 2 workers reached "
+                  f"{whole / own:.0%} of it")
         case["other_cpus"] = others_cpu(c0, machine_cpu() or (0, 0), cpu_time() - o0,
                                         time.perf_counter() - t0)
         print(f"  other processes used {case['other_cpus']:.2f} of {cpu_count()} CPUs during "
