@@ -167,6 +167,32 @@ def test_group_form_factors_group_by_group_equal_the_flat_pairs_bit_for_bit(monk
     assert np.array_equal(by_group, flat) and np.array_equal(small_blocks, flat)
 
 
+def test_clipped_contour_answers_points_below_the_whole_region_without_clipping():
+    """A point that sees the whole region at or below its horizon (wholly behind, or in its
+    plane) sees nothing of it: F = 0, ok, without the clipping; the points that see part of it
+    get what the clipping gives them among any others, bit for bit, and what the face-by-face
+    sum gives."""
+    from hemicube_radiosity.core import geometry
+    rng = np.random.default_rng(11)
+    lamp = build_patches([scenes.cornell_box()[5]], None)              # the lamp, facing down
+    o = geometry.GroupOutline.of(lamp.corners(), np.zeros(len(lamp), int), lamp.normals)
+    centre = lamp.centers.mean(axis=0)
+    pts = centre + rng.uniform((-1.5, -1.5, -1.5), (1.5, 1.5, -0.05), (400, 3))   # below the lamp
+    nrm = rng.normal(size=(400, 3))
+    nrm[:100] = np.abs(nrm[:100]) * (0, 0, -1)                       # facing away: nothing seen
+    nrm[100:120] = lamp.normals[0]                                    # in the horizon's plane: nothing
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    pts[100:120, 2] = centre[2]
+    F, ok = geometry._clipped_contour(pts, nrm, o.edges, lamp.normals[0])
+    assert ok.all() and not F[:120].any()
+    part = np.flatnonzero(F > 0)
+    assert part.size > 100
+    Fp, okp = geometry._clipped_rows(pts[120:], nrm[120:], o.edges, lamp.normals[0])
+    assert np.array_equal(F[120:], Fp) and okp.all()
+    ref = polygon_form_factors(pts, nrm, lamp.corners(), lamp.normals).sum(axis=1)
+    np.testing.assert_allclose(F, ref, atol=1e-12)
+
+
 def test_dense_cornell_box_bakes_like_the_coarse_one():
     """The same box modelled as 8,192 triangles: a few hundred patches, and the floor and back
     wall within 5% of the coarse model's bake at the defaults (the light is the same; only the
