@@ -414,6 +414,27 @@ def test_emitter_transport_identical_with_two_workers(box, shadows, pool_kind, m
     assert np.array_equal(T1, T3)
 
 
+@needs_fork
+def test_grouped_emitters_shine_on_threads_and_patches_on_forks(box, monkeypatch):
+    """A transport of grouped emitters (mostly rays: embreex lets go of the GIL) runs on threads,
+    one of emitter patches shining one by one (NumPy form factors) on forked processes; both
+    equal one worker's."""
+    from hemicube_radiosity.core import direct
+    monkeypatch.setattr(direct, "PROCESS_RAYS", 0)                     # large enough for both
+    forked = []
+    real = parallel._process_map
+    monkeypatch.setattr(parallel, "_process_map", lambda *a, **k: forked.append(1) or real(*a, **k))
+    x, n, _ = vertex_frames(box)
+    em = np.flatnonzero(box.emission.max(axis=1) > 0)
+    assert em.size > 1
+    for groups, forks in ((np.zeros(em.size, np.int64), False), (None, True)):
+        forked.clear()
+        kw = dict(scene=None, samples=4, chunk_rays=em.size * 4 * 7, groups=groups)
+        T2 = emitter_transport(box, x, n, em, workers=2, **kw)
+        assert bool(forked) == forks
+        assert np.array_equal(T2, emitter_transport(box, x, n, em, workers=1, **kw)) and T2.any()
+
+
 def test_emitter_transport_cancel_with_two_workers(box, pool_kind, monkeypatch):
     from hemicube_radiosity.core import direct
     monkeypatch.setattr(direct, "PROCESS_RAYS", 0)
