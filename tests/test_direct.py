@@ -80,3 +80,51 @@ def test_grid_of_is_grid_points_kept_for_the_geometry():
         got = patch_average(ps, 2, light, centre)
         assert np.array_equal(got[~centre], want)
         assert np.array_equal(got[centre], light(ps.centers[centre], ps.normals[centre], ""))
+
+
+def test_a_lamp_face_cut_into_100_patches_shines_as_one_unit():
+    """A 0.5 m lamp face cut into 10 x 10 patches (no clusters: the coarse path) shines as one
+    unit: one contour and 64 shadow rays per point (4 x the face's 16: finer patches, finer
+    shadows), not 100 contours and 4 rays per patch (400). Where nothing stands between, the light is the whole face's closed form (its
+    outline's contour, exact); the same face with one patch of another emission (a texture's) or
+    bent out of its plane shines patch by patch, as before."""
+    from hemicube_radiosity.core.direct_light import DirectLight
+    from hemicube_radiosity.core.pipeline import BakeSettings
+
+    h = 0.25
+    lamp = quad([(-h, -h, 1), (-h, h, 1), (h, h, 1), (h, -h, 1)], (0, 0, 0), (1.0, 0.5, 0.25), name="Lamp")
+    floor = quad([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], (0.5, 0.5, 0.5), name="Floor")
+    settings = BakeSettings(patch_size=0.05, direct_samples=16, two_sided_emission=False)
+    ps = build_patches([lamp, floor], 0.05)
+    light = DirectLight.plan(ps, settings, [])
+    assert light.emitters.size == 100 and light.groups.tolist() == [0] * 100 and light.samples == 64
+
+    cast = []
+    scene = light.scene()
+    occluded = scene.occluded
+
+    class Counting:
+        scale = getattr(scene, "scale", 1.0)
+
+        def occluded(self, o, d, tfar):
+            cast.append(len(o))
+            return occluded(o, d, tfar)
+    light._scene = Counting()
+    x = np.array([[0.0, 0.0, 0.0], [0.1, -0.2, 0.0], [0.6, 0.3, 0.0], [1.5, 1.5, 0.0]])
+    got = light.at(x, np.tile([0.0, 0.0, 1.0], (4, 1)), "floor")
+    assert sum(cast) == 64 * len(x)                    # 64 rays a point: all lit, no penumbra
+    # the whole face's form factor (four corner rectangles, closed form) times its radiance
+    exact = []
+    for px, py, _ in x:
+        def part(a, b):                                  # signed corner rectangles of [-h, h]^2
+            return np.sign(a) * np.sign(b) * point_under_rectangle_corner(abs(a), abs(b), 1.0)
+        exact.append(part(h - px, h - py) - part(-h - px, h - py) - part(h - px, -h - py) + part(-h - px, -h - py))
+    np.testing.assert_allclose(got, np.array(exact)[:, None] * [1.0, 0.5, 0.25], rtol=1e-5)
+
+    textured = ps.emission.copy()
+    textured[light.emitters[7]] *= 0.9
+    from dataclasses import replace
+    assert DirectLight.plan(replace(ps, emission=textured), settings, []).groups is None
+    bent = quad([(-h, -h, 1), (-h, h, 1.1), (h, h, 1), (h, -h, 1)], (0, 0, 0), (1.0,) * 3, name="Lamp")
+    per_patch = DirectLight.plan(build_patches([bent, floor], 0.05), settings, [])
+    assert per_patch.groups is None and per_patch.samples == 2

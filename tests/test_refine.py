@@ -167,7 +167,10 @@ def test_a_soft_shadow_is_smooth_when_the_lamp_is_cut_into_patches():
     the light stepped in nine levels (measured: RMS error 5.5% of the brightest, second
     differences along the row 19x the exact light's). At least 2 rays per patch (a 2 x 2 grid)
     find it and refine it: 1.8% RMS, 6x (what is left: a shadow's edge that passes between a
-    patch's points unseen)."""
+    patch's points unseen). The nine patches of one face now shine as one unit, the same 36
+    rays spread over the whole face in compact strata (:func:`.direct._group_samples`), each
+    weighted by its share of the form factor: 1.1% RMS, 4.8x (with the face's 16 rays alone:
+    1.7%, 8.5x)."""
     q = scenes.quad
     h = 0.25
     lamp = q([(-h, -h, 1), (-h, h, 1), (h, h, 1), (h, -h, 1)], (0, 0, 0), (1.0,) * 3, name="Lamp")   # faces down
@@ -175,7 +178,7 @@ def test_a_soft_shadow_is_smooth_when_the_lamp_is_cut_into_patches():
     floor = q([(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], (0.5, 0.5, 0.5), name="Floor")
     ps = build_patches([lamp, plate, floor], 0.17)
     light = DirectLight.plan(ps, BakeSettings(patch_size=0.17, direct_samples=16, two_sided_emission=False), [])
-    assert light.emitters.size == 9
+    assert light.emitters.size == 9 and light.groups.tolist() == [0] * 9 and light.samples == 36
     x = np.linspace(-0.4, 0.4, 81)
     y = 0.05
     pts = np.column_stack([x, np.full_like(x, y), np.zeros_like(x)])
@@ -186,8 +189,8 @@ def test_a_soft_shadow_is_smooth_when_the_lamp_is_cut_into_patches():
 
     def d2(a):
         return a[:-2] - 2 * a[1:-1] + a[2:]
-    assert np.sqrt(np.mean(err ** 2)) < 0.03
-    assert np.sqrt(np.mean(d2(err) ** 2)) < 10 * np.sqrt(np.mean(d2(exact / exact.max()) ** 2))
+    assert np.sqrt(np.mean(err ** 2)) < 0.015
+    assert np.sqrt(np.mean(d2(err) ** 2)) < 6 * np.sqrt(np.mean(d2(exact / exact.max()) ** 2))
 
 
 def test_a_bright_spot_on_a_floor_lights_a_wall_without_blotches():

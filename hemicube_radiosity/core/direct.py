@@ -8,8 +8,10 @@ light is most of the detail in a bake, so it is computed apart:
 
 with F the exact unoccluded point-to-polygon form factor (Lambert's contour formula, after
 clipping the emitter to the receiver's horizon: :func:`.geometry.polygon_form_factors`) and V
-the fraction of stratified sample points on the emitter that are visible from x (shadow rays,
-:mod:`.rays`). D is the radiance arriving from the emitters, so a receiver with reflectivity
+the visible share of that form factor, from stratified sample points on the emitter (shadow
+rays, :mod:`.rays`), each weighted by its part of F (cos at x times cos at the emitter over the
+squared distance): a large lamp half hidden from a point near it is dimmed by the part of F it
+loses, not by the part of its area. D is the radiance arriving from the emitters, so a receiver with reflectivity
 rho reflects ``rho * D`` of it; the radiosity solve then carries only the reflected light (see
 :mod:`.pipeline`), never the emitters' E.
 """
@@ -20,6 +22,7 @@ import numpy as np
 from .geometry import GROUP_LOOP, GroupOutline, group_form_factors, jittered_grid, polygon_form_factors
 from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
+from .spatial import morton_codes
 
 #: Shadow rays (points x emitter units x samples) from which a transport with several workers
 #: runs on forked processes: below, forking costs more than it saves.
@@ -78,27 +81,64 @@ def _emitter_samples(corners, samples, rng):
 
 
 def _group_samples(corners, areas, groups, samples, rng):
-    """(G, S, 3) points spread over each group of emitter patches by area: S strata of the
-    group's total area, each a random point on the patch it falls in (bilinear map)."""
+    """(G, S, 3) points spread over each group of emitter patches by area.
+
+    The group's patches are put in Morton order of their centres (within the group's bounding
+    box) and its area is cut into S strata along that order, one random point in each: a run of
+    the order is a compact region, so the strata are spread over the group in both directions,
+    not in bands. The points that fall on one patch lie on a jittered grid over it (m of its
+    g x g cells, g = ceil(sqrt m), evenly spaced from a random cell: each point is uniform over
+    the patch), so a group of one patch and S = 16 gets the 4 x 4 grid a patch shining alone
+    has. (Random points within the patches, strata in the order the patches came: a lamp cut
+    into 9 patches, 16 rays, lit a soft shadow with 2.9% RMS error.)"""
     G = int(groups.max()) + 1
-    order = np.argsort(groups, kind="stable")
+    centres = corners.mean(axis=1)
+    lo = np.full((G, 3), np.inf)
+    hi = np.full((G, 3), -np.inf)
+    np.minimum.at(lo, groups, centres)
+    np.maximum.at(hi, groups, centres)
+    order = np.lexsort((morton_codes(centres, lo[groups], hi[groups]), groups))
     cum = np.cumsum(areas[order])
     start = np.searchsorted(groups[order], np.arange(G))
     before = np.where(start > 0, cum[start - 1], 0.0)
     total = np.bincount(groups, weights=areas, minlength=G)
     t = before[:, None] + total[:, None] * (np.arange(samples)[None] + rng.uniform(0, 1, (G, samples))) / samples
-    k = order[np.minimum(np.searchsorted(cum, t.ravel(), side="right"), len(cum) - 1)].reshape(G, samples)
-    u, v = rng.uniform(0, 1, (2, G, samples, 1))
-    return _bilinear(corners[k], u, v)                                # corners[k]: (G, S, 4, 3)
+    pos = np.minimum(np.searchsorted(cum, t.ravel(), side="right"), len(cum) - 1)
+    # the points on one patch are a run of ``pos`` (t rises along each group, the groups in order)
+    n = pos.size
+    new = np.r_[True, pos[1:] != pos[:-1]]
+    first = np.flatnonzero(new)
+    run = np.cumsum(new) - 1
+    rank = np.arange(n) - first[run]
+    m = np.diff(np.r_[first, n])[run]
+    g = np.ceil(np.sqrt(m)).astype(np.int64)
+    cells = g * g
+    offset = np.floor(rng.uniform(0, 1, first.size) * cells[first]).astype(np.int64)
+    cell = (offset[run] + rank * cells // m) % cells
+    ju, jv = rng.uniform(0, 1, (2, n))
+    u = ((cell // g + ju) / g).reshape(G, samples, 1)
+    v = ((cell % g + jv) / g).reshape(G, samples, 1)
+    return _bilinear(corners[order[pos].reshape(G, samples)], u, v)   # corners[k]: (G, S, 4, 3)
 
 
-def _visible_fraction(scene, origins, targets):
-    """(r,) fraction of the segments origins (r,3) -> targets (r,S,3) that nothing blocks."""
+def _visible_fraction(scene, origins, targets, normals=None, target_normals=None):
+    """(r,) fraction of the segments origins (r,3) -> targets (r,S,3) that nothing blocks.
+    With the points' unit ``normals`` (r,3) and the targets' ``target_normals`` (r,3) or
+    (r,S,3): (visible weight (r,), weight (r,), none blocked (r,), all blocked (r,)), each
+    segment weighted by its share of the form factor, cos at the point (0 below its horizon) x
+    |cos| at the target / length^2; their ratio is the visible share of the emitter's form
+    factor, not of its area."""
     S = targets.shape[1]
     d = targets - origins[:, None, :]
     blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
-                             np.full(len(origins) * S, 1 - 1e-4))
-    return 1 - blocked.reshape(-1, S).mean(axis=1)
+                             np.full(len(origins) * S, 1 - 1e-4)).reshape(-1, S)
+    if normals is None:
+        return 1 - blocked.mean(axis=1)
+    r2 = np.einsum("rsk,rsk->rs", d, d)
+    tn = target_normals if target_normals.ndim == 3 else target_normals[:, None, :]
+    w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.abs(np.einsum("rsk,rsk->rs", d, tn)) \
+        / np.maximum(r2 * r2, 1e-300)
+    return np.einsum("rs,rs->r", w, 1.0 - blocked), w.sum(axis=1), ~blocked.any(axis=1), blocked.all(axis=1)
 
 
 def _sample_drawer(patches, em, corners, groups, units, eps):
@@ -121,6 +161,20 @@ def _sample_drawer(patches, em, corners, groups, units, eps):
     return draw
 
 
+def _unit_normals(em_normals, corners, groups):
+    """(G, 3) each group's area-weighted mean unit normal (a flat group's own)."""
+    area = np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1]), axis=1)
+    n = np.zeros((int(groups.max()) + 1, 3))
+    np.add.at(n, groups, em_normals * area[:, None])
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+
+
+def _share(seen, weight):
+    """The visible share ``seen / weight``: 0 where no segment has any weight (every target below
+    the point's horizon, where the horizon-clipped form factor is tiny)."""
+    return np.where(weight > 0, seen / np.where(weight > 0, weight, 1.0), 0.0)
+
+
 class _Transport:
     """The work of one :func:`emitter_transport` call, in chunks of ``step`` points.
 
@@ -141,6 +195,7 @@ class _Transport:
         self.seed = seed
         # the groups' outlines once, not per chunk (a few straight edges per group, see GroupOutline)
         self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
+        self.unit_normals = em_normals if groups is None else _unit_normals(em_normals, corners, groups)
         self.ys = draw(samples, np.random.default_rng(seed))             # (units, S, 3)
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
@@ -163,10 +218,16 @@ class _Transport:
         pi, mi = np.nonzero(F > 0)
         # rows by ``take``: indexing a 2-D array with an index array is several times slower
         o = x.take(pi, axis=0) + self.eps * nx.take(pi, axis=0)          # (r, 3)
-        v = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0)) if pi.size else np.zeros(0)
+        if not pi.size:
+            return s, F, pi, mi, o, (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3))), None
+        n = nx.take(pi, axis=0)
+        seen, weight, lit, dark = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
+                                                    self.unit_normals.take(mi, axis=0))
+        # exactly 1 where every ray passes and 0 where none does (a ratio of sums rounds)
+        v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
         # penumbra: where some rays pass and some do not, cast ``refine`` times more
-        part = (v > 0) & (v < 1)
-        return s, F, pi, mi, o, v, part if self.refine > 0 and part.any() else None
+        part = ~lit & ~dark
+        return s, F, pi, mi, o, (v, seen, weight, n), part if self.refine > 0 and part.any() else None
 
     def chunk(self, s):
         """(s, T rows (p, units) float32) of the chunk starting at point ``s``: its
@@ -175,11 +236,12 @@ class _Transport:
         s, F, pi, mi, o, v, part = self.first_pass(s)
         if self.scene is None:
             return s, F.astype(np.float32)
+        v, seen, weight, n = v
         if part is not None:
-            refine = self.refine
             on = np.flatnonzero(part)
-            targets = self.extra.take(mi[on], axis=0)
-            v[on] = (v[on] + refine * _visible_fraction(self.scene, o.take(on, axis=0), targets)) / (1 + refine)
+            more, w, _, _ = _visible_fraction(self.scene, o.take(on, axis=0), self.extra.take(mi[on], axis=0),
+                                              n.take(on, axis=0), self.unit_normals.take(mi[on], axis=0))
+            v[on] = _share(seen[on] + more, weight[on] + w)
         vis = np.zeros(F.shape)
         vis[pi, mi] = v
         return s, (F * vis).astype(np.float32)

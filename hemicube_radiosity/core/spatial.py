@@ -17,10 +17,23 @@ import numpy as np
 
 from .unique import unique_ints
 
-__all__ = ["Grid", "k_nearest", "sq_dist"]
+__all__ = ["Grid", "k_nearest", "morton_codes", "sq_dist"]
 
 _MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
 _PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
+
+
+def morton_codes(points, lo, hi) -> np.ndarray:
+    """(n,) int64 Morton (Z-order) codes of ``points`` (n, 3) in boxes ``lo``..``hi`` (n, 3) or
+    (3,): each axis quantised to 10 bits and their bits interleaved, so that points close in the
+    order are close in space (runs of the order are compact regions)."""
+    span = np.maximum(np.asarray(hi) - np.asarray(lo), 1e-12)
+    q = np.clip(((points - lo) / span * 1023).astype(np.int64), 0, 1023)
+    code = np.zeros(len(points), np.int64)
+    for bit in range(10):                  # interleave the three axes' bits
+        for ax in range(3):
+            code |= ((q[:, ax] >> bit) & 1) << (3 * bit + ax)
+    return code
 
 
 def sq_dist(a, b):
