@@ -11,9 +11,9 @@ clipping the emitter to the receiver's horizon: :func:`.geometry.polygon_form_fa
 the visible share of that form factor, from stratified sample points on the emitter (shadow
 rays, :mod:`.rays`), each weighted by its part of F (cos at x times cos at the emitter over the
 squared distance): a large lamp half hidden from a point near it is dimmed by the part of F it
-loses, not by the part of its area. D is the radiance arriving from the emitters, so a receiver with reflectivity
-rho reflects ``rho * D`` of it; the radiosity solve then carries only the reflected light (see
-:mod:`.pipeline`), never the emitters' E.
+loses, not by the part of its area. D is the radiance arriving from the emitters, so a receiver
+with reflectivity rho reflects ``rho * D`` of it; the radiosity solve then carries only the
+reflected light (see :mod:`.pipeline`), never the emitters' E.
 """
 from __future__ import annotations
 
@@ -121,22 +121,19 @@ def _group_samples(corners, areas, groups, samples, rng):
     return _bilinear(corners[order[pos].reshape(G, samples)], u, v)   # corners[k]: (G, S, 4, 3)
 
 
-def _visible_fraction(scene, origins, targets, normals=None, target_normals=None):
-    """(r,) fraction of the segments origins (r,3) -> targets (r,S,3) that nothing blocks.
-    With the points' unit ``normals`` (r,3) and the targets' ``target_normals`` (r,3) or
-    (r,S,3): (visible weight (r,), weight (r,), none blocked (r,), all blocked (r,)), each
-    segment weighted by its share of the form factor, cos at the point (0 below its horizon) x
-    |cos| at the target / length^2; their ratio is the visible share of the emitter's form
-    factor, not of its area."""
+def _visible_fraction(scene, origins, targets, normals, target_normals):
+    """Which of the segments origins (r, 3) -> targets (r, S, 3) nothing blocks, each weighted
+    by its part of the form factor: cos at the point (its unit ``normals`` (r, 3); 0 below its
+    horizon) times |cos| at the target (``target_normals`` (r, 3), one per row) over the
+    squared length, squared again for the unnormalised direction. (visible weight (r,),
+    weight (r,), none blocked (r,), all blocked (r,)): the weights' ratio is the visible share
+    of the emitter's form factor, not of its area."""
     S = targets.shape[1]
     d = targets - origins[:, None, :]
     blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
                              np.full(len(origins) * S, 1 - 1e-4)).reshape(-1, S)
-    if normals is None:
-        return 1 - blocked.mean(axis=1)
     r2 = np.einsum("rsk,rsk->rs", d, d)
-    tn = target_normals if target_normals.ndim == 3 else target_normals[:, None, :]
-    w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.abs(np.einsum("rsk,rsk->rs", d, tn)) \
+    w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.abs(np.einsum("rsk,rk->rs", d, target_normals)) \
         / np.maximum(r2 * r2, 1e-300)
     return np.einsum("rs,rs->r", w, 1.0 - blocked), w.sum(axis=1), ~blocked.any(axis=1), blocked.all(axis=1)
 
@@ -204,9 +201,11 @@ class _Transport:
 
     def first_pass(self, s):
         """Form factors of the chunk starting at point ``s`` and the visible fraction from the
-        first ``samples`` rays: (s, F, pi, mi, o, v, penumbra) with F (p, units) unshadowed,
-        (pi, mi) its nonzero entries, o (r, 3) the ray origins, v (r,) the visible fractions and
-        penumbra (r,) bool where some rays pass and some do not (None: nothing to refine)."""
+        first ``samples`` rays: (s, F, pi, mi, o, (v, seen, weight, n), penumbra) with F (p, units)
+        unshadowed, (pi, mi) its nonzero entries, o (r, 3) the ray origins, v (r,) the visible
+        shares of F (seen / weight: :func:`_visible_fraction`'s sums, for the penumbra's rays to
+        add to), n (r, 3) the points' normals and penumbra (r,) bool where some rays pass and some
+        do not (None: nothing to refine)."""
         x = self.points[s:s + self.step]
         nx = self.normals[s:s + self.step]
         if self.groups is None:
