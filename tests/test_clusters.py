@@ -320,7 +320,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
 
 
 def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
-    """Issue 9: the direct stage lights a grouped cluster at 16 stand-in centres (area strata in
+    """Issue 9: the direct stage lights a grouped cluster at 32 stand-in centres (area strata in
     Morton order), not at every face's, so its cost follows the clusters. Each cluster's direct
     source still matches the closed-form mean over all its faces (a Lambertian square lamp over
     a floor of 20,000 triangles, nothing in between)."""
@@ -342,9 +342,9 @@ def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
     c, p = r.clusters, r.patches
     on_floor = c.owner == p.object_names.index("Floor")
     assert (p.owner == 0).sum() == 20000 and on_floor.sum() == 64 and c.sizes[on_floor].min() > 250
-    # the solve's light: 16 points a floor cluster (4 x the 2 x 2 light points; the plain and the
+    # the solve's light: 32 points a floor cluster (8 x the 2 x 2 light points; the plain and the
     # seen mean share them), 2 x 2 on each of the lamp's 9 patches; the output vertices apart
-    assert sorted(counted) == [("grouped-centres", 16 * 64), ("patch-points-2", 4 * 9), ("vertices", 10301)]
+    assert sorted(counted) == [("grouped-centres", 32 * 64), ("patch-points-2", 4 * 9), ("vertices", 10301)]
     # truth: 5 x the form factor to the lamp at every face centre, area-weighted per cluster
     lp = build_patches([lamp], None)
     F = polygon_form_factors(p.centers, p.normals, lp.corners(), lp.normals).sum(1)
