@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from analytic import point_under_rectangle_corner
-from hemicube_radiosity.core.direct import emitter_direct
+from hemicube_radiosity.core.direct import emitter_direct, emitter_transport
 from hemicube_radiosity.core.geometry import polygon_form_factors
 from hemicube_radiosity.core.patches import build_patches
 from hemicube_radiosity.core.rays import embree_scene
@@ -128,3 +128,28 @@ def test_a_lamp_face_cut_into_100_patches_shines_as_one_unit():
     bent = quad([(-h, -h, 1), (-h, h, 1.1), (h, h, 1), (h, -h, 1)], (0, 0, 0), (1.0,) * 3, name="Lamp")
     per_patch = DirectLight.plan(build_patches([bent, floor], 0.05), settings, [])
     assert per_patch.groups is None and per_patch.samples == 2
+
+
+def test_a_curved_lamps_far_side_does_not_shadow_its_near_side():
+    """A lamp modelled as a dense half-cylinder (48 strips, normals outward) shining as one
+    group, seen from a point off to its side: the point sees the strips that face it, nothing
+    stands between, so the light is the group's form factor, unshadowed (the sum of the strips'
+    closed-form contours). Targets on the strips facing away send the point nothing, and the
+    rays to them pass through the lamp itself: weighted by cos at the target clamped at 0 they
+    count for nothing (with |cos|, or counted alike, they darkened the point by the part of the
+    lamp it cannot see)."""
+    k = 48
+    a = np.linspace(0.0, np.pi, k + 1)
+    r, L = 0.2, 1.0
+    faces = [quad([(r * np.cos(a[i]), 0.0, 1 + r * np.sin(a[i])), (r * np.cos(a[i]), L, 1 + r * np.sin(a[i])),
+                   (r * np.cos(a[i + 1]), L, 1 + r * np.sin(a[i + 1])), (r * np.cos(a[i + 1]), 0.0, 1 + r * np.sin(a[i + 1]))],
+                  (0, 0, 0), (1.0, 1.0, 1.0), name=f"strip{i}") for i in range(k)]
+    ps = build_patches(faces, None)
+    assert np.all(np.einsum("ij,ij->i", ps.normals, ps.centers - [0.0, ps.centers[:, 1].mean(), 1.0]) > 0)  # outward
+    x = np.array([[1.0, 0.5, 1.05], [0.0, 0.5, 2.0], [-0.8, 0.5, 1.6]])
+    nx = np.array([[-1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.6, 0.0, -0.8]])
+    em = np.arange(len(ps))
+    groups = np.zeros(len(ps), np.int64)
+    F = polygon_form_factors(x, nx, ps.corners(), ps.normals).sum(axis=1)
+    T = emitter_transport(ps, x, nx, em, scene=embree_scene(ps), samples=64, groups=groups)[:, 0]
+    np.testing.assert_allclose(T, F, rtol=1e-5)

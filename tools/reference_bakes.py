@@ -21,7 +21,8 @@ per chunk of the transport (issue 9: the chunks are cut to share the work betwee
 no longer depends on how they are cut), and when the patches cut from one emitting face began to
 shine as one unit, with shadow rays spread over a group in compact strata and weighted by their
 part of the form factor (issue 9: a lamp cut into 100 patches cost every point 100 contours and
-400 rays).
+400 rays), and when that weight began to take each target's own normal, 0 where it faces away
+(a group of shining pieces on two surfaces, a curved lamp's far side).
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 

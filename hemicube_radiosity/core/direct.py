@@ -81,7 +81,8 @@ def _emitter_samples(corners, samples, rng):
 
 
 def _group_samples(corners, areas, groups, samples, rng):
-    """(G, S, 3) points spread over each group of emitter patches by area.
+    """(G, S, 3) points spread over each group of emitter patches by area, and (G, S) the patch
+    (row of ``corners``) each lies on.
 
     The group's patches are put in Morton order of their centres (within the group's bounding
     box) and its area is cut into S strata along that order, one random point in each: a run of
@@ -118,52 +119,51 @@ def _group_samples(corners, areas, groups, samples, rng):
     ju, jv = rng.uniform(0, 1, (2, n))
     u = ((cell // g + ju) / g).reshape(G, samples, 1)
     v = ((cell % g + jv) / g).reshape(G, samples, 1)
-    return _bilinear(corners[order[pos].reshape(G, samples)], u, v)   # corners[k]: (G, S, 4, 3)
+    k = order[pos].reshape(G, samples)
+    return _bilinear(corners[k], u, v), k                              # corners[k]: (G, S, 4, 3)
 
 
 def _visible_fraction(scene, origins, targets, normals, target_normals):
     """Which of the segments origins (r, 3) -> targets (r, S, 3) nothing blocks, each weighted
     by its part of the form factor: cos at the point (its unit ``normals`` (r, 3); 0 below its
-    horizon) times |cos| at the target (``target_normals`` (r, 3), one per row) over the
-    squared length, squared again for the unnormalised direction. (visible weight (r,),
-    weight (r,), none blocked (r,), all blocked (r,)): the weights' ratio is the visible share
-    of the emitter's form factor, not of its area."""
+    horizon) times cos at the target (``target_normals`` (r, S, 3), the emitting side's; 0
+    where the target faces away: a curved group's far side sends the point nothing, and the
+    group itself blocks the ray to it) over the squared length, squared again for the
+    unnormalised direction. (visible weight (r,), weight (r,), none blocked (r,), all blocked
+    (r,)): the weights' ratio is the visible share of the emitter's form factor, not of its
+    area."""
     S = targets.shape[1]
     d = targets - origins[:, None, :]
     blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
                              np.full(len(origins) * S, 1 - 1e-4)).reshape(-1, S)
     r2 = np.einsum("rsk,rsk->rs", d, d)
-    w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.abs(np.einsum("rsk,rk->rs", d, target_normals)) \
+    w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.maximum(-np.einsum("rsk,rsk->rs", d, target_normals), 0.0) \
         / np.maximum(r2 * r2, 1e-300)
     return np.einsum("rs,rs->r", w, 1.0 - blocked), w.sum(axis=1), ~blocked.any(axis=1), blocked.all(axis=1)
 
 
 def _sample_drawer(patches, em, corners, groups, units, eps):
     """``draw(count, rng)``: (units, count, 3) shadow-ray targets on the emitters (per patch, or
-    spread over each group by area), from the random stream ``rng``.
+    spread over each group by area), from the random stream ``rng``, and (units, count, 3) the
+    unit normals of the patches they lie on (a curved group's targets face their own ways).
 
     The points are lifted ``eps`` (scene units) off the emitter along its normal (a group's
     area-weighted mean normal): a shadow ray that ends exactly on a surface would graze it at
     float32 precision (a wall lighting the floor at their shared edge)."""
+    normals = patches.normals[em]
     if groups is None:
         def draw(count, rng):
-            return _emitter_samples(corners, count, rng) + eps * patches.normals[em][:, None, :]
+            y = _emitter_samples(corners, count, rng) + eps * normals[:, None, :]
+            return y, np.broadcast_to(normals[:, None, :], y.shape)
         return draw
     lift = np.zeros((units, 3))
     np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
     lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
 
     def draw(count, rng):
-        return _group_samples(corners, patches.areas[em], groups, count, rng) + lift[:, None, :]
+        y, k = _group_samples(corners, patches.areas[em], groups, count, rng)
+        return y + lift[:, None, :], normals[k]
     return draw
-
-
-def _unit_normals(em_normals, corners, groups):
-    """(G, 3) each group's area-weighted mean unit normal (a flat group's own)."""
-    area = np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 3] - corners[:, 1]), axis=1)
-    n = np.zeros((int(groups.max()) + 1, 3))
-    np.add.at(n, groups, em_normals * area[:, None])
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
 
 
 def _share(seen, weight):
@@ -178,8 +178,9 @@ class _Transport:
     ``points``, ``normals`` (P, 3) float64; ``corners`` (M, 4, 3) and ``em_normals`` (M, 3) of
     the emitter patches; ``groups`` (M,) int64 or None; ``eps`` the lift off the surfaces
     (scene units); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
-    ``samples`` targets per emitter unit (from ``seed``) and the penumbra's ``refine`` times
-    as many more (their own stream), both shared by every point: T is the same for any chunk
+    ``samples`` targets per emitter unit (from ``seed``) and ``extra`` the penumbra's ``refine``
+    times as many more (their own stream), ``yn`` and ``extra_n`` their patches' normals, all
+    shared by every point: T is the same for any chunk
     size and whoever computes the chunks (they are cut to share the work evenly), and
     neighbouring points, whichever chunk they fall in, aim at the same targets (a penumbra
     varies smoothly, and two coplanar faces read the same light).
@@ -192,12 +193,11 @@ class _Transport:
         self.seed = seed
         # the groups' outlines once, not per chunk (a few straight edges per group, see GroupOutline)
         self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
-        self.unit_normals = em_normals if groups is None else _unit_normals(em_normals, corners, groups)
-        self.ys = draw(samples, np.random.default_rng(seed))             # (units, S, 3)
+        self.ys, self.yn = draw(samples, np.random.default_rng(seed))    # (units, S, 3) twice
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
         self.step = max(1, min(len(points), chunk_rays // max(units * self.S, 1), 4096))
-        self.extra = draw(refine * self.S, np.random.default_rng((seed, 1))) if refine > 0 else None
+        self.extra, self.extra_n = draw(refine * self.S, np.random.default_rng((seed, 1))) if refine > 0 else (None, None)
 
     def first_pass(self, s):
         """Form factors of the chunk starting at point ``s`` and the visible fraction from the
@@ -221,7 +221,7 @@ class _Transport:
             return s, F, pi, mi, o, (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3))), None
         n = nx.take(pi, axis=0)
         seen, weight, lit, dark = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
-                                                    self.unit_normals.take(mi, axis=0))
+                                                    self.yn.take(mi, axis=0))
         # exactly 1 where every ray passes and 0 where none does (a ratio of sums rounds)
         v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
         # penumbra: where some rays pass and some do not, cast ``refine`` times more
@@ -239,7 +239,7 @@ class _Transport:
         if part is not None:
             on = np.flatnonzero(part)
             more, w, _, _ = _visible_fraction(self.scene, o.take(on, axis=0), self.extra.take(mi[on], axis=0),
-                                              n.take(on, axis=0), self.unit_normals.take(mi[on], axis=0))
+                                              n.take(on, axis=0), self.extra_n.take(mi[on], axis=0))
             v[on] = _share(seen[on] + more, weight[on] + w)
         vis = np.zeros(F.shape)
         vis[pi, mi] = v
