@@ -86,7 +86,7 @@ def surface_values(params, polys, vertex_values, pid, y):
 
 
 def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
-                  chunk_rays=1 << 18, ticker=None, workers=1, hits=False, background=False):
+                  chunk_rays=1 << 16, ticker=None, workers=1, hits=False, background=False):
     """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
@@ -97,9 +97,12 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     geometry only: a relight reuses it. ``workers``: workers casting chunks of points at once (0 = every
     core, 1 = serial): threads, or forked processes from :data:`PROCESS_RAYS` rays on (only the
     chunk starts go out, each chunk's rows come back); G is bit-identical for any count.
-    ``chunk_rays``: rays cast and summed at once (a quarter million: the serial gather of the
-    13k vertices of the 2k-triangle box took 2.0-2.3 s in chunks of a million, 1.0 s in these,
-    its temporaries then fitting the caches better). ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
+    ``chunk_rays``: rays cast and summed at once (65,536: the serial gather of the 13k vertices
+    of the 2k-triangle box took 2.0-2.3 s in chunks of a million, 1.0 s in a quarter million, its
+    temporaries then fitting the caches better; and a forked worker faults every page of its
+    first chunk's temporaries in fresh, zeroed by the kernel: on the 54k-triangle box with two
+    workers, chunks of a quarter million cost the two workers 120k page faults and 0.65-1.1 s of
+    system time, these 75k and 0.27-0.46 s, and 3.7-4.3 -> 2.9-3.2 s of CPU in all). ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
     :func:`correct_hits`; each hit carries weight ``1 / rays`` in G). ``background``: return a
     :class:`.parallel.Background` whose ``result()`` is what the call returns, so the caller can
