@@ -132,7 +132,8 @@ def test_gather_directions_are_the_einsum_of_the_frames_bit_for_bit():
 
 def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeypatch):
     """The hits cut at row boundaries into shares, one per thread (issue 9: Suzanne's 612k hits
-    on abrupt elements were 1.6 s on one core): C is the same for any count, and it is what
+    on abrupt elements were 1.6 s on one core), and each share into runs: C is the same for any
+    count and any run length, and it is what
     :func:`correct_hits` adds (its independent sum) for values read through ``read``."""
     from hemicube_radiosity.core import gather
     from hemicube_radiosity.core.gather import correct_hits, correction_matrix
@@ -159,6 +160,14 @@ def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeyp
         assert len(calls) == workers and min(calls) > 0
         for a in ("indptr", "indices", "data"):
             np.testing.assert_array_equal(getattr(many, a), getattr(one, a))
+    # each share made in runs of a few hits, cut at row boundaries: the same C, bit for bit
+    monkeypatch.setattr(gather, "CORRECTION_RUN", 97)
+    for workers in (1, 2):
+        calls.clear()
+        runs = correction_matrix(G, H, ps, select, read, extra, workers=workers)
+        assert len(calls) > 10 and max(calls) < 97 + 64      # a run ends at its row's end
+        for a in ("indptr", "indices", "data"):
+            np.testing.assert_array_equal(getattr(runs, a), getattr(one, a))
     vals = rng.random((len(ps.verts), 3))
 
     def exact(y, pid):

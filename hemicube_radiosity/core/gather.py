@@ -253,6 +253,8 @@ def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.nd
 
 #: The fewest hits a thread of :func:`correction_matrix` takes.
 CORRECTION_SHARE = 1 << 15
+#: Hits a share of :func:`correction_matrix` makes into rows at once.
+CORRECTION_RUN = 1 << 15
 
 
 def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, workers=1) -> CSR:
@@ -280,7 +282,17 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
     bounds = [0, *np.searchsorted(H[:, 0], H[at, 0]).tolist(), len(H)]
 
     def share(i):
+        # in runs of about CORRECTION_RUN hits, cut at row boundaries: each run's temporaries
+        # (tens of bytes a hit) then come from the heap's kept pages, not freshly faulted ones
+        # (the whole share's, hundreds of megabytes, were mapped and zeroed anew)
         h = H[bounds[i]:bounds[i + 1]]
+        cut = np.searchsorted(h[:, 0], h[np.arange(CORRECTION_RUN, len(h), CORRECTION_RUN), 0])
+        runs = [run(h[a:b]) for a, b in zip([0, *cut.tolist()], [*cut.tolist(), len(h)]) if b > a]
+        if not runs:
+            return np.zeros(0, np.int64), np.zeros(0)
+        return tuple(np.concatenate([r[j] for r in runs]) for j in (0, 1))
+
+    def run(h):
         row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:].astype(np.float64)
         ids, w = surface_weights(params, patches.polys, pid, y)
         rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
