@@ -487,6 +487,23 @@ def test_forked_workers_write_into_a_shared_array():
     assert parallel.shared_array(0, np.int32).shape == (0,)
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="MADV_REMOVE is Linux's")
+def test_release_tail_hands_back_the_pages_past_what_is_kept():
+    """:func:`.parallel.release_tail`: the items kept, and the rest of their page, are untouched;
+    the pages after are handed back (shared memory reads zeros where its pages are gone), so a
+    compacted gather keeps only the memory its rows use."""
+    import mmap
+    page = mmap.PAGESIZE // 8
+    a = parallel.shared_array(10 * page, np.float64)
+    a[:] = 1.0
+    keep = 3 * page + 5
+    parallel.release_tail(a, keep)
+    assert (a[:4 * page] == 1.0).all()               # the kept items and the rest of their page
+    assert not a[4 * page:].any()                    # the pages after: gone (zeros)
+    parallel.release_tail(a, 10 * page)              # nothing past the end: nothing happens
+    assert (a[:4 * page] == 1.0).all()
+
+
 def test_background_returns_raises_and_stops():
     """:class:`.parallel.Background`: the value made on its thread, the error raised on the
     caller's, and a stop asked for (cancelled while waiting) reaches the thread's loop."""

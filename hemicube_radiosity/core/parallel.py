@@ -142,6 +142,24 @@ def shared_array(shape, dtype) -> np.ndarray:
     return np.frombuffer(mm, dtype=dtype, count=int(np.prod(shape, dtype=np.int64))).reshape(shape)
 
 
+def release_tail(a: np.ndarray, n: int) -> None:
+    """Hand back to the system the pages of a 1-D :func:`shared_array` ``a`` past its first ``n``
+    items (best effort: where ``madvise(MADV_REMOVE)`` is there; the pages read as zeros after).
+    The array keeps its size: what is past ``n`` must not be read."""
+    mm = a
+    while mm is not None and not isinstance(mm, mmap.mmap):
+        mm = getattr(mm, "base", None) if not isinstance(mm, memoryview) else mm.obj
+    remove = getattr(mmap, "MADV_REMOVE", None)
+    if mm is None or remove is None:
+        return
+    start = -(-int(n) * a.itemsize // mmap.PAGESIZE) * mmap.PAGESIZE
+    if start < len(mm):
+        try:
+            mm.madvise(remove, start, len(mm) - start)
+        except OSError:
+            pass
+
+
 def shares(fn, n) -> list:
     """``[fn(0), ..., fn(n - 1)]`` for work cut into ``n`` shares that take about as long (a
     sparse product's rows): the calling thread runs ``fn(0)`` itself while ``n - 1`` threads
