@@ -189,9 +189,12 @@ def shares(fn, n) -> list:
         pool.shutdown(wait=True)
 
 
-def _ordered(pool, fn, items, workers, in_flight, *args):
+def _ordered(pool, fn, items, workers, in_flight, *args, cancel=True):
     """Submit ``fn(*args, item)`` ahead on ``pool`` and yield the results in order; on an early
-    stop, cancel what has not started (the caller shuts the pool down)."""
+    stop, cancel what has not started (the caller shuts the pool down), unless ``cancel`` is
+    False: a process pool about to be terminated marks its pending futures broken itself, and
+    CPython 3.11's pool raised ``InvalidStateError`` on its manager thread when one of them had
+    been cancelled meanwhile (a race: 3 of 25 runs of the cancel test on a loaded machine)."""
     ahead = max(workers, int(in_flight or 2 * workers))
     it = iter(items)
     pending = deque()
@@ -207,8 +210,9 @@ def _ordered(pool, fn, items, workers, in_flight, *args):
                 break
             yield result
     finally:
-        for f in pending:
-            f.cancel()
+        if cancel:
+            for f in pending:
+                f.cancel()
 
 
 def started_map(fn, items, workers=1, *, in_flight=None, processes=False):
@@ -249,7 +253,7 @@ def _process_map(fn, items, workers, in_flight, announce=False):
         if announce:
             yield None
         try:
-            yield from _ordered(pool, _call, items, workers, in_flight, token)
+            yield from _ordered(pool, _call, items, workers, in_flight, token, cancel=False)
         except BrokenProcessPool as exc:     # a worker was killed (out of memory, a signal)
             raise RadiosityError(f"a worker process stopped during the bake ({exc}); bake with "
                                  "fewer workers or less memory per worker (larger patches)") from exc
