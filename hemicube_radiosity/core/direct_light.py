@@ -23,7 +23,7 @@ from .gather import transport_product, transposed_transport
 from .lights import direct_irradiance
 from .patches import PatchSet
 from .progress import Ticker
-from .spatial import morton_codes
+from .spatial import morton_order
 from .rays import embree_available, embree_scene, occluder, open_fraction, sky_fraction
 from .unique import unique_ints
 
@@ -80,7 +80,9 @@ class DirectLight:
                 groups = _whole_groups(patches, emitters, groups, 0.5 * float(settings.patch_size) ** 2)
         elif emitters.size:
             face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
-            per_face = int(np.unique(face, return_counts=True)[1].max())
+            _, first, of_face, count = unique_ints(face, return_index=True, return_inverse=True,
+                                                   return_counts=True)
+            per_face = int(count.max())
             # the face's rays shared out, but at least 2 per patch (a 2 x 2 jittered grid): with
             # one ray a point sees each patch all lit or all dark, never in part, so a penumbra
             # is never found nor refined (:func:`.direct.emitter_transport`) and a soft shadow
@@ -88,7 +90,7 @@ class DirectLight:
             # light, cut in 9, made the roughest part of its bake)
             budget = int(settings.direct_samples)
             samples = max(min(2, budget), -(-budget // per_face))
-            groups = _face_groups(patches, emitters)
+            groups = _face_groups(patches, emitters, first, of_face) if per_face > 1 else None
             if groups is not None:
                 # a face shining as one: the rays its patches cast apart (the 2 x 2 grids: finer
                 # patches ask for finer shadows), at most 4 x its budget
@@ -224,22 +226,19 @@ def grid_points(patches: PatchSet, n: int, rng=None):
     return x, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
 
 
-def _face_groups(patches: PatchSet, emitters) -> np.ndarray | None:
-    """(M,) the emitting patches of each input face as one unit, numbered 0.. in order, or None
-    where no face is cut into more than one patch, or where some face's patches cannot shine as
-    one: not in one plane (a bent quad), or not of one emission (a texture's): then every patch
-    shines on its own, sharing its face's rays (:meth:`DirectLight.plan`).
+def _face_groups(patches: PatchSet, emitters, first, of_face) -> np.ndarray | None:
+    """(M,) the emitting patches ``emitters`` of each input face as one unit (``of_face`` (M,):
+    their face, numbered 0..; ``first``: each face's first row of ``emitters``), or None where
+    some face's patches cannot shine as one: not in one plane (a bent quad), or not of one
+    emission (a texture's): then every patch shines on its own, sharing its face's rays
+    (:meth:`DirectLight.plan`).
     A face's patches cut from one flat face of one emission light as the face does: its form
     factor is its outline's (one contour, :func:`.geometry.group_form_factors`) and its
     ``direct_samples`` rays spread over it by area, as a lamp modelled as many faces and grouped
     into a cluster. Each patch shining apart cost every point a contour and at least 4 rays per
     patch: the Cornell box at 0.05 m patches cut its 0.5 m lamp into 100 of them, 400 rays and
     100 contours per point, 34 s of its 51 s bake on two workers."""
-    face = patches.owner[emitters].astype(np.int64) * (1 << 32) + patches.source_face[emitters]
-    keys, first, groups, count = np.unique(face, return_index=True, return_inverse=True, return_counts=True)
-    groups = groups.reshape(-1)
-    if count.max() <= 1:
-        return None
+    groups = np.asarray(of_face, dtype=np.int64).reshape(-1)
     lead = emitters[first][groups]                       # each patch's face's first patch
     same_light = np.all(patches.emission[emitters] == patches.emission[lead], axis=1)
     n, n0 = patches.normals[emitters], patches.normals[lead]
@@ -248,7 +247,7 @@ def _face_groups(patches: PatchSet, emitters) -> np.ndarray | None:
         (np.abs(np.einsum("ij,ij->i", patches.centers[emitters] - patches.centers[lead], n0)) <= 1e-7 * span)
     if not np.all(same_light & flat):
         return None
-    return groups.astype(np.int64)
+    return groups
 
 
 def _whole_groups(patches: PatchSet, emitters, groups, min_area) -> np.ndarray:
@@ -305,11 +304,7 @@ def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
     big = np.flatnonzero(clusters.sizes[of] > k)
     if len(big):
         cl = of[big]
-        lo = np.full((len(clusters), 3), np.inf)
-        hi = np.full((len(clusters), 3), -np.inf)
-        np.minimum.at(lo, cl, c[big])
-        np.maximum.at(hi, cl, c[big])
-        order = np.lexsort((morton_codes(c[big], lo[cl], hi[cl]), cl))
+        order = morton_order(c[big], cl, len(clusters))
         rows, cl = big[order], cl[order]
         cum = np.cumsum(a[rows])
         first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]

@@ -120,6 +120,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     R = len(local)
     step = max(1, chunk_rays // R)
     counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
+    written = []                              # forked: (start, entries, hits) of each chunk
     sky = np.zeros(P)
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads (or forks) share it
@@ -142,7 +143,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
                 sky[s:s + m] = sky_s
                 counts[s + 1:s + m + 1] = n
                 if out is not None:                    # (c, H): how many entries and hits
-                    found.append((s, c, H))
+                    written.append((s, c, H))
                 else:
                     found.append(H)
                     cols.append(c)
@@ -152,7 +153,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
                 if stop is not None and stop.is_set():
                     return None
         if out is not None:                            # the shared arrays themselves
-            c, w, H = out.compact(found)
+            c, w, H = out.compact(written)
             G = CSR(np.cumsum(counts), c, w, (P, V), {"rays": R, "seed": seed})
             return (G, sky, H) if hits else (G, sky)
         G = CSR(np.cumsum(counts), np.concatenate(cols) if cols else np.zeros(0, np.int32),
@@ -194,11 +195,6 @@ class _SharedRows:
             return e, None
         self.hits[self.R * s:self.R * s + len(H)] = H
         return e, len(H)
-
-    def read(self, s, e, h):
-        """(columns, values, hits or None) of the chunk at ``s``: views."""
-        a, b = 4 * self.R * s, self.R * s
-        return self.cols[a:a + e], self.vals[a:a + e], None if h is None else self.hits[b:b + h]
 
     def compact(self, chunks):
         """(columns, values, hits or None) of every chunk, in the order of ``chunks`` ((s, e, h)

@@ -17,7 +17,7 @@ import numpy as np
 
 from .unique import unique_ints
 
-__all__ = ["Grid", "k_nearest", "morton_codes", "sq_dist"]
+__all__ = ["Grid", "k_nearest", "morton_codes", "morton_order", "sq_dist"]
 
 _MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
 _PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
@@ -34,6 +34,17 @@ def morton_codes(points, lo, hi) -> np.ndarray:
         for ax in range(3):
             code |= ((q[:, ax] >> bit) & 1) << (3 * bit + ax)
     return code
+
+
+def morton_order(points, groups, count: int) -> np.ndarray:
+    """(n,) the order of ``points`` (n, 3) by ``groups`` (n,) int in 0..``count``, then by Morton
+    code within each group's bounding box (:func:`morton_codes`): each group's points in a run,
+    and a run of that order is a compact region of its group."""
+    lo = np.full((count, 3), np.inf)
+    hi = np.full((count, 3), -np.inf)
+    np.minimum.at(lo, groups, points)
+    np.maximum.at(hi, groups, points)
+    return np.lexsort((morton_codes(points, lo[groups], hi[groups]), groups))
 
 
 def sq_dist(a, b):
