@@ -4,8 +4,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches
-from hemicube_radiosity.core.scenes import box, cornell_box
+from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches, keeps_faces_whole
+from hemicube_radiosity.core.scenes import box, cornell_box, tessellate
 
 
 def edge_use(ps):
@@ -208,3 +208,51 @@ def test_corners_of_some_patches_are_those_of_all():
     assert np.array_equal(c[tri, 3], c[tri, 2]) and np.array_equal(c[~tri, 3], p.verts[p.polys[~tri, 3]])
     ids = np.array([len(p) - 1, 0, 3, 3, int(np.flatnonzero(tri)[0])])
     assert np.array_equal(p.corners(ids), c[ids]) and p.corners(np.zeros(0, int)).shape == (0, 4, 3)
+
+
+def _same_patches(a, b):
+    return all(np.array_equal(getattr(a, f), getattr(b, f))
+               for f in ("verts", "polys", "centers", "normals", "areas", "rho", "emission", "owner", "source_face"))
+
+
+def _ngon_scene():
+    """A convex hexagon (split into quads around its centre, its edges halved) beside a
+    triangle that shares one of its edges (re-cut at that midpoint), and a concave L (ear
+    clipped, edges kept)."""
+    ang = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    hexa = np.stack([0.4 * np.cos(ang), 0.4 * np.sin(ang), np.zeros(6)], 1)
+    verts = np.concatenate([hexa, [[0.6, 0.3, 0.0]]])
+    L = [[0, 0, 1], [2, 0, 1], [2, 1, 1], [1, 1, 1], [1, 2, 1], [0, 2, 1]]
+    return [MeshInput.from_faces(verts, [list(range(6)), [0, 6, 1]]), MeshInput.from_faces(np.array(L) * 0.2, [list(range(6))])]
+
+
+@pytest.mark.parametrize("scene", ["dense box", "n-gons", "float32 far away"])
+def test_keeps_faces_whole_exactly_when_building_cuts_nothing(scene):
+    """keeps_faces_whole(meshes, size) measures the edges instead of building: it must say True
+    exactly when build_patches at that size makes the faces' own PatchSet, array for array
+    (then a bake reuses the faces it built once), around the sizes where the answer turns."""
+    if scene == "dense box":
+        meshes = tessellate(cornell_box(), 6)
+    elif scene == "n-gons":
+        meshes = _ngon_scene()
+    else:
+        m = box((1000.0, 1000.0, 1000.0), (1001.0, 1001.0, 1001.0), inward=True)
+        m.verts = m.verts.astype(np.float32)
+        meshes = [m]
+    faces = build_patches(meshes, None)
+    edges = np.concatenate([np.linalg.norm(np.roll(faces.verts[p[p >= 0]], -1, axis=0) - faces.verts[p[p >= 0]], axis=1)
+                            for p in faces.polys])
+    longest = float(edges.max())
+    sizes = [longest * f for f in (0.3, 0.5, 0.99, 1 - 1e-9, 1.0, 1 + 1e-9, 1.01, 2.0)] + [0.0, None]
+    answers = []
+    for size in sizes:
+        whole = keeps_faces_whole(meshes, size)
+        assert whole == _same_patches(build_patches(meshes, size), faces), size
+        answers.append(whole)
+    assert answers[0] is False and answers[-3] is True      # both answers are asked for
+
+
+def test_keeps_faces_whole_names_the_object_as_build_patches_does():
+    bad = MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 5]], name="Broken")
+    with pytest.raises(PatchError, match="'Broken'.*vertex that does not exist"):
+        keeps_faces_whole([bad], 0.1)

@@ -434,3 +434,33 @@ def test_a_bake_runs_on_small_pages_and_puts_numpys_setting_back(monkeypatch):
         assert switch(True) is True
     finally:
         switch(before)
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for_them(monkeypatch, workers):
+    """A mesh whose faces are smaller than the patch and detail sizes is its own patches and
+    output elements (:func:`.patches.keeps_faces_whole`): the bake builds its faces once, not
+    once for the patches, once for the elements and again inside a process forked only to
+    find the two equal; the bake is the same as one that builds them every time."""
+    from hemicube_radiosity.core import output, parallel, pipeline
+    from hemicube_radiosity.core.scenes import tessellate
+    meshes = tessellate(cornell_box(), 12)                 # 1/6 m cells
+    s = BakeSettings(workers=workers, patch_size=0.5, element_size=0.25, resolution=16, gather_rays=16)
+    built, started = [], []
+    real = pipeline.build_patches
+    for mod in (pipeline, output):
+        monkeypatch.setattr(mod, "build_patches", lambda m, size=None, **k: built.append(size) or real(m, size, **k))
+    start = parallel.Ahead.start
+    monkeypatch.setattr(parallel.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
+    r = bake(meshes, s)
+    assert built == [None] and started == []
+    assert len(r.elements) == len(r.patches) == sum(len(m.face_offsets) - 1 for m in meshes)
+    # the same bake with the faces measured as too large to keep (build_patches every time)
+    monkeypatch.setattr(pipeline, "keeps_faces_whole", lambda *a: False)
+    monkeypatch.setattr(output, "keeps_faces_whole", lambda *a: False)
+    built.clear()
+    again = bake(meshes, s)
+    assert built == [0.5, 0.25] and started == ([1] if workers > 1 and parallel.processes_available() else [])
+    for a in ("verts", "polys"):
+        assert np.array_equal(getattr(r.elements, a), getattr(again.elements, a))
+    assert np.array_equal(r.vertex_radiosity, again.vertex_radiosity)

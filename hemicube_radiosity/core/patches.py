@@ -22,7 +22,7 @@ import numpy as np
 from .errors import RadiosityError
 from .unique import unique_rows
 
-__all__ = ["MeshInput", "PatchSet", "build_patches", "PatchError"]
+__all__ = ["MeshInput", "PatchSet", "build_patches", "keeps_faces_whole", "PatchError"]
 
 
 class PatchError(RadiosityError, ValueError):
@@ -427,18 +427,7 @@ def _edge_segments(verts, polys, patch_size):
     face_edges[valid] = inv
     flipped = np.zeros((F, 4), bool)
     flipped[valid] = (a > b)[valid]
-    va, vb = verts[edges[:, 0]], verts[edges[:, 1]]
-    length = np.linalg.norm(vb - va, axis=1)
-    if patch_size is None or patch_size <= 0:
-        n = np.ones(len(edges), dtype=np.int64)
-    else:
-        # An edge a whisker longer than k patches gets k segments, not k + 1. The whisker is
-        # relative: coordinates often come in float32 (Blender), whose rounding is ~6e-8 of the
-        # coordinates' magnitude, so a 1 mm edge cut at 0.125 mm measures 8.0000004 patches.
-        # Scaling the scene or moving it away from the origin must not change the count.
-        mag = np.maximum(np.abs(va).max(axis=1), np.abs(vb).max(axis=1))
-        slack = 1e-6 * np.maximum(length, mag)
-        n = np.maximum(1, np.ceil((length - slack) / patch_size)).astype(np.int64)
+    n = _segment_counts(verts[edges[:, 0]], verts[edges[:, 1]], patch_size)
     q = np.flatnonzero(~tri)
     t = np.flatnonzero(tri)
     for _ in range(len(edges) + 1):
@@ -455,6 +444,56 @@ def _edge_segments(verts, polys, patch_size):
         if np.array_equal(before, n):
             break
     return edges, face_edges, flipped, n
+
+
+def _segment_counts(va, vb, patch_size):
+    """(E,) int64 segments of the edges ``va`` -> ``vb`` (E, 3) at ``patch_size`` (1 each with no
+    size), before they are equalised over faces."""
+    if patch_size is None or patch_size <= 0:
+        return np.ones(len(va), dtype=np.int64)
+    length = np.linalg.norm(vb - va, axis=1)
+    # An edge a whisker longer than k patches gets k segments, not k + 1. The whisker is
+    # relative: coordinates often come in float32 (Blender), whose rounding is ~6e-8 of the
+    # coordinates' magnitude, so a 1 mm edge cut at 0.125 mm measures 8.0000004 patches.
+    # Scaling the scene or moving it away from the origin must not change the count.
+    mag = np.maximum(np.abs(va).max(axis=1), np.abs(vb).max(axis=1))
+    slack = 1e-6 * np.maximum(length, mag)
+    return np.maximum(1, np.ceil((length - slack) / patch_size)).astype(np.int64)
+
+
+def keeps_faces_whole(meshes, patch_size) -> bool:
+    """True when :func:`build_patches` at ``patch_size`` cuts no face (every edge one segment):
+    then it makes the same PatchSet, array for array, as with no size (the same steps, with every
+    count 1), and a mesh finer than the size is its own patches or output elements. It measures
+    the faces' edges and builds nothing (the 54k-triangle Cornell box: 25 ms, against 0.2 s to
+    build its faces twice to find them equal). Raises :class:`PatchError` as :func:`build_patches`
+    does for faces that are unusable."""
+    if patch_size is None or patch_size <= 0:
+        return True
+    for mesh in [meshes] if isinstance(meshes, MeshInput) else meshes:
+        verts = np.asarray(mesh.verts, dtype=np.float64)
+        off = np.asarray(mesh.face_offsets, dtype=np.int64)
+        idx = np.asarray(mesh.face_indices, dtype=np.int64)
+        sizes = np.diff(off)
+        _check_faces(mesh, verts, idx, sizes)
+        # the faces' own edges, each from its lower vertex id to its higher, as _edge_segments
+        # measures them; an n-gon's are halved at most when it is split (edge midpoints)
+        nxt = np.arange(1, idx.size + 1)
+        nxt[off[1:] - 1] = off[:-1]
+        a, b = idx, idx[nxt]
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        if np.any(_segment_counts(verts[lo], verts[hi], (2.5 if np.any(sizes > 4) else 1.0) * patch_size) > 1):
+            return False
+        if np.any(sizes > 4):                  # the split's own edges, measured exactly
+            verts, polys, _ = _to_tris_and_quads(mesh)
+            tri = polys[:, 3] < 0
+            b = np.where(tri[:, None], polys[:, [1, 2, 0, 0]], polys[:, [1, 2, 3, 0]])
+            side = np.ones(polys.shape, bool)
+            side[tri, 3] = False
+            lo, hi = np.minimum(polys, b)[side], np.maximum(polys, b)[side]
+            if np.any(_segment_counts(verts[lo], verts[hi], patch_size) > 1):
+                return False
+    return True
 
 
 class _EdgeCuts(NamedTuple):

@@ -23,9 +23,9 @@ from .estimate import estimate_stage
 from .lights import SpotLight, SunLight, direct_irradiance
 from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
 from .contact import cut_along_contacts
-from .output import meshes_key, output_elements, start_elements, vertex_stage
+from .output import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
 from .parallel import kept_heap, one_blas_thread
-from .patches import PatchError, PatchSet, build_patches
+from .patches import PatchError, PatchSet, build_patches, keeps_faces_whole
 from .progress import Cancelled
 from .refine import refine_stage
 from .settings import BakeSettings
@@ -170,7 +170,7 @@ def patch_stage(ctx) -> None:
     if ctx.patches is None:
         # geometry only, cached: a relight re-reads the materials onto the same patches
         key = cache_key(ctx.meshes_key(), ("patches", s.patch_size, s.group_faces, s.group_angle))
-        pieces, clusters = cached(ctx.cache, key, lambda: _cut(ctx.meshes, s))
+        pieces, clusters = cached(ctx.cache, key, lambda: _cut(ctx.meshes, s, lambda: mesh_faces(ctx)))
         ctx.patches = _with_mesh_materials(pieces, ctx.meshes)
         ctx.clusters = None if clusters is None else clusters.with_materials(ctx.patches)
     elif s.group_faces:
@@ -218,16 +218,23 @@ def _with_mesh_materials(pieces: PatchSet, meshes) -> PatchSet:
 _MATERIAL_INDEX: dict = {}     # id(source_face) -> (source_face, owner, face counts, index)
 
 
-def _cut(meshes, s):
-    """(patches, clusters or None): the meshes cut to the patch size and small faces grouped."""
-    pieces = build_patches(meshes, s.patch_size)
+def _cut(meshes, s, faces=None):
+    """(patches, clusters or None): the meshes cut to the patch size and small faces grouped.
+    ``faces()``: ``build_patches(meshes)``, the meshes' faces as they are (the bake's, built once
+    a bake: :func:`.output.mesh_faces`), the patches where the size cuts no face."""
+    faces = faces or (lambda: build_patches(meshes, None))
+    try:
+        whole = keeps_faces_whole(meshes, s.patch_size)
+    except PatchError:
+        whole = False                         # build_patches says what is wrong, in its order
+    pieces = faces() if whole else build_patches(meshes, s.patch_size)
     clusters = group_pieces(pieces, s.patch_size, s.group_angle) if s.group_faces else None
     if clusters is None:
         # cut along where surfaces stand on others, as the output is (core/contact.py): a patch
         # across a partition off the patch grid lit the dark side with the lit side's light
         # (0.5% of the lit floor on average, 2.9% at worst; now 0). Faces cut into one patch
         # (the user's own, finer than the patches) stay whole
-        pieces = cut_along_contacts(pieces, build_patches(meshes, None))
+        pieces = cut_along_contacts(pieces, faces())
     return pieces, clusters
 
 
