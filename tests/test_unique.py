@@ -52,15 +52,19 @@ def _int_cases():
     yield np.array([5])
     yield rng.random(100) > 0.3
     yield rng.integers(0, 2 ** 20, 4096).astype(np.uint32)
+    # a gather chunk's keys: rows ascending, each row's columns in no order, repeats in a row
+    yield np.repeat(np.arange(300), 64) * 5000 + rng.integers(0, 900, 300 * 64)
+    yield np.arange(10_000)[::-1].copy()                           # one run, descending
 
 
-@pytest.mark.parametrize("case", list(range(7)))
-def test_unique_ints_is_numpys_unique(case):
+@pytest.mark.parametrize("grouped", [False, True])
+@pytest.mark.parametrize("case", list(range(9)))
+def test_unique_ints_is_numpys_unique(case, grouped):
     x = list(_int_cases())[case]
     want = np.unique(x, return_index=True, return_inverse=True, return_counts=True)
-    got = unique_ints(x, return_index=True, return_inverse=True, return_counts=True)
+    got = unique_ints(x, return_index=True, return_inverse=True, return_counts=True, grouped=grouped)
     assert got[0].dtype == want[0].dtype
     for g, w in zip(got, want):
         assert np.array_equal(g, np.asarray(w).reshape(-1))
-    assert np.array_equal(unique_ints(x), want[0])
-    assert np.array_equal(unique_ints(x, return_inverse=True)[1], np.asarray(want[2]).reshape(-1))
+    assert np.array_equal(unique_ints(x, grouped=grouped), want[0])
+    assert np.array_equal(unique_ints(x, return_inverse=True, grouped=grouped)[1], np.asarray(want[2]).reshape(-1))

@@ -246,7 +246,7 @@ def _cast(patches, params, scene, points, normals, local, step, hits, out, s):
         H = np.column_stack([s + f // R, pf, y]).astype(_hit_dtype(len(points), len(patches)))
     # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
     V = len(patches.verts)
-    key, inv = unique_ints(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True)
+    key, inv = unique_ints(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True, grouped=True)
     summed = np.bincount(inv.reshape(-1), weights=w.ravel() / R, minlength=key.size)
     keep = summed != 0
     key, summed = key[keep], summed[keep]
@@ -328,7 +328,7 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
         rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
         if not len(rows):
             return np.zeros(0, np.int64), np.zeros(0)
-        key, inv = unique_ints(rows * n + cols, return_inverse=True)
+        key, inv = unique_ints(rows * n + cols, return_inverse=True, grouped=True)   # two runs of rows
         summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
         keep = summed != 0
         return key[keep], summed[keep]

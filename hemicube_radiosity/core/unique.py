@@ -48,12 +48,19 @@ def unique_rows(a, return_inverse=False, return_counts=False):
     return tuple(out)
 
 
-def unique_ints(x, return_index=False, return_inverse=False, return_counts=False):
+def unique_ints(x, return_index=False, return_inverse=False, return_counts=False, grouped=False):
     """``np.unique(x, return_index=..., return_inverse=..., return_counts=...)`` for an integer
     array (flattened; the inverse is 1-D), the same arrays, faster: each value is packed with its
     position into one int64 and the packed values are sorted, not argsorted (a gather's chunk of
     a million hits: 60 ms in ``np.unique``, 7 ms to sort). Falls back to ``np.unique`` for other
-    dtypes or where value range and position do not fit in 63 bits."""
+    dtypes or where value range and position do not fit in 63 bits.
+
+    ``grouped``: ``x`` comes in short runs, each above the one before (a matrix's entries row by
+    row, each row's columns in any order: ``row * n + col`` with the rows ascending). The packed
+    values are then sorted by NumPy's stable sort, a merge sort that takes runs as it finds them:
+    a gather chunk's 262,144 (point, vertex) keys, 13.6 -> 6.5 ms (the quicksort's is faster on
+    values in no order: 14.4 against 18.5 ms). Every packed value is distinct (each holds its
+    position), so both sorts give the same arrays."""
     x = np.asarray(x).reshape(-1)
     flags = dict(return_index=return_index, return_inverse=return_inverse, return_counts=return_counts)
     packed = _packed(x)
@@ -61,7 +68,7 @@ def unique_ints(x, return_index=False, return_inverse=False, return_counts=False
         out = np.unique(x, **flags)
         return (out[0], *(np.asarray(a).reshape(-1) for a in out[1:])) if isinstance(out, tuple) else out
     packed, bits, lo = packed
-    packed.sort()
+    packed.sort(kind="stable" if grouped else "quicksort")
     order = packed & ((1 << bits) - 1)
     packed >>= bits
     new = np.empty(len(x), bool)
