@@ -1022,10 +1022,10 @@ def start_elements(ctx):
         return None                           # unusable faces: the patch stage says which
 
     def cut():
-        elements = build_patches(meshes, size)
-        if geometry_key(elements) == geometry_key(build_patches(meshes, None)):
+        elements, faces = build_patches(meshes, size), build_patches(meshes, None)
+        if geometry_key(elements) == geometry_key(faces):
             return None
-        return _cut(meshes, elements)
+        return _cut(meshes, elements, faces)     # the faces built once here too
     return Ahead.start(cut)
 
 
