@@ -153,3 +153,29 @@ def test_a_curved_lamps_far_side_does_not_shadow_its_near_side():
     F = polygon_form_factors(x, nx, ps.corners(), ps.normals).sum(axis=1)
     T = emitter_transport(ps, x, nx, em, scene=embree_scene(ps), samples=64, groups=groups)[:, 0]
     np.testing.assert_allclose(T, F, rtol=1e-5)
+
+
+def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
+    """The transports of a bake (stand-ins, vertices, gather hits, bright areas) ask for the
+    same lamps' outlines again and again: each emitter set's outline is made once and kept
+    (direct._outline), and the bake is the same as one that makes it every time."""
+    import hashlib
+    from hemicube_radiosity.core import direct, geometry, scenes
+    from hemicube_radiosity.core.pipeline import BakeSettings, bake
+    made = []
+    real = geometry.GroupOutline.of.__func__
+
+    def of(cls, polys, groups, normals):
+        made.append(hashlib.sha256(np.ascontiguousarray(polys).tobytes()).hexdigest())
+        return real(cls, polys, groups, normals)
+    monkeypatch.setattr(geometry.GroupOutline, "of", classmethod(of))
+    monkeypatch.setattr(direct, "_OUTLINES", {})
+    meshes = scenes.tessellate(scenes.cornell_box(), 8)
+    s = BakeSettings(workers=1, resolution=16, gather_rays=16)
+    kept = bake(meshes, s)
+    assert len(made) >= 2 and len(made) == len(set(made))
+    monkeypatch.setattr(direct, "OUTLINES_KEPT", 0)          # made every time, as before
+    made.clear()
+    again = bake(meshes, s)
+    assert len(made) > len(set(made))
+    assert np.array_equal(kept.vertex_radiosity, again.vertex_radiosity)

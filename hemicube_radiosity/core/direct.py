@@ -17,6 +17,8 @@ reflected light (see :mod:`.pipeline`), never the emitters' E.
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from .geometry import GROUP_LOOP, GroupOutline, group_form_factors, jittered_grid, polygon_form_factors
@@ -167,6 +169,30 @@ def _share(seen, weight):
     return np.where(weight > 0, seen / np.where(weight > 0, weight, 1.0), 0.0)
 
 
+def _outline(corners, groups, em_normals):
+    """:meth:`.geometry.GroupOutline.of` the emitter groups, kept for the :data:`OUTLINES_KEPT`
+    most recent emitter sets (by the bytes of their corners, groups and normals): a bake's
+    transports ask for the same lamps again and again (the 54k-triangle box's eleven for three
+    sets, 8 ms each)."""
+    h = hashlib.sha256()
+    for a in (corners, groups, em_normals):
+        a = np.ascontiguousarray(a)
+        h.update(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes())
+    key = h.digest()
+    got = _OUTLINES.pop(key, None)
+    if got is None:
+        got = GroupOutline.of(corners, groups, em_normals)
+    _OUTLINES[key] = got                        # the most recent last
+    while len(_OUTLINES) > OUTLINES_KEPT:
+        _OUTLINES.pop(next(iter(_OUTLINES)))
+    return got
+
+
+#: Emitter outlines :func:`_outline` keeps.
+OUTLINES_KEPT = 4
+_OUTLINES: dict = {}
+
+
 class _Transport:
     """The work of one :func:`emitter_transport` call, in chunks of ``step`` points.
 
@@ -187,7 +213,7 @@ class _Transport:
         self.groups, self.scene, self.refine, self.eps, self.draw = groups, scene, refine, eps, draw
         self.seed = seed
         # the groups' outlines once, not per chunk (a few straight edges per group, see GroupOutline)
-        self.outline = None if groups is None else GroupOutline.of(corners, groups, em_normals)
+        self.outline = None if groups is None else _outline(corners, groups, em_normals)
         self.ys, self.yn = draw(samples, np.random.default_rng(seed))    # (units, S, 3) twice
         self.S = self.ys.shape[1]
         units = self.ys.shape[0]
