@@ -15,13 +15,28 @@ import numpy as np
 
 from .sparse import CSR
 
-__all__ = ["FormFactorCache", "array_key", "cache_key", "cached", "geometry_key"]
+__all__ = ["FormFactorCache", "array_key", "cache_key", "cached", "geometry_key", "kept"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
     h = hashlib.sha256(geometry_key)
     h.update(repr(settings_key).encode())
     return h.hexdigest()
+
+
+def kept(store: dict, key, make, keep: int):
+    """``store[key]``, made by ``make()`` when absent and kept with the ``keep`` most recently
+    made (the oldest go first; with ``keep`` <= 0 nothing is kept): an in-process memo of what
+    a bake asks for again (ray scenes by geometry, emitter outlines)."""
+    if keep <= 0:
+        return make()
+    got = store.get(key)
+    if got is None:
+        got = make()
+        while len(store) >= keep:
+            store.pop(next(iter(store)))
+        store[key] = got
+    return got
 
 
 _GEOMETRY: dict = {}     # id(polys) -> (verts, polys, key): the last few geometries hashed

@@ -21,6 +21,7 @@ import hashlib
 
 import numpy as np
 
+from .cache import kept
 from .geometry import GROUP_LOOP, GroupOutline, group_form_factors, jittered_grid, polygon_form_factors
 from .parallel import ordered_map, resolve_workers
 from .patches import PatchSet
@@ -178,14 +179,7 @@ def _outline(corners, groups, em_normals):
     for a in (corners, groups, em_normals):
         a = np.ascontiguousarray(a)
         h.update(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes())
-    key = h.digest()
-    got = _OUTLINES.pop(key, None)
-    if got is None:
-        got = GroupOutline.of(corners, groups, em_normals)
-    _OUTLINES[key] = got                        # the most recent last
-    while len(_OUTLINES) > OUTLINES_KEPT:
-        _OUTLINES.pop(next(iter(_OUTLINES)))
-    return got
+    return kept(_OUTLINES, h.digest(), lambda: GroupOutline.of(corners, groups, em_normals), OUTLINES_KEPT)
 
 
 #: Emitter outlines :func:`_outline` keeps.

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .cache import kept
 from .errors import RadiosityError
 from .geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
 from .parallel import ordered_map, resolve_workers
@@ -125,14 +126,7 @@ def embree_scene(patches: PatchSet) -> EmbreeScene:
 
 def _per_geometry(cache: dict, patches: PatchSet, make, keep: int):
     """``make(patches)``, kept in ``cache`` by ``patches``' geometry (the ``keep`` most recent)."""
-    key = patches.geometry_key()
-    got = cache.get(key)
-    if got is None:
-        got = make(patches)
-        while len(cache) >= keep:
-            cache.pop(next(iter(cache)))
-        cache[key] = got
-    return got
+    return kept(cache, patches.geometry_key(), lambda: make(patches), keep)
 
 
 def clear_ray_cache() -> None:
