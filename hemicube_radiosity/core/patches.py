@@ -414,12 +414,7 @@ def _edge_segments(verts, polys, patch_size):
     """
     F = len(polys)
     tri = polys[:, 3] < 0
-    a = polys
-    b = np.where(tri[:, None], polys[:, [1, 2, 0, 0]], polys[:, [1, 2, 3, 0]])
-    valid = np.ones((F, 4), bool)
-    valid[tri, 3] = False
-    ea = np.minimum(a, b)[valid]
-    eb = np.maximum(a, b)[valid]
+    a, b, valid, ea, eb = _poly_sides(polys)
     key = np.stack([ea, eb], axis=1)
     edges, inv = unique_rows(key, return_inverse=True)
     inv = inv.reshape(-1)
@@ -444,6 +439,17 @@ def _edge_segments(verts, polys, patch_size):
         if np.array_equal(before, n):
             break
     return edges, face_edges, flipped, n
+
+
+def _poly_sides(polys):
+    """The sides of polys (F, 4) (-1 in column 3 for a triangle): ``a``, ``b`` (F, 4) each side's
+    first and last vertex (side i runs corner i -> i + 1), ``valid`` (F, 4) False for a
+    triangle's fourth, and the valid sides' vertices ``lo``, ``hi`` (S,), the lower id first."""
+    tri = polys[:, 3] < 0
+    b = np.where(tri[:, None], polys[:, [1, 2, 0, 0]], polys[:, [1, 2, 3, 0]])
+    valid = np.ones(polys.shape, bool)
+    valid[tri, 3] = False
+    return polys, b, valid, np.minimum(polys, b)[valid], np.maximum(polys, b)[valid]
 
 
 def _segment_counts(va, vb, patch_size):
@@ -486,11 +492,7 @@ def keeps_faces_whole(meshes, patch_size) -> bool:
             return False
         if np.any(sizes > 4):                  # the split's own edges, measured exactly
             verts, polys, _ = _to_tris_and_quads(mesh)
-            tri = polys[:, 3] < 0
-            b = np.where(tri[:, None], polys[:, [1, 2, 0, 0]], polys[:, [1, 2, 3, 0]])
-            side = np.ones(polys.shape, bool)
-            side[tri, 3] = False
-            lo, hi = np.minimum(polys, b)[side], np.maximum(polys, b)[side]
+            lo, hi = _poly_sides(polys)[3:]
             if np.any(_segment_counts(verts[lo], verts[hi], patch_size) > 1):
                 return False
     return True
