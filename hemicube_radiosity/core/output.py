@@ -954,10 +954,17 @@ def _uncut_elements(ctx) -> PatchSet:
     s = ctx.settings
 
     def make():
-        if keeps_faces_whole(ctx.meshes, s.element_size):
+        if _faces_whole(ctx, s.element_size):
             return mesh_faces(ctx)
         return build_patches(ctx.meshes, s.element_size)
     return cached(ctx.cache, cache_key(_meshes_key(ctx), ("elements", s.element_size)), make)
+
+
+def _faces_whole(ctx, size) -> bool:
+    """:func:`.patches.keeps_faces_whole` of the meshes at ``size``, once a bake (the start of the
+    bake asks it for the detail size, and the elements again)."""
+    return cached(ctx.cache, cache_key(_meshes_key(ctx), ("faces-whole", size)),
+                  lambda: keeps_faces_whole(ctx.meshes, size), disk=False)
 
 
 def mesh_faces(ctx) -> PatchSet:
@@ -1003,9 +1010,9 @@ def start_elements(ctx):
     a forked process at the start of the bake, beside the patches, the refinement, the form
     factors and the direct light; :func:`_cut_elements` takes it. A :class:`.parallel.Ahead`,
     or None: one worker, no elements, the elements cached (a relight forks nothing: forking
-    took its median from 40 to 71 ms), no process forked. The process returns the same cut as
-    :func:`_cut_elements` makes (None where no face is cut to the detail size: then the
-    elements are the input's faces and the patches, and nothing is cut)."""
+    took its median from 40 to 71 ms), or no face cut to the detail size (the elements are the
+    input's faces: nothing to cut), no process forked. The process returns the same cut as
+    :func:`_cut_elements` makes."""
     s = ctx.settings
     if not s.uses_elements() or ctx.meshes is None or resolve_workers(s.workers) <= 1:
         return None
@@ -1014,19 +1021,13 @@ def start_elements(ctx):
         return None                           # made by a bake before (a relight): cut, or nothing to cut
     meshes, size = ctx.meshes, s.element_size
     try:
-        if keeps_faces_whole(meshes, size):
+        if _faces_whole(ctx, size):
             # the elements are the faces: the process would only build them twice to say so
             # (the 54k-triangle box: 0.4 s of a core the form factors' workers want)
             return None
     except RadiosityError:
         return None                           # unusable faces: the patch stage says which
-
-    def cut():
-        elements, faces = build_patches(meshes, size), build_patches(meshes, None)
-        if geometry_key(elements) == geometry_key(faces):
-            return None
-        return _cut(meshes, elements, faces)     # the faces built once here too
-    return Ahead.start(cut)
+    return Ahead.start(lambda: _cut(meshes, build_patches(meshes, size), build_patches(meshes, None)))
 
 
 def _incoming(reflected, rho):
