@@ -5,7 +5,7 @@
 Issue 9 opened with "a Suzanne with a level-3 Subdivision Surface (31.7k faces) cannot be baked at
 all". This bench builds one (``bmesh.ops.create_monkey``, a SUBSURF modifier of ``--level``,
 evaluated into a plain mesh as an applied modifier leaves it), scaled to 0.55 m and set on the
-floor of the coarse Cornell box (``core.scenes.cornell_box``, 16 quads) beside the blocks. Ours:
+floor of the coarse Cornell box (``core.builtin_scenes.cornell_box``, 16 quads) beside the blocks. Ours:
 ``pipeline.bake`` with ``BakeSettings()`` as shipped (every stage timed); Cycles: a COMBINED
 vertex bake of the same objects at ``--spp`` samples, 32 bounces, 2 threads
 (``tools/cycles_reference.py``), in the same run. Both are read at Suzanne's vertices: ours
@@ -40,7 +40,7 @@ def suzanne(level, scale=0.2, at=(0.45, 1.5, 0.0)):
     import bmesh
     import bpy
 
-    from hemicube_radiosity.core.patches import MeshInput
+    from hemicube_radiosity.core.mesh.patches import MeshInput
 
     bm = bmesh.new()
     bmesh.ops.create_monkey(bm)
@@ -87,8 +87,8 @@ def main(argv=None):
     import bpy  # noqa: F401
     import cycles_reference as cr
     from bench_dense import _Scene, build_scene
-    from hemicube_radiosity.core import pipeline, scenes
-    from hemicube_radiosity.core.interpolate import interpolate_at
+    from hemicube_radiosity.core import pipeline, builtin_scenes as scenes
+    from hemicube_radiosity.core.output.interpolate import interpolate_at
 
     box = scenes.cornell_box()
     suz, normals = suzanne(a.level)

@@ -4,7 +4,7 @@
     .venv/bin/python bench/bench_dense.py --quick    # smoke run: 3 small sizes (~3 min)
     .venv/bin/python bench/bench_dense.py --report-only   # rewrite the report from bench/out
 
-The Cornell box of ``core.scenes.cornell_box`` (16 quads: floor, ceiling, three walls, light, two
+The Cornell box of ``core.builtin_scenes.cornell_box`` (16 quads: floor, ceiling, three walls, light, two
 blocks without bottoms) is modelled densely by ``tessellate(cornell_box(), n)``: every quad cut into
 n x n quads of two triangles, 2 n^2 triangles per quad. For each n, in child processes:
 
@@ -26,7 +26,7 @@ its vertices are the **probe points** (emitters and never-lit vertices left out,
 within ``LAMP_BAND`` = 0.3 m of the lamp's footprint: lit through the 2 mm gap by the lamp's back, a
 small very bright spot that would dominate the RMS). Every
 tessellation, ours and Cycles 64 spp alike, is evaluated at those same points by
-``core.interpolate.interpolate_at`` (ours: its output elements and vertex radiosities; Cycles: its
+``core.output.interpolate.interpolate_at`` (ours: its output elements and vertex radiosities; Cycles: its
 per-corner colours on the tessellated triangles). Reported: probe RMS relative error (luminance
 weighted, as speed_vs_error), floor luminance ratio (mean luminance of the floor probes / the
 reference's) and red bleeding ratio ((R/G) over the floor probes within 0.3 m of the red wall /
@@ -56,9 +56,9 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, HERE)
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
-from hemicube_radiosity.core import pipeline, scenes  # noqa: E402
-from hemicube_radiosity.core.interpolate import interpolate_at  # noqa: E402
-from hemicube_radiosity.core.patches import PatchSet, _poly_geometry  # noqa: E402
+from hemicube_radiosity.core import pipeline, builtin_scenes as scenes  # noqa: E402
+from hemicube_radiosity.core.output.interpolate import interpolate_at  # noqa: E402
+from hemicube_radiosity.core.mesh.patches import PatchSet, _poly_geometry  # noqa: E402
 
 import scenes_bench  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
@@ -368,7 +368,7 @@ def section(res):
          + f". Machine: {m.get('cpu', '?')}, {m.get('cpus')} logical CPUs, {m.get('mem_gb', '?')} GB; a shared machine:"
          f" `uptime` load averages at start {res['uptime_start']}, at end {res['uptime_end']} (per row below: the 1-min"
          " load when the child started).", "",
-         "The Cornell box (`core.scenes.cornell_box`, 16 quads) modelled densely: `tessellate(cornell_box(), n)` cuts every"
+         "The Cornell box (`core.builtin_scenes.cornell_box`, 16 quads) modelled densely: `tessellate(cornell_box(), n)` cuts every"
          " quad into n x n quads of two triangles (2 n^2 triangles a quad). Each size runs in its own child process"
          f" (ours {res.get('repeat', 1)} times, each in a new process, the fastest kept: this machine's noise moved a"
          " size's time by 10-15% from run to run, more than the steps the time rule compares; the runs go in rounds over"
@@ -413,7 +413,7 @@ def section(res):
     said = [(r["ours"]["triangles"], r["ours"]["forecast"], r["ours"]["core_seconds"]) for r in res["rows"]
             if "core_seconds" in r.get("ours", {}) and r["ours"].get("forecast")]
     if said:
-        L += ["", "The time each bake said it expected before its form factors (`result.forecast`, core/forecast.py),"
+        L += ["", "The time each bake said it expected before its form factors (`result.forecast`, core/runtime/forecast.py),"
               " against the bake's time: " + "; ".join(f"{t:,} triangles {f:.1f} s / {b:.1f} s ({f / b:.2f}x)"
                                                         for t, f, b in said) + "."]
     L += ["", "Times in seconds. Stages are `result.timings` of `pipeline.bake` ('vertices' = exact direct light at every"

@@ -3,7 +3,7 @@
 Closed box rooms of about 500, 2,000 and 8,000 patches at resolutions 64 and 128; prints ms per
 hemi-cube (wall clock), total time, the size of F and CPU ms per hemi-cube (steadier than the
 wall clock when other jobs share the machine).  ``--quick`` skips the 8,000-patch rows.
-``--baseline FILE`` also times another version of ``core/hemicube.py`` (e.g. a copy of an older
+``--baseline FILE`` also times another version of ``core/form_factors/hemicube.py`` (e.g. a copy of an older
 commit kept outside the repo) in the same run, and reports how far its F is from the current one.
 
     .venv/bin/python bench/bench_formfactors.py [--quick] [--baseline /tmp/hemicube_old.py]
@@ -20,16 +20,16 @@ import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
 
-from hemicube_radiosity.core.hemicube import hemicube_form_factors  # noqa: E402
-from hemicube_radiosity.core.patches import build_patches  # noqa: E402
-from hemicube_radiosity.core.scenes import closed_box  # noqa: E402
+from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors  # noqa: E402
+from hemicube_radiosity.core.mesh.patches import build_patches  # noqa: E402
+from hemicube_radiosity.core.builtin_scenes import closed_box  # noqa: E402
 
 # cells per side of a unit cube room: 6 n^2 patches
 ROOMS = {"~500": 9, "~2000": 18, "~8000": 36}
 
 
 def load_baseline(path):
-    """``hemicube_form_factors`` of another version of core/hemicube.py, loaded inside the package
+    """``hemicube_form_factors`` of another version of core/form_factors/hemicube.py, loaded inside the package
     (so its relative imports resolve)."""
     spec = importlib.util.spec_from_file_location("hemicube_radiosity.core._bench_baseline", path)
     mod = importlib.util.module_from_spec(spec)
@@ -42,7 +42,7 @@ def methods(baseline=None):
     out = [("numpy", hemicube_form_factors)]
     if baseline:
         out.append(("base", load_baseline(baseline)))
-    from hemicube_radiosity.core.embree_ff import embree_hemicube_form_factors
+    from hemicube_radiosity.core.form_factors.embree import embree_hemicube_form_factors
     from hemicube_radiosity.core.rays import embree_available
 
     if embree_available():

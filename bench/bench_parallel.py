@@ -4,7 +4,7 @@ Scenes: the dense Cornell box (``scenes.tessellate(scenes.cornell_box(), 40)``: 
 grouped into ~555 patches by the default settings), the coarse ``cornell_box()`` cut into 0.1 m
 patches, each baked by the NumPy hemi-cube and by Embree, and Suzanne at subdivision level 3 in
 the box (bench_curved.py's scene, the hemi-cube only), in turn with 1 worker, 2 workers (the
-hemi-cube's form factors on two forked processes, :mod:`core.parallel`) and, unless
+hemi-cube's form factors on two forked processes, :mod:`core.runtime.parallel`) and, unless
 ``--no-threads``, 2 workers with processes switched off (``parallel.PROCESSES = False``:
 everything on threads, as before), ``--repeat`` times (each stage's best wall time kept, with
 its CPU time: on a shared machine the best run is the one least disturbed). Per stage it prints
@@ -38,8 +38,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from hemicube_radiosity.core import parallel, pipeline, scenes  # noqa: E402
-from hemicube_radiosity.core.parallel import cpu_count  # noqa: E402
+from hemicube_radiosity.core.runtime import parallel
+from hemicube_radiosity.core import pipeline, builtin_scenes as scenes  # noqa: E402
+from hemicube_radiosity.core.runtime.parallel import cpu_count  # noqa: E402
 from hemicube_radiosity.core.rays import clear_ray_cache, embree_available  # noqa: E402
 from hemicube_radiosity.core.settings import BakeSettings  # noqa: E402
 
@@ -191,7 +192,7 @@ GATHER_THREADS = ("2 gthr", 2, True)
 
 
 def bake_config(meshes, kw, workers, processes, label=""):
-    from hemicube_radiosity.core import gather
+    from hemicube_radiosity.core.output import gather
     parallel.PROCESSES = processes
     forked_from = gather.PROCESS_RAYS
     if label == GATHER_THREADS[0]:
@@ -239,9 +240,9 @@ def gather_only(rounds):
     the default rays, with hits) at 1 worker, 2 forked workers and 2 threads, ``rounds`` times
     in turn: wall and CPU (with the workers') per configuration, best and median. A whole bake
     on a shared machine buries this stage's difference in the other stages' noise."""
-    from hemicube_radiosity.core import gather
-    from hemicube_radiosity.core.direct import vertex_frames
-    from hemicube_radiosity.core.patches import build_patches
+    from hemicube_radiosity.core.output import gather
+    from hemicube_radiosity.core.light.emitters import vertex_frames
+    from hemicube_radiosity.core.mesh.patches import build_patches
     from hemicube_radiosity.core.rays import embree_scene
     el = build_patches(scenes.tessellate(scenes.cornell_box(), 40), None)
     x, n, _ = vertex_frames(el)

@@ -37,9 +37,9 @@ def main(argv=None):
     import bpy
     import cycles_reference as cr
     from hemicube_radiosity.blender.demo import object_from_mesh_input
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.cache import FormFactorCache
-    from hemicube_radiosity.core.patches import MeshInput
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+    from hemicube_radiosity.core.mesh.patches import MeshInput
     from hemicube_radiosity.core.pipeline import BakeSettings, bake
 
     meshes = scenes.tessellate(scenes.cornell_box(), a.n)

@@ -6,7 +6,7 @@ Each :class:`BenchScene` holds
 * ``fine``: the same surfaces pre-cut into about 4,000 faces, with hard edges (every original
   face is its own vertex island, so each vertex lies on one plane and has one normal). The
   reference (Cycles at high samples) and every candidate are compared at ``fine``'s vertices;
-* ``world``: constant world radiance (3,) or None (black), ``lights``: core.lights lamps (or ()).
+* ``world``: constant world radiance (3,) or None (black), ``lights``: core.light.lamps lamps (or ()).
 
 Emitters are plain emissive faces: in Cycles (bench/speed_vs_error.build_blender_scene) a Diffuse
 BSDF plus an Emission, which lights both faces, as an artist's file has them; our bakes use the
@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 
 __all__ = ["BenchScene", "cut_fine", "fine_points", "contact_vertices", "cornell", "furnished_room", "open_yard", "SCENES",
            "get_scene"]

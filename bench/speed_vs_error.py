@@ -13,7 +13,7 @@ cached under ``bench/cache/`` (tools/cycles_reference.cached_bake). Candidates, 
 * ours, ``core.pipeline.bake`` on the scene's MeshInputs (faces-as-patches on the fine mesh, or
   the coarse scene cut into patches of a given size) + the add-on's ``write_copies`` (scene ->
   colour attribute written), per method / resolution / rays; evaluated at the fine vertices by
-  ``core.interpolate.interpolate_at``.
+  ``core.output.interpolate.interpolate_at``.
 
 Error of a candidate at the fine vertices, emitters left out, with luminance weights
 w = (0.2126, 0.7152, 0.0722) per channel: e_v = sqrt(sum_c w_c (x_c - r_c)^2).
@@ -57,10 +57,10 @@ sys.path.insert(0, os.path.join(ROOT, "bench"))
 sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 from hemicube_radiosity.core import pipeline  # noqa: E402
-from hemicube_radiosity.core.cache import FormFactorCache  # noqa: E402
-from hemicube_radiosity.core.direct_light import DirectLight  # noqa: E402
-from hemicube_radiosity.core.interpolate import interpolate_at  # noqa: E402
-from hemicube_radiosity.core.patches import MeshInput, build_patches  # noqa: E402
+from hemicube_radiosity.core.runtime.cache import FormFactorCache  # noqa: E402
+from hemicube_radiosity.core.light.stage import DirectLight  # noqa: E402
+from hemicube_radiosity.core.output.interpolate import interpolate_at  # noqa: E402
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches  # noqa: E402
 
 import scenes_bench  # noqa: E402
 
@@ -147,7 +147,7 @@ def flat_vertices(sc, pts, normals, mask, edges):
       edges between original faces, so a vertex on a face's border or corner has 2-3);
     * it is compared at all (``mask``: not an emitter, not a never-lit hidden vertex);
     * it is lit by the direct light: D_v > 5% of the mean of D over ``mask``, where D is the exact
-      direct luminance at the vertex (``core.direct_light.DirectLight.plan`` on a patches-only bake
+      direct luminance at the vertex (``core.light.stage.DirectLight.plan`` on a patches-only bake
       of the coarse scene: emitters, lamps and the world's sky seen from the vertex, shadow rays);
     * no neighbour's D differs from its own by more than 30% (of the larger): no shadow boundary;
     * and none of its neighbours fails one of the tests above (a one-vertex margin).
@@ -248,7 +248,8 @@ class Writer:
         self.read_seconds = 0.0
         try:
             import bpy
-            from hemicube_radiosity.blender import read, write
+            from hemicube_radiosity.blender.read import scene as read
+            from hemicube_radiosity.blender import write
             t = time.perf_counter()
             dg = bpy.context.evaluated_depsgraph_get()
             self.scene_input = read.read_scene(dg, objs)
@@ -535,7 +536,7 @@ def run_scene(sc, args):
             f"  smooth {100 * rec['smooth']:.2f}%")
     out["ours"] = [d for d in done if not d.get("skipped")]
     out["skipped"] = [d for d in done if d.get("skipped")]
-    # issue 11: the report's estimated error (core.estimate) beside the error measured here
+    # issue 11: the report's estimated error (core.output.estimate) beside the error measured here
     try:
         s = dataclasses.replace(settings_of(defaults_candidate()), estimate_error=True)
         res = pipeline.bake(sc.coarse, s, world=sc.world, lights=sc.lights)
@@ -614,10 +615,10 @@ def memory_child(n, method, res):
     """Run in a subprocess: cut the Cornell box into ~n patches; peak resident memory of the
     form factors alone, then of the rest of the bake (direct light, solve, vertices) with F
     cached; the peak is reset between the two (/proc/self/clear_refs). Prints JSON."""
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.cache import cache_key
-    from hemicube_radiosity.core.patches import PatchError
-    from hemicube_radiosity.core.solve import solve
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.runtime.cache import cache_key
+    from hemicube_radiosity.core.mesh.patches import PatchError
+    from hemicube_radiosity.core.solve.solvers import solve
 
     coarse = scenes.cornell_box()
     area = sum(build_patches(coarse, None).areas)
@@ -697,8 +698,8 @@ def run_memory(jobs, timeout):
 
 
 def profile_hemicube(n=500, res=64, top=14):
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.hemicube import hemicube_form_factors
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
 
     coarse = scenes.cornell_box()
     area = sum(build_patches(coarse, None).areas)
@@ -973,7 +974,7 @@ def write_report(results, doc, img_dir):
          " surfaces pre-cut into ~4,000 faces with hard edges between original faces. Cycles bakes that mesh;"
          " our candidates bake either that mesh with faces as patches (`patch_size=None`, 'faces') or the coarse"
          " scene cut into patches of the given size, and are evaluated at the evaluation mesh's vertices by"
-         " `core.interpolate.interpolate_at` (the paper's bilinear rendering step).",
+         " `core.output.interpolate.interpolate_at` (the paper's bilinear rendering step).",
          f"- Reference: Cycles COMBINED vertex bake (`tools/cycles_reference.py`, emission + direct + indirect"
          f" diffuse), {BOUNCES} bounces, no clamping/denoising, cached in `bench/cache/`. Candidates use another seed."
          " Materials: Diffuse BSDF of the scene's reflectance; an emitter adds an Emission (strength 1) and lights"

@@ -1,4 +1,4 @@
-"""``python -m hemicube_radiosity bake|demo|batch ...`` with the bpy module (see :mod:`.blender.cli`).
+"""``python -m hemicube_radiosity bake|demo|batch ...`` with the bpy module (see :mod:`.blender.cli.main`).
 
 From any directory: ``PYTHONPATH=/path/to/repo /path/to/repo/.venv/bin/python -m
 hemicube_radiosity ...``, or the repository's ``bin/hemicube-radiosity`` wrapper, which does that.
@@ -21,7 +21,7 @@ def _main():
         print("hemicube_radiosity: error: the 'bpy' module is needed: pip install bpy (Python 3.11), "
               "or run inside Blender with: blender -b -c hemicube_radiosity ...", file=sys.stderr)
         return 1
-    from .blender.cli import _flush_c_stdio, main
+    from .blender.cli.main import _flush_c_stdio, main
 
     code = main()
     if {"-q", "--quiet"} & set(sys.argv[1:]):

@@ -138,7 +138,7 @@ def test_rebake_replaces_previous_bake(cornell):
 
 def test_reopen_restores_scene_and_operator_is_undoable(cornell, addon, bpy_module):
     bpy = bpy_module
-    assert "UNDO" in sub(addon, "blender.operators").OBJECT_OT_radiosity_bake.bl_options
+    assert "UNDO" in sub(addon, "blender.ui.operators").OBJECT_OT_radiosity_bake.bl_options
     bpy.ops.wm.open_mainfile(filepath=cornell["blend"])
     assert bpy.data.collections.get("Radiosity") is None
     for n in cornell["names"]:
@@ -220,7 +220,7 @@ def _plane_grid(bpy, name, faces=2, smooth=False):
 
 def test_weld_rule(addon, empty_scene):
     bpy = empty_scene
-    read = sub(addon, "blender.read")
+    read = sub(addon, "blender.read.scene")
     dg = lambda: bpy.context.evaluated_depsgraph_get()  # noqa: E731
     # a flat-shaded wall cut into 2 x 2 faces stays one surface: 9 shared vertices
     wall = _plane_grid(bpy, "Wall", faces=2)
@@ -249,7 +249,7 @@ def test_weld_rule(addon, empty_scene):
 
 def test_world_space_modifiers_and_negative_scale(addon, empty_scene):
     bpy = empty_scene
-    read = sub(addon, "blender.read")
+    read = sub(addon, "blender.read.scene")
     bpy.ops.mesh.primitive_plane_add(size=1, location=(1, 2, 3))
     ob = bpy.context.active_object
     ob.scale = (2, 1, 1)
@@ -279,7 +279,7 @@ def test_world_space_modifiers_and_negative_scale(addon, empty_scene):
 
 def test_material_reading(addon, empty_scene):
     bpy = empty_scene
-    read = sub(addon, "blender.read")
+    read = sub(addon, "blender.read.scene")
 
     def principled(name, base, em=(0, 0, 0), strength=0.0):
         m = bpy.data.materials.new(name)
@@ -339,12 +339,12 @@ def test_material_reading(addon, empty_scene):
     bpy.ops.mesh.primitive_plane_add()
     bpy.context.active_object.data.materials.append(bpy.data.materials["G"])
     select(bpy, [bpy.context.active_object])
-    sub(addon, "blender.operators")  # registered
+    sub(addon, "blender.ui.operators")  # registered
     from io import StringIO  # noqa: F401  (reports go to the operator; check the job directly)
     bake = sub(addon, "blender.bake")
     job = bake.BakeJob.prepare(bpy.context, [bpy.context.active_object], bake.BakeSettings())
     assert any("viewport colour" in n for n in job.notes)
-    assert "Approximated:" in sub(addon, "blender.operators")._notes_line(job.notes)
+    assert "Approximated:" in sub(addon, "blender.ui.operators")._notes_line(job.notes)
 
 
 def test_lamps_light_the_bake_in_cycles_units(addon, empty_scene):
@@ -440,7 +440,7 @@ def test_cancel_leaves_scene_unchanged_and_stages_are_printed(addon, empty_scene
     bpy = empty_scene
     objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
     bake = sub(addon, "blender.bake")
-    core_progress = importlib.import_module(ADDON_MODULE + ".hemicube_radiosity.core.progress")
+    core_progress = importlib.import_module(ADDON_MODULE + ".hemicube_radiosity.core.runtime.progress")
     n_obj, n_mesh = len(bpy.data.objects), len(bpy.data.meshes)
     job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeSettings(**BAKE))
     calls = []
@@ -509,7 +509,7 @@ def _modal_run(addon, bpy, objs, cancel_first):
     import time
     import types
 
-    ops = sub(addon, "blender.operators")
+    ops = sub(addon, "blender.ui.operators")
     bake = sub(addon, "blender.bake")
     cls = ops.OBJECT_OT_radiosity_bake
     ui = _FakeUI()

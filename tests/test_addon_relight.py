@@ -14,7 +14,7 @@ BAKE = dict(patch_size=0.25, resolution=32)
 def test_relight_in_the_session_reuses_form_factors(addon, empty_scene, monkeypatch, tmp_path):
     bpy = empty_scene
     bake_mod = importlib.import_module(f"{addon.__name__}.blender.bake")
-    form_factors = importlib.import_module(f"{addon.__name__}.core.form_factors")
+    form_factors = importlib.import_module(f"{addon.__name__}.core.form_factors.stage")
     write = importlib.import_module(f"{addon.__name__}.blender.write")
     demo = importlib.import_module(f"{addon.__name__}.blender.demo")
     bake_mod.clear_session_cache()

@@ -16,9 +16,9 @@ import pytest
 from conftest import file_sha256, node_tree, scene_hash
 from test_addon import select
 
-from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings as CoreSettings, bake as core_bake
-from hemicube_radiosity.core.progress import Cancelled as CoreCancelled
+from hemicube_radiosity.core.runtime.progress import Cancelled as CoreCancelled
 
 BAKE = dict(patch_size=0.5, resolution=8, element_size=0.0)
 CLI_BAKE = ["--patch-size", "0.5", "--resolution", "8", "--element-size", "0"]
@@ -31,7 +31,7 @@ def sub(addon, name):
 
 def run_cli(addon, argv):
     out, err = io.StringIO(), io.StringIO()
-    rc = sub(addon, "blender.cli").main(argv, in_blender=True, out=out, err=err)
+    rc = sub(addon, "blender.cli.main").main(argv, in_blender=True, out=out, err=err)
     return rc, out.getvalue(), err.getvalue()
 
 
@@ -581,7 +581,7 @@ def test_real_full_disk_through_blenders_exporter(addon, plane_blend, tiny_disk,
 def test_cancel_mid_bake_leaves_the_scene_unchanged(addon, empty_scene):
     bpy = empty_scene
     objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
-    core_progress = sub(addon, "core.progress")
+    core_progress = sub(addon, "core.runtime.progress")
     sub(addon, "blender.bake").clear_session_cache()
     before = scene_hash(bpy)
     job = prepare(addon, bpy, objs)

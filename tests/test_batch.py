@@ -21,7 +21,7 @@ SMALL = ["--resolution", "8", "--patch-size", "0.5", "--element-size", "0", "--g
 
 
 def cli(addon):
-    return importlib.import_module(f"{addon.__name__}.blender.cli")
+    return importlib.import_module(f"{addon.__name__}.blender.cli.main")
 
 
 def batch(addon, *argv):

@@ -23,7 +23,7 @@ def sub(addon, name):
 def run(addon, argv):
     """The registered command's handler (what ``blender -c hemicube_radiosity`` calls)."""
     out, err = io.StringIO(), io.StringIO()
-    rc = sub(addon, "blender.cli").main(argv, in_blender=True, out=out, err=err)
+    rc = sub(addon, "blender.cli.main").main(argv, in_blender=True, out=out, err=err)
     return rc, out.getvalue(), err.getvalue()
 
 
@@ -91,7 +91,7 @@ def test_cli_report(cli_bake):
 
 
 def test_cli_patches_arrays(addon, cli_bake):
-    scenes = importlib.import_module(f"{addon.__name__}.core.scenes")
+    scenes = importlib.import_module(f"{addon.__name__}.core.builtin_scenes")
     z = np.load(cli_bake["patches"])
     n = len(z["areas"])
     for k, shape in (("centers", (n, 3)), ("normals", (n, 3)), ("radiosity", (n, 3)), ("emission", (n, 3)),
@@ -285,7 +285,7 @@ def test_detail_size_bakes_a_finer_mesh_over_coarse_patches(addon, cornell_blend
     per = r["per_object"]
     assert sum(v["elements"] for v in per.values()) == r["elements"]
     assert sum(v["patches"] for v in per.values()) == r["patches"]
-    # 16 x 16 elements, those under the blocks' outlines cut along them (core/contact.py)
+    # 16 x 16 elements, those under the blocks' outlines cut along them (core/mesh/contact.py)
     assert 16 * 16 < per["Floor"]["elements"] < 2 * 16 * 16 and 4 * 4 < per["Floor"]["patches"] < 4 * 4 * 4
     assert r["settings"]["element_size"] == 0.125 and r["settings"]["gather_rays"] == int(gather)
     doc, accessor = read_gltf(str(tmp_path / "b.glb"))

@@ -5,13 +5,13 @@ import numpy as np
 import pytest
 
 from analytic import parallel_rectangles, perpendicular_rectangles
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.clusters import group_pieces
-from hemicube_radiosity.core.drawn import draw_set
-from hemicube_radiosity.core.embree_ff import embree_hemicube_form_factors
-from hemicube_radiosity.core.geometry import group_form_factors, polygon_form_factors
-from hemicube_radiosity.core.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.clusters import group_pieces
+from hemicube_radiosity.core.form_factors.drawn import draw_set
+from hemicube_radiosity.core.form_factors.embree import embree_hemicube_form_factors
+from hemicube_radiosity.core.util.geometry import group_form_factors, polygon_form_factors
+from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 
 
@@ -149,7 +149,7 @@ def test_group_form_factors_group_by_group_equal_the_flat_pairs_bit_for_bit(monk
     """A few groups are evaluated group by group (points x edges blocks, in blocks of points),
     many groups as flat (point, group) pairs: the same sums in the same order, bit for bit,
     including the points below part of a group (clipped contours) and a small block size."""
-    from hemicube_radiosity.core import geometry
+    from hemicube_radiosity.core.util import geometry
     rng = np.random.default_rng(8)
     lamp = scenes.tessellate([scenes.cornell_box()[5]], 9)
     p = build_patches(lamp, None)
@@ -172,7 +172,7 @@ def test_clipped_contour_answers_points_below_the_whole_region_without_clipping(
     plane) sees nothing of it: F = 0, ok, without the clipping; the points that see part of it
     get what the clipping gives them among any others, bit for bit, and what the face-by-face
     sum gives."""
-    from hemicube_radiosity.core import geometry
+    from hemicube_radiosity.core.util import geometry
     rng = np.random.default_rng(11)
     lamp = build_patches([scenes.cornell_box()[5]], None)              # the lamp, facing down
     o = geometry.GroupOutline.of(lamp.corners(), np.zeros(len(lamp), int), lamp.normals)
@@ -200,7 +200,7 @@ def test_dense_cornell_box_bakes_like_the_coarse_one():
     One-sided emitters here: the two-sided lamp 2 mm under the ceiling paints a hot spot on it
     that patches of 0.25 m resolve differently whatever the modelling (pointwise ~9% apart,
     the same mean: checked below)."""
-    from hemicube_radiosity.core.interpolate import interpolate_at
+    from hemicube_radiosity.core.output.interpolate import interpolate_at
 
     s = BakeSettings(two_sided_emission=False)
     coarse = bake(scenes.cornell_box(), s)
@@ -232,8 +232,8 @@ def test_a_dense_lamp_split_in_cells_has_straight_cell_outlines():
     unoccluded transport equals the untessellated quad's to float32 precision. Each cell keeps
     its own faces' form factor to within the sliver of triangles along its borders (1.2% of
     the lamp's at these points; asserted below 2%)."""
-    from hemicube_radiosity.core.direct import emitter_transport
-    from hemicube_radiosity.core.geometry import GroupOutline
+    from hemicube_radiosity.core.light.emitters import emitter_transport
+    from hemicube_radiosity.core.util.geometry import GroupOutline
 
     rng = np.random.default_rng(9)
     quad = [scenes.cornell_box()[5]]
@@ -268,7 +268,7 @@ def test_straightened_group_outlines_keep_the_exact_sum(monkeypatch, kind):
     split at random: into Voronoi cells (straightened: 93-236 edges in all become 18-55) or face
     by face at random (scattered faces: their outlines would cross, so they are kept), the sum
     over the groups is the whole lamp's closed form to round-off."""
-    from hemicube_radiosity.core import geometry
+    from hemicube_radiosity.core.util import geometry
 
     monkeypatch.setattr(geometry, "STRAIGHTEN_ABOVE", 0)
     rng = np.random.default_rng(0)
@@ -299,7 +299,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     """A dense sphere cut into curved groups (a hot cap shining on a room): the normal cone
     that decides most point-group pairs at once, and the face-by-face sum over the faces turned
     to the point only, give the plain sum over every face of :func:`polygon_form_factors`."""
-    from hemicube_radiosity.core import geometry
+    from hemicube_radiosity.core.util import geometry
 
     rng = np.random.default_rng(3)
     p = build_patches([_uv_sphere(48, 24)], None)
@@ -324,8 +324,8 @@ def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
     Morton order), not at every face's, so its cost follows the clusters. Each cluster's direct
     source still matches the closed-form mean over all its faces (a Lambertian square lamp over
     a floor of 20,000 triangles, nothing in between)."""
-    from hemicube_radiosity.core import direct_light
-    from hemicube_radiosity.core.direct_light import DirectLight
+    from hemicube_radiosity.core.light import stage as direct_light
+    from hemicube_radiosity.core.light.stage import DirectLight
 
     floor = scenes.tessellate([scenes.quad([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)], rho=(0.6,) * 3,
                                            name="Floor")], 100)
@@ -367,7 +367,7 @@ def test_a_lamps_slivers_shine_with_their_neighbours():
     neighbour in the same plane: 4 groups at both sizes, whose form factors still sum to the
     lamp's closed form. A sliver never joins a group in another plane (a furnace box is one
     object: its walls' groups stay apart)."""
-    from hemicube_radiosity.core.direct_light import DirectLight
+    from hemicube_radiosity.core.light.stage import DirectLight
 
     boxes = {n: scenes.tessellate(scenes.cornell_box(), n) for n in (8, 21)}
     s = BakeSettings().resolved(boxes[8])                  # 'auto': 0.247 m patches

@@ -1,4 +1,4 @@
-"""Surfaces standing on others (core/contact.py, issues 11 and 12): output elements cut along
+"""Surfaces standing on others (core/mesh/contact.py, issues 11 and 12): output elements cut along
 the contact lines, vertices there apart on each side, buried corners given the open side's limit.
 
 A house standing on one large ground face under a uniform sky: uncut, the output elements
@@ -10,10 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import output, scenes
-from hemicube_radiosity.core.contact import cut_along_contacts, open_side
-from hemicube_radiosity.core.interpolate import interpolate_at
-from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core.output import stage as output
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.contact import cut_along_contacts, open_side
+from hemicube_radiosity.core.output.interpolate import interpolate_at
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 from hemicube_radiosity.core.rays import embree_available, embree_scene
 

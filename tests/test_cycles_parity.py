@@ -26,8 +26,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from hemicube_radiosity.blender import read as reader  # noqa: E402
-from hemicube_radiosity.blender.lights import read_lights, world_radiance  # noqa: E402
+from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
+from hemicube_radiosity.blender.read.lights import read_lights, world_radiance  # noqa: E402
 from test_lighting_cycles import RHO, Comparison, floor_object  # noqa: E402
 
 TOL = 0.02
@@ -158,7 +158,7 @@ def test_world_before_blender_5_without_nodes(monkeypatch):
         color = (0.5, 0.5, 0.5)
         cycles_visibility = w.cycles_visibility
 
-    from hemicube_radiosity.blender import lights as lights_mod
+    from hemicube_radiosity.blender.read import lights as lights_mod
 
     class OldApp:
         version = (4, 2, 0)

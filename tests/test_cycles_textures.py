@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Issue 10: reflectance and emission as Cycles evaluates them (``blender/shading.py``).
+"""Issue 10: reflectance and emission as Cycles evaluates them (``blender/read/shading.py``).
 
 Each case is a floor whose colour comes from nodes Cycles evaluates (an image texture through
 UVs, a procedural texture through a Mix node, a colour attribute, an emission texture) or from a
@@ -27,8 +27,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from hemicube_radiosity.blender import read as reader  # noqa: E402
-from hemicube_radiosity.blender import shading  # noqa: E402
+from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
+from hemicube_radiosity.blender.read import shading  # noqa: E402
 from test_lighting_cycles import Comparison  # noqa: E402
 
 TOL = 0.02

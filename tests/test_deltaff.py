@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.deltaff import delta_form_factors
+from hemicube_radiosity.core.form_factors.deltaff import delta_form_factors
 
 
 def point_to_polygon(polys):

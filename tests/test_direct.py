@@ -3,11 +3,11 @@ import numpy as np
 import pytest
 
 from analytic import point_under_rectangle_corner
-from hemicube_radiosity.core.direct import emitter_direct, emitter_transport
-from hemicube_radiosity.core.geometry import polygon_form_factors
-from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.light.emitters import emitter_direct, emitter_transport
+from hemicube_radiosity.core.util.geometry import polygon_form_factors
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.rays import embree_scene
-from hemicube_radiosity.core.scenes import quad
+from hemicube_radiosity.core.builtin_scenes import quad
 
 
 SQ = np.array([[[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]]], float)
@@ -58,8 +58,8 @@ def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
 
 def test_grid_of_is_grid_points_kept_for_the_geometry():
     # the patch grids a relight lights again: grid_points' values, the same arrays the second time
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.direct_light import _rows, grid_of, grid_points, patch_average
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.light.stage import _rows, grid_of, grid_points, patch_average
     ps = build_patches(scenes.cornell_box(), 0.25)
     rows = np.arange(3, len(ps), 2)
     x, w = grid_points(_rows(ps, rows), 3)
@@ -88,7 +88,7 @@ def test_a_lamp_face_cut_into_100_patches_shines_as_one_unit():
     shadows), not 100 contours and 4 rays per patch (400). Where nothing stands between, the light is the whole face's closed form (its
     outline's contour, exact); the same face with one patch of another emission (a texture's) or
     bent out of its plane shines patch by patch, as before."""
-    from hemicube_radiosity.core.direct_light import DirectLight
+    from hemicube_radiosity.core.light.stage import DirectLight
     from hemicube_radiosity.core.pipeline import BakeSettings
 
     h = 0.25
@@ -160,7 +160,9 @@ def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
     same lamps' outlines again and again: each emitter set's outline is made once and kept
     (direct._outline), and the bake is the same as one that makes it every time."""
     import hashlib
-    from hemicube_radiosity.core import direct, geometry, scenes
+    from hemicube_radiosity.core.light import emitters as direct
+    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core import builtin_scenes as scenes
     from hemicube_radiosity.core.pipeline import BakeSettings, bake
     made = []
     real = geometry.GroupOutline.of.__func__

@@ -1,12 +1,13 @@
-"""The hemi-cube draws a planar cluster of pieces as its outline (core/drawn.py): the same pixels
+"""The hemi-cube draws a planar cluster of pieces as its outline (core/form_factors/drawn.py): the same pixels
 at a cost set by the clusters, not by how finely the faces were modelled."""
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import hemicube, scenes
-from hemicube_radiosity.core.clusters import group_pieces
-from hemicube_radiosity.core.drawn import draw_set
-from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core.form_factors import hemicube
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.clusters import group_pieces
+from hemicube_radiosity.core.form_factors.drawn import draw_set
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut
 
 
@@ -96,8 +97,8 @@ def test_a_cluster_with_a_hole_is_drawn_piece_by_piece():
 def test_outlines_touching_at_a_corner_are_cut_into_simple_loops():
     # a cell border slanting through the quads: one triangle of cluster 0 touches the rest of
     # it at a corner only, so its boundary passes that vertex twice
-    from hemicube_radiosity.core import drawn
-    from hemicube_radiosity.core.clusters import _make
+    from hemicube_radiosity.core.form_factors import drawn
+    from hemicube_radiosity.core.mesh.clusters import _make
     pieces = build_patches([_grid(8)], 4.0)
     of = (pieces.centers[:, 0] + 2.0 * pieces.centers[:, 1] > 0.43).astype(np.int64)
     clusters = _make(pieces, of)
@@ -127,6 +128,6 @@ def test_collinear_border_points_are_left_out_on_both_sides_alike(n):
     # inner points (each cluster: 2 triangles) and share the border's two end points
     pieces = build_patches([_grid(n, size=2.0)], 4.0)
     of = (pieces.centers[:, 0] > 1.0).astype(np.int64)
-    from hemicube_radiosity.core.clusters import _make
+    from hemicube_radiosity.core.mesh.clusters import _make
     d = draw_set(pieces, _make(pieces, of))
     assert d.outlined.all() and len(d) == 4 and len(d.verts) == 6

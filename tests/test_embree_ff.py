@@ -4,13 +4,14 @@ import sys
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.patches import build_patches
-from hemicube_radiosity.core import embree_ff
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.form_factors import embree as embree_ff
 from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
-from hemicube_radiosity.core.embree_ff import (embree_hemicube_form_factors,
-                                               embree_stochastic_form_factors)
-from hemicube_radiosity.core.progress import Cancelled
+from hemicube_radiosity.core.form_factors.embree import (
+    embree_hemicube_form_factors, embree_stochastic_form_factors
+)
+from hemicube_radiosity.core.runtime.progress import Cancelled
 from hemicube_radiosity.core.rays import EmbreeUnavailable, embree_available
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
@@ -147,8 +148,8 @@ def turned(meshes, angles=(0.3, -0.2, 0.7)):
 @pytest.mark.parametrize("turn,seed", [(False, 11), (True, None), (True, 5)],
                          ids=["axis-aligned,rotated-hemicubes", "turned,fixed-frames", "turned,rotated"])
 def test_rasteriser_and_embree_agree_on_the_same_pixels(turn, seed):
-    hemicube = pytest.importorskip("hemicube_radiosity.core.hemicube",
-                                   reason="core/hemicube.py (the NumPy rasteriser) is not there yet")
+    hemicube = pytest.importorskip("hemicube_radiosity.core.form_factors.hemicube",
+                                   reason="core/form_factors/hemicube.py (the NumPy rasteriser) is not there yet")
     # a room with blocks: occlusion, neighbours sharing edges, patches at grazing angles.
     # Not axis-aligned geometry with unrotated hemi-cubes: there the top-face diagonal pixel
     # centres fall exactly on wall-patch edges and the two methods break those ties differently

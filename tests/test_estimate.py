@@ -1,4 +1,4 @@
-"""The report's estimated error (core/estimate.py, issue 11) against the error it estimates.
+"""The report's estimated error (core/output/estimate.py, issue 11) against the error it estimates.
 
 Truth here is the same bake converged: output elements a third the size and 512 gather rays,
 interpolated to the default bake's vertices (Cycles' version of this check, on the bench scenes,
@@ -15,12 +15,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import pipeline, scenes
-from hemicube_radiosity.core.direct import vertex_frames
-from hemicube_radiosity.core.estimate import _lit_vertices, _vertex_owner, relative_rms
-from hemicube_radiosity.core.interpolate import interpolate_at
-from hemicube_radiosity.core.output import _open_elements, seen_vertices
-from hemicube_radiosity.core.patches import MeshInput
+from hemicube_radiosity.core import pipeline, builtin_scenes as scenes
+from hemicube_radiosity.core.light.emitters import vertex_frames
+from hemicube_radiosity.core.output.estimate import _lit_vertices, _vertex_owner, relative_rms
+from hemicube_radiosity.core.output.interpolate import interpolate_at
+from hemicube_radiosity.core.output.stage import _open_elements, seen_vertices
+from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.rays import embree_available
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="the gather needs Embree")

@@ -1,13 +1,13 @@
-"""The time a bake expects, said before its form factors (core/forecast.py): counted from the
+"""The time a bake expects, said before its form factors (core/runtime/forecast.py): counted from the
 bake's own receivers, curved pieces and output vertices; none when the form factors are cached.
 (How close it comes to the time taken is measured by bench/bench_dense.py, not here: timings in
 unit tests are this shared machine's noise.)"""
 import numpy as np
 
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.cache import FormFactorCache
-from hemicube_radiosity.core.forecast import OTHER, curved_pieces
-from hemicube_radiosity.core.form_factors import receivers_needed
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.runtime.cache import FormFactorCache
+from hemicube_radiosity.core.runtime.forecast import OTHER, curved_pieces
+from hemicube_radiosity.core.form_factors.stage import receivers_needed
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut, bake
 
 from test_hemicube_cull import sphere

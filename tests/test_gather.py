@@ -3,11 +3,13 @@ import numpy as np
 import pytest
 
 from analytic import point_under_rectangle_corner
-from hemicube_radiosity.core.gather import final_gather, gather_matrix, patch_parameters, surface_values
-from hemicube_radiosity.core.geometry import polygon_form_factors
-from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.output.gather import (
+    final_gather, gather_matrix, patch_parameters, surface_values
+)
+from hemicube_radiosity.core.util.geometry import polygon_form_factors
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.rays import embree_scene, sky_fraction
-from hemicube_radiosity.core.scenes import closed_box, quad
+from hemicube_radiosity.core.builtin_scenes import closed_box, quad
 
 
 def test_constant_field_in_a_closed_room_is_gathered_exactly():
@@ -36,7 +38,7 @@ def test_wall_seen_from_the_floor_matches_the_analytic_form_factor_and_world_fil
 
 def test_surface_values_are_bilinear_on_quads_and_linear_on_triangles():
     c = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0], [3, 0, 0]], float)
-    from hemicube_radiosity.core.patches import MeshInput
+    from hemicube_radiosity.core.mesh.patches import MeshInput
 
     ps = build_patches(MeshInput.from_faces(c, [[0, 1, 2, 3], [1, 4, 2]]), None)
     vals = np.array([[1.0], [3.0], [7.0], [2.0], [5.0]])
@@ -84,8 +86,8 @@ def test_the_shared_ray_pattern_reads_a_plates_form_factor_along_a_row_under_its
 def test_product_is_matvec_bit_for_bit(dtype):
     # the relight's sparse products (G in float32, the correction matrix in float64), in runs of
     # rows and on threads, sum every row as CSR.matvec does
-    from hemicube_radiosity.core.gather import product
-    from hemicube_radiosity.core.sparse import CSR
+    from hemicube_radiosity.core.output.gather import product
+    from hemicube_radiosity.core.util.sparse import CSR
     rng = np.random.default_rng(5)
     P, V, nnz = 3000, 2000, 1 << 21
     rows = np.sort(rng.integers(0, P - 10, nnz))               # the last rows empty
@@ -101,8 +103,8 @@ def test_product_is_matvec_bit_for_bit(dtype):
 def test_transport_product_transposed_is_apply_transport_bit_for_bit():
     # the relight keeps its cached transports transposed to float64 (gather.transposed_transport):
     # the same sums as the (P, M) float32 transport and as direct.apply_transport's einsum
-    from hemicube_radiosity.core.direct import apply_transport
-    from hemicube_radiosity.core.gather import transport_product, transposed_transport
+    from hemicube_radiosity.core.light.emitters import apply_transport
+    from hemicube_radiosity.core.output.gather import transport_product, transposed_transport
     rng = np.random.default_rng(3)
     T = rng.random((5000, 37)).astype(np.float32)
     T[rng.random(T.shape) < 0.3] = 0
@@ -118,7 +120,7 @@ def test_transport_product_transposed_is_apply_transport_bit_for_bit():
 def test_gather_directions_are_the_einsum_of_the_frames_bit_for_bit():
     """`geometry.in_frames` (the gather's and the open fraction's rays in world space) sums the
     three axes as einsum did: a relight's cached G and the reference bakes keep every bit."""
-    from hemicube_radiosity.core.geometry import in_frames, tangent_frames
+    from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
     from hemicube_radiosity.core.rays import cosine_lattice
     rng = np.random.default_rng(3)
     n = rng.normal(size=(500, 3))
@@ -135,8 +137,8 @@ def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeyp
     on abrupt elements were 1.6 s on one core), and each share into runs: C is the same for any
     count and any run length, and it is what
     :func:`correct_hits` adds (its independent sum) for values read through ``read``."""
-    from hemicube_radiosity.core import gather
-    from hemicube_radiosity.core.gather import correct_hits, correction_matrix
+    from hemicube_radiosity.core.output import gather
+    from hemicube_radiosity.core.output.gather import correct_hits, correction_matrix
     ps = build_patches(closed_box(size=(1.0, 1.3, 0.8)), 0.1)
     rng = np.random.default_rng(7)
     idx = rng.choice(len(ps), 300, replace=False)

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 from conftest import corner_data, read_gltf
-from hemicube_radiosity.core.gltf_post import VIEW_TRANSFORMS, display_linear, srgb_encode, tone_map_gltf
+from hemicube_radiosity.core.formats.gltf import (
+    VIEW_TRANSFORMS, display_linear, srgb_encode, tone_map_gltf
+)
 
 
 def sub(addon, name):

@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from analytic import parallel_rectangles, perpendicular_rectangles, point_under_rectangle_corner
-from hemicube_radiosity.core.lights import PointLight, SpotLight, SunLight
-from hemicube_radiosity.core.patches import MeshInput
+from hemicube_radiosity.core.light.lamps import PointLight, SpotLight, SunLight
+from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
-from hemicube_radiosity.core.scenes import box, quad
-from hemicube_radiosity.core.vertex import exposure
+from hemicube_radiosity.core.builtin_scenes import box, quad
+from hemicube_radiosity.core.output.vertex import exposure
 
 
 def rectangle_from_point(x, y, x0, x1, y0, y1, c):
@@ -99,7 +99,7 @@ def test_a_relight_of_the_partitioned_room_casts_no_ray(monkeypatch):
     """The vertices parted along the wall's line are geometry: a relight (the lamp brighter)
     finds them in the cache with everything else, casts no ray and equals a cold bake."""
     from hemicube_radiosity.core import rays
-    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
 
     s = BakeSettings(patch_size=0.2, element_size=0.1, gather_rays=32)
     cache = FormFactorCache()
@@ -125,7 +125,7 @@ def test_a_block_piercing_the_floor_darkens_nothing_around_it():
     """A block standing on the floor and the same block sunk 10 cm into it light the floor
     around it alike: the buried floor gets no light, and its zero does not pull down the
     vertices it shares with open floor. (A buried corner of an element across the outline takes
-    the open side's limit, :mod:`hemicube_radiosity.core.contact`: dark are the vertices of
+    the open side's limit, :mod:`hemicube_radiosity.core.mesh.contact`: dark are the vertices of
     elements wholly under the block.)"""
     room = box((0, 0, 0), (2, 2, 1.5), (0.7,) * 3, inward=True, name="room")
     lamp = quad([(0.8, 0.8, 1.49), (0.8, 1.2, 1.49), (1.2, 1.2, 1.49), (1.2, 0.8, 1.49)], (0, 0, 0), (10.0,) * 3,
@@ -328,7 +328,7 @@ def block_bakes():
 
 def _open_floor_values(r, owner):
     """:func:`_floor_values` over the vertices of floor elements outside the block's footprint
-    (what can be seen: the output elements are cut along the block's foot, core/contact.py, and a
+    (what can be seen: the output elements are cut along the block's foot, core/mesh/contact.py, and a
     vertex on it has a copy on each side, the one under the block dark)."""
     el = r.elements
     sel = (el.owner == owner) & (np.abs(el.centers[:, 2]) < 1e-9) & (_footprint_distance(el.centers) > 0)
@@ -372,7 +372,7 @@ def test_the_floor_on_a_resting_blocks_outline_is_the_open_floors_limit(block_ba
     segment across a corner included) and read the floor with a hole's limit there: 0.05-0.65%
     along the sides, 3.0-3.6% bright at the corners (measured), where the limit depends on the
     direction one comes from and the reference's ring of faces has a copy per face. The output elements are cut along the
-    block's foot (core/contact.py): each outline vertex has a copy under the block, and the
+    block's foot (core/mesh/contact.py): each outline vertex has a copy under the block, and the
     open floor's elements use one copy each."""
     ref, bakes = block_bakes
     el = bakes[0.0].elements

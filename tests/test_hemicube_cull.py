@@ -1,12 +1,12 @@
-"""Culling before drawing (core/hemicube.py): pieces that cannot cover a hemi-cube pixel centre
+"""Culling before drawing (core/form_factors/hemicube.py): pieces that cannot cover a hemi-cube pixel centre
 are left out before they are projected and drawn, and the item buffers stay those of drawing
 every piece."""
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import hemicube as H
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.patches import MeshInput
+from hemicube_radiosity.core.form_factors import hemicube as H
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut
 
 

@@ -1,9 +1,9 @@
 """Bilinear evaluation of a bake at arbitrary surface points."""
 import numpy as np
 
-from hemicube_radiosity.core.interpolate import interpolate_at, locate
-from hemicube_radiosity.core.patches import MeshInput, build_patches
-from hemicube_radiosity.core.scenes import box
+from hemicube_radiosity.core.output.interpolate import interpolate_at, locate
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.builtin_scenes import box
 
 
 def test_bilinear_field_is_exact_on_a_skewed_quad_grid():
@@ -43,10 +43,11 @@ def test_triangle_patches_interpolate_barycentrically():
 # ----------------------------------------------------------------------------- the grid search (issue 9)
 import pytest  # noqa: E402
 
-from hemicube_radiosity.core import interpolate, spatial  # noqa: E402
-from hemicube_radiosity.core.interpolate import _bilinear, _inverse_bilinear  # noqa: E402
-from hemicube_radiosity.core.scenes import tessellate  # noqa: E402
-from hemicube_radiosity.core.spatial import k_nearest  # noqa: E402
+from hemicube_radiosity.core.output import interpolate
+from hemicube_radiosity.core.util import spatial  # noqa: E402
+from hemicube_radiosity.core.output.interpolate import _bilinear, _inverse_bilinear  # noqa: E402
+from hemicube_radiosity.core.builtin_scenes import tessellate  # noqa: E402
+from hemicube_radiosity.core.util.spatial import k_nearest  # noqa: E402
 
 
 def _brute_locate(ps, points, owner=None, normals=None, candidates=8):
@@ -162,9 +163,9 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
     the patch solution reaches its element vertices at their patch's corner, without `locate`
     (Suzanne at level 3: 4.7 s -> 0.2 s). The bake is what the search gives to 1e-6 of its
     mean; only the coarse room's element vertices are searched for."""
-    from hemicube_radiosity.core import output
+    from hemicube_radiosity.core.output import stage as output
     from hemicube_radiosity.core.pipeline import BakeSettings, bake
-    from hemicube_radiosity.core.scenes import cornell_box, tessellate
+    from hemicube_radiosity.core.builtin_scenes import cornell_box, tessellate
 
     room = cornell_box()
     meshes = room[:7] + tessellate(room[7:], 20)
@@ -191,8 +192,8 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
 
 def test_interpolate_located_is_the_corners_bilinear_bit_for_bit():
     # the corners and weights kept for a relight (located_corners) give _bilinear's values
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.interpolate import _bilinear, interpolate_located
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.output.interpolate import _bilinear, interpolate_located
     P = build_patches(scenes.tessellate(scenes.cornell_box()[:3], 2) + scenes.cornell_box()[3:], 0.3)
     rng = np.random.default_rng(3)
     idx = rng.integers(0, len(P), 4000)

@@ -3,7 +3,7 @@
 
 Each case builds a small scene in bpy, bakes it with Cycles (tools/cycles_reference.py: COMBINED
 = E + rho H / pi at every face corner) and with our pipeline (meshes through the add-on's reader,
-lamps and world through ``blender.lights.read_lights``, one patch per face), and compares the
+lamps and world through ``blender.read.lights.read_lights``, one patch per face), and compares the
 two at the same face corners. Corners near shadow edges (and the spot's cone edge) are masked
 geometrically; everything else must agree to < 3% mean relative error. Each case also checks a
 unit-sensitive ratio on its own (a wrong 1/pi or 4 pi would fail it).
@@ -21,8 +21,8 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from hemicube_radiosity.blender import read as reader  # noqa: E402
-from hemicube_radiosity.blender.lights import read_lights  # noqa: E402
+from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
+from hemicube_radiosity.blender.read.lights import read_lights  # noqa: E402
 from hemicube_radiosity.core.pipeline import BakeSettings, bake  # noqa: E402
 
 RHO = 0.8
@@ -101,10 +101,10 @@ class Comparison:
 
 
 def lamps_at_corners(c):
-    """rho H / pi of the lamps read by read_lights, evaluated by core.lights at every compared
+    """rho H / pi of the lamps read by read_lights, evaluated by core.light.lamps at every compared
     corner itself (no patches, no shadows): the unit mapping alone, free of discretisation."""
-    from hemicube_radiosity.core.lights import direct_irradiance
-    from hemicube_radiosity.core.patches import PatchSet
+    from hemicube_radiosity.core.light.lamps import direct_irradiance
+    from hemicube_radiosity.core.mesh.patches import PatchSet
 
     n = len(c.pos)
     pts = PatchSet(c.pos, np.tile([0, 1, 2, -1], (n, 1)), c.pos, c.normal, np.ones(n),
@@ -252,7 +252,7 @@ def test_point_light_over_plane():
     assert y0 / y1 == pytest.approx(2 * math.sqrt(2), rel=0.01)
     # absolute units: rho P / (4 pi^2 h^2) under the lamp
     assert y0 == pytest.approx(RHO * 100.0 / (4 * math.pi ** 2), rel=0.005)
-    # the mapping alone (read_lights -> core.lights at the corners): Cycles to 0.1%
+    # the mapping alone (read_lights -> core.light.lamps at the corners): Cycles to 0.1%
     exact = lamps_at_corners(c)
     np.testing.assert_allclose(exact, c.cycles, rtol=1e-3)
     # the bake evaluates lamps again at every vertex (core.pipeline's exact direct path), so
@@ -509,7 +509,7 @@ def test_world_settings():
     solid-angle-weighted mean colour, with a note."""
     cr.new_empty_scene()
     w = cr.set_world((0.2, 0.3, 0.4), 2.5)
-    from hemicube_radiosity.blender.lights import world_radiance
+    from hemicube_radiosity.blender.read.lights import world_radiance
 
     notes = []
     np.testing.assert_allclose(world_radiance(w, notes), [0.5, 0.75, 1.0], rtol=1e-6)

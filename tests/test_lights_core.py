@@ -6,11 +6,12 @@ import sys
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.geometry import polygon_form_factor
-from hemicube_radiosity.core.lights import (AreaLight, PointLight, SpotLight, SunLight,
-                                            direct_irradiance, spot_attenuation)
-from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.util.geometry import polygon_form_factor
+from hemicube_radiosity.core.light.lamps import (
+    AreaLight, PointLight, SpotLight, SunLight, direct_irradiance, spot_attenuation
+)
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.rays import EmbreeUnavailable, NumpyOccluder, embree_available
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")

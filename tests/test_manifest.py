@@ -72,6 +72,6 @@ def test_build_zip_contains_the_addon_only(tmp_path, extension_wheels):
     assert stray == [], stray
     assert not any("__pycache__" in n or n.endswith(".pyc") for n in names)
     for needed in ("blender_manifest.toml", "__init__.py", "hemicube_radiosity/__init__.py",
-                   "hemicube_radiosity/blender/operators.py", "hemicube_radiosity/core/pipeline.py",
-                   "hemicube_radiosity/blender/cli.py"):
+                   "hemicube_radiosity/blender/ui/operators.py", "hemicube_radiosity/core/pipeline.py",
+                   "hemicube_radiosity/blender/cli/main.py"):
         assert needed in names, needed

@@ -40,7 +40,7 @@ BAKE = textwrap.dedent("""
     def fail(ex):
         raise ex
     addon_utils.enable(module, default_set=True, handle_error=fail)
-    cli = importlib.import_module(module + ".hemicube_radiosity.blender.cli")
+    cli = importlib.import_module(module + ".hemicube_radiosity.blender.cli.main")
     rc = cli.main(["demo", "--output-dir", sys.argv[1], "--no-render", "--method", "embree",
                    "--patch-size", "0.5", "--resolution", "16", "--element-size", "0", "-q"])
     import embreex

@@ -16,16 +16,19 @@ import time
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import embree_ff, hemicube, parallel, scenes
-from hemicube_radiosity.core.clusters import group_pieces
-from hemicube_radiosity.core.direct import emitter_transport, vertex_frames
-from hemicube_radiosity.core.gather import gather_matrix
-from hemicube_radiosity.core.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.parallel import (cpu_count, one_blas_thread, ordered_map,
-                                               processes_available, resolve_workers, shares)
-from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core.form_factors import embree as embree_ff, hemicube
+from hemicube_radiosity.core.runtime import parallel
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.clusters import group_pieces
+from hemicube_radiosity.core.light.emitters import emitter_transport, vertex_frames
+from hemicube_radiosity.core.output.gather import gather_matrix
+from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
+from hemicube_radiosity.core.runtime.parallel import (
+    cpu_count, one_blas_thread, ordered_map, processes_available, resolve_workers, shares
+)
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.pipeline import bake
-from hemicube_radiosity.core.progress import Cancelled, Ticker
+from hemicube_radiosity.core.runtime.progress import Cancelled, Ticker
 from hemicube_radiosity.core.rays import embree_available, embree_scene
 from hemicube_radiosity.core.settings import BakeSettings
 
@@ -283,7 +286,7 @@ def test_form_factor_workers_start_nothing_inside_blender(box, monkeypatch):
 _ORPHAN_SCRIPT = """
 import os, sys, time
 sys.path.insert(0, sys.argv[1])
-from hemicube_radiosity.core.parallel import ordered_map
+from hemicube_radiosity.core.runtime.parallel import ordered_map
 
 def f(i):
     os.write(1, f"{os.getpid()}\\n".encode())   # one write: two workers' lines never interleave
@@ -397,7 +400,7 @@ def test_progress_reaches_one_with_two_workers(box, pool_kind):
 
 @pytest.mark.parametrize("shadows", ["numpy", pytest.param("embree", marks=needs_embree)])
 def test_emitter_transport_identical_with_two_workers(box, shadows, pool_kind, monkeypatch):
-    from hemicube_radiosity.core import direct
+    from hemicube_radiosity.core.light import emitters as direct
     from hemicube_radiosity.core.rays import occluder
     monkeypatch.setattr(direct, "PROCESS_RAYS", 0)                     # fork even for this small box
     scene = occluder(box, shadows)
@@ -419,7 +422,7 @@ def test_grouped_emitters_shine_on_threads_and_patches_on_forks(box, monkeypatch
     """A transport of grouped emitters (mostly rays: embreex lets go of the GIL) runs on threads,
     one of emitter patches shining one by one (NumPy form factors) on forked processes; both
     equal one worker's."""
-    from hemicube_radiosity.core import direct
+    from hemicube_radiosity.core.light import emitters as direct
     monkeypatch.setattr(direct, "PROCESS_RAYS", 0)                     # large enough for both
     forked = []
     real = parallel._process_map
@@ -436,7 +439,7 @@ def test_grouped_emitters_shine_on_threads_and_patches_on_forks(box, monkeypatch
 
 
 def test_emitter_transport_cancel_with_two_workers(box, pool_kind, monkeypatch):
-    from hemicube_radiosity.core import direct
+    from hemicube_radiosity.core.light import emitters as direct
     monkeypatch.setattr(direct, "PROCESS_RAYS", 0)
     x, n, _ = vertex_frames(box)
     em = np.flatnonzero(box.emission.max(axis=1) > 0)
@@ -449,7 +452,7 @@ def test_emitter_transport_cancel_with_two_workers(box, pool_kind, monkeypatch):
 
 @needs_embree
 def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
-    from hemicube_radiosity.core import gather
+    from hemicube_radiosity.core.output import gather
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)                     # fork even for this small box
     x, n, _ = vertex_frames(box)
     G1, s1, H1 = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=1, hits=True)
@@ -597,7 +600,7 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
     bake's own process cuts nothing, and the bake is the one-worker bake, bit for bit. On one
     worker, or with threads only, it is cut in place, as before. A bake stopped early leaves no
     process behind."""
-    from hemicube_radiosity.core import output
+    from hemicube_radiosity.core.output import stage as output
     calls = []
     real = output.cut_along_contacts
     monkeypatch.setattr(output, "cut_along_contacts", lambda *a, **k: calls.append(os.getpid()) or real(*a, **k))
@@ -612,7 +615,7 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
         assert np.array_equal(getattr(r1.elements, a), getattr(r2.elements, a))
     assert np.array_equal(r1.vertex_radiosity, r2.vertex_radiosity)
     # a relight (the same geometry, the lamp brighter) finds the elements in the cache: no fork
-    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
     # (the box as modelled: its elements are cut; tessellated finer than the detail size: its
     # faces are the elements, and nothing is cut)
     started = []
@@ -645,7 +648,7 @@ def test_a_bake_keeps_its_freed_heap_and_hands_it_back_after(tmp_path):
     script = tmp_path / "heap.py"
     script.write_text("""
 import resource, sys, numpy as np
-from hemicube_radiosity.core.parallel import kept_heap
+from hemicube_radiosity.core.runtime.parallel import kept_heap
 def rss():
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * 4096 >> 20
@@ -681,7 +684,7 @@ def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
     monkeypatch.setattr(embree_ff, "RAYS_PER_BATCH", 1 << 13)
     s = dict(patch_size=0.5, element_size=0.25, resolution=16, method=method,
              gather_rays=16 if embree_available() else 0)
-    from hemicube_radiosity.core import gather, output
+    from hemicube_radiosity.core.output import gather, stage as output
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)           # the gather forked, in the background
     started = []
     start = output._start_gather
@@ -702,7 +705,7 @@ def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
 def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
     """Cancelled after the vertex stage started its gather in the background: the bake stops,
     and neither the collecting thread nor a worker outlives it."""
-    from hemicube_radiosity.core import gather, output
+    from hemicube_radiosity.core.output import gather, stage as output
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)
     started = []
     start = output._start_gather

@@ -4,8 +4,10 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.patches import MeshInput, PatchError, build_patches, keeps_faces_whole
-from hemicube_radiosity.core.scenes import box, cornell_box, tessellate
+from hemicube_radiosity.core.mesh.patches import (
+    MeshInput, PatchError, build_patches, keeps_faces_whole
+)
+from hemicube_radiosity.core.builtin_scenes import box, cornell_box, tessellate
 
 
 def edge_use(ps):
@@ -130,7 +132,7 @@ def test_bad_input_names_object_and_problem(bad, message):
 
 def scaled_room(scale, float32=False):
     """closed_box of side ``scale`` (uneven emission so the radiosities vary over the room)."""
-    from hemicube_radiosity.core.scenes import closed_box
+    from hemicube_radiosity.core.builtin_scenes import closed_box
 
     m = closed_box((scale, 1.3 * scale, 0.8 * scale), rho=(0.6, 0.5, 0.4), emission=(0.0, 0.0, 0.0))[0]
     m.face_emission[5] = (2.0, 2.0, 2.0)             # one wall lights the room
@@ -200,7 +202,7 @@ def test_bake_is_scale_invariant_to_1e4_at_decimal_scales():
 def test_corners_of_some_patches_are_those_of_all():
     """``corners(ids)`` is ``corners()[ids]``, triangles repeating their last corner, for a set
     of quads and triangles, any order and repeats."""
-    from hemicube_radiosity.core.scenes import tessellate
+    from hemicube_radiosity.core.builtin_scenes import tessellate
     p = build_patches(cornell_box() + tessellate(cornell_box(), 2), None)
     tri = p.polys[:, 3] < 0
     assert tri.any() and (~tri).any()

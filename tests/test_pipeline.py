@@ -2,9 +2,9 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.cache import FormFactorCache
+from hemicube_radiosity.core.runtime.cache import FormFactorCache
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
-from hemicube_radiosity.core.scenes import CORNELL_WHITE, box, closed_box, cornell_box
+from hemicube_radiosity.core.builtin_scenes import CORNELL_WHITE, box, closed_box, cornell_box
 
 METHODS = ["hemicube", "embree"]
 
@@ -83,7 +83,7 @@ def test_cornell_blocks_cast_shadows(cornell):
     c, B = floor(wb)
     c0, B0 = floor(nb)
     # the same 16 x 16 floor grid in both bakes, the blocks' outlines cutting it further
-    # (core/contact.py): each piece against the blocks-free patch it lies in
+    # (core/mesh/contact.py): each piece against the blocks-free patch it lies in
     cell = (np.floor(c / 0.125).astype(int) @ [16, 1, 0])
     cell0 = (np.floor(c0 / 0.125).astype(int) @ [16, 1, 0])
     assert len(c0) == 256 and np.array_equal(np.sort(cell0), np.arange(256)) and len(c) > 256
@@ -144,8 +144,9 @@ def test_relight_with_lamps_reuses_form_factors_and_direct_transport(monkeypatch
     """A new lamp colour, a new emission strength and a new wall colour: F and the emitters'
     direct-light transport come from the cache (no hemi-cube, no emitter ray is cast), and the
     result equals a cold bake of the changed scene."""
-    from hemicube_radiosity.core import direct, pipeline
-    from hemicube_radiosity.core.lights import PointLight
+    from hemicube_radiosity.core.light import emitters as direct
+    from hemicube_radiosity.core import pipeline
+    from hemicube_radiosity.core.light.lamps import PointLight
 
     s = BakeSettings(patch_size=0.25, resolution=32, tolerance=1e-8)
     cache = FormFactorCache()
@@ -186,7 +187,7 @@ def test_furnace_holds_on_finer_output_elements(gather_rays):
 def _plate_scene():
     """A 2 m floor, a 0.4 m emitter 1.5 m above it and a floating 0.4 m plate between them:
     a shadow with a sharp umbra and a penumbra, and no contact edges."""
-    from hemicube_radiosity.core.scenes import quad
+    from hemicube_radiosity.core.builtin_scenes import quad
 
     floor = quad([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], (0.7, 0.7, 0.7), name="floor")
     light = quad([(-0.2, -0.2, 1.5), (-0.2, 0.2, 1.5), (0.2, 0.2, 1.5), (0.2, -0.2, 1.5)],
@@ -199,7 +200,7 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
     """With 0.5 m patches alone the floor's vertices cannot follow the plate's shadow; with
     0.1 m output elements (direct light exact at each vertex) they match a bake whose patches
     are all 0.1 m."""
-    from hemicube_radiosity.core.interpolate import interpolate_at
+    from hemicube_radiosity.core.output.interpolate import interpolate_at
 
     fine = bake(_plate_scene(), BakeSettings(patch_size=0.1, resolution=32, method="embree", element_size=None))
     elem = bake(_plate_scene(), BakeSettings(patch_size=0.5, resolution=32, element_size=0.1, gather_rays=0))
@@ -219,7 +220,7 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
 
 
 def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
-    from hemicube_radiosity.core.patches import PatchError
+    from hemicube_radiosity.core.mesh.patches import PatchError
 
     with pytest.raises(PatchError, match=r"makes \d+ patches, more than the limit of 500"):
         bake(cornell_box(), BakeSettings(patch_size=0.1, max_patches=500))
@@ -228,7 +229,9 @@ def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
 def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(monkeypatch):
     """With output elements and a final gather, a relight reuses F, the emitters' transport, the
     element mesh and the gather matrix: no hemi-cube, no ray, no cutting; same result as cold."""
-    from hemicube_radiosity.core import direct, gather, pipeline
+    from hemicube_radiosity.core.light import emitters as direct
+    from hemicube_radiosity.core.output import gather
+    from hemicube_radiosity.core import pipeline
 
     s = BakeSettings(patch_size=0.5, element_size=0.125, gather_rays=64, resolution=32, tolerance=1e-8)
     cache = FormFactorCache()
@@ -253,7 +256,7 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
 def test_automatic_sizes_follow_the_scene_scale():
     """'auto': patch size = diagonal / 14, detail = a third of it, so a scene scaled by 10
     is cut into the same patches and elements."""
-    from hemicube_radiosity.core.patches import build_patches
+    from hemicube_radiosity.core.mesh.patches import build_patches
 
     small = cornell_box()
     big = cornell_box(size=20.0, light_size=5.0)
@@ -285,8 +288,8 @@ def test_corner_colours_reach_the_output_vertices(gather_rays):
     """A texture seen at the corners (MeshInput.corner_rho / corner_emission): a plane under a
     uniform white world sends back rho at each vertex (the sky is all it sees), and an emissive
     corner colour is the vertex's emission, while the solve uses the faces' means."""
-    from hemicube_radiosity.core.patches import MeshInput
-    from hemicube_radiosity.core.scenes import quad, tessellate
+    from hemicube_radiosity.core.mesh.patches import MeshInput
+    from hemicube_radiosity.core.builtin_scenes import quad, tessellate
 
     plane = tessellate([quad([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)])], 12, triangles=False)[0]
     pos = plane.verts[plane.face_indices]
@@ -345,8 +348,8 @@ def test_relight_that_moves_the_bright_areas_chooses_again_and_equals_a_cold_bak
     a relight that only scales the light reuses it, while one that moves the light elsewhere (a
     second lamp low on the red wall turned from as bright as the ceiling lamp to dim) chooses
     again and builds a new one, never reads a stale one, and equals a cold bake."""
-    from hemicube_radiosity.core import output
-    from hemicube_radiosity.core.scenes import quad
+    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.builtin_scenes import quad
 
     def scene(top, low, wall=None):
         meshes = cornell_box(light_radiance=top)
@@ -381,9 +384,9 @@ def test_relight_reads_materials_as_the_patches_and_clusters_do():
     Clusters.with_materials) equals, bit for bit, PatchSet.with_mesh_materials and the clusters'
     area-weighted mean; and a point set's cache digest (cache.array_key) is kept per array object
     and follows its values."""
-    from hemicube_radiosity.core.cache import array_key
+    from hemicube_radiosity.core.runtime.cache import array_key
     from hemicube_radiosity.core.pipeline import _with_mesh_materials
-    from hemicube_radiosity.core.scenes import tessellate
+    from hemicube_radiosity.core.builtin_scenes import tessellate
 
     meshes = tessellate(cornell_box(), 3)
     r = bake(meshes, BakeSettings(patch_size=0.3, gather_rays=0, resolution=16))
@@ -409,7 +412,7 @@ def test_a_bake_runs_on_small_pages_and_puts_numpys_setting_back(monkeypatch):
     """NumPy's huge-page advice is off while the stages run (a bake's many large temporaries
     ran 20% slower on huge pages) and as it was afterwards, also when a stage fails."""
     from hemicube_radiosity.core import pipeline
-    from hemicube_radiosity.core.scenes import cornell_box
+    from hemicube_radiosity.core.builtin_scenes import cornell_box
 
     switch = pipeline._madvise_switch()
     if switch is None:
@@ -442,8 +445,10 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     output elements (:func:`.patches.keeps_faces_whole`): the bake builds its faces once, not
     once for the patches, once for the elements and again inside a process forked only to
     find the two equal; the bake is the same as one that builds them every time."""
-    from hemicube_radiosity.core import output, parallel, pipeline
-    from hemicube_radiosity.core.scenes import tessellate
+    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.runtime import parallel
+    from hemicube_radiosity.core import pipeline
+    from hemicube_radiosity.core.builtin_scenes import tessellate
     meshes = tessellate(cornell_box(), 12)                 # 1/6 m cells
     s = BakeSettings(workers=workers, patch_size=0.5, element_size=0.25, resolution=16, gather_rays=16)
     built, started = [], []

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core import scenes
-from hemicube_radiosity.core.patches import build_patches
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.rays import (NumpyOccluder, clear_ray_cache, embree_available, embree_scene, occluder,
                                           patch_triangles)
 
@@ -60,7 +60,7 @@ def test_numpy_bvh_and_embree_agree_on_occlusion_in_the_cornell_box():
 def test_shadow_rays_see_the_same_surfaces_as_planar_outlines():
     """A dense box's shadow rays test 32 triangles (each wall, block face and the lamp as its
     outline) instead of 14,112, and every ray is blocked exactly as by the triangles."""
-    from hemicube_radiosity.core.drawn import plane_outlines
+    from hemicube_radiosity.core.form_factors.drawn import plane_outlines
 
     p = build_patches(scenes.tessellate(scenes.cornell_box(), 21), None)
     q = plane_outlines(p)

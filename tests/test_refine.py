@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 
 from analytic import point_under_rectangle_corner
-from hemicube_radiosity.core import output, scenes
-from hemicube_radiosity.core.direct_light import DirectLight
-from hemicube_radiosity.core.patches import MeshInput, build_patches
+from hemicube_radiosity.core.output import stage as output
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.light.stage import DirectLight
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.rays import embree_scene, open_fraction
-from hemicube_radiosity.core.refine import split_patches
+from hemicube_radiosity.core.mesh.refine import split_patches
 from hemicube_radiosity.core.settings import BakeSettings
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])

@@ -11,7 +11,7 @@ import types
 
 import pytest
 
-from hemicube_radiosity.core.errors import RadiosityError, SettingsError
+from hemicube_radiosity.core.runtime.errors import RadiosityError, SettingsError
 from hemicube_radiosity.core.settings import AUTO_SWITCH, BakeSettings, schema
 
 
@@ -57,7 +57,7 @@ def test_from_mapping_reads_blender_style_values():
 def test_panel_operator_and_core_share_every_default_choice_and_limit(addon):
     import bpy
 
-    props = sub(addon, "blender.props")
+    props = sub(addon, "blender.ui.props")
     d = BakeSettings()
     group = bpy.types.Scene.bl_rna.properties["hemicube_radiosity"].fixed_type
     op = bpy.ops.object.radiosity_bake.get_rna_type()
@@ -90,7 +90,7 @@ def test_panel_operator_and_core_share_every_default_choice_and_limit(addon):
 
 
 def test_cli_options_are_the_schema(addon):
-    cli = sub(addon, "blender.cli")
+    cli = sub(addon, "blender.cli.main")
     parser = cli.build_parser()
     args = parser.parse_args(["bake", "in.blend", "-o", "out.glb"])
     assert dataclasses.asdict(BakeSettings.from_mapping(args)) == dataclasses.asdict(BakeSettings())
@@ -131,8 +131,8 @@ class _Layout:
 
 def test_panel_draws_every_setting_once_top_first_and_sizes_follow_the_switch(addon, empty_scene):
     bpy = empty_scene
-    panel = sub(addon, "blender.panel")
-    props = sub(addon, "blender.props")
+    panel = sub(addon, "blender.ui.panel")
+    props = sub(addon, "blender.ui.props")
     s = bpy.context.scene.hemicube_radiosity
     log = []
     panel.draw_main(_Layout(log), bpy.context)
@@ -161,7 +161,7 @@ def test_panel_draws_every_setting_once_top_first_and_sizes_follow_the_switch(ad
 def test_report_settings_are_the_settings_as_used(addon, tmp_path):
     import bpy
 
-    cli = sub(addon, "blender.cli")
+    cli = sub(addon, "blender.cli.main")
     bpy.ops.wm.read_homefile(use_empty=True)
     sub(addon, "blender.demo").build_cornell_box(bpy.context)
     blend = str(tmp_path / "in.blend")

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.solve import energy_balance, solve
-from hemicube_radiosity.core.sparse import CSR
+from hemicube_radiosity.core.solve.solvers import energy_balance, solve
+from hemicube_radiosity.core.util.sparse import CSR
 
 
 def random_reciprocal_system(n=60, seed=1, leak=0.1):
@@ -102,7 +102,7 @@ def test_not_converged_is_reported_not_hidden():
 
 
 def test_cancel_stops_the_solve():
-    from hemicube_radiosity.core.progress import Cancelled
+    from hemicube_radiosity.core.runtime.progress import Cancelled
 
     F, A, rho, S = random_reciprocal_system()
     with pytest.raises(Cancelled):
@@ -112,9 +112,9 @@ def test_cancel_stops_the_solve():
 # ---- reflectivity near 1: stop on an error bound, accelerate, never hang (issue 12) ----
 
 def _closed_box_F():
-    from hemicube_radiosity.core.hemicube import hemicube_form_factors
-    from hemicube_radiosity.core.patches import build_patches
-    from hemicube_radiosity.core.scenes import closed_box
+    from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
+    from hemicube_radiosity.core.mesh.patches import build_patches
+    from hemicube_radiosity.core.builtin_scenes import closed_box
 
     ps = build_patches(closed_box((1.0, 1.3, 0.8)), 0.2)
     return hemicube_form_factors(ps, 32), ps.areas

@@ -1,10 +1,10 @@
-"""core.unique.unique_rows returns what np.unique(axis=0) returns, on the kinds of rows the
+"""core.util.unique.unique_rows returns what np.unique(axis=0) returns, on the kinds of rows the
 bake keys on: small and huge integer ranges (the packed key and the lexsort), negative values,
 bools, floats with ties and signed zeros, one column and many."""
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.unique import unique_ints, unique_rows
+from hemicube_radiosity.core.util.unique import unique_ints, unique_rows
 
 
 def _cases():

@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.patches import MeshInput, build_patches
-from hemicube_radiosity.core.vertex import vertex_radiosity
+from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.output.vertex import vertex_radiosity
 
 
 def grid(nx=4, ny=3, size=(4.0, 3.0)):
@@ -50,10 +50,10 @@ def test_single_patch_takes_its_own_value():
 
 def test_cached_fits_and_frames_are_the_same_bit_for_bit():
     # a relight's vertex values come from the fits kept in the cache: the same arithmetic
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.cache import FormFactorCache
-    from hemicube_radiosity.core.direct import vertex_frames
-    from hemicube_radiosity.core.vertex import frames
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+    from hemicube_radiosity.core.light.emitters import vertex_frames
+    from hemicube_radiosity.core.output.vertex import frames
     ps = build_patches(scenes.cornell_box(), 0.25)
     rng = np.random.default_rng(3)
     w = rng.random(len(ps)) * (rng.random(len(ps)) > 0.2)
@@ -76,8 +76,8 @@ def test_cached_fits_and_frames_are_the_same_bit_for_bit():
 def test_a_field_zero_on_most_patches_sums_only_the_rest_bit_for_bit():
     # an emission field (a few patches glow) skips the zero terms of its sums: each band's
     # values are those it has beside a band that is nowhere 0 (which sums every term)
-    from hemicube_radiosity.core import scenes
-    from hemicube_radiosity.core.cache import FormFactorCache
+    from hemicube_radiosity.core import builtin_scenes as scenes
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
     ps = build_patches(scenes.tessellate(scenes.cornell_box(), 2), 0.25)
     rng = np.random.default_rng(7)
     w = rng.random(len(ps)) * (rng.random(len(ps)) > 0.2)
@@ -94,8 +94,8 @@ def test_a_field_zero_on_most_patches_sums_only_the_rest_bit_for_bit():
 
 
 def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
-    from hemicube_radiosity.core.cache import FormFactorCache
-    from hemicube_radiosity.core.vertex import fill_buried
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+    from hemicube_radiosity.core.output.vertex import fill_buried
     ps = grid(8, 6, (8.0, 6.0))
     w = np.ones(len(ps))
     w[(ps.centers[:, 0] > 2) & (ps.centers[:, 0] < 6) & (ps.centers[:, 1] > 1) & (ps.centers[:, 1] < 5)] = 0.0
@@ -111,7 +111,7 @@ def test_fill_buried_cached_rings_are_the_same_bit_for_bit():
 
 def test_fit_substitution_is_the_row_major_one_bit_for_bit():
     # _fit_solve substitutes in (n, k, T) copies: the same operations as on (T, n, k) rows
-    from hemicube_radiosity.core.vertex import _fit_solve, _lu
+    from hemicube_radiosity.core.output.vertex import _fit_solve, _lu
     rng = np.random.default_rng(11)
     M = rng.random((500, 4, 4)) + 4 * np.eye(4) * rng.random((500, 1, 1))
     rhs = rng.random((500, 4, 3)) - 0.5

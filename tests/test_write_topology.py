@@ -125,7 +125,7 @@ def bake(addon, bpy, objects):
     bake_mod = sub(addon, "blender.bake")
     settings = sub(addon, "core.settings").BakeSettings(patch_size=0.5, element_size=0.25, resolution=16,
                                                         gather_rays=0)
-    cache = sub(addon, "core.cache").FormFactorCache(None)
+    cache = sub(addon, "core.runtime.cache").FormFactorCache(None)
     job = bake_mod.BakeJob.prepare(bpy.context, objects, settings, cache=cache)
     job.run()
     job.write(bpy.context)

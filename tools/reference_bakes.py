@@ -59,7 +59,7 @@ CASES = {
 
 
 def lights_for(kind):
-    from hemicube_radiosity.core.lights import AreaLight, PointLight, SpotLight, SunLight
+    from hemicube_radiosity.core.light.lamps import AreaLight, PointLight, SpotLight, SunLight
 
     if kind == "none":
         return []
@@ -72,7 +72,7 @@ def lights_for(kind):
 
 
 def scene(kind):
-    from hemicube_radiosity.core import scenes
+    from hemicube_radiosity.core import builtin_scenes as scenes
 
     if kind == "cornell":
         return scenes.cornell_box()

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import bpy
 
-from . import operators, panel, props
+from .ui import operators, panel, props
 
 __all__ = ["register", "unregister", "cli_command"]
 
@@ -19,7 +19,7 @@ _cli_handle = None
 
 def cli_command(argv):
     """``blender -b -c hemicube_radiosity bake ...``: returns the exit code, never exits."""
-    from .cli import main
+    from .cli.main import main
 
     return main(list(argv), in_blender=True)
 

@@ -5,7 +5,7 @@
 thread, no bpy; progress/cancel hooks), ``job.write`` writes Blender data (main thread). A
 cancelled or failed ``run`` leaves the scene exactly as it was: nothing is written before
 ``write``. Settings are the core's :class:`BakeSettings` (``core/settings.py``); user-facing
-problems are :class:`core.errors.RadiosityError`.
+problems are :class:`core.runtime.errors.RadiosityError`.
 """
 from __future__ import annotations
 
@@ -15,12 +15,13 @@ import time
 
 import bpy
 
-from ..core.cache import FormFactorCache
-from ..core.errors import RadiosityError
-from ..core.forecast import SAID as FORECAST_SAID
+from ..core.runtime.cache import FormFactorCache
+from ..core.runtime.errors import RadiosityError
+from ..core.runtime.forecast import SAID as FORECAST_SAID
 from ..core.pipeline import STAGES, BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
-from . import read, write
+from .read import scene as read
+from . import write
 
 __all__ = ["BakeJob", "StagePrinter", "resolve_objects", "other_meshes", "session_cache",
            "clear_session_cache", "STAGE_NAMES"]
@@ -153,7 +154,7 @@ class BakeJob:
         scene_input = read.read_scene(depsgraph, targets, others)
         light_notes = []
         if settings.use_lights:
-            from .lights import read_lights
+            from .read.lights import read_lights
 
             lights, world, light_notes = read_lights(depsgraph)
             scene_input.lights, scene_input.world = tuple(lights), world

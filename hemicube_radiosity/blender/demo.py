@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""The demo: the core's Cornell box (``core.scenes.cornell_box``) as Blender objects, and a preview
+"""The demo: the core's Cornell box (``core.builtin_scenes.cornell_box``) as Blender objects, and a preview
 render of the baked colours with Cycles on the CPU.
 
 The objects get ordinary Principled BSDF materials (Base Color = reflectivity, Emission Color x
@@ -12,7 +12,7 @@ import math
 import bpy
 import numpy as np
 
-from ..core.scenes import cornell_box
+from ..core.builtin_scenes import cornell_box
 
 __all__ = ["object_from_mesh_input", "build_cornell_box", "add_preview_camera", "render_preview"]
 

@@ -29,7 +29,7 @@ import sys
 import bpy
 import numpy as np
 
-from ..core.errors import RadiosityError
+from ..core.runtime.errors import RadiosityError
 from .gltf import export_gltf
 
 __all__ = ["EXPORTERS", "export", "check_output", "operator_error_reason"]

@@ -6,7 +6,7 @@
   COLOR_0 only when the material reads the attribute and ``export_all_vertex_colors`` (on by
   default) would add a white COLOR_0 for materials that don't.
 * Blender writes the attribute's HDR values (a lamp's 12.0), which glTF forbids in COLOR_0. The
-  written file is then rewritten by ``core/gltf_post.py`` ``tone_map_gltf``: COLOR_0 becomes the
+  written file is then rewritten by ``core/formats/gltf.py`` ``tone_map_gltf``: COLOR_0 becomes the
   values through the view transform (linear, 0..1; 'standard' = clamp, so a viewer shows what
   Blender's Standard view shows) and the HDR values stay as the custom attribute ``_RADIANCE``.
   The colour attribute in Blender is not changed. See docs/gltf.md.
@@ -27,7 +27,7 @@ import os
 
 import bpy
 
-from ..core.gltf_post import tone_map_gltf
+from ..core.formats.gltf import tone_map_gltf
 
 __all__ = ["export_gltf", "EXPORT_OPTIONS"]
 

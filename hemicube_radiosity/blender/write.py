@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import bpy
 import numpy as np
-from ..core.errors import RadiosityError
+from ..core.runtime.errors import RadiosityError
 
 __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
            "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays"]

@@ -15,22 +15,22 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .cache import FormFactorCache, cache_key, cached
-from .clusters import Clusters, group_pieces
-from .direct_light import DirectLight, direct_stage, patch_average, source_term
-from .errors import SettingsError
-from .estimate import estimate_stage
-from .lights import SpotLight, SunLight, direct_irradiance
-from .form_factors import compute_form_factors, form_factor_stage, receivers_needed
-from .contact import cut_along_contacts
-from .output import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
-from .parallel import kept_heap, one_blas_thread
-from .patches import PatchError, PatchSet, build_patches, keeps_faces_whole
-from .progress import Cancelled
-from .refine import refine_stage
+from .runtime.cache import FormFactorCache, cache_key, cached
+from .mesh.clusters import Clusters, group_pieces
+from .light.stage import DirectLight, direct_stage, patch_average, source_term
+from .runtime.errors import SettingsError
+from .output.estimate import estimate_stage
+from .light.lamps import SpotLight, SunLight, direct_irradiance
+from .form_factors.stage import compute_form_factors, form_factor_stage, receivers_needed
+from .mesh.contact import cut_along_contacts
+from .output.stage import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
+from .runtime.parallel import kept_heap, one_blas_thread
+from .mesh.patches import PatchError, PatchSet, build_patches, keeps_faces_whole
+from .runtime.progress import Cancelled
+from .mesh.refine import refine_stage
 from .settings import BakeSettings
-from .solve import Solution, solve
-from .sparse import CSR
+from .solve.solvers import Solution, solve
+from .util.sparse import CSR
 
 __all__ = ["BakeSettings", "BakeContext", "BakeResult", "bake", "STAGES", "compute_form_factors",
            "receivers_needed", "source_term", "output_elements"]
@@ -56,8 +56,8 @@ class BakeResult:
     elements: PatchSet | None = None
     settings: BakeSettings | None = None      # as used: 'auto' sizes resolved to world units
     clusters: Clusters | None = None          # small faces grouped: solution.B is per cluster
-    error_estimate: object = None             # core.estimate.ErrorEstimate with settings.estimate_error
-    forecast: object = None                   # core.forecast.Forecast: the time expected (None: F was cached)
+    error_estimate: object = None             # core.output.estimate.ErrorEstimate with settings.estimate_error
+    forecast: object = None                   # core.runtime.forecast.Forecast: the time expected (None: F was cached)
 
     def __post_init__(self):
         if self.elements is None:
@@ -104,8 +104,8 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
-    error_estimate: object = None            # core.estimate.ErrorEstimate (estimate stage)
-    forecast: object = None                  # core.forecast.Forecast (said before the form factors)
+    error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
+    forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
     ahead: dict = field(default_factory=dict)   # name -> parallel.Ahead: work started at the bake's start
 
@@ -230,7 +230,7 @@ def _cut(meshes, s, faces=None):
     pieces = faces() if whole else build_patches(meshes, s.patch_size)
     clusters = group_pieces(pieces, s.patch_size, s.group_angle) if s.group_faces else None
     if clusters is None:
-        # cut along where surfaces stand on others, as the output is (core/contact.py): a patch
+        # cut along where surfaces stand on others, as the output is (core/mesh/contact.py): a patch
         # across a partition off the patch grid lit the dark side with the lit side's light
         # (0.5% of the lit floor on average, 2.9% at worst; now 0). Faces cut into one patch
         # (the user's own, finer than the patches) stay whole
@@ -414,7 +414,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
          lights=(), world=None, cache: FormFactorCache | None = None,
          patches: PatchSet | None = None) -> BakeResult:
     """Run every stage of :data:`STAGES`. ``progress(stage, fraction, message)``; ``cancelled()
-    -> bool`` (raises :class:`.progress.Cancelled`). ``lights``: core.lights light objects;
+    -> bool`` (raises :class:`.progress.Cancelled`). ``lights``: core.light.lamps light objects;
     ``world``: (3,) radiance. ``cache``: a :class:`.cache.FormFactorCache`; a hit skips the
     form-factor work. ``patches``: a ready PatchSet (then ``meshes`` is not cut again, nor the
     patches refined: a relight hands back the refined patches of a first bake)."""

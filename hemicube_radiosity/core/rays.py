@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cache import kept
-from .errors import RadiosityError
-from .geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
-from .parallel import ordered_map, resolve_workers
-from .patches import PatchSet
+from .runtime.cache import kept
+from .runtime.errors import RadiosityError
+from .util.geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
+from .runtime.parallel import ordered_map, resolve_workers
+from .mesh.patches import PatchSet
 
 __all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "EmbreeUnavailable", "embree_available",
            "import_embreex", "EmbreeScene",
@@ -279,7 +279,7 @@ def _occluding(patches: PatchSet) -> PatchSet:
     """The surfaces shadow rays test against: ``patches`` with each planar region as its
     outline (:func:`.drawn.plane_outlines`; a wall modelled as 10,000 triangles is 2 for a shadow
     ray), built once per geometry (the two most recent are kept)."""
-    from .drawn import plane_outlines
+    from .form_factors.drawn import plane_outlines
 
     return _per_geometry(_OCCLUDING_CACHE, patches, plane_outlines, 2)
 

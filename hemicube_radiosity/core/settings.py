@@ -1,8 +1,8 @@
 """Every bake setting, once: default, choices or limits, unit, label and help text.
 
 :class:`BakeSettings` is the single source of the bake's settings. The Blender layer generates its
-property group and the operator's properties from :func:`schema` (``blender/props.py``), the CLI
-its options (``blender/cli.py``), and the report is ``dataclasses.asdict(settings)``. Adding a
+property group and the operator's properties from :func:`schema` (``blender/ui/props.py``), the CLI
+its options (``blender/cli/main.py``), and the report is ``dataclasses.asdict(settings)``. Adding a
 setting is one field here (plus the code that reads it and its test); the panel, the operator, the
 CLI and the report follow.
 
@@ -25,7 +25,7 @@ from dataclasses import MISSING, asdict, dataclass, field, fields, replace
 
 import numpy as np
 
-from .errors import SettingsError
+from .runtime.errors import SettingsError
 
 __all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES",
            "OUTPUT_MODES", "OUTPUT_PASSES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
@@ -261,7 +261,7 @@ class BakeSettings:
 
     # ------------------------------------------------------------------ derived values
     def resolved(self, meshes) -> "BakeSettings":
-        """A copy with 'auto' sizes turned into world units for ``meshes`` (core.patches.MeshInput)."""
+        """A copy with 'auto' sizes turned into world units for ``meshes`` (core.mesh.patches.MeshInput)."""
         patch, element = self.patch_size, self.element_size
         if patch == "auto":
             lo = np.min([np.min(m.verts, axis=0) for m in meshes], axis=0)

@@ -1,0 +1,311 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Blender lamps and world -> core lights, in Cycles' units.
+
+``read_lights(depsgraph_or_scene) -> (lights, world, notes)``
+
+Every light object that Cycles would render is turned into a :mod:`..core.light.lamps` object; the
+world's constant Background colour x strength becomes ``world`` (3,) radiance (or None). Nothing
+is modified in the scene. What is approximated or left out is said in ``notes``, one short line
+per thing.
+
+Units (Blender hands Cycles ``color x energy x 2**exposure``, times the black-body colour when
+``use_temperature``, times the light's Emission node colour x strength when it has nodes;
+the numbers below are checked against Cycles bakes in tests/test_cycles_reference.py and
+tests/test_lighting_cycles.py):
+
+============  =====================================================================
+POINT         radiant intensity P / (4 pi) W/sr; ``shadow_soft_size`` is the radius,
+              ``use_soft_falloff`` chooses disk-facing-receiver (on) or sphere (off).
+SPOT          the same, limited by the cone: ``spot_size`` (full angle), ``spot_blend``
+              (smoothstep over the outer ``blend`` part of 1 - cos(size/2)); no
+              cosine fall-off about the axis. Direction: the object's -Z.
+SUN           ``energy`` is the irradiance (W/m^2) at normal incidence; ``angle`` its
+              angular diameter (soft shadows). Direction: the object's -Z.
+AREA          one-sided Lambertian emitter facing the object's -Z: radiance
+              P / (pi A) with ``normalize`` on (A includes the object's scale), P / pi
+              with it off (mapped as power P x A). SQUARE/RECTANGLE/DISK/ELLIPSE.
+World         the active World Output's Background (or Emission) Color x Strength, Mix
+              and Add shaders of them followed; seen wherever a hemi-cube sees no surface.
+              A 4.x world with "Use Nodes" off arrives in Blender 5 as a new active output
+              fed by its old colour; before 5.0 it is ``world.color``. No world: black.
+============  =====================================================================
+
+Lights are taken by *render* visibility, as Cycles renders them, not the viewport's: a light
+hidden with H, disabled in viewports or in a collection hidden in the viewport still lights;
+``hide_render``, a collection disabled in renders or excluded from the view layer, does not
+(``read.render_visible_objects``). Also honoured: the light object's ``visible_diffuse`` (off: no
+diffuse light at all in Cycles), the world's ``cycles_visibility.diffuse``. ``diffuse_factor`` is
+not used by Cycles (EEVEE only) and is ignored here too, with a note when it is not 1.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.light.lamps import AreaLight, PointLight, SpotLight, SunLight
+from .scene import (
+    follow, rgb, is_render_visible, render_visible_objects, unevaluated_note, world_matrix
+)
+
+__all__ = ["read_lights", "light_from_object", "world_radiance"]
+
+
+def _output_node(nt, kind):
+    outs = [n for n in nt.nodes if n.type == kind and getattr(n, "target", "ALL") in ("ALL", "CYCLES")]
+    return next((n for n in outs if n.is_active_output), outs[0] if outs else None)
+
+
+def _input_value(node, name, notes, what, default):
+    s = node.inputs.get(name)
+    if s is None:
+        return default
+    if s.is_linked:
+        src, out = follow(s)
+        if src is not None and src.type in ("RGB", "VALUE"):
+            v = out.default_value
+            return rgb(v) if s.type == "RGBA" else float(v)
+        notes.append(f"{what}: '{name}' of '{node.name}' is driven by nodes; its unlinked value was used")
+    v = s.default_value
+    return rgb(v) if s.type == "RGBA" else float(v)
+
+
+def _light_node_factor(data, notes, what):
+    """Colour factor of a light's own node tree (Cycles multiplies the lamp by it)."""
+    if not getattr(data, "use_nodes", False) or data.node_tree is None:
+        return np.ones(3)
+    out = _output_node(data.node_tree, "OUTPUT_LIGHT")
+    if out is None:
+        return np.zeros(3)
+    node, _ = follow(out.inputs.get("Surface"))
+    if node is None:
+        return np.zeros(3)
+    if node.type != "EMISSION":
+        notes.append(f"{what}: light nodes other than Emission ('{node.name}'); used strength 1")
+        return np.ones(3)
+    return (_input_value(node, "Color", notes, what, np.ones(3))
+            * _input_value(node, "Strength", notes, what, 1.0))
+
+
+def light_from_object(ob, matrix_world, notes):
+    """One light object (evaluated or original) -> core light, or None when it adds no light.
+
+    ``matrix_world``: (4, 4) world matrix (for instances, the instance's). Appends to ``notes``.
+    """
+    data = ob.data
+    what = f"light '{ob.name}'"
+    M = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
+    if not getattr(ob, "visible_diffuse", True):
+        notes.append(f"{what}: not visible to diffuse rays; left out (as Cycles does)")
+        return None
+    if data.type == "AREA" and data.cycles.is_portal:
+        notes.append(f"{what}: a portal, not a light; left out")
+        return None
+    color = rgb(data.color)
+    if getattr(data, "use_temperature", False):
+        color = color * rgb(data.temperature_color)
+    color = color * _light_node_factor(data, notes, what)
+    energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
+    if energy < 0 or np.any(color < 0):
+        notes.append(f"{what}: negative power is not supported; left out")
+        return None
+    if energy == 0 or not np.any(color > 0):
+        return None
+    if abs(float(getattr(data, "diffuse_factor", 1.0)) - 1.0) > 1e-6:
+        notes.append(f"{what}: diffuse factor {data.diffuse_factor:g} ignored (EEVEE only; Cycles ignores it too)")
+    ll = getattr(ob, "light_linking", None)
+    if ll is not None and (ll.receiver_collection is not None or ll.blocker_collection is not None):
+        notes.append(f"{what}: light linking ignored (it lights and is blocked by everything)")
+    pos = M[:3, 3].copy()
+    down = -M[:3, 2]
+    t = data.type
+    if t == "POINT":
+        return PointLight(pos, color, energy, float(data.shadow_soft_size),
+                          bool(getattr(data, "use_soft_falloff", True)))
+    if t == "SPOT":
+        sx, sy = np.linalg.norm(M[:3, 0]), np.linalg.norm(M[:3, 1])
+        if abs(sx - sy) > 1e-6 * max(sx, sy):
+            notes.append(f"{what}: non-uniform scale (elliptic cone in Cycles) taken as a round cone")
+        return SpotLight(pos, down, color, energy, float(data.shadow_soft_size), float(data.spot_size),
+                         float(data.spot_blend), bool(getattr(data, "use_soft_falloff", True)))
+    if t == "SUN":
+        return SunLight(down, color, energy, float(data.angle))
+    if t == "AREA":
+        if float(data.spread) < np.pi - 1e-6:
+            notes.append(f"{what}: spread {np.degrees(data.spread):.0f} deg ignored (taken as 180 deg, "
+                         "a Lambertian emitter of the same power)")
+        light = AreaLight(M, data.shape, float(data.size), float(data.size_y), color, energy)
+        if not getattr(data, "normalize", True):
+            light.power_w = energy * light.area          # Cycles: radiance P / pi, not P / (pi A)
+        return light
+    notes.append(f"{what}: type {t} not supported; left out")
+    return None
+
+
+def _world_tree(world):
+    """The node tree a render of ``world`` uses, or None for a plain ``world.color`` world.
+
+    Blender 5 always renders a world's nodes (``use_nodes`` is deprecated and always on); a 4.x
+    file whose world had "Use Nodes" off is converted on load into a new active World Output fed by
+    a Background of the old ``world.color``, which the active-output rule below follows. Before
+    5.0, "Use Nodes" off renders ``world.color`` as a uniform background."""
+    import bpy
+
+    nt = world.node_tree
+    if bpy.app.version < (5, 0, 0) and not getattr(world, "use_nodes", True):
+        return None
+    return nt
+
+
+def _world_color(node, notes):
+    """Constant Color x Strength of a Background (or Emission) node in a world."""
+    strength = _input_value(node, "Strength", notes, "world", 1.0)
+    cs = node.inputs["Color"]
+    src, _ = follow(cs)
+    if src is not None and src.type == "TEX_ENVIRONMENT" and src.image is not None:
+        c = _image_mean(src.image, src.projection)
+        notes.append(f"world: environment texture '{src.image.name}' replaced by its average colour "
+                     f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is modelled")
+    elif src is not None and src.type not in ("RGB",):
+        c = rgb(cs.default_value)
+        notes.append(f"world: colour of '{node.name}' comes from '{src.name}' ({src.type}), which is not "
+                     f"read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) as a "
+                     "constant sky")
+    else:
+        c = _input_value(node, "Color", notes, "world", np.zeros(3))
+    return np.asarray(c, float) * float(strength)
+
+
+def _world_shader(node, notes, depth=0):
+    """(3,) radiance of the world shader ``node`` outputs (Background/Emission, Mix, Add)."""
+    if node is None or depth > 16:
+        return np.zeros(3)
+    t = node.type
+    if t in ("BACKGROUND", "EMISSION"):
+        return _world_color(node, notes)
+    if t in ("MIX_SHADER", "ADD_SHADER"):
+        parts = [_world_shader(follow(s)[0], notes, depth + 1)
+                 for s in [s for s in node.inputs if s.type == "SHADER"][:2]]
+        while len(parts) < 2:
+            parts.append(np.zeros(3))
+        if t == "ADD_SHADER":
+            return parts[0] + parts[1]
+        fac = float(np.clip(_input_value(node, "Fac", notes, "world", 0.5), 0.0, 1.0))
+        return (1 - fac) * parts[0] + fac * parts[1]
+    notes.append(f"world: shader '{node.name}' ({node.type}) is not a Background; it gives no sky light here")
+    return np.zeros(3)
+
+
+def world_radiance(world, notes):
+    """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse)."""
+    if world is None:
+        return None                  # Cycles renders a scene without a world black, too
+    vis = getattr(world, "cycles_visibility", None)
+    if vis is not None and not vis.diffuse:
+        notes.append("world: not visible to diffuse rays; no sky light")
+        return None
+    nt = _world_tree(world)
+    if nt is None:
+        c = rgb(world.color)
+        return c if np.any(c > 0) else None
+    out = _output_node(nt, "OUTPUT_WORLD")
+    if out is None:
+        notes.append("world: no World Output node; no sky light")
+        return None
+    node, _ = follow(out.inputs.get("Surface"))
+    if node is None:
+        return None
+    c = _world_shader(node, notes)
+    if np.any(c < 0):
+        notes.append(f"world: negative radiance ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) taken as 0")
+    c = np.maximum(c, 0.0)
+    return c if np.any(c > 0) else None
+
+
+def _image_mean(image, projection="EQUIRECTANGULAR"):
+    """Solid-angle-weighted mean colour of an environment image (rows weighted by cos(latitude)
+    for equirectangular maps; a plain mean otherwise)."""
+    w, h = image.size
+    if w == 0 or h == 0:
+        return np.zeros(3)
+    px = np.empty(w * h * image.channels, np.float32)
+    image.pixels.foreach_get(px)
+    px = px.reshape(h, w, image.channels)[..., :3].astype(np.float64)
+    if projection == "EQUIRECTANGULAR":
+        lat = (np.arange(h) + 0.5) / h * np.pi - np.pi / 2
+        wt = np.cos(lat)
+        return (px.mean(axis=1) * wt[:, None]).sum(axis=0) / wt.sum()
+    return px.reshape(-1, 3).mean(axis=0)
+
+
+def _view_layer_of(scene):
+    import bpy
+
+    ctx = getattr(bpy.context, "view_layer", None)
+    if getattr(bpy.context, "scene", None) == scene and ctx is not None:
+        return ctx
+    return scene.view_layers[0]
+
+
+def _render_light_items(dg, notes):
+    """(object, matrix) of every light a render shows: what Cycles sees, not what the viewport
+    shows. The viewport depsgraph gives evaluated lights and instances; lights hidden in the
+    viewport but visible to renders are added from the view layer; lights the viewport shows but
+    renders do not (``hide_render``, a collection disabled in renders) are dropped."""
+    view_layer = dg.view_layer
+    visible = {o.as_pointer(): o for o in render_visible_objects(view_layer, {"LIGHT"})}
+    layer_objects = {o.as_pointer() for o in view_layer.objects}
+    items, seen = [], set()
+    for inst in dg.object_instances:
+        ob = inst.instance_object if inst.is_instance else inst.object
+        if ob is None or ob.type != "LIGHT":
+            continue
+        key = ob.original.as_pointer()
+        if inst.is_instance:
+            if ob.original.hide_render:
+                continue
+            parent = inst.parent
+            if (parent is not None and parent.original.as_pointer() in layer_objects
+                    and not is_render_visible(parent.original, view_layer)):
+                continue                  # its instancer is not rendered
+        else:
+            if key not in visible:
+                continue
+            seen.add(key)
+        items.append((ob, np.array(inst.matrix_world, dtype=np.float64)))
+    for key, ob in visible.items():
+        if key in seen:
+            continue
+        ev = ob.evaluated_get(dg)          # hidden with H: still evaluated; disabled: the original
+        if not getattr(ev, "is_evaluated", False):
+            n = unevaluated_note(ob)
+            if n or ob.data.animation_data is not None:
+                notes.append(f"light '{ob.name}': {n or 'disabled in viewports; light animation not applied'}")
+        items.append((ev, world_matrix(ob, dg)))
+    return items
+
+
+def read_lights(depsgraph_or_scene):
+    """(lights, world, notes) for a depsgraph (evaluated, instances included) or a scene.
+
+    Lights are taken by their *render* visibility, as Cycles does: a light hidden in the viewport
+    (H, or disabled in viewports, or in a collection hidden there) still lights the bake; one in a
+    collection that is excluded or disabled in renders, or with ``hide_render``, does not.
+
+    ``lights``: list of core light objects; ``world``: (3,) radiance or None; ``notes``: what was
+    approximated or left out.
+    """
+    notes, lights = [], []
+    if hasattr(depsgraph_or_scene, "object_instances"):
+        dg = depsgraph_or_scene
+        scene = dg.scene_eval if hasattr(dg, "scene_eval") else dg.scene
+        items = _render_light_items(dg, notes)
+    else:
+        scene = depsgraph_or_scene
+        items = [(ob, np.array(ob.matrix_world, dtype=np.float64))
+                 for ob in render_visible_objects(_view_layer_of(scene), {"LIGHT"})]
+    for ob, M in items:
+        light = light_from_object(ob, M, notes)
+        if light is not None:
+            light.cast_shadows = bool(getattr(ob.data, "use_shadow", True))   # Blender's Shadow switch
+            lights.append(light)
+    world = world_radiance(scene.world, notes)
+    return lights, world, notes

@@ -1,0 +1,342 @@
+"""What the hemi-cube draws of grouped pieces: a planar cluster as its outline, not its pieces.
+
+A wall modelled as 10,000 triangles and grouped into tens of clusters (:mod:`clusters`) covers
+the same pixels whether its triangles are drawn or each cluster's outline is: the union of a
+planar cluster's pieces *is* the polygon its boundary edges bound. So the hemi-cube's cost per
+receiver follows the clusters' outlines, not the modelling (issue 9):
+
+* a cluster whose pieces lie in one plane, whose boundary (the directed piece edges whose
+  reverse is not in the cluster) is one simple loop, is drawn as that loop triangulated
+  (ear clipping, in its plane);
+* vertices along a straight run of outline are left out where every outline through them agrees:
+  a vertex is dropped when exactly two outline edges meet there (counted over all clusters, the
+  vertices welded by position, so two clusters or two objects sharing the border drop it
+  alike), the three points are collinear, and no piece drawn as-is uses it. Shared borders stay
+  the same edges on both sides, so the drawing stays watertight (:mod:`hemicube`);
+* everything else (curved clusters, clusters with holes or pinched outlines, single pieces,
+  clusters whose outline cannot be clipped into ears) is drawn piece by piece, as before.
+
+Coverage is exact (the same region, bounded by the same vertices); the depth of an outline
+triangle is its cluster's plane (a representative piece's), within rounding of each piece's.
+Which fragment wins a depth tie between coplanar surfaces may change; F does not otherwise.
+
+Units: world units.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..mesh.clusters import Clusters
+from ..mesh.patches import PatchSet
+from ..util.unique import unique_ints, unique_rows
+
+__all__ = ["DrawSet", "draw_set"]
+
+#: Pieces of a cluster are coplanar when their normals differ by at most this (per component)
+#: and their centres lie this fraction of the scene's diagonal off the representative's plane.
+PLANAR_TOL = 1e-7
+#: A vertex is on the straight line through its two outline neighbours when it is this fraction
+#: of the scene's diagonal off it.
+COLLINEAR_TOL = 1e-10
+
+
+@dataclass
+class DrawSet:
+    """Convex polygons the hemi-cube draws, each with the cluster it is seen as.
+
+    verts:   (V, 3) float64 positions, welded (one per distinct position).
+    polys:   (M, 4) int64 indices into ``verts``; a triangle has -1 in column 3.
+    normals: (M, 3) float64 unit normals; centers: (M, 3) float64 a point of each plane.
+    item_of: (M,) int64 cluster of each polygon.
+    outlined: (K,) bool clusters drawn as their outline.
+    """
+
+    verts: np.ndarray
+    polys: np.ndarray
+    normals: np.ndarray
+    centers: np.ndarray
+    item_of: np.ndarray
+    outlined: np.ndarray
+
+    def __len__(self) -> int:
+        return int(len(self.polys))
+
+
+def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
+    """The polygons that draw ``pieces`` grouped by ``clusters`` (see the module docstring)."""
+    verts = np.asarray(pieces.verts, dtype=np.float64)
+    polys = np.asarray(pieces.polys, dtype=np.int64)
+    of = np.asarray(clusters.of, dtype=np.int64)
+    K, P = len(clusters), len(pieces)
+    diag = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) or 1.0
+    upos, weld = unique_rows(verts, return_inverse=True)
+    weld = weld.reshape(-1)
+    wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
+
+    # a representative piece per cluster, and the clusters whose pieces share its plane
+    order = np.argsort(of, kind="stable")
+    starts = np.searchsorted(of[order], np.arange(K))
+    rep = order[np.minimum(starts, P - 1)]
+    n, c = np.asarray(pieces.normals), np.asarray(pieces.centers)
+    bent = (np.abs(n - n[rep][of]).max(axis=1) > PLANAR_TOL) \
+        | (np.abs(np.einsum("ij,ij->i", c - c[rep][of], n[rep][of])) > PLANAR_TOL * diag)
+    ok = np.bincount(of, minlength=K) > 1
+    areas = np.bincount(of, weights=np.asarray(pieces.areas, np.float64), minlength=K)
+    ok[of[bent]] = False
+
+    loops = _outline_loops(wpolys, of, ok, upos, n[rep])              # cluster -> loops, or failed
+    ok &= np.isin(np.arange(K), list(loops))
+    while True:
+        # vertices every outline agrees to leave out: none that a piece drawn as-is uses
+        used = wpolys[~ok[of]]
+        pinned = np.zeros(len(upos), bool)
+        pinned[used[used >= 0]] = True
+        drop = _droppable(upos, [L for k in np.flatnonzero(ok) for L in loops[k]], pinned, diag)
+        tri, tri_of, failed = [], [], []
+        for k in np.flatnonzero(ok):
+            t = _triangulate(upos, [[v for v in L if not drop[v]] for L in loops[k]], n[rep[k]],
+                             areas[k])
+            if t is None:
+                failed.append(k)
+                continue
+            tri.append(t)
+            tri_of.append(np.full(len(t), k, dtype=np.int64))
+        if not failed:
+            break
+        ok[failed] = False            # drawn as pieces: decide the drop again around them
+    as_is = np.flatnonzero(~ok[of])
+    t_polys = np.concatenate(tri) if tri else np.zeros((0, 3), np.int64)
+    m_polys = np.concatenate([wpolys[as_is],
+                              np.concatenate([t_polys, np.full((len(t_polys), 1), -1)], axis=1)])
+    item_of = np.concatenate([of[as_is]] + (tri_of or [np.zeros(0, np.int64)]))
+    k_of = np.concatenate(tri_of) if tri_of else np.zeros(0, np.int64)
+    normals = np.concatenate([n[as_is], n[rep][k_of]])
+    centers = np.concatenate([c[as_is], c[rep][k_of]])
+    # compact the vertices to those drawn
+    live = np.unique(m_polys[m_polys >= 0])
+    remap = np.full(len(upos), -1, dtype=np.int64)
+    remap[live] = np.arange(live.size)
+    m_polys = np.where(m_polys < 0, -1, remap[np.maximum(m_polys, 0)])
+    return DrawSet(upos[live], m_polys, normals, centers, item_of, ok)
+
+
+def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
+    """{cluster: [loop, ...]}, each loop the welded vertex ids around one part of the cluster's
+    boundary, for clusters ``ok`` whose boundary is loops without holes; the others are left
+    out (a hole, an edge used twice the same way).
+
+    Where the boundary touches itself at a vertex (two triangles meeting at a corner only), each
+    edge arriving there goes on with the first edge leaving it clockwise in the cluster's plane
+    (counter-clockwise from the outside): the loops part there, each simple. ``normals`` (K, 3)
+    is each cluster's normal (the pieces wind counter-clockwise about it)."""
+    sel = np.flatnonzero(ok[of])
+    if not sel.size:
+        return {}
+    p = wpolys[sel]
+    k = np.where(p[:, 3] < 0, 3, 4)
+    nxt = np.where(np.arange(4)[None, :] + 1 < k[:, None], np.roll(p, -1, axis=1), p[:, :1])
+    live = np.arange(4)[None, :] < k[:, None]
+    a, b = p[live], nxt[live]
+    cl = np.repeat(of[sel], k)
+    keep = a != b
+    a, b, cl = a[keep], b[keep], cl[keep]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = np.stack([cl, lo, hi], axis=1)
+    _, inv, cnt = unique_rows(key, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    fwd = np.bincount(inv, weights=(a < b).astype(np.float64), minlength=cnt.size)
+    bad = (cnt > 2) | ((cnt == 2) & (fwd != 1))
+    broken = set(np.unique(cl[bad[inv]]).tolist())
+    edge = cnt[inv] == 1
+    a, b, cl = a[edge], b[edge], cl[edge]
+    o = np.lexsort((a, cl))
+    a, b, cl = a[o], b[o], cl[o]
+    loops = {}
+    ends = np.r_[0, np.flatnonzero(np.diff(cl)) + 1, cl.size]
+    for s, e in zip(ends[:-1], ends[1:]):
+        k_ = int(cl[s])
+        if k_ in broken or e - s < 3:
+            continue
+        found = _loops(a[s:e].tolist(), b[s:e].tolist(), pos, normals[k_])
+        if found is not None:
+            loops[k_] = found
+    return loops
+
+
+def _loops(a, b, pos, normal):
+    """Directed boundary edges a[i] -> b[i] of one cluster cut into loops (lists of vertex ids),
+    or None when they do not close."""
+    out = {}
+    for x, y in zip(a, b):
+        out.setdefault(x, []).append(y)
+    pinched = any(len(v) > 1 for v in out.values())
+    if pinched:
+        ax = int(np.argmax(np.abs(normal)))
+        i, j = [(1, 2), (2, 0), (0, 1)][ax]
+        sgn = 1.0 if normal[ax] > 0 else -1.0
+
+        def angle(frm, to):
+            d = pos[to] - pos[frm]
+            return float(np.arctan2(sgn * d[j], d[i]))
+    used = set()
+    loops = []
+    for x0, y0 in zip(a, b):
+        if (x0, y0) in used:
+            continue
+        loop, x, y = [x0], x0, y0
+        used.add((x0, y0))
+        while y != x0:
+            if len(loop) > len(a):
+                return None
+            nxt = [z for z in out.get(y, ()) if (y, z) not in used]
+            if not nxt:
+                return None
+            if len(nxt) > 1 or len(out[y]) > 1:
+                if not pinched:
+                    return None
+                back = angle(y, x)
+                # first edge leaving y clockwise from the way back (interior on the left)
+                nxt = [min(out[y], key=lambda z: (back - angle(y, z)) % (2 * np.pi) or 2 * np.pi)]
+                if (y, nxt[0]) in used:
+                    return None
+            loop.append(y)
+            x, y = y, nxt[0]
+            used.add((x, y))
+        loops.append(loop)
+    return loops
+
+
+def _droppable(pos, loops, pinned, diag) -> np.ndarray:
+    """(V,) bool welded vertices every outline may leave out: two outline edges (over all loops,
+    undirected) meet there, collinear, and no piece drawn as-is uses the vertex."""
+    drop = np.zeros(len(pos), bool)
+    if not loops:
+        return drop
+    a = np.concatenate([np.asarray(L) for L in loops])
+    b = np.concatenate([np.roll(np.asarray(L), -1) for L in loops])
+    und = unique_rows(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1))
+    ends = und.ravel()
+    deg = np.bincount(ends, minlength=len(pos))
+    cand = np.flatnonzero((deg == 2) & ~pinned)
+    if not cand.size:
+        return drop
+    # the two neighbours of each candidate
+    other = np.concatenate([und[:, 1], und[:, 0]])
+    at = np.concatenate([und[:, 0], und[:, 1]])
+    o = np.argsort(at, kind="stable")
+    at, other = at[o], other[o]
+    first = np.searchsorted(at, cand)
+    u, w = other[first], other[first + 1]
+    x, pu, pw = pos[cand], pos[u], pos[w]
+    d = pw - pu
+    L2 = np.einsum("ij,ij->i", d, d)
+    off = np.linalg.norm(np.cross(x - pu, d), axis=1) / np.sqrt(np.maximum(L2, 1e-300))
+    t = np.einsum("ij,ij->i", x - pu, d) / np.maximum(L2, 1e-300)
+    drop[cand[(off <= COLLINEAR_TOL * diag) & (t > 0) & (t < 1)]] = True
+    return drop
+
+
+def _triangulate(pos, loops, normal, area, tol=1e-9):
+    """(T, 3) int64 triangles filling ``loops`` (each a simple polygon, counter-clockwise about
+    ``normal``), or None when a loop cannot be clipped into ears or the triangles' area is not
+    the pieces' ``area`` (to ``tol`` relative): a loop that is a hole, or loops that overlap."""
+    parts = []
+    for loop in loops:
+        t = _ear_clip(pos, loop, normal) if len(loop) >= 3 else None
+        if t is None:
+            return None
+        parts.append(t)
+    tri = np.concatenate(parts)
+    p = pos[tri]
+    got = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum()
+    if abs(got - area) > tol * area:
+        return None
+    return tri
+
+
+def _ear_clip(pos, loop, normal):
+    """(T, 3) int64 triangles of the simple polygon ``loop`` (welded vertex ids) in the plane of
+    ``normal``; None when no ear can be clipped (a polygon that is not simple in its plane).
+
+    An ear is a convex corner whose triangle holds no other vertex, on its border included (a
+    vertex on the cut would leave a T-junction inside the cluster)."""
+    ax = int(np.argmax(np.abs(normal)))
+    i, j = [(1, 2), (2, 0), (0, 1)][ax]
+    pts = pos[np.asarray(loop)]
+    x, y = pts[:, i].tolist(), pts[:, j].tolist()
+    m = len(loop)
+    area2 = sum(x[k] * y[(k + 1) % m] - x[(k + 1) % m] * y[k] for k in range(m))
+    if area2 == 0:
+        return None
+    s = 1.0 if area2 > 0 else -1.0
+    idx = list(range(m))
+    out = []
+
+    def cross(p, q, r):
+        return s * ((x[q] - x[p]) * (y[r] - y[p]) - (y[q] - y[p]) * (x[r] - x[p]))
+
+    guard = 0
+    k = 0
+    while len(idx) > 3:
+        if guard > len(idx):
+            return None
+        n_ = len(idx)
+        p, q, r = idx[(k - 1) % n_], idx[k % n_], idx[(k + 1) % n_]
+        ear = cross(p, q, r) > 0
+        if ear:
+            for t in idx:
+                if t in (p, q, r) or (x[t], y[t]) in ((x[p], y[p]), (x[q], y[q]), (x[r], y[r])):
+                    continue
+                if cross(p, q, t) >= 0 and cross(q, r, t) >= 0 and cross(r, p, t) >= 0:
+                    ear = False
+                    break
+        if ear:
+            out.append((loop[p], loop[q], loop[r]))
+            idx.pop(k % n_)
+            guard = 0
+            k = k % len(idx)
+        else:
+            guard += 1
+            k = (k + 1) % n_
+    p, q, r = idx
+    if cross(p, q, r) > 0:
+        out.append((loop[p], loop[q], loop[r]))
+    elif cross(p, q, r) < 0:
+        return None
+    return np.asarray(out, dtype=np.int64).reshape(-1, 3)
+
+
+def plane_outlines(patches: PatchSet) -> PatchSet:
+    """The same surfaces as ``patches`` in fewer triangles, for shadow rays (which ask whether
+    something is in the way, not what): connected patches in one plane (welded by position) are
+    one region, drawn as its outline triangulated like a cluster (:func:`draw_set`); a region
+    with a hole, or a patch alone, stays as it is. Only the geometry is meaningful in the
+    result (reflectivity and emission 0, owner and source face -1)."""
+    from ..mesh.clusters import _components, _make
+
+    P = len(patches)
+    verts = np.asarray(patches.verts, dtype=np.float64)
+    if P < 2:
+        return patches
+    diag = float(np.linalg.norm(verts.max(axis=0) - verts.min(axis=0))) or 1.0
+    n = np.asarray(patches.normals, dtype=np.float64)
+    d = np.einsum("ij,ij->i", n, np.asarray(patches.centers)) / diag
+    key = unique_rows(np.round(np.column_stack([n, d]), 7) + 0.0, return_inverse=True)[1].reshape(-1)
+    key = np.where(np.all(np.isfinite(n), axis=1), key, -1 - np.arange(P))
+    weld = unique_rows(verts, return_inverse=True)[1].reshape(-1)
+    polys = np.asarray(patches.polys)
+    wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
+    of = unique_ints(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
+    if of.max() + 1 == P:
+        return patches
+    d_set = draw_set(patches, _make(patches, of))
+    V = d_set.verts
+    c = np.where(d_set.polys < 0, d_set.polys[:, 2:3], d_set.polys)
+    corners = V[c]
+    area = 0.5 * np.linalg.norm(np.cross(corners[:, 2] - corners[:, 0], corners[:, 1] - corners[:, 0])
+                                + np.cross(corners[:, 3] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    M = len(d_set)
+    return PatchSet(V, d_set.polys, corners.mean(axis=1), d_set.normals, area, np.zeros((M, 3)),
+                    np.zeros((M, 3)), np.full(M, -1, np.int32), np.full(M, -1, np.int32), [])

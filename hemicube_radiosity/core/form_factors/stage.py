@@ -1,0 +1,81 @@
+"""The form-factor stage: F by the chosen method, reused from the cache when the geometry is.
+
+Methods (``settings.method``): 'hemicube' (:mod:`.hemicube`, the NumPy rasteriser), 'embree'
+(rays through the same hemi-cube pixels, :mod:`.embree_ff`), 'embree_stochastic' (cosine rays).
+Every method returns a :class:`.sparse.CSR` with ``sky`` filled and F_ii = 0.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from . import embree as embree_ff
+from ..runtime.cache import cache_key, geometry_key
+from .hemicube import hemicube_form_factors
+from ..mesh.patches import PatchSet
+from ..util.sparse import CSR
+
+__all__ = ["compute_form_factors", "receivers_needed", "form_factor_stage"]
+
+
+def receivers_needed(patches) -> np.ndarray:
+    """Patches (or clusters) whose rows of F matter: a patch that reflects nothing (rho = 0 in every band,
+    e.g. a pure emitter) has B = S whatever it sees, so its hemi-cube is never drawn."""
+    return np.flatnonzero(patches.rho.max(axis=1) > 0)
+
+
+def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progress=None,
+                         cancelled=None, clusters=None) -> CSR:
+    """F for ``patches`` (or their ``clusters``, every patch drawn) by ``settings.method`` (rows
+    only for ``receivers``, default all), with ``settings.workers`` workers (the same F for any
+    count): the hemi-cube on forked processes where there are any, Embree on threads
+    (:mod:`.parallel`)."""
+    kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters,
+              workers=getattr(settings, "workers", 1))
+    if settings.method == "hemicube":
+        return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed, **kw)
+    if settings.method == "embree":
+        return embree_ff.embree_hemicube_form_factors(patches, settings.resolution,
+                                                      rotate_seed=settings.rotate_seed, **kw)
+    return embree_ff.embree_stochastic_form_factors(patches, settings.rays_per_patch,
+                                                    seed=settings.rotate_seed or 0, **kw)
+
+
+def form_factor_stage(ctx) -> None:
+    """Fill ``ctx.form_factors`` and ``ctx.form_factor_source`` ('computed' or 'cached')."""
+    patches, cache = ctx.patches, ctx.cache
+    key = None
+    if cache is not None:
+        grouping = b"" if ctx.clusters is None else np.ascontiguousarray(ctx.clusters.of).tobytes()
+        # the patches' key hashed once per geometry (a relight's patches share their cached arrays)
+        key = cache_key(geometry_key(patches) + grouping, ctx.settings.form_factor_key())
+    F = cache.get(key) if cache is not None else None
+    ctx.form_factor_source = "cached" if F is not None else "computed"
+    if F is None:
+        recv = receivers_needed(ctx.unknowns)
+        ctx.forecast = _forecast(ctx, recv.size)
+        ctx.say(0.0, ctx.forecast.describe())
+        started = time.perf_counter()
+
+        def progress(fr):
+            el = time.perf_counter() - started
+            eta = el * (1 - fr) / fr if fr > 0 else float("nan")
+            ctx.say(fr, f"{100 * fr:.0f}%  ETA {eta:.1f} s")
+
+        F = compute_form_factors(patches, ctx.settings, receivers=recv, progress=progress,
+                                 cancelled=ctx.cancelled, clusters=ctx.clusters)
+        F.meta.setdefault("receivers", int(recv.size))
+        if cache is not None:
+            cache.put(key, F)
+    ctx.form_factors = F
+    ctx.say(1.0, f"{ctx.form_factor_source}: {F.nnz} nonzeros, {F.nbytes / 1e6:.1f} MB")
+
+
+def _forecast(ctx, receivers):
+    """:func:`.forecast.forecast` of this bake, before its form factors, for about as many
+    output vertices as it will have (:func:`.output.output_vertices_ahead`: the elements before
+    their cut along contacts, which is made meanwhile on a process of its own)."""
+    from ..runtime.forecast import forecast
+    from ..output.stage import output_vertices_ahead
+    return forecast(ctx, receivers, output_vertices_ahead(ctx))

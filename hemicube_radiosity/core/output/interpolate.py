@@ -1,0 +1,201 @@
+"""Evaluate a bake anywhere on its surfaces: the paper's rendering step, bilinear inside a patch.
+
+Given vertex radiosities on the patch mesh, a point on a surface takes the bilinear interpolation
+of its patch's four corner values (a triangle patch is a quad with its last two corners equal,
+which makes the same formula barycentric). Used to put a coarse patch solution on a finer mesh
+(another mesh's vertices, a reference bake's vertices) without cutting more patches.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..mesh.patches import PatchSet
+from ..util.spatial import _PAIRS, Grid, sq_dist
+
+__all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners", "interpolate_corners"]
+
+_CELL = 2.0     # locate's grid cells, in patch sizes: the 8 nearest centres mostly in the 27 cells around
+_BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
+
+
+def _bilinear(c, u, v):
+    """c (..., 4, k) corner values; u, v (...,) -> (..., k)."""
+    u = u[..., None]
+    v = v[..., None]
+    return ((1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :]
+            + u * v * c[..., 2, :] + (1 - u) * v * c[..., 3, :])
+
+
+def _inverse_bilinear(c, p, iterations=8):
+    """(u, v) with bilinear(c, u, v) closest to p (Gauss-Newton from the centre); c (..., 4, 3).
+
+    Worked one coordinate at a time on contiguous (...,) arrays: the same operations as on the
+    (..., 3) vectors, in the same order, so bit for bit the same (u, v), about 2.5x as fast (a
+    dot product over a short last axis, ``np.einsum("...i,...i")``, took 25 ms for 600k points;
+    it sums x0 y0 + x2 y2 first, then x1 y1, without fused multiply-adds, as :func:`_dot` does).
+    Suzanne's gather hits on abrupt elements, 600k points, spent 0.74 s here."""
+    shape = p.shape[:-1]
+    c = np.asarray(c, dtype=np.float64)
+    p = np.asarray(p, dtype=np.float64)
+    cc = [[np.ascontiguousarray(np.broadcast_to(c[..., k, i], shape)) for i in range(3)] for k in range(4)]
+    pp = [np.ascontiguousarray(np.broadcast_to(p[..., i], shape)) for i in range(3)]
+    e10, e23, e30, e21 = ([cc[a][i] - cc[b][i] for i in range(3)] for a, b in ((1, 0), (2, 3), (3, 0), (2, 1)))
+    u = np.full(shape, 0.5)
+    v = np.full(shape, 0.5)
+    for _ in range(iterations):
+        mu, mv = 1 - u, 1 - v
+        w = (mu * mv, u * mv, u * v, mu * v)             # as _bilinear weighs the corners
+        r = []
+        for i in range(3):
+            x = w[0] * cc[0][i]
+            for k in (1, 2, 3):
+                x += w[k] * cc[k][i]
+            x -= pp[i]
+            r.append(x)
+        du = [mv * e10[i] + v * e23[i] for i in range(3)]
+        dv = [mu * e30[i] + u * e21[i] for i in range(3)]
+        a, b, d, gu, gv = _dot(du, du), _dot(du, dv), _dot(dv, dv), _dot(du, r), _dot(dv, r)
+        det = a * d - b * b
+        tiny = det <= 1e-30 * np.maximum(a * d, 1e-300)
+        det = np.where(tiny, 1.0, det)
+        step_u = np.where(tiny, 0.0, (d * gu - b * gv) / det)
+        step_v = np.where(tiny, 0.0, (a * gv - b * gu) / det)
+        u = np.clip(u - step_u, -0.5, 1.5)
+        v = np.clip(v - step_v, -0.5, 1.5)
+    return u, v
+
+
+def _dot(x, y):
+    """x . y for vectors given as three coordinate arrays, summed as ``np.einsum("...i,...i")``
+    sums a last axis of 3 (x0 y0 + x2 y2, then + x1 y1; no fused multiply-add): bit for bit."""
+    out = x[0] * y[0]
+    out += x[2] * y[2]
+    out += x[1] * y[1]
+    return out
+
+
+def _pick(patches, corners, size, cand, p, normals):
+    """The best of each point's candidate patches ``cand`` (m, k) for the points ``p`` (m, 3):
+    (m,) position in ``cand`` (the first of equal scores), clamped (u, v) (m, k) each, and (m,)
+    True where another candidate scores the same."""
+    c = corners[cand]                                            # (m, k, 4, 3)
+    pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
+    u, v = _inverse_bilinear(c, pp)
+    outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
+    uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
+    gap = np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
+    score = outside + gap
+    if normals is not None:
+        facing = np.einsum("mkj,mj->mk", patches.normals[cand], normals)
+        score = score + 10.0 * (facing < 0.5)
+    best = np.argmin(score, axis=1)
+    tied = (score == score[np.arange(len(cand)), best][:, None]).sum(1) > 1
+    return best, uc, vc, tied
+
+
+def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, chunk=2048):
+    """Patch index (P,) and bilinear (u, v) (P, 2) in [0, 1] for points on the patch surfaces.
+
+    ``owner`` (P,) restricts each point to patches of that object; ``normals`` (P, 3) rejects
+    patches facing another way (for corners shared by differently oriented faces). Each point is
+    tried against its ``candidates`` nearest patch centres; the one it lies in (or is closest to
+    lying in) wins. Points off every surface get the nearest patch, clamped.
+
+    The result is the brute-force search's to the bit: every centre of the object for every
+    point (``np.argpartition`` of the squared distances), the candidates tried in the order that
+    gives. The nearest centres come from a grid over the object's centres instead
+    (``spatial.Grid``, cells twice the area-weighted patch size), at a cost of about
+    P * candidates, not P * patches; only where the grid's candidates leave the choice open is the
+    point compared with every centre as before: when two candidates fit equally well (a point on
+    an edge two patches share, at a cost of its object's patches: ``argpartition``'s order picks
+    one, and at a T-junction they give other values) or the last candidate's distance is tied with
+    the next centre's. Objects of at most 512 patches take the brute force for every point.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    P = len(points)
+    by_owner = owner is not None
+    owner = np.asarray(owner, np.int64) if by_owner else np.zeros(P, np.int64)
+    powner = patches.owner if by_owner else np.zeros(len(patches), np.int64)
+    normals = None if normals is None else np.asarray(normals, dtype=np.float64)
+    corners = patches.corners()
+    size = np.sqrt(patches.areas)
+    out_idx = np.full(P, -1, np.int64)
+    out_uv = np.zeros((P, 2))
+
+    def settle(ids, cand):
+        best, uc, vc, tied = _pick(patches, corners, size, cand, points[ids],
+                                   None if normals is None else normals[ids])
+        r = np.arange(ids.size)
+        out_idx[ids] = cand[r, best]
+        out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
+        return tied
+
+    for o in np.unique(owner):
+        pts_ids = np.flatnonzero(owner == o)
+        cand_all = np.flatnonzero(powner == o)
+        if cand_all.size == 0:
+            raise ValueError(f"no patches belong to object {int(o)}")
+        N = cand_all.size
+        k = min(candidates, N)
+        if k == N:                       # every patch a candidate, in index order (as before)
+            for s in range(0, pts_ids.size, chunk):
+                ids = pts_ids[s:s + chunk]
+                settle(ids, np.broadcast_to(cand_all, (ids.size, k)))
+            continue
+        cc = patches.centers[cand_all]
+        if N <= _BRUTE:
+            redo = pts_ids
+        else:
+            a = patches.areas[cand_all]
+            typical = float((a * size[cand_all]).sum() / a.sum()) if a.sum() > 0 else 0.0   # area-weighted
+            grid = Grid(cc, _CELL * typical)
+            redo = []
+            for s in range(0, pts_ids.size, chunk):
+                ids = pts_ids[s:s + chunk]
+                near, d2 = grid.k_nearest(points[ids], k + 1)
+                tied = settle(ids, cand_all[np.sort(near[:, :k], axis=1)])
+                redo.append(ids[tied | (d2[:, k - 1] == d2[:, k])])
+            redo = np.concatenate(redo)
+        # the brute force, where the order of the candidates decides (or the object has few patches)
+        rows = max(1, _PAIRS // N)
+        for s in range(0, redo.size, rows):
+            ids = redo[s:s + rows]
+            d2 = sq_dist(points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
+            settle(ids, cand_all[np.argpartition(d2, k - 1, axis=1)[:, :k]])
+    return out_idx, out_uv
+
+
+def interpolate_at(patches: PatchSet, vertex_values, points, owner=None, normals=None) -> np.ndarray:
+    """Bilinear interpolation of per-vertex values (V, k) at points on the surfaces -> (P, k)."""
+    return interpolate_located(patches, vertex_values, *locate(patches, points, owner, normals))
+
+
+def interpolate_located(patches: PatchSet, vertex_values, idx, uv) -> np.ndarray:
+    """(P, k) per-vertex values (V, k) at points already located (``idx``, ``uv`` of
+    :func:`locate`: geometry only, so a relight can keep them)."""
+    return interpolate_corners(vertex_values, located_corners(patches, idx, uv))
+
+
+def located_corners(patches: PatchSet, idx, uv):
+    """(corner vertex ids (4, P) intp, bilinear weights (4, P)) of points located at ``idx``,
+    ``uv`` (:func:`locate`): what :func:`interpolate_corners` reads, geometry only (a relight
+    keeps it and only reads its new values through it)."""
+    polys = patches.polys[idx].copy()
+    tri = polys[:, 3] < 0
+    polys[tri, 3] = polys[tri, 2]
+    u, v = uv[:, 0], uv[:, 1]
+    w = np.stack([(1 - u) * (1 - v), u * (1 - v), u * v, (1 - u) * v])
+    return np.ascontiguousarray(polys.T, dtype=np.intp), w
+
+
+def interpolate_corners(vertex_values, corners) -> np.ndarray:
+    """(P, k) the bilinear interpolation of per-vertex values (V, k) through ``corners``
+    (:func:`located_corners`): the same arithmetic as :func:`_bilinear` on the corners' values,
+    bit for bit, a band's corners taken and weighted as contiguous rows (weighing the (P, 1)
+    weights into (P, k) corner values, broadcast along the short axis, was most of it)."""
+    cols, w = corners
+    vt = np.ascontiguousarray(np.asarray(vertex_values, dtype=np.float64).T)      # (k, V)
+    total = vt.take(cols[0], axis=1) * w[0]
+    for c in range(1, 4):
+        total += vt.take(cols[c], axis=1) * w[c]
+    return np.ascontiguousarray(total.T)
