@@ -339,7 +339,7 @@ def worker_command(bake_argv, blender=None):
         repo = addon.split(".")[1] if addon.startswith("bl_ext.") else None
         factory = ["--factory-startup"] if repo == "user_default" else []
         return [blender, "--background", *factory, "--addons", addon, "-c", PROG, "bake", *bake_argv], env
-    root = os.path.abspath(os.path.join(os.path.dirname(__file__), os.pardir, os.pardir, os.pardir, os.pardir))
+    root = os.path.abspath(os.path.join(os.path.dirname(__file__), os.pardir, os.pardir, os.pardir))
     env["PYTHONPATH"] = os.pathsep.join([root, *filter(None, [env.get("PYTHONPATH")])])
     return [sys.executable, "-m", PROG, "bake", *bake_argv], env
 
