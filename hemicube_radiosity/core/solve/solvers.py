@@ -98,7 +98,7 @@ def _indices(F) -> np.ndarray:
     again): ``take`` converts int32 indices on every call. The sweeps' blocks are views of it."""
     if F.indices.dtype == np.intp:
         return F.indices
-    return F._memo("indices64", lambda: F.indices.astype(np.intp))
+    return F.memo("indices64", lambda: F.indices.astype(np.intp))
 
 
 def _matvec(F, x) -> np.ndarray:
@@ -108,7 +108,7 @@ def _matvec(F, x) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     one = x.ndim == 1
     xt = np.ascontiguousarray((x[:, None] if one else x).T)
-    nonempty, starts = F._memo("row-starts", lambda: (
+    nonempty, starts = F.memo("row-starts", lambda: (
         np.flatnonzero(np.diff(F.indptr)), F.indptr[:-1][np.diff(F.indptr) > 0]))
     out = np.zeros((F.shape[0], xt.shape[0]))
     if starts.size:
@@ -167,7 +167,7 @@ def energy_balance(F: CSR, rho, source, B, areas, row_ids=None, computed=None, F
         # column sums of A_i F_ij over computed rows i, without forming the transpose
         # (only the entries in the left-out columns matter: few, e.g. the lights); which
         # entries those are is kept on F for the rows left out (a relight's are the same)
-        rid, col, data = F._memo(("left-out-columns", np.packbits(miss).tobytes(), miss.size),
+        rid, col, data = F.memo(("left-out-columns", np.packbits(miss).tobytes(), miss.size),
                                  lambda: _left_out_entries(F, miss))
         w = data * (areas * computed)[rid]
         n = F.shape[1]
@@ -217,7 +217,7 @@ def _gs_blocks(F, rho_max, size, omega):
     limit = None if omega <= 1.0 else 0.5 * (2.0 / omega - 1.0)
     bounds = []
     # F's part of it (each block's coupling, its slices) once per F: a relight solves again
-    memo = F._memo("gs-blocks", dict)
+    memo = F.memo("gs-blocks", dict)
 
     def coupling(b0, b1):
         """(b1 - b0,) what each row of the block gathers from the block itself, or None."""
