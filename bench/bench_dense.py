@@ -58,7 +58,7 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 from hemicube_radiosity.core import pipeline, builtin_scenes as scenes  # noqa: E402
 from hemicube_radiosity.core.output.interpolate import interpolate_at  # noqa: E402
-from hemicube_radiosity.core.mesh.patches import PatchSet, _poly_geometry  # noqa: E402
+from hemicube_radiosity.core.mesh.patches import PatchSet, poly_geometry  # noqa: E402
 
 import scenes_bench  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
@@ -161,7 +161,7 @@ def corner_patches(meshes):
         base += L
     v = np.concatenate(verts)
     p = np.concatenate(polys)
-    c, nrm, a = _poly_geometry(v, p)
+    c, nrm, a = poly_geometry(v, p)
     N = len(p)
     return PatchSet(v, p, c, nrm, a, np.zeros((N, 3)), np.zeros((N, 3)), np.concatenate(owner),
                     np.zeros(N, np.int32), [m.name for m in meshes])

@@ -21,14 +21,14 @@ def _main():
         print("hemicube_radiosity: error: the 'bpy' module is needed: pip install bpy (Python 3.11), "
               "or run inside Blender with: blender -b -c hemicube_radiosity ...", file=sys.stderr)
         return 1
-    from .blender.cli.main import _flush_c_stdio, main
+    from .blender.cli.main import flush_c_stdio, main
 
     code = main()
     if {"-q", "--quiet"} & set(sys.argv[1:]):
         # Quiet to the end: Blender 4.5 prints "Error: Not freed memory blocks" on stdout while
         # the interpreter shuts down, after the command has returned.
         sys.stdout.flush()
-        _flush_c_stdio()
+        flush_c_stdio()
         null = os.open(os.devnull, os.O_WRONLY)
         os.dup2(null, sys.stdout.fileno())
         os.close(null)
@@ -42,7 +42,7 @@ def _main():
             shutil.rmtree(bpy.app.tempdir, ignore_errors=True)
         sys.stdout.flush()
         sys.stderr.flush()
-        _flush_c_stdio()
+        flush_c_stdio()
         os._exit(code)
     return code
 

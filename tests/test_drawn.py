@@ -98,10 +98,10 @@ def test_outlines_touching_at_a_corner_are_cut_into_simple_loops():
     # a cell border slanting through the quads: one triangle of cluster 0 touches the rest of
     # it at a corner only, so its boundary passes that vertex twice
     from hemicube_radiosity.core.form_factors import drawn
-    from hemicube_radiosity.core.mesh.clusters import _make
+    from hemicube_radiosity.core.mesh.clusters import make_clusters
     pieces = build_patches([_grid(8)], 4.0)
     of = (pieces.centers[:, 0] + 2.0 * pieces.centers[:, 1] > 0.43).astype(np.int64)
-    clusters = _make(pieces, of)
+    clusters = make_clusters(pieces, of)
     pos, weld = np.unique(pieces.verts, axis=0, return_inverse=True)
     w = np.where(pieces.polys < 0, -1, weld.reshape(-1)[np.maximum(pieces.polys, 0)])
     loops = drawn._outline_loops(w, of, np.ones(2, bool), pos, clusters.normals)
@@ -128,6 +128,6 @@ def test_collinear_border_points_are_left_out_on_both_sides_alike(n):
     # inner points (each cluster: 2 triangles) and share the border's two end points
     pieces = build_patches([_grid(n, size=2.0)], 4.0)
     of = (pieces.centers[:, 0] > 1.0).astype(np.int64)
-    from hemicube_radiosity.core.mesh.clusters import _make
-    d = draw_set(pieces, _make(pieces, of))
+    from hemicube_radiosity.core.mesh.clusters import make_clusters
+    d = draw_set(pieces, make_clusters(pieces, of))
     assert d.outlined.all() and len(d) == 4 and len(d.verts) == 6

@@ -45,7 +45,13 @@ import pytest  # noqa: E402
 
 from hemicube_radiosity.core.output import interpolate
 from hemicube_radiosity.core.util import spatial  # noqa: E402
-from hemicube_radiosity.core.output.interpolate import _bilinear, _inverse_bilinear  # noqa: E402
+from hemicube_radiosity.core.output.interpolate import inverse_bilinear  # noqa: E402
+from hemicube_radiosity.core.util.geometry import bilinear  # noqa: E402
+
+
+def _bilinear(c, u, v):
+    """c (..., 4, k) corner values; u, v (...,) -> (..., k)."""
+    return bilinear(c, u[..., None], v[..., None])
 from hemicube_radiosity.core.builtin_scenes import tessellate  # noqa: E402
 from hemicube_radiosity.core.util.spatial import k_nearest  # noqa: E402
 
@@ -69,7 +75,7 @@ def _brute_locate(ps, points, owner=None, normals=None, candidates=8):
         cand = cand_all[near]
         c = corners[cand]
         pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
-        u, v = _inverse_bilinear(c, pp)
+        u, v = inverse_bilinear(c, pp)
         outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
         uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
         score = outside + np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
@@ -138,7 +144,7 @@ def test_locate_equals_a_brute_force_search(monkeypatch, brute):
 def test_k_nearest_equals_a_full_sort(monkeypatch, pairs):
     """``pairs``: the (point, site) pairs handled at once, 64 to split every batch of points."""
     if pairs is not None:
-        monkeypatch.setattr(spatial, "_PAIRS", pairs)
+        monkeypatch.setattr(spatial, "MAX_PAIRS", pairs)
     rng = np.random.default_rng(4)
     for trial in range(24):
         N = int(rng.integers(1, 300))
@@ -193,7 +199,7 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
 def test_interpolate_located_is_the_corners_bilinear_bit_for_bit():
     # the corners and weights kept for a relight (located_corners) give _bilinear's values
     from hemicube_radiosity.core import builtin_scenes as scenes
-    from hemicube_radiosity.core.output.interpolate import _bilinear, interpolate_located
+    from hemicube_radiosity.core.output.interpolate import interpolate_located
     P = build_patches(scenes.tessellate(scenes.cornell_box()[:3], 2) + scenes.cornell_box()[3:], 0.3)
     rng = np.random.default_rng(3)
     idx = rng.integers(0, len(P), 4000)
@@ -239,14 +245,14 @@ def test_inverse_bilinear_is_the_vector_gauss_newton_bit_for_bit():
     u0, v0 = rng.random(h), rng.random(h)
     exact = _bilinear(c, u0, v0)
     for p in (exact, exact + rng.normal(0, 0.02, exact.shape)):
-        got, ref = _inverse_bilinear(c, p), _vector_inverse_bilinear(c, p)
+        got, ref = inverse_bilinear(c, p), _vector_inverse_bilinear(c, p)
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])
     cand = c[:8000].reshape(1000, 8, 4, 3)
     pp = np.broadcast_to(exact[:1000, None, :], (1000, 8, 3))
-    for g, r in zip(_inverse_bilinear(cand, pp), _vector_inverse_bilinear(cand, pp)):
+    for g, r in zip(inverse_bilinear(cand, pp), _vector_inverse_bilinear(cand, pp)):
         np.testing.assert_array_equal(g, r)
     good = (rng.random((h, 1, 3)) * 3 + np.array([[0, 0, 0], [0.1, 0, 0.01], [0.1, 0.1, 0.02], [0, 0.1, -0.01]])
             * (0.5 + 0.5 * rng.random((h, 1, 1))) + rng.normal(0, 0.002, (h, 4, 3)))
-    u, v = _inverse_bilinear(good, _bilinear(good, u0, v0))
+    u, v = inverse_bilinear(good, _bilinear(good, u0, v0))
     assert np.abs(u - u0).max() < 1e-9 and np.abs(v - v0).max() < 1e-9

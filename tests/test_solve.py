@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.solve.solvers import energy_balance, solve
+from hemicube_radiosity.core.solve.residual import energy_balance
+from hemicube_radiosity.core.solve.solvers import solve
 from hemicube_radiosity.core.util.sparse import CSR
 
 

@@ -607,12 +607,12 @@ def _silenced_stdout(active):
         yield
     finally:
         sys.stdout.flush()
-        _flush_c_stdio()
+        flush_c_stdio()
         os.dup2(saved, fd)
         os.close(saved)
 
 
-def _flush_c_stdio():
+def flush_c_stdio():
     """fflush(NULL): what Blender printed through C stdio, before fd 1 changes or the process ends."""
     try:
         import ctypes

@@ -314,7 +314,7 @@ def plane_outlines(patches: PatchSet) -> PatchSet:
     one region, drawn as its outline triangulated like a cluster (:func:`draw_set`); a region
     with a hole, or a patch alone, stays as it is. Only the geometry is meaningful in the
     result (reflectivity and emission 0, owner and source face -1)."""
-    from ..mesh.clusters import _components, _make
+    from ..mesh.clusters import connected_components, make_clusters
 
     P = len(patches)
     verts = np.asarray(patches.verts, dtype=np.float64)
@@ -328,10 +328,10 @@ def plane_outlines(patches: PatchSet) -> PatchSet:
     weld = unique_rows(verts, return_inverse=True)[1].reshape(-1)
     polys = np.asarray(patches.polys)
     wpolys = np.where(polys < 0, -1, weld[np.maximum(polys, 0)])
-    of = unique_ints(_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
+    of = unique_ints(connected_components(key, wpolys), return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == P:
         return patches
-    d_set = draw_set(patches, _make(patches, of))
+    d_set = draw_set(patches, make_clusters(patches, of))
     V = d_set.verts
     c = np.where(d_set.polys < 0, d_set.polys[:, 2:3], d_set.polys)
     corners = V[c]

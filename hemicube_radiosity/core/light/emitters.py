@@ -23,7 +23,7 @@ import numpy as np
 
 from ..runtime.cache import kept
 from ..util.geometry import (
-    GROUP_LOOP, GroupOutline, group_form_factors, jittered_grid, polygon_form_factors
+    GROUP_LOOP, GroupOutline, bilinear, group_form_factors, jittered_grid, polygon_form_factors
 )
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..mesh.patches import PatchSet
@@ -72,17 +72,10 @@ def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     return x, n, mean(patches.rho)
 
 
-def _bilinear(c, u, v):
-    """Points ``(u, v)`` in [0, 1]^2 mapped onto quads: ``c`` (..., 4, 3) corners in order, u and
-    v broadcasting against ``c[..., 0, :]``; (..., 3). A triangle repeats its third corner."""
-    return (1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :] + u * v * c[..., 2, :] \
-        + (1 - u) * v * c[..., 3, :]
-
-
 def _emitter_samples(corners, samples, rng):
     """(M, S, 3) stratified points on each emitter patch (bilinear map of jittered grid cells)."""
     u, v = jittered_grid(rng, len(corners), samples)
-    return _bilinear(corners[:, None], u[..., None], v[..., None])
+    return bilinear(corners[:, None], u[..., None], v[..., None])
 
 
 def _group_samples(corners, areas, groups, samples, rng):
@@ -120,7 +113,7 @@ def _group_samples(corners, areas, groups, samples, rng):
     u = ((cell // g + ju) / g).reshape(G, samples, 1)
     v = ((cell % g + jv) / g).reshape(G, samples, 1)
     k = order[pos].reshape(G, samples)
-    return _bilinear(corners[k], u, v), k                              # corners[k]: (G, S, 4, 3)
+    return bilinear(corners[k], u, v), k                              # corners[k]: (G, S, 4, 3)
 
 
 def _visible_fraction(scene, origins, targets, normals, target_normals):

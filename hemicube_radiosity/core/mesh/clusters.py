@@ -78,12 +78,12 @@ class Clusters:
     def with_materials(self, pieces: PatchSet) -> "Clusters":
         """The same grouping with reflectivity and emission read again from ``pieces`` (a
         cluster of one piece takes that piece's values exactly)."""
-        rho, em = (self._area_mean(a, pieces.areas) for a in (pieces.rho, pieces.emission))
+        rho, em = (self.area_mean(a, pieces.areas) for a in (pieces.rho, pieces.emission))
         solo = np.flatnonzero(self.sizes[self.of] == 1)
         rho[self.of[solo]], em[self.of[solo]] = pieces.rho[solo], pieces.emission[solo]
         return Clusters(self.of, self.centers, self.normals, self.areas, rho, em, self.owner)
 
-    def _area_mean(self, per_piece, piece_areas) -> np.ndarray:
+    def area_mean(self, per_piece, piece_areas) -> np.ndarray:
         """:meth:`mean` of a (P, 3) array, bit for bit (each cluster's products summed in piece
         order, from 0), by a bincount per band instead of ``np.add.at`` (a tenth of the time:
         a relight reads its materials onto the clusters every time)."""
@@ -123,7 +123,7 @@ def _normal_bins(normals, max_angle):
     return (face * cells + ij[:, 0]) * cells + ij[:, 1]
 
 
-def _components(keys, polys):
+def connected_components(keys, polys):
     """(P,) label of each piece's connected component (through shared vertices) among pieces
     of equal key: label propagation with pointer jumping, all edges at once."""
     p, c = np.nonzero(polys >= 0)
@@ -172,14 +172,14 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     # a piece that is not small keys on its own index: it stays alone
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
     key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
-    label = _components(key, pieces.polys)
+    label = connected_components(key, pieces.polys)
     of = unique_ints(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):
         return None
-    return _make(pieces, of)
+    return make_clusters(pieces, of)
 
 
-def _make(pieces: PatchSet, of) -> Clusters:
+def make_clusters(pieces: PatchSet, of) -> Clusters:
     K = int(of.max()) + 1
     a = pieces.areas
     areas = np.bincount(of, weights=a, minlength=K)

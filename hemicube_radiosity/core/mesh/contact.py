@@ -455,8 +455,8 @@ def _assemble(elements, pieces, eps):
     verts = np.concatenate(verts)
     polys = np.array(polys, np.int64)
     parent = np.array(parent, np.int64)
-    from .patches import _poly_geometry
-    centers, _, areas = _poly_geometry(verts, polys)
+    from .patches import poly_geometry
+    centers, _, areas = poly_geometry(verts, polys)
     keep = areas > 0
     polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]
     used = np.unique(polys[polys >= 0])

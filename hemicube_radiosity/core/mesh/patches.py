@@ -194,7 +194,7 @@ def _material_index(patches: PatchSet, mats):
     return index
 
 
-def _poly_geometry(verts, polys):
+def poly_geometry(verts, polys):
     """Centres, unit normals and areas of triangles/quads (quads may be slightly non-planar)."""
     c = verts[np.where(polys < 0, polys[:, 2:3], polys)]  # (N,4,3), triangle repeats corner 2
     tri = polys[:, 3] < 0
@@ -704,7 +704,7 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
         v, p, parent = _subdivide(v, p, patch_size)
         src = src[parent]
         v, p = _compact(v, p)
-        c, nrm, a = _poly_geometry(v, p)
+        c, nrm, a = poly_geometry(v, p)
         if min_area is None:
             span = np.ptp(np.asarray(mesh.verts, float), axis=0) if len(mesh.verts) else np.zeros(3)
             keep = a > 1e-12 * float(span @ span)

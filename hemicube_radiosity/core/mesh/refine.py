@@ -16,9 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .clusters import _make
+from .clusters import make_clusters
 from ..light.stage import LUMA, DirectLight, grid_of
-from .patches import PatchSet, _poly_geometry
+from .patches import PatchSet, poly_geometry
 from ..util.unique import unique_ints
 
 __all__ = ["LUMA", "split_patches", "abrupt", "refine", "refine_stage"]
@@ -72,7 +72,7 @@ def split_patches(patches: PatchSet, select) -> tuple[PatchSet, np.ndarray]:
     children = np.stack([np.where(tri[:, None], ti, qi) for qi, ti in zip(q, t)], 1).reshape(-1, 4)
     parent = np.concatenate([keep, np.repeat(sel, 4)])
     polys = np.concatenate([patches.polys[keep], children])
-    centers, normals, areas = _poly_geometry(verts, polys)
+    centers, normals, areas = poly_geometry(verts, polys)
     normals = patches.normals[parent]            # children lie in their parent's plane
     out = PatchSet(verts, polys, centers, normals, areas, patches.rho[parent], patches.emission[parent],
                    patches.owner[parent], patches.source_face[parent], list(patches.object_names))
@@ -198,6 +198,6 @@ def refine_stage(ctx) -> None:
         of = ctx.clusters.of[parent]
         child = np.flatnonzero(np.bincount(parent, minlength=len(p))[parent] > 1)
         of[child] = of.max() + 1 + np.arange(child.size)
-        ctx.clusters = _make(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
+        ctx.clusters = make_clusters(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
     ctx.notes.append(f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
     ctx.patches = refined

@@ -296,7 +296,7 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
     are in order (the gather's chunks are), so each share's entries come sorted and summed in
     the same order as in one piece: C is the same, bit for bit, for any count. With two
     workers, Suzanne (level 3) in the Cornell box, 612k hits on abrupt elements: 1.64 s on the
-    bake's thread while the other core waited, 0.63 s so (with :func:`.interpolate._inverse_bilinear`
+    bake's thread while the other core waited, 0.63 s so (with :func:`.interpolate.inverse_bilinear`
     2.5x as fast); the 54k-triangle box's 241k hits: 0.25 -> 0.17 s."""
     P, V = G.shape
     R = G.meta["rays"]
@@ -372,7 +372,7 @@ def product(M, x, workers=1) -> np.ndarray:
     xt = np.ascontiguousarray((x[:, None] if one else x).T)     # (k, n): contiguous gathers
     out = np.zeros((M.shape[0], xt.shape[0]))
     n = min(resolve_workers(workers), max(1, M.nnz >> 20))
-    bounds = M._memo(("product-bounds", n), lambda: [   # the threads' rows, kept on M
+    bounds = M.memo(("product-bounds", n), lambda: [   # the threads' rows, kept on M
         0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]])
     shares(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), n)   # the caller takes one
     return out[:, 0] if one else out
@@ -392,7 +392,7 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
     cols, data = G.indices, G.data
     wide = data.dtype == np.float64
     ibuf, dbuf, buf = np.empty(0, np.intp), np.empty(0), np.empty(0)
-    for s, e, rows, starts in G._memo(("row-runs", r0, r1, chunk), lambda: _row_runs(G.indptr, r0, r1, chunk)):
+    for s, e, rows, starts in G.memo(("row-runs", r0, r1, chunk), lambda: _row_runs(G.indptr, r0, r1, chunk)):
         if buf.size < e - s:
             m = max(e - s, chunk)
             ibuf, dbuf, buf = np.empty(m, np.intp), np.empty(m), np.empty(m)

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from ..util.spatial import _PAIRS, Grid, sq_dist
+from ..util.geometry import bilinear
+from ..util.spatial import MAX_PAIRS, Grid, sq_dist
 
 __all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners", "interpolate_corners"]
 
@@ -18,15 +19,7 @@ _CELL = 2.0     # locate's grid cells, in patch sizes: the 8 nearest centres mos
 _BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
 
 
-def _bilinear(c, u, v):
-    """c (..., 4, k) corner values; u, v (...,) -> (..., k)."""
-    u = u[..., None]
-    v = v[..., None]
-    return ((1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :]
-            + u * v * c[..., 2, :] + (1 - u) * v * c[..., 3, :])
-
-
-def _inverse_bilinear(c, p, iterations=8):
+def inverse_bilinear(c, p, iterations=8):
     """(u, v) with bilinear(c, u, v) closest to p (Gauss-Newton from the centre); c (..., 4, 3).
 
     Worked one coordinate at a time on contiguous (...,) arrays: the same operations as on the
@@ -44,7 +37,7 @@ def _inverse_bilinear(c, p, iterations=8):
     v = np.full(shape, 0.5)
     for _ in range(iterations):
         mu, mv = 1 - u, 1 - v
-        w = (mu * mv, u * mv, u * v, mu * v)             # as _bilinear weighs the corners
+        w = (mu * mv, u * mv, u * v, mu * v)             # as bilinear weighs the corners
         r = []
         for i in range(3):
             x = w[0] * cc[0][i]
@@ -80,10 +73,10 @@ def _pick(patches, corners, size, cand, p, normals):
     True where another candidate scores the same."""
     c = corners[cand]                                            # (m, k, 4, 3)
     pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
-    u, v = _inverse_bilinear(c, pp)
+    u, v = inverse_bilinear(c, pp)
     outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
     uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
-    gap = np.linalg.norm(_bilinear(c, uc, vc) - pp, axis=-1) / size[cand]
+    gap = np.linalg.norm(bilinear(c, uc[..., None], vc[..., None]) - pp, axis=-1) / size[cand]
     score = outside + gap
     if normals is not None:
         facing = np.einsum("mkj,mj->mk", patches.normals[cand], normals)
@@ -157,7 +150,7 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
                 redo.append(ids[tied | (d2[:, k - 1] == d2[:, k])])
             redo = np.concatenate(redo)
         # the brute force, where the order of the candidates decides (or the object has few patches)
-        rows = max(1, _PAIRS // N)
+        rows = max(1, MAX_PAIRS // N)
         for s in range(0, redo.size, rows):
             ids = redo[s:s + rows]
             d2 = sq_dist(points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
@@ -190,7 +183,7 @@ def located_corners(patches: PatchSet, idx, uv):
 
 def interpolate_corners(vertex_values, corners) -> np.ndarray:
     """(P, k) the bilinear interpolation of per-vertex values (V, k) through ``corners``
-    (:func:`located_corners`): the same arithmetic as :func:`_bilinear` on the corners' values,
+    (:func:`located_corners`): the same arithmetic as :func:`..util.geometry.bilinear` on the corners' values,
     bit for bit, a band's corners taken and weighted as contiguous rows (weighing the (P, 1)
     weights into (P, k) corner values, broadcast along the short axis, was most of it)."""
     cols, w = corners

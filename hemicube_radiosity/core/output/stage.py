@@ -18,16 +18,17 @@ import hashlib
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from ..mesh.clusters import _components
+from ..mesh.clusters import connected_components
 from ..mesh.contact import cut_along_contacts, open_side
-from ..light.emitters import _bilinear, apply_transport, emitter_transport, vertex_frames
+from ..light.emitters import apply_transport, emitter_transport, vertex_frames
 from ..runtime.errors import RadiosityError
+from ..util.geometry import bilinear
 from .gather import (
     apply_gather, correction_matrix, gather_matrix, product, transport_product,
     transposed_transport
 )
-from .interpolate import _inverse_bilinear, interpolate_corners, located_corners, locate
-from ..mesh.patches import PatchSet, _poly_geometry, build_patches, keeps_faces_whole
+from .interpolate import inverse_bilinear, interpolate_corners, located_corners, locate
+from ..mesh.patches import PatchSet, poly_geometry, build_patches, keeps_faces_whole
 from ..runtime.parallel import Ahead, resolve_workers
 from ..runtime.progress import Ticker
 from ..mesh.refine import LUMA
@@ -395,7 +396,7 @@ class _AbruptGrid:
             m = np.flatnonzero(n == k)
             t = inset + (1 - 2 * inset) * np.arange(k + 1) / k
             u, v = (a.reshape(1, -1, 1) for a in np.meshgrid(t, t, indexing="ij"))   # point i * (k+1) + j
-            p = _bilinear(corners[ids[m]][:, None], u, v)                            # (m, (k+1)^2, 3)
+            p = bilinear(corners[ids[m]][:, None], u, v)                            # (m, (k+1)^2, 3)
             x[(self.offset[m, None] + np.arange((k + 1) ** 2)[None]).ravel()] = p.reshape(-1, 3)
         owner = np.repeat(ids, count)
         nrm = elements.normals[owner]
@@ -420,7 +421,7 @@ class _AbruptGrid:
         c = self.corners[self.ids[loc]][:, None]                                      # (c, 1, 4, 3)
         u = (i[:, None] + np.array([0, 1, 1, 0])[None]) / n[:, None]
         v = (j[:, None] + np.array([0, 0, 1, 1])[None]) / n[:, None]
-        corners = _bilinear(c, u[..., None], v[..., None])                            # (c, 4, 3)
+        corners = bilinear(c, u[..., None], v[..., None])                            # (c, 4, 3)
         return self.ids[loc], corners, self.cell_mean[h]
 
     def _corner_ids(self, loc, i, j):
@@ -442,13 +443,13 @@ class _AbruptGrid:
             a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
             n = self.n[loc][:, None]
             c = self.corners[ids[loc]][:, None]                                       # (c, 1, 4, 3)
-            centre = _bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
+            centre = bilinear(c, ((i + 0.5) / self.n[loc])[:, None, None], ((j + 0.5) / self.n[loc])[:, None, None])
             ju, jv = _place_uniforms(centre[:, 0], self.elements.verts, 2 * S * S).reshape(-1, 2, S * S) \
                 .transpose(1, 0, 2)
             su = (i[:, None] + (a + ju) / S) / n
             sv = (j[:, None] + (b + jv) / S) / n
             u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
-            x = _bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
+            x = bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
             el = np.repeat(ids[loc], S * S)
             nrm = self.elements.normals[el]
             return x, el, nrm, _seen(ctx, self.elements, x, nrm).reshape(loc.size, S * S)
@@ -471,7 +472,7 @@ class _AbruptGrid:
         tri = self.elements.polys[pid, 3] < 0
         u, v = np.empty(len(pid)), np.empty(len(pid))
         if (~tri).any():
-            u[~tri], v[~tri] = _inverse_bilinear(c[~tri], y[~tri])
+            u[~tri], v[~tri] = inverse_bilinear(c[~tri], y[~tri])
         if tri.any():   # y = c0 + u (1 - v) (c1 - c0) + v (c2 - c0)
             t = np.flatnonzero(tri)
             e1, e2, r = c[t, 1] - c[t, 0], c[t, 2] - c[t, 0], y[t] - c[t, 0]
@@ -715,7 +716,7 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
         place = unique_rows(elements.verts, return_inverse=True)[1].reshape(-1)
         polys = elements.polys[ids]
         polys = np.where(polys >= 0, place[np.maximum(polys, 0)], -1)
-        return unique_ints(_components(key, polys), return_inverse=True)[1].reshape(-1)
+        return unique_ints(connected_components(key, polys), return_inverse=True)[1].reshape(-1)
     # geometry only (a relight that shines the same elements finds them grouped)
     ids = np.ascontiguousarray(ids, dtype=np.int64)
     return cached(ctx.cache, cache_key(geometry_key(elements) + ids.tobytes(), ("shine-groups", size)), groups)
@@ -756,7 +757,7 @@ def _shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     h.update(np.ascontiguousarray(polys).tobytes())
     shape = geometry_key(elements) + h.digest()
     centers, area = cached(ctx.cache, cache_key(shape, ("shine-geometry",)),
-                           lambda: _poly_geometry(verts, polys)[::2], disk=False)
+                           lambda: poly_geometry(verts, polys)[::2], disk=False)
     rho = elements.rho.take(every, axis=0)
     arriving = np.where(rho > 0, L / np.where(rho > 0, rho, 1.0), 0.0)
     power = area * np.maximum(arriving @ LUMA, 1e-300)     # where the shadow rays go (light arriving:
@@ -869,7 +870,7 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         # it across by a hair: a curved mesh's vertex moved in toward its elements lies a
         # thousandth of a face or less under the faces, and is where it belongs)
         c = ctx.patches.corners(i1)
-        d = _bilinear(c, uv1[:, :1], uv1[:, 1:]) - xv[rest]
+        d = bilinear(c, uv1[:, :1], uv1[:, 1:]) - xv[rest]
         n = ctx.patches.normals[i1]
         across = np.einsum("ij,ij->i", d, n)
         size = np.sqrt(ctx.patches.areas[i1])
@@ -1053,7 +1054,7 @@ def vertex_stage(ctx) -> None:
         w = np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)
         w.flags.writeable = False
         return w
-    weights = F._memo(key, make)
+    weights = F.memo(key, make)
     ctx.elements = patches
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None

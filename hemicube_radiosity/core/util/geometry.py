@@ -811,3 +811,10 @@ def _edge_terms(a, b, n):
     theta = np.arctan2(cn, np.einsum("pec,pec->pe", a, b))
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(cn > 0, theta * np.einsum("pec,pc->pe", c, n) / cn, 0.0)
+
+
+def bilinear(c, u, v):
+    """Points ``(u, v)`` in [0, 1]^2 mapped onto quads: ``c`` (..., 4, 3) corners in order, u and
+    v broadcasting against ``c[..., 0, :]``; (..., 3). A triangle repeats its third corner."""
+    return (1 - u) * (1 - v) * c[..., 0, :] + u * (1 - v) * c[..., 1, :] + u * v * c[..., 2, :] \
+        + (1 - u) * v * c[..., 3, :]

@@ -77,7 +77,7 @@ class CSR:
         r, c = np.nonzero(a)
         return cls.from_coo(r, c, a[r, c], a.shape, meta)
 
-    def _memo(self, name, make):
+    def memo(self, name, make):
         """F never changes once built (it is cached and shared by relights): derived arrays are
         computed once per matrix."""
         memo = self.__dict__.setdefault("_derived", {})
@@ -88,14 +88,14 @@ class CSR:
     def row_ids(self) -> np.ndarray:
         """(nnz,) the row of every stored entry."""
         idx = np.int32 if self.shape[0] < 2 ** 31 else np.int64   # half the memory of int64 indices
-        return self._memo("row_ids", lambda: np.repeat(np.arange(self.shape[0], dtype=idx), np.diff(self.indptr)))
+        return self.memo("row_ids", lambda: np.repeat(np.arange(self.shape[0], dtype=idx), np.diff(self.indptr)))
 
     def row(self, i):
         s, e = self.indptr[i], self.indptr[i + 1]
         return self.indices[s:e], self.data[s:e]
 
     def row_sums(self) -> np.ndarray:
-        return self._memo("row_sums", lambda: np.bincount(self.row_ids(), weights=self.data.astype(np.float64),
+        return self.memo("row_sums", lambda: np.bincount(self.row_ids(), weights=self.data.astype(np.float64),
                                                           minlength=self.shape[0]))
 
     def matvec(self, x: np.ndarray, row_ids: np.ndarray | None = None) -> np.ndarray:

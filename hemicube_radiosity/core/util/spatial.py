@@ -20,7 +20,7 @@ from .unique import unique_ints
 __all__ = ["Grid", "k_nearest", "morton_codes", "morton_order", "sq_dist"]
 
 _MARGIN = 1e-6            # relative: a site outside the searched cube may be this much nearer than its faces
-_PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
+MAX_PAIRS = 1 << 20          # (point, site) pairs at a time: at most about 100 MB of temporaries
 
 
 def morton_codes(points, lo, hi) -> np.ndarray:
@@ -114,7 +114,7 @@ class _Level:
         pos = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
         hit = valid & (self.keys[pos] == key)
         cnt = np.where(hit, self.count[pos], 0)
-        if m > 1 and int(cnt.sum()) > _PAIRS:     # crowded cells (sites much denser than the cell): halves
+        if m > 1 and int(cnt.sum()) > MAX_PAIRS:     # crowded cells (sites much denser than the cell): halves
             parts = [self.ring(sites, q, k, r) for q in (p[:m // 2], p[m // 2:])]
             return tuple(np.concatenate(x) for x in zip(*parts))
         cnt = cnt.ravel()
@@ -185,7 +185,7 @@ class Grid:
                 out_s[ids[ok]], out_d[ids[ok]] = s[ok], d[ok]
                 ids = ids[~ok]
                 i += 1
-            rows = max(1, _PAIRS // N)
+            rows = max(1, MAX_PAIRS // N)
             for b in range(0, ids.size, rows):
                 sub = ids[b:b + rows]
                 out_s[sub], out_d[sub] = self._all(points[sub], k)
