@@ -10,14 +10,10 @@ each is kept. The target is the one the batch exists for: near-linear in the cor
 
 The ratio only means something with the cores free. On a machine where other sessions keep the
 CPUs busy, Linux's autogroup scheduler gives each session an equal share however many workers it
-starts (measured 0.9x with two other CPU-bound sessions running, ``nice`` did not change it), so
-the script warns when the load average is high. As root, giving the run's own session group the
-CPU measures what an idle machine would show:
+starts (``nice`` does not change that), so the script warns when the load average is high. As
+root, giving the run's own session group the CPU measures what an idle machine would show:
 
     setsid sh -c 'echo -19 > /proc/self/autogroup; exec .venv/bin/python bench/bench_batch.py'
-
-Measured that way on 2 cores: -j 1 4.58 s, -j 2 2.52 s for four files, 1.82x (each worker: about
-0.5 s of bake plus about 0.6 s of Python, bpy and file start-up).
 """
 from __future__ import annotations
 
@@ -94,7 +90,7 @@ def main(argv=None):
     print(f"\n{len(files)} demo-size files on {cores} cores: -j 1 {best[1]:.2f} s, -j 2 {best[2]:.2f} s, "
           f"speed-up {ratio:.2f}x (target ~{TARGET}x: {'met' if ok else 'NOT met'})")
     with open(os.path.join(HERE, "out", "bench_batch.json"), "w") as f:
-        json.dump({"files": len(files), "cores": cores, "j1_s": best[1], "j2_s": best[2], "speedup": ratio,
+        json.dump({"quick": args.quick, "repeat": repeat, "files": len(files), "cores": cores, "j1_s": best[1], "j2_s": best[2], "speedup": ratio,
                    "target": TARGET}, f, indent=2)
     return 0
 

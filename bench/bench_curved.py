@@ -12,11 +12,12 @@ vertex bake of the same objects at ``--spp`` samples, 32 bounces, 2 threads
 with ``interpolate_at`` on our output, Cycles' as the mean of each vertex's corners. The mean
 luminance over Suzanne's vertices (Cycles' noise averages out over 30k of them) compares the
 two; the per-vertex RMS difference is mostly Cycles' own noise at
-64 spp and is printed as such. Prints a Markdown table (pasted into docs/performance.md by hand).
+64 spp and is reported as such. Prints the row and saves it to bench/out/curved.json.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import sys
@@ -120,6 +121,13 @@ def main(argv=None):
           f"{st['patches']:.2f} | {st['form_factors']:.2f} | {st['direct']:.2f} | {st['solve']:.2f} | "
           f"{st['vertices']:.2f} | {ours:.1f} | {peak:.0f} | {b.seconds:.1f} | {b.seconds / ours:.2f}x | "
           f"{y_ours.mean() / y_ref.mean():.3f} | {100 * rms:.1f}% |")
+    os.makedirs(os.path.join(HERE, "out"), exist_ok=True)
+    with open(os.path.join(HERE, "out", "curved.json"), "w") as f:
+        json.dump({"quick": a.quick, "level": a.level, "faces": faces, "vertices": V, "pieces": len(res.patches),
+                   "patches": int(res.unknowns), "output_vertices": len(res.elements.verts), "stages": dict(st),
+                   "seconds": ours, "peak_mb": peak, "spp": a.spp, "cycles_seconds": b.seconds,
+                   "ratio": b.seconds / ours, "luminance_ratio": float(y_ours.mean() / y_ref.mean()), "rms": rms,
+                   "load": [load0[0], os.getloadavg()[0]]}, f, indent=1, default=float)
 
 
 if __name__ == "__main__":

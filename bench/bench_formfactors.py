@@ -5,6 +5,7 @@ hemi-cube (wall clock), total time, the size of F and CPU ms per hemi-cube (stea
 wall clock when other jobs share the machine).  ``--quick`` skips the 8,000-patch rows.
 ``--baseline FILE`` also times another version of ``core/form_factors/hemicube.py`` (e.g. a copy of an older
 commit kept outside the repo) in the same run, and reports how far its F is from the current one.
+Results go to bench/out/formfactors.json.
 
     .venv/bin/python bench/bench_formfactors.py [--quick] [--baseline /tmp/hemicube_old.py]
 """
@@ -12,13 +13,15 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import os
 import sys
 import time
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), ".."))
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, ".."))
 
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors  # noqa: E402
 from hemicube_radiosity.core.mesh.patches import build_patches  # noqa: E402
@@ -66,6 +69,7 @@ def main(argv=None):
     print(f"{'room':>6} {'patches':>7} {'R':>4} {'method':>7} {'ms/hemicube':>11} {'total s':>8} "
           f"{'nnz':>10} {'F MB':>7} {'max|rowsum-1|':>13} {'cpu ms/hc':>9}"
           + (f" {'max|F-F_numpy|':>14}" if args.baseline else ""))
+    rows = []
     for label, n in rooms.items():
         patches = build_patches(closed_box(), 1.0 / n)
         for R in (64, 128):
@@ -80,6 +84,13 @@ def main(argv=None):
                     ref = F if ref is None else ref
                     line += f" {max_difference(ref, F):>14.1e}"
                 print(line, flush=True)
+                rows.append({"room": label, "patches": len(patches), "resolution": R, "method": name,
+                             "ms_per_hemicube": 1e3 * dt / len(patches), "seconds": dt, "nnz": int(F.nnz),
+                             "f_mb": F.nbytes / 1e6, "rowsum_error": float(err),
+                             "cpu_ms_per_hemicube": 1e3 * cpu / len(patches)})
+    os.makedirs(os.path.join(HERE, "out"), exist_ok=True)
+    with open(os.path.join(HERE, "out", "formfactors.json"), "w") as f:
+        json.dump({"quick": args.quick, "rows": rows}, f, indent=1)
 
 
 def max_difference(A, B):

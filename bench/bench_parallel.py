@@ -232,7 +232,8 @@ def print_case(label, results, best, configs):
         line += "".join(f" {sp[c]:7.2f}x" for c, _, _ in configs[1:])
         line += "".join(f" {cpu[c]:9.2f}" for c, _, _ in configs)
         print(f"  {st:14s}{line}")
-    return {"identical": same, "stages": rows}
+    return {"identical": same, "stages": rows, "unknowns": int(r1.unknowns), "patches": len(r1.patches),
+            "elements": len(r1.elements)}
 
 
 def gather_only(rounds):
@@ -302,7 +303,7 @@ def main(argv=None):
           "two free cores)", flush=True)
     m0, w0 = machine_cpu() or (0, 0), time.perf_counter()
     own0 = cpu_time()
-    report = {"cpus": cpu_count(), "load_before": load0, "ceiling": ceiling, "ceiling_rounds": rounds,
+    report = {"quick": args.quick, "repeat": repeat, "cpus": cpu_count(), "load_before": load0, "ceiling": ceiling, "ceiling_rounds": rounds,
               "cases": {}}
     all_ok = True
     for label, meshes, kw in cases("coarse" if args.quick else args.only, args.method):

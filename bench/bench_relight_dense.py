@@ -9,11 +9,12 @@ reused). Cycles: a vertex bake of the same objects at ``--samples`` spp (COMBINE
 references), which a relight has to repeat whole. Prints both times and the ratio; the machine's
 load (os.getloadavg) is printed too, as this machine is shared. The relight is timed ``--repeat``
 times (each a new lamp strength and wall colour, so each is a relight, not a repeat): the ratio
-is taken on the median, the fastest is printed too.
+is taken on the median, the fastest is printed too. Results go to bench/out/relight_dense.json.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import time
@@ -76,6 +77,13 @@ def main(argv=None):
           f"{runs[0][0]:.3f} s; the median's {' '.join(f'{k} {v:.3f}' for k, v in timings.items())})")
     print(f"Cycles {a.samples} spp re-bake: {cycles:.2f} s -> relight {cycles / warm:.0f}x faster "
           f"(load average {load:.1f} on {os.cpu_count()} cores)")
+    os.makedirs(os.path.join(HERE, "out"), exist_ok=True)
+    with open(os.path.join(HERE, "out", "relight_dense.json"), "w") as f:
+        json.dump({"quick": a.quick, "n": a.n, "faces": faces, "patches": int(first.unknowns),
+                   "output_vertices": len(first.elements.verts), "cold_seconds": cold, "relight_seconds": warm,
+                   "fastest_seconds": runs[0][0], "repeat": len(runs), "stages": dict(timings),
+                   "spp": a.samples, "cycles_seconds": cycles, "ratio": cycles / warm, "load": load,
+                   "cpus": os.cpu_count()}, f, indent=1, default=float)
     return 0
 
 

@@ -1,14 +1,16 @@
-"""What `make bench` runs: the form-factor micro-benchmark (if present), the batch speed-up
-(``bench_batch.py``: -j 2 against -j 1), the stages on 1 and 2 worker threads
-(``bench_parallel.py``), the tessellation sweep (``bench_dense.py``), a dense room's relight
-(``bench_relight_dense.py``), Suzanne subdivided in the Cornell box (``bench_curved.py``), then
-speed vs error.
+"""What `make bench` runs: every benchmark in turn, then bench/report.py, which writes
+docs/performance.md (and docs/img/perf_*.png) from the JSON each benchmark saved in bench/out/.
 
-    make bench                       # full run (~30 min on 2 cores; Cycles references cached)
-    make bench BENCH_ARGS=--quick    # smoke run (~3 min)
+    make bench                            # full run (~30 min on 2 cores; Cycles references cached)
+    make bench BENCH_ARGS=--quick         # smoke run (~11 min)
+    make bench BENCH_ARGS=--report-only   # the report alone, from bench/out/ (runs nothing)
 
-Arguments are passed to bench/speed_vs_error.py (``--quick`` also to the others). Exits non-zero when a benchmark script fails; targets that do not hold are printed,
-not failed (they are measurements, not tests).
+The benchmarks: form-factor speed (``bench_formfactors.py``), the batch speed-up (``bench_batch.py``:
+-j 2 against -j 1), the stages on 1 and 2 workers (``bench_parallel.py``), the tessellation sweep
+(``bench_dense.py``), a dense room's relight (``bench_relight_dense.py``), Suzanne subdivided in the
+Cornell box (``bench_curved.py``), then speed against error (``speed_vs_error.py``, which gets the
+other arguments; ``--quick`` goes to every script). Exits non-zero when a script fails; targets
+that do not hold are printed, not failed (they are measurements, not tests).
 """
 from __future__ import annotations
 
@@ -18,6 +20,8 @@ import sys
 import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
+BENCHES = ("bench_formfactors.py", "bench_batch.py", "bench_parallel.py", "bench_dense.py",
+           "bench_relight_dense.py", "bench_curved.py")
 
 
 def run(script, args):
@@ -29,16 +33,16 @@ def run(script, args):
 
 
 def main(argv):
+    quick = ["--quick"] if "--quick" in argv else []
+    if "--report-only" in argv:
+        return run(os.path.join(HERE, "report.py"), quick)
+    t = time.perf_counter()
     rc = 0
-    ff = os.path.join(HERE, "bench_formfactors.py")
-    if os.path.exists(ff):
-        rc |= run(ff, ["--quick"] if "--quick" in argv else [])
-    rc |= run(os.path.join(HERE, "bench_batch.py"), ["--quick"] if "--quick" in argv else [])
-    rc |= run(os.path.join(HERE, "bench_parallel.py"), ["--quick"] if "--quick" in argv else [])
-    rc |= run(os.path.join(HERE, "bench_dense.py"), ["--quick"] if "--quick" in argv else [])
-    rc |= run(os.path.join(HERE, "bench_relight_dense.py"), ["--quick"] if "--quick" in argv else [])
-    rc |= run(os.path.join(HERE, "bench_curved.py"), ["--quick"] if "--quick" in argv else [])
+    for name in BENCHES:
+        rc |= run(os.path.join(HERE, name), quick)
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
+    rc |= run(os.path.join(HERE, "report.py"), quick)
+    print(f"\nmake bench: {time.perf_counter() - t:.0f} s", flush=True)
     return 1 if rc else 0
 
 

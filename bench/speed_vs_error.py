@@ -1,8 +1,7 @@
 """Speed against error: our hemi-cube/Embree bakes against Cycles' vertex bake, same vertices.
 
     .venv/bin/python bench/speed_vs_error.py            # full run (~30 min; references cached)
-    .venv/bin/python bench/speed_vs_error.py --quick    # smoke run (~3 min)
-    .venv/bin/python bench/speed_vs_error.py --report-only   # rewrite the report from bench/out
+    .venv/bin/python bench/speed_vs_error.py --quick    # smoke run (~4 min)
 
 For every scene of ``bench/scenes_bench.py`` a fixed fine evaluation mesh (~4,000 faces) is built
 in Blender. Reference: Cycles' COMBINED vertex bake of that mesh at ``--ref-spp`` (4,096) samples,
@@ -28,7 +27,8 @@ the defaults must be no worse than the reference's own value, on each scene.
 Also: a relight (new light strength and wall colour, cached form factors) against a Cycles
 re-bake at the same error, form factors for ~2,000 patches at resolution 64 (ms per hemi-cube),
 peak memory for 2k/8k/32k patches (one subprocess each), a profile of the hemi-cube hot loop.
-Writes bench/out/results.json, docs/performance.md and docs/img/perf_*.png.
+Writes bench/out/results.json (results_quick.json with ``--quick``) and prints the targets;
+bench/report.py turns it into docs/performance.md.
 """
 from __future__ import annotations
 
@@ -40,7 +40,6 @@ import json
 import os
 import platform
 import pstats
-import resource
 import subprocess
 import sys
 import time
@@ -66,8 +65,6 @@ import scenes_bench  # noqa: E402
 
 CACHE_DIR = os.path.join(ROOT, "bench", "cache")
 OUT_DIR = os.path.join(ROOT, "bench", "out")
-DOC = os.path.join(ROOT, "docs", "performance.md")
-IMG_DIR = os.path.join(ROOT, "docs", "img")
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 REF_SEED = 4242          # reference seed; candidates use CAND_SEED (independent noise)
 CAND_SEED = 7
@@ -763,9 +760,6 @@ def machine_info():
 
 
 # ----------------------------------------------------------------------------- report
-NOTES_BEGIN, NOTES_END = "<!-- notes: kept across regenerations -->", "<!-- /notes -->"
-
-
 def _pct(x):
     return f"{100 * x:.2f}%"
 
@@ -779,17 +773,6 @@ def _fmt_s(x):
     if x is None or not np.isfinite(x):
         return "n/a"
     return f"{x:.3f}" if x < 1 else f"{x:.2f}"
-
-
-def _defaults_text():
-    d = pipeline.BakeSettings()
-    auto = {"patch_size": " (bounding-box diagonal / 14)", "element_size": " (patch / 3)"}
-    sz = {k: (f"{getattr(d, k)!r}{auto[k]}" if isinstance(getattr(d, k), str) else f"{getattr(d, k):g}")
-          for k in auto}
-    return (f"method={d.method!r}, resolution={d.resolution}, patch_size={sz['patch_size']}, element_size="
-            f"{sz['element_size']}, gather_rays={d.gather_rays}, solver={d.solver!r}, direct={d.direct!r}"
-            + "".join(f", {k}={getattr(d, k)!r}" for k in ("two_sided_emission", "patch_light_points")
-                      if hasattr(d, k)))
 
 
 def headline(sc):
@@ -898,216 +881,6 @@ def targets(results):
     return rows
 
 
-def plot_group(c):
-    """One plotted line per method family (frontier of its candidates)."""
-    if c.get("direct", "exact") == "hemicube":
-        return "paper: emitters through F"
-    if c.get("element_size"):
-        return f"{c['method']} + elements"
-    return c["method"]
-
-
-def plot(results, img_dir):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    os.makedirs(img_dir, exist_ok=True)
-    scs = results["scenes"]
-    fig, axes = plt.subplots(1, len(scs), figsize=(5.2 * len(scs), 4.4), squeeze=False)
-    group_colours = {"hemicube": "tab:blue", "embree": "tab:orange", "embree_stochastic": "tab:green",
-                     "hemicube + elements": "tab:purple", "embree_stochastic + elements": "tab:red",
-                     "paper: emitters through F": "tab:gray"}
-    for ax, sc in zip(axes[0], scs):
-        c = sorted(sc["cycles"], key=lambda c: c["seconds"])
-        ax.plot([x["seconds"] for x in c], [100 * x["error"][METRIC] for x in c], "o-", color="k", label="Cycles")
-        for x in c:
-            ax.annotate(f"{x['spp']}", (x["seconds"], 100 * x["error"][METRIC]), fontsize=7,
-                        textcoords="offset points", xytext=(3, 3))
-        groups = {}
-        for x in sc["ours"]:
-            groups.setdefault(plot_group(x), []).append(x)
-        for m, o in sorted(groups.items()):
-            col = group_colours.get(m, None)
-            ax.scatter([x["seconds"] for x in o], [100 * x["error"][METRIC] for x in o], s=10, alpha=0.4, color=col)
-            pts = [(x["seconds"], x["error"][METRIC]) for x in o]
-            f = [o[i] for i in pareto(pts)]
-            ax.plot([x["seconds"] for x in f], [100 * x["error"][METRIC] for x in f], "s-", ms=4,
-                    color=col, label=f"ours: {m}")
-        for x in sc["ours"]:
-            if x.get("defaults"):
-                ax.scatter([x["seconds"]], [100 * x["error"][METRIC]], marker="*", s=140, color="gold",
-                           edgecolors="k", zorder=5, label="ours: defaults")
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_xlabel("time, scene -> colours written (s)")
-        ax.set_ylabel("relative RMS error, reference noise removed (%)")
-        ax.set_title(f"{sc['name']}: {sc['fine_faces']} faces", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = os.path.join(img_dir, "perf_time_vs_error.png")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
-def write_report(results, doc, img_dir):
-    img = plot(results, img_dir)
-    rel_img = os.path.relpath(img, os.path.dirname(doc))
-    m = results["machine"]
-    L = ["# Performance: speed against error", "",
-         "Generated by `make bench` (`bench/speed_vs_error.py`" + (" --quick" if results.get("quick") else "")
-         + f"), started {results['started']} UTC, {results.get('seconds', 0) / 60:.1f} min.",
-         "Ratios, not absolute times, carry over to other machines: every comparison below was measured"
-         " side by side in one run on the same machine.", "",
-         "## Machine", "",
-         f"- CPU: {m.get('cpu', '?')}, {m.get('cpus')} logical CPUs, {m.get('mem_gb', '?')} GB RAM;"
-         f" {m.get('platform')}",
-         f"- Python {m.get('python')}, NumPy {m.get('numpy')}, bpy {m.get('bpy', '?')} (Cycles CPU, 2 threads),"
-         f" embreex {m.get('embreex')}; commit {m.get('git', '?')}"
-         + (f" (working tree with uncommitted changes to {', '.join(m['dirty'])})" if m.get("dirty") else ""),
-         f"- Load average at start {tuple(round(x, 1) for x in m.get('load_avg_start', ()))}, at end"
-         f" {tuple(round(x, 1) for x in m.get('load_avg_end', ()))} (a shared machine: absolute times are noisy)",
-         "", "## How it is measured", "",
-         "- Each scene is modelled coarse (a few large faces) and has a fixed **evaluation mesh**: the same"
-         " surfaces pre-cut into ~4,000 faces with hard edges between original faces. Cycles bakes that mesh;"
-         " our candidates bake either that mesh with faces as patches (`patch_size=None`, 'faces') or the coarse"
-         " scene cut into patches of the given size, and are evaluated at the evaluation mesh's vertices by"
-         " `core.output.interpolate.interpolate_at` (the paper's bilinear rendering step).",
-         f"- Reference: Cycles COMBINED vertex bake (`tools/cycles_reference.py`, emission + direct + indirect"
-         f" diffuse), {BOUNCES} bounces, no clamping/denoising, cached in `bench/cache/`. Candidates use another seed."
-         " Materials: Diffuse BSDF of the scene's reflectance; an emitter adds an Emission (strength 1) and lights"
-         " both faces, as an artist's file renders (our bake's default `two_sided_emission=True`).",
-         "- Error at the vertices (emitters left out), luminance weights w = (0.2126, 0.7152, 0.0722):"
-         " e_v = sqrt(sum_c w_c (x_c - r_c)^2); **RMS** = sqrt(mean e_v^2) / mean(Y_ref); **p95** = 95th"
-         " percentile of e_v / max(Y_ref, 0.05 mean Y_ref); **bias** = relative difference of the mean luminance.",
-         "- **smooth** (issue 11): on flat faces away from shadow boundaries and contacts, the RMS of (vertex"
-         " luminance - mean of its edge neighbours) / that mean. Flat vertices: inside an original face (>= 4"
-         " neighbours), compared, lit by the exact direct light (> 5% of its mean; lamps and emitters, shadow rays)"
-         " with no jump > 30% of it to a neighbour, and no neighbour failing these (a scene lit by the sky alone:"
-         " the interior test only). The reference's own value is the bar (its noise counts in it too).",
-         "- Time, Cycles: `bpy.ops.object.bake` (BVH build, sampling, colours written to the mesh). Time, ours:"
-         " `core.pipeline.bake` on MeshInputs (patches, form factors, solve, vertex radiosities) + the add-on's"
-         " `write_copies` (mesh + colour attribute) + the reader's `read_scene` of the evaluation scene (measured"
-         " once per scene and added to every candidate). Evaluation at the fine vertices is not timed.",
-         "- Ours: `hemicube` (NumPy rasteriser), `embree` (rays through the hemi-cube pixel centres),"
-         " `embree_stochastic` (cosine rays); Gauss-Seidel to tolerance 1e-4. A candidate is skipped when a cheaper"
-         " one of the same method (fewer patches, lower resolution/rays) already took longer than the cap.",
-         "- **defaults**: `BakeSettings()` exactly as shipped (" + _defaults_text() + ") with the scene's world and"
-         " lights: one labelled candidate per scene (a star in the plot), whatever the scene's size.",
-         "- Relight: the same settings baked once into a `FormFactorCache`, then the geometry baked again with"
-         " the emitters x1.5 and warmer reflectances: read + `pipeline.bake` (cached F, element mesh and gather"
-         " matrix) + write, against Cycles' time to the first bake's error.",
-         "", f"![time vs error]({rel_img})", ""]
-    # headline
-    L += ["## Headline ratios", "",
-          "| scene | at Cycles' 64-spp error | Cycles | ours | ratio | at 2% RMS: Cycles / ours | at 1% RMS: Cycles / ours |",
-          "|---|---|---|---|---|---|---|"]
-    for sc in results["scenes"]:
-        h = headline(sc)
-        a = h.get("at_c64", {})
-        cells = []
-        for k in ("at_0.02", "at_0.01"):
-            x = h[k]
-            cells.append(f"{_fmt_s(x['cycles_seconds'])} / {_fmt_s(x['ours_seconds'])} s = "
-                         + (f"**{x['ratio']:.2f}x**" if np.isfinite(x["ratio"]) else "not reached"))
-        L.append(f"| {sc['name']} | {_pct(a.get('error', float('nan')))} | {_fmt_s(a.get('cycles_seconds'))} s |"
-                 f" {_fmt_s(a.get('ours_seconds'))} s | "
-                 + (f"**{a['ratio']:.2f}x**" if a and np.isfinite(a["ratio"]) else "not reached")
-                 + f" | {cells[0]} | {cells[1]} |")
-    L += ["", "Ratio = Cycles' time / our time to reach the same RMS error (Cycles interpolated log-log along its"
-          " spp sweep; ours = the fastest candidate at or below that error).", ""]
-    # targets
-    L += ["## Targets (issue 5)", "", "| target | measured | holds |", "|---|---|---|"]
-    for t, meas, ok in targets(results):
-        L.append(f"| {t} | {meas} | {'yes' if ok else '**no**'} |")
-    L.append("")
-    # per-scene tables
-    for sc in results["scenes"]:
-        L += [f"## Scene `{sc['name']}`: {sc['title']}", "",
-              f"{sc['fine_faces']} evaluation faces, {sc['vertices']} vertices; reference {sc['ref_spp']} spp"
-              f" (its bake took {sc['ref_seconds']:.0f} s). Writer: {sc.get('writer')}; read"
-              f" {sc.get('read_seconds', 0):.2f} s.", "",
-              f"Reference noise, fitted over the Cycles sweep: {_pct(sc['ref_noise']['rms'])} RMS (Cycles' error falls as"
-              f" spp^-{sc['ref_noise']['alpha'] / 2:.2f}). RMS = measured RMS with that noise variance removed;"
-              f" raw = as measured. {sc.get('compared', '?')} vertices compared ({sc.get('hidden', 0)} never-lit hidden"
-              f" vertices, {sc.get('contact', 0)} on contact lines across their surface (a ground's vertex on a wall's"
-              " foot: the light jumps there, no value is right) and the emitters left out)."
-              + (f" Smoothness of the reference itself: **{_pct_opt(sc['smooth_ref'])}** over"
-                 f" {sc.get('smooth_vertices', '?')} flat vertices"
-                 + ("" if sc.get("smooth_light_tested", True) else " (no lamp or emitter: interior test only)") + "."
-                 if "smooth_ref" in sc else ""), "",
-              "| Cycles spp | time (s) | RMS | raw RMS | p95 | bias | smooth |", "|---|---|---|---|---|---|---|"]
-        for c in sc["cycles"]:
-            e = c["error"]
-            L.append(f"| {c['spp']} | {_fmt_s(c['seconds'])} | {_pct(e[METRIC])} | {_pct(e['rms'])} | {_pct(e['p95'])} |"
-                     f" {_pct(e['bias'])} | {_pct_opt(c.get('smooth'))} |")
-        L += ["", "| ours | patches | time (s) | form factors | direct | solve (it) | vertices | write | RMS | raw RMS | p95"
-              " | bias | smooth | frontier |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-        front = set(pareto([(o["seconds"], o["error"][METRIC]) for o in sc["ours"]]))
-        for i, o in sorted(enumerate(sc["ours"]), key=lambda kv: kv[1]["seconds"]):
-            st, e = o["stages"], o["error"]
-            L.append(f"| {o['label']} | {o['patches']} | {_fmt_s(o['seconds'])} | {_fmt_s(st['form_factors'])} |"
-                     f" {_fmt_s(st.get('direct'))} | {_fmt_s(st['solve'])} ({o['iterations']}) |"
-                     f" {_fmt_s(st.get('vertices'))} | {_fmt_s(o['write_seconds'])} | {_pct(e[METRIC])} | {_pct(e['rms'])} |"
-                     f" {_pct(e['p95'])} | {_pct(e['bias'])} | {_pct_opt(o.get('smooth'))} | {'*' if i in front else ''} |")
-        sk = sc.get("skipped", [])
-        if sk:
-            L += ["", "Skipped: " + "; ".join(f"{s['label']} ({s['patches']} patches)"
-                                              + (f" [{s['error']}]" if 'error' in s else "") for s in sk) + "."]
-        rls = sc.get("relight") or []
-        for rl in ([rls] if isinstance(rls, dict) else rls):
-            st = rl["stages"]
-            L += ["", f"Relight ({rl['label']}; form factors {rl['ff_source']}): {_fmt_s(rl['seconds'])} s"
-                  f" (read {_fmt_s(rl.get('read_seconds', 0.0))}, patches {_fmt_s(st.get('patches'))},"
-                  f" form factors {_fmt_s(st.get('form_factors'))}, direct {_fmt_s(st.get('direct'))}, solve"
-                  f" {_fmt_s(st.get('solve'))}, vertices {_fmt_s(st.get('vertices'))}, write {_fmt_s(rl['write_seconds'])})"
-                  f" against a Cycles re-bake at the same {_pct(rl['error_rms'])} RMS: {_fmt_s(rl['cycles_seconds'])} s"
-                  f" -> **{rl['ratio']:.0f}x**."]
-        L.append("")
-    # memory
-    mem = results.get("memory", [])
-    if mem:
-        L += ["## Form factors and peak memory (one subprocess per row, Cornell box cut to N patches)", "",
-              "| patches | method | res / rays | form factors (s wall / CPU) | ms per row | nnz | F (MB) | FF peak (MB) |"
-              " rest of the bake (s) | its peak (MB) | dense N x N float32 (MB) |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-        for r in mem:
-            if "nnz" not in r:
-                L.append(f"| {r['patches']} | {r['method']} | {r['work']} | "
-                         + (f"timed out after {r['timeout']} s" if "timeout" in r else f"failed: {r.get('error', '')[-120:]}")
-                         + " | | | | | | | |")
-                continue
-            L.append(f"| {r['patches']} | {r['method']} | {r['work']} | {r['ff_seconds']:.2f} /"
-                     f" {r.get('ff_cpu_seconds', float('nan')):.2f} | {r['ms_per_row']:.2f} |"
-                     f" {r['nnz']:,} | {r['ff_mb']:.0f} | {r['ff_peak_mb']:.0f} | {r['rest_seconds']:.2f} ({r['rest']}) |"
-                     f" {r['rest_peak_mb']:.0f} | {r['dense_mb']:.0f} |")
-        L += ["", "Peaks are resident-set growth over the process before the stage (VmHWM reset between"
-              " stages). 'Rest' = direct light, solve and vertex stages of `pipeline.bake` with F cached;"
-              " above the pipeline's patch limit, the solve alone."]
-        L.append("")
-    pr = results.get("profile")
-    if pr:
-        L += [f"## Profile of the hemi-cube rasteriser ({pr['patches']} patches, resolution {pr['resolution']},"
-              f" {pr['seconds']:.2f} s under cProfile)", "", "| function | calls | own time (s) | cumulative (s) |",
-              "|---|---|---|---|"]
-        for r in pr["rows"]:
-            L.append(f"| `{r['function']}` | {r['calls']} | {r['tottime']:.3f} | {r['cumtime']:.3f} |")
-        L.append("")
-    # keep hand-written notes
-    notes = f"{NOTES_BEGIN}\n## Notes\n\n(written after the run)\n{NOTES_END}"
-    if os.path.exists(doc):
-        old = open(doc).read()
-        if NOTES_BEGIN in old and NOTES_END in old:
-            notes = old[old.index(NOTES_BEGIN):old.index(NOTES_END) + len(NOTES_END)]
-    L += [notes, ""]
-    os.makedirs(os.path.dirname(doc), exist_ok=True)
-    with open(doc, "w") as f:
-        f.write("\n".join(L))
-    log(f"report: {doc}, plot: {img}")
-
-
 # ----------------------------------------------------------------------------- main
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -1118,7 +891,6 @@ def main(argv=None):
     ap.add_argument("--cap", type=float, default=None, help="skip candidates whose cheaper sibling took longer (s)")
     ap.add_argument("--no-memory", action="store_true")
     ap.add_argument("--refs-only", action="store_true", help="only bake (and cache) the references")
-    ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--results", default=None)
     ap.add_argument("--memory-child", nargs=3, metavar=("N", "METHOD", "RES"))
     args = ap.parse_args(argv)
@@ -1127,11 +899,6 @@ def main(argv=None):
         memory_child(int(n), m, int(r))
         return 0
     results_path = args.results or os.path.join(OUT_DIR, "results_quick.json" if args.quick else "results.json")
-    if args.report_only:
-        with open(results_path) as f:
-            results = json.load(f)
-        write_report(results, DOC, IMG_DIR)
-        return 0
     args.scenes = args.scenes or (["cornell"] if args.quick else list(scenes_bench.SCENES))
     args.ref_spp = args.ref_spp or (None if args.quick else 4096)
     args.cycles_spp = args.cycles_spp or ([4, 16, 64] if args.quick else [4, 16, 64, 256, 1024])
@@ -1168,8 +935,6 @@ def main(argv=None):
     os.makedirs(OUT_DIR, exist_ok=True)
     with open(results_path, "w") as f:
         json.dump(results, f, indent=1, default=float)
-    write_report(results, DOC if not args.quick else os.path.join(OUT_DIR, "performance_quick.md"),
-                 IMG_DIR if not args.quick else OUT_DIR)
     log("\nTargets:")
     for t, meas, ok in targets(results):
         log(f"  [{'HOLDS' if ok else 'FAILS'}] {t}: {meas}")
