@@ -256,7 +256,7 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
 def test_automatic_sizes_follow_the_scene_scale():
     """'auto': patch size = diagonal / 14, detail = a third of it, so a scene scaled by 10
     is cut into the same patches and elements."""
-    from hemicube_radiosity.core.mesh.patches import build_patches
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
 
     small = cornell_box()
     big = cornell_box(size=20.0, light_size=5.0)

@@ -25,7 +25,8 @@ from .form_factors.stage import compute_form_factors, form_factor_stage, receive
 from .mesh.contact import cut_along_contacts
 from .output.stage import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
 from .runtime.parallel import kept_heap, one_blas_thread
-from .mesh.patches import PatchError, PatchSet, build_patches, keeps_faces_whole
+from .mesh.patches import PatchError, PatchSet
+from .mesh.subdivide import build_patches, keeps_faces_whole
 from .runtime.progress import Cancelled
 from .mesh.refine import refine_stage
 from .settings import BakeSettings
