@@ -24,7 +24,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors  # noqa: E402
-from hemicube_radiosity.core.mesh.patches import build_patches  # noqa: E402
+from hemicube_radiosity.core.mesh.subdivide import build_patches  # noqa: E402
 from hemicube_radiosity.core.builtin_scenes import closed_box  # noqa: E402
 
 # cells per side of a unit cube room: 6 n^2 patches

@@ -243,7 +243,7 @@ def gather_only(rounds):
     on a shared machine buries this stage's difference in the other stages' noise."""
     from hemicube_radiosity.core.output import gather
     from hemicube_radiosity.core.light.emitters import vertex_frames
-    from hemicube_radiosity.core.mesh.patches import build_patches
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
     from hemicube_radiosity.core.rays import embree_scene
     el = build_patches(scenes.tessellate(scenes.cornell_box(), 40), None)
     x, n, _ = vertex_frames(el)

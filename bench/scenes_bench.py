@@ -21,7 +21,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 
 __all__ = ["BenchScene", "cut_fine", "fine_points", "contact_vertices", "cornell", "furnished_room", "open_yard", "SCENES",
            "get_scene"]

@@ -59,7 +59,8 @@ from hemicube_radiosity.core import pipeline  # noqa: E402
 from hemicube_radiosity.core.runtime.cache import FormFactorCache  # noqa: E402
 from hemicube_radiosity.core.light.stage import DirectLight  # noqa: E402
 from hemicube_radiosity.core.output.interpolate import interpolate_at  # noqa: E402
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches  # noqa: E402
+from hemicube_radiosity.core.mesh.patches import MeshInput  # noqa: E402
+from hemicube_radiosity.core.mesh.subdivide import build_patches  # noqa: E402
 
 import scenes_bench  # noqa: E402
 

@@ -16,7 +16,8 @@ import pytest
 from conftest import file_sha256, node_tree, scene_hash
 from test_addon import select
 
-from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings as CoreSettings, bake as core_bake
 from hemicube_radiosity.core.runtime.progress import Cancelled as CoreCancelled
 

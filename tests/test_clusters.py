@@ -11,7 +11,8 @@ from hemicube_radiosity.core.form_factors.drawn import draw_set
 from hemicube_radiosity.core.form_factors.embree import embree_hemicube_form_factors
 from hemicube_radiosity.core.util.geometry import group_form_factors, polygon_form_factors
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 
 

@@ -14,7 +14,8 @@ from hemicube_radiosity.core.output import stage as output
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.contact import cut_along_contacts, open_side
 from hemicube_radiosity.core.output.interpolate import interpolate_at
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 from hemicube_radiosity.core.rays import embree_available, embree_scene
 

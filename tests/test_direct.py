@@ -5,7 +5,7 @@ import pytest
 from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.light.emitters import emitter_direct, emitter_transport
 from hemicube_radiosity.core.util.geometry import polygon_form_factors
-from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_scene
 from hemicube_radiosity.core.builtin_scenes import quad
 

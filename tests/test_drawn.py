@@ -7,7 +7,8 @@ from hemicube_radiosity.core.form_factors import hemicube
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.form_factors.drawn import draw_set
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut
 
 

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.form_factors import embree as embree_ff
 from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core.form_factors.embree import (

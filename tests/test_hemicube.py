@@ -7,7 +7,8 @@ from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.form_factors.hemicube import (
     hemicube_form_factors, pixel_directions, pixel_weights, receiver_frames
 )
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.runtime.progress import Cancelled
 
 

@@ -2,7 +2,8 @@
 import numpy as np
 
 from hemicube_radiosity.core.output.interpolate import interpolate_at, locate
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.builtin_scenes import box
 
 

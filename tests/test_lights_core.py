@@ -11,7 +11,7 @@ from hemicube_radiosity.core.util.geometry import polygon_form_factor
 from hemicube_radiosity.core.light.lamps import (
     AreaLight, PointLight, SpotLight, SunLight, direct_irradiance, spot_attenuation
 )
-from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import EmbreeUnavailable, NumpyOccluder, embree_available
 
 needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")

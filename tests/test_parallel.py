@@ -26,7 +26,7 @@ from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
 from hemicube_radiosity.core.runtime.parallel import (
     cpu_count, one_blas_thread, ordered_map, processes_available, resolve_workers, shares
 )
-from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.runtime.progress import Cancelled, Ticker
 from hemicube_radiosity.core.rays import embree_available, embree_scene

@@ -4,9 +4,8 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.mesh.patches import (
-    MeshInput, PatchError, build_patches, keeps_faces_whole
-)
+from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError
+from hemicube_radiosity.core.mesh.subdivide import build_patches, keeps_faces_whole
 from hemicube_radiosity.core.builtin_scenes import box, cornell_box, tessellate
 
 

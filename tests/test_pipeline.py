@@ -256,7 +256,7 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
 def test_automatic_sizes_follow_the_scene_scale():
     """'auto': patch size = diagonal / 14, detail = a third of it, so a scene scaled by 10
     is cut into the same patches and elements."""
-    from hemicube_radiosity.core.mesh.patches import build_patches
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
 
     small = cornell_box()
     big = cornell_box(size=20.0, light_size=5.0)
@@ -380,12 +380,11 @@ def test_relight_that_moves_the_bright_areas_chooses_again_and_equals_a_cold_bak
 
 
 def test_relight_reads_materials_as_the_patches_and_clusters_do():
-    """What a relight re-reads onto the cached patches and clusters (pipeline._with_mesh_materials,
-    Clusters.with_materials) equals, bit for bit, PatchSet.with_mesh_materials and the clusters'
-    area-weighted mean; and a point set's cache digest (cache.array_key) is kept per array object
-    and follows its values."""
+    """What a relight re-reads onto the cached patches and clusters (PatchSet.with_mesh_materials
+    by its kept index, Clusters.with_materials) equals, bit for bit, each patch's face read mesh
+    by mesh and the clusters' area-weighted mean; and a point set's cache digest
+    (cache.array_key) is kept per array object and follows its values."""
     from hemicube_radiosity.core.runtime.cache import array_key
-    from hemicube_radiosity.core.pipeline import _with_mesh_materials
     from hemicube_radiosity.core.builtin_scenes import tessellate
 
     meshes = tessellate(cornell_box(), 3)
@@ -395,10 +394,14 @@ def test_relight_reads_materials_as_the_patches_and_clusters_do():
     rng = np.random.default_rng(2)
     for m in relit:
         m.face_rho[:] = rng.uniform(0.05, 0.9, np.shape(m.face_rho))
+    want_rho, want_em = np.empty((len(r.patches), 3)), np.empty((len(r.patches), 3))
+    for oi, m in enumerate(relit):
+        sel = r.patches.owner == oi
+        want_rho[sel] = np.asarray(m.face_rho, float)[r.patches.source_face[sel]]
+        want_em[sel] = np.asarray(m.face_emission, float)[r.patches.source_face[sel]]
     for _ in range(2):                                   # the index made, then kept
-        got = _with_mesh_materials(r.patches, relit)
-        want = r.patches.with_mesh_materials(relit)
-        assert np.array_equal(got.rho, want.rho) and np.array_equal(got.emission, want.emission)
+        got = r.patches.with_mesh_materials(relit)
+        assert np.array_equal(got.rho, want_rho) and np.array_equal(got.emission, want_em)
         assert got.verts is r.patches.verts and got.polys is r.patches.polys
     c = r.clusters.with_materials(got)
     assert np.array_equal(c.rho[c.sizes > 1], r.clusters.mean(got.rho, got.areas)[c.sizes > 1])

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.mesh.patches import build_patches
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import (NumpyOccluder, clear_ray_cache, embree_available, embree_scene, occluder,
                                           patch_triangles)
 

@@ -7,7 +7,8 @@ from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.output import stage as output
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.light.stage import DirectLight
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.rays import embree_scene, open_fraction
 from hemicube_radiosity.core.mesh.refine import split_patches

@@ -114,7 +114,7 @@ def test_cancel_stops_the_solve():
 
 def _closed_box_F():
     from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
-    from hemicube_radiosity.core.mesh.patches import build_patches
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
     from hemicube_radiosity.core.builtin_scenes import closed_box
 
     ps = build_patches(closed_box((1.0, 1.3, 0.8)), 0.2)

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.output.vertex import vertex_radiosity
 
 

@@ -25,7 +25,8 @@ from .form_factors.stage import compute_form_factors, form_factor_stage, receive
 from .mesh.contact import cut_along_contacts
 from .output.stage import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
 from .runtime.parallel import kept_heap, one_blas_thread
-from .mesh.patches import PatchError, PatchSet, build_patches, keeps_faces_whole
+from .mesh.patches import PatchError, PatchSet
+from .mesh.subdivide import build_patches, keeps_faces_whole
 from .runtime.progress import Cancelled
 from .mesh.refine import refine_stage
 from .settings import BakeSettings
@@ -171,7 +172,7 @@ def patch_stage(ctx) -> None:
         # geometry only, cached: a relight re-reads the materials onto the same patches
         key = cache_key(ctx.meshes_key(), ("patches", s.patch_size, s.group_faces, s.group_angle))
         pieces, clusters = cached(ctx.cache, key, lambda: _cut(ctx.meshes, s, lambda: mesh_faces(ctx)))
-        ctx.patches = _with_mesh_materials(pieces, ctx.meshes)
+        ctx.patches = pieces.with_mesh_materials(ctx.meshes)
         ctx.clusters = None if clusters is None else clusters.with_materials(ctx.patches)
     elif s.group_faces:
         ctx.clusters = group_pieces(ctx.patches, s.patch_size, s.group_angle)
@@ -189,33 +190,6 @@ def patch_stage(ctx) -> None:
                          f"memory budget of {s.max_memory_gb:g} GB{hint}")
     grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
     ctx.say(1.0, f"{n} patches{grouped}; form factors at most {1024 * gb:.0f} MB")
-
-
-def _with_mesh_materials(pieces: PatchSet, meshes) -> PatchSet:
-    """``pieces.with_mesh_materials(meshes)``, the same values: every piece's face read from the
-    meshes' face arrays laid end to end, by one index per piece (kept for the pieces' arrays
-    and the meshes' face array lengths: a relight of the same geometry reads its materials through it)
-    instead of a pass over the pieces per mesh."""
-    counts = tuple(len(m.face_rho) for m in meshes)
-    if counts != tuple(len(m.face_emission) for m in meshes):
-        return pieces.with_mesh_materials(meshes)
-    hit = _MATERIAL_INDEX.get(id(pieces.source_face))
-    if hit is None or hit[0] is not pieces.source_face or hit[1] is not pieces.owner or hit[2] != counts:
-        start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
-        owner = np.asarray(pieces.owner, dtype=np.int64)
-        if owner.size and (owner.min() < 0 or owner.max() >= len(meshes)):
-            return pieces.with_mesh_materials(meshes)
-        hit = (pieces.source_face, pieces.owner, counts, start[owner] + pieces.source_face)
-        while len(_MATERIAL_INDEX) >= 8:
-            _MATERIAL_INDEX.pop(next(iter(_MATERIAL_INDEX)))
-        _MATERIAL_INDEX[id(pieces.source_face)] = hit
-    index = hit[3]
-    rho = np.concatenate([np.asarray(m.face_rho, float).reshape(-1, 3) for m in meshes]).take(index, axis=0)
-    em = np.concatenate([np.asarray(m.face_emission, float).reshape(-1, 3) for m in meshes]).take(index, axis=0)
-    return pieces.with_materials(rho, em)
-
-
-_MATERIAL_INDEX: dict = {}     # id(source_face) -> (source_face, owner, face counts, index)
 
 
 def _cut(meshes, s, faces=None):

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .patches import PatchSet
+from .patches import PatchSet, poly_geometry
 from ..util.unique import unique_ints, unique_rows
 
 __all__ = ["OpenSide", "open_side"]
@@ -198,7 +198,7 @@ def _split(poly, a, m, tol):
 
 def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_rel=1e-3) -> PatchSet:
     """``elements`` cut along the lines where other surfaces (``faces``: the scene's faces, e.g.
-    :func:`.patches.build_patches` with no size) stand on or pass through them, with the
+    :func:`.subdivide.build_patches` with no size) stand on or pass through them, with the
     vertices on those lines apart on each side (a seam): no element straddles a wall's foot,
     and a vertex on it is evaluated on its own side (the open side's limit; the side under a
     house sees nothing and is never seen). A piece of more than four corners is fanned into
@@ -455,7 +455,6 @@ def _assemble(elements, pieces, eps):
     verts = np.concatenate(verts)
     polys = np.array(polys, np.int64)
     parent = np.array(parent, np.int64)
-    from .patches import poly_geometry
     centers, _, areas = poly_geometry(verts, polys)
     keep = areas > 0
     polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]

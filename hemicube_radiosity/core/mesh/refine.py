@@ -19,6 +19,7 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .clusters import make_clusters
 from ..light.stage import LUMA, DirectLight, grid_of
 from .patches import PatchSet, poly_geometry
+from ..rays import embree_available, embree_scene
 from ..util.unique import unique_ints
 
 __all__ = ["LUMA", "split_patches", "abrupt", "refine", "refine_stage"]
@@ -143,7 +144,6 @@ def _crossing(patches, cache=None):
     (B 0.047 against 0.099 for the patch above it); the floor beside the block, which gathers
     that side within millimetres of the floor, read 17% too little on the block's outline. Geometry only: cached in
     ``cache`` (a relight casts no ray)."""
-    from ..rays import embree_available, embree_scene
     if not embree_available():
         return None
 

@@ -28,7 +28,8 @@ from .gather import (
     transposed_transport
 )
 from .interpolate import inverse_bilinear, interpolate_corners, located_corners, locate
-from ..mesh.patches import PatchSet, poly_geometry, build_patches, keeps_faces_whole
+from ..mesh.patches import PatchSet, poly_geometry
+from ..mesh.subdivide import build_patches, keeps_faces_whole
 from ..runtime.parallel import Ahead, resolve_workers
 from ..runtime.progress import Ticker
 from ..mesh.refine import LUMA
