@@ -27,7 +27,8 @@ from contextlib import closing
 import numpy as np
 
 from ..util.geometry import cosine_directions, stratified_unit_square, tangent_frames
-from .hemicube import pixel_directions, pixel_weights, receiver_frames, receiver_ids
+from .hemicube import receiver_ids
+from .pixels import pixel_directions, pixel_weights, receiver_frames
 from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..runtime.progress import Ticker
