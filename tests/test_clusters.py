@@ -9,7 +9,7 @@ from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.form_factors.drawn import draw_set
 from hemicube_radiosity.core.form_factors.embree import embree_hemicube_form_factors
-from hemicube_radiosity.core.util.geometry import group_form_factors, polygon_form_factors
+from hemicube_radiosity.core.light.polygon_ff import group_form_factors, polygon_form_factors
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
@@ -150,7 +150,7 @@ def test_group_form_factors_group_by_group_equal_the_flat_pairs_bit_for_bit(monk
     """A few groups are evaluated group by group (points x edges blocks, in blocks of points),
     many groups as flat (point, group) pairs: the same sums in the same order, bit for bit,
     including the points below part of a group (clipped contours) and a small block size."""
-    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core.light import polygon_ff
     rng = np.random.default_rng(8)
     lamp = scenes.tessellate([scenes.cornell_box()[5]], 9)
     p = build_patches(lamp, None)
@@ -160,9 +160,9 @@ def test_group_form_factors_group_by_group_equal_the_flat_pairs_bit_for_bit(monk
     nrm = rng.normal(size=(600, 3))
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     by_group = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
-    monkeypatch.setattr(geometry, "BLOCK_PAIRS", 97)
+    monkeypatch.setattr(polygon_ff, "BLOCK_PAIRS", 97)
     small_blocks = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
-    monkeypatch.setattr(geometry, "GROUP_LOOP", 0)
+    monkeypatch.setattr(polygon_ff, "GROUP_LOOP", 0)
     flat = group_form_factors(pts, nrm, p.corners(), groups, p.normals)
     assert (flat > 0).sum() > 100 and groups.max() >= 1
     assert np.array_equal(by_group, flat) and np.array_equal(small_blocks, flat)
@@ -173,10 +173,11 @@ def test_clipped_contour_answers_points_below_the_whole_region_without_clipping(
     plane) sees nothing of it: F = 0, ok, without the clipping; the points that see part of it
     get what the clipping gives them among any others, bit for bit, and what the face-by-face
     sum gives."""
-    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core.light import polygon_ff
+    from hemicube_radiosity.core.light.outline import GroupOutline
     rng = np.random.default_rng(11)
     lamp = build_patches([scenes.cornell_box()[5]], None)              # the lamp, facing down
-    o = geometry.GroupOutline.of(lamp.corners(), np.zeros(len(lamp), int), lamp.normals)
+    o = GroupOutline.of(lamp.corners(), np.zeros(len(lamp), int), lamp.normals)
     centre = lamp.centers.mean(axis=0)
     pts = centre + rng.uniform((-1.5, -1.5, -1.5), (1.5, 1.5, -0.05), (400, 3))   # below the lamp
     nrm = rng.normal(size=(400, 3))
@@ -184,11 +185,11 @@ def test_clipped_contour_answers_points_below_the_whole_region_without_clipping(
     nrm[100:120] = lamp.normals[0]                                    # in the horizon's plane: nothing
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
     pts[100:120, 2] = centre[2]
-    F, ok = geometry._clipped_contour(pts, nrm, o.edges, lamp.normals[0])
+    F, ok = polygon_ff._clipped_contour(pts, nrm, o.edges, lamp.normals[0])
     assert ok.all() and not F[:120].any()
     part = np.flatnonzero(F > 0)
     assert part.size > 100
-    Fp, okp = geometry._clipped_rows(pts[120:], nrm[120:], o.edges, lamp.normals[0])
+    Fp, okp = polygon_ff._clipped_rows(pts[120:], nrm[120:], o.edges, lamp.normals[0])
     assert np.array_equal(F[120:], Fp) and okp.all()
     ref = polygon_form_factors(pts, nrm, lamp.corners(), lamp.normals).sum(axis=1)
     np.testing.assert_allclose(F, ref, atol=1e-12)
@@ -234,7 +235,7 @@ def test_a_dense_lamp_split_in_cells_has_straight_cell_outlines():
     its own faces' form factor to within the sliver of triangles along its borders (1.2% of
     the lamp's at these points; asserted below 2%)."""
     from hemicube_radiosity.core.light.emitters import emitter_transport
-    from hemicube_radiosity.core.util.geometry import GroupOutline
+    from hemicube_radiosity.core.light.outline import GroupOutline
 
     rng = np.random.default_rng(9)
     quad = [scenes.cornell_box()[5]]
@@ -269,9 +270,10 @@ def test_straightened_group_outlines_keep_the_exact_sum(monkeypatch, kind):
     split at random: into Voronoi cells (straightened: 93-236 edges in all become 18-55) or face
     by face at random (scattered faces: their outlines would cross, so they are kept), the sum
     over the groups is the whole lamp's closed form to round-off."""
-    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core.light import outline as group_outline
+    from hemicube_radiosity.core.light.outline import GroupOutline
 
-    monkeypatch.setattr(geometry, "STRAIGHTEN_ABOVE", 0)
+    monkeypatch.setattr(group_outline, "STRAIGHTEN_ABOVE", 0)
     rng = np.random.default_rng(0)
     p = build_patches(scenes.tessellate([scenes.cornell_box()[5]], 23), None)
     c, pn = p.corners(), p.normals
@@ -289,7 +291,7 @@ def test_straightened_group_outlines_keep_the_exact_sum(monkeypatch, kind):
         else:
             g = rng.integers(0, k, len(c))
         g = np.unique(g, return_inverse=True)[1].reshape(-1)
-        outline = geometry.GroupOutline.of(c, g, pn)
+        outline = GroupOutline.of(c, g, pn)
         if kind == "cells":
             assert outline.edge_count.max() <= 12
         F = group_form_factors(pts, nrm, c, g, pn, outline)
@@ -300,13 +302,14 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     """A dense sphere cut into curved groups (a hot cap shining on a room): the normal cone
     that decides most point-group pairs at once, and the face-by-face sum over the faces turned
     to the point only, give the plain sum over every face of :func:`polygon_form_factors`."""
-    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core.light import polygon_ff
+    from hemicube_radiosity.core.light.outline import GroupOutline
 
     rng = np.random.default_rng(3)
     p = build_patches([_uv_sphere(48, 24)], None)
     c, pn = p.corners(), p.normals
     g = group_pieces(p, 0.7).of                                       # cells and 30-degree normal bins
-    outline = geometry.GroupOutline.of(c, g, pn)
+    outline = GroupOutline.of(c, g, pn)
     assert (~outline.planar).sum() >= 8
     pts = np.concatenate([rng.uniform(-3, 3, (300, 3)), p.centers[::7] * 1.0001])   # far, and on the ball
     nrm = rng.normal(size=(len(pts), 3))
@@ -316,7 +319,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     F = group_form_factors(pts, nrm, c, g, pn, outline)
     np.testing.assert_allclose(F, want, rtol=1e-9, atol=1e-13)
     # the cone settles most pairs without a face-by-face test
-    n_front, count = geometry._in_front(pts, outline)
+    n_front, count = polygon_ff._in_front(pts, outline)
     assert ((n_front == 0) | (n_front == count[None])).mean() > 0.8
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.light.emitters import emitter_direct, emitter_transport
-from hemicube_radiosity.core.util.geometry import polygon_form_factors
+from hemicube_radiosity.core.light.polygon_ff import polygon_form_factors
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_scene
 from hemicube_radiosity.core.builtin_scenes import quad
@@ -161,16 +161,16 @@ def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
     (direct._outline), and the bake is the same as one that makes it every time."""
     import hashlib
     from hemicube_radiosity.core.light import emitters as direct
-    from hemicube_radiosity.core.util import geometry
+    from hemicube_radiosity.core.light.outline import GroupOutline
     from hemicube_radiosity.core import builtin_scenes as scenes
     from hemicube_radiosity.core.pipeline import BakeSettings, bake
     made = []
-    real = geometry.GroupOutline.of.__func__
+    real = GroupOutline.of.__func__
 
     def of(cls, polys, groups, normals):
         made.append(hashlib.sha256(np.ascontiguousarray(polys).tobytes()).hexdigest())
         return real(cls, polys, groups, normals)
-    monkeypatch.setattr(geometry.GroupOutline, "of", classmethod(of))
+    monkeypatch.setattr(GroupOutline, "of", classmethod(of))
     monkeypatch.setattr(direct, "_OUTLINES", {})
     meshes = scenes.tessellate(scenes.cornell_box(), 8)
     s = BakeSettings(workers=1, resolution=16, gather_rays=16)

@@ -6,7 +6,7 @@ from analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.output.gather import (
     final_gather, gather_matrix, patch_parameters, surface_values
 )
-from hemicube_radiosity.core.util.geometry import polygon_form_factors
+from hemicube_radiosity.core.light.polygon_ff import polygon_form_factors
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_scene, sky_fraction
 from hemicube_radiosity.core.builtin_scenes import closed_box, quad

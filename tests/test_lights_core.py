@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.util.geometry import polygon_form_factor
+from hemicube_radiosity.core.light.polygon_ff import polygon_form_factor
 from hemicube_radiosity.core.light.lamps import (
     AreaLight, PointLight, SpotLight, SunLight, direct_irradiance, spot_attenuation
 )

@@ -23,7 +23,8 @@ import numpy as np
 
 from .runtime.cache import kept
 from .runtime.errors import RadiosityError
-from .util.geometry import cosine_directions, in_frames, jittered_grid, tangent_frames
+from .util.geometry import in_frames, tangent_frames
+from .util.sampling import cosine_directions, jittered_grid
 from .runtime.parallel import ordered_map, resolve_workers
 from .mesh.patches import PatchSet
 

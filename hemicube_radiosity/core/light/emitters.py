@@ -22,9 +22,10 @@ import hashlib
 import numpy as np
 
 from ..runtime.cache import kept
-from ..util.geometry import (
-    GROUP_LOOP, GroupOutline, bilinear, group_form_factors, jittered_grid, polygon_form_factors
-)
+from ..util.geometry import bilinear
+from ..util.sampling import jittered_grid
+from .outline import GroupOutline
+from .polygon_ff import GROUP_LOOP, group_form_factors, polygon_form_factors
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..mesh.patches import PatchSet
 from ..util.spatial import morton_order

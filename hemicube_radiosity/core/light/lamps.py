@@ -60,10 +60,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..util.geometry import (
-    DISK_SIDES, disk_polygons, disk_samples, equal_area_scale, polygon_form_factor,
-    stratified_unit_square
-)
+from ..util.geometry import DISK_SIDES, disk_polygons, equal_area_scale
+from ..util.sampling import disk_samples, stratified_unit_square
+from .polygon_ff import polygon_form_factor
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder
