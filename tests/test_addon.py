@@ -279,7 +279,7 @@ def test_world_space_modifiers_and_negative_scale(addon, empty_scene):
 
 def test_material_reading(addon, empty_scene):
     bpy = empty_scene
-    read = sub(addon, "blender.read.scene")
+    read = sub(addon, "blender.read.materials")
 
     def principled(name, base, em=(0, 0, 0), strength=0.0):
         m = bpy.data.materials.new(name)

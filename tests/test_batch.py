@@ -20,8 +20,8 @@ from conftest import ROOT, read_gltf
 SMALL = ["--resolution", "8", "--patch-size", "0.5", "--element-size", "0", "--gather-rays", "0"]
 
 
-def cli(addon):
-    return importlib.import_module(f"{addon.__name__}.blender.cli.main")
+def cli(addon, module="main"):
+    return importlib.import_module(f"{addon.__name__}.blender.cli.{module}")
 
 
 def batch(addon, *argv):
@@ -163,20 +163,22 @@ def test_python_m_batch_from_another_directory(addon, scenes, tmp_path):
 def test_worker_gets_the_settings_it_was_given(addon):
     """What a worker is told re-parses to the very settings the batch parsed (every type of
     option: switches, choices, sizes, numbers, strings), and defaults are not repeated."""
-    c = cli(addon)
+    c = cli(addon, "batch")
+    p = cli(addon, "parser")
+    cpu_count = importlib.import_module(f"{addon.__name__}.core.runtime.parallel").cpu_count
     argv = ["batch", "x.blend", "--out-dir", "o", "--no-lights", "--method", "EMBREE", "--patch-size", "0.3",
             "--element-size", "0", "--resolution", "16", "--tolerance", "1e-5", "--cache", "/tmp/ff cache",
             "--attribute", "Col", "--rotate-seed", "3"]
-    args = c.build_parser().parse_args(argv)
+    args = p.build_parser().parse_args(argv)
     words = c.setting_argv(args)
-    again = c.build_parser().parse_args(["bake", "x.blend", *words])
-    assert c.BakeSettings.from_mapping(again) == c.BakeSettings.from_mapping(args)
+    again = p.build_parser().parse_args(["bake", "x.blend", *words])
+    assert p.BakeSettings.from_mapping(again) == p.BakeSettings.from_mapping(args)
     assert "--max-patches" not in words and "--no-others" not in words
-    assert c.setting_argv(c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o"])) == []
+    assert c.setting_argv(p.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o"])) == []
     # two files at once on this machine's cores share them; a given --workers is kept
-    two = c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2"])
-    assert c.batch_worker_argv(two) == ["--workers", str(max(1, c._cpu_count() // 2))]
-    kept = c.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2", "--workers", "3"])
+    two = p.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2"])
+    assert c.batch_worker_argv(two) == ["--workers", str(max(1, cpu_count() // 2))]
+    kept = p.build_parser().parse_args(["batch", "x.blend", "--out-dir", "o", "-j", "2", "--workers", "3"])
     assert c.batch_worker_argv(kept) == ["--workers", "3"]
     cmd, env = c.worker_command(["x.blend"])
     assert cmd[:4] == [sys.executable, "-m", "hemicube_radiosity", "bake"]

@@ -27,6 +27,7 @@ bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
+from hemicube_radiosity.blender.read import materials, visibility  # noqa: E402
 from hemicube_radiosity.blender.read.lights import read_lights, world_radiance  # noqa: E402
 from test_lighting_cycles import RHO, Comparison, floor_object  # noqa: E402
 
@@ -235,8 +236,8 @@ def test_meshes_follow_render_visibility():
     c, occ = mesh_visibility_case()
     vl = bpy.context.view_layer
     assert not occ.visible_get()                                  # what the viewport says
-    assert occ in reader.render_visible_objects(vl, {"MESH"})     # what Cycles sees
-    assert reader.is_render_visible(occ, vl)
+    assert occ in visibility.render_visible_objects(vl, {"MESH"})     # what Cycles sees
+    assert visibility.is_render_visible(occ, vl)
     floor = c.owner == 0
     x, y = np.abs(c.pos[:, 0]), np.abs(c.pos[:, 1])
     edge = (np.maximum(x, y) > 1 - 1e-6) & (np.maximum(x, y) < 1 + 1e-6)
@@ -247,11 +248,11 @@ def test_meshes_follow_render_visibility():
     # hidden with H and in a collection disabled in renders: in / out of the render
     occ.hide_viewport = False
     occ.hide_set(True)
-    assert reader.is_render_visible(occ, vl)
+    assert visibility.is_render_visible(occ, vl)
     coll, _ = _collection("render_off", [occ])
     coll.hide_render = True
-    assert not reader.is_render_visible(occ, vl)
-    assert occ not in reader.render_visible_objects(vl)
+    assert not visibility.is_render_visible(occ, vl)
+    assert occ not in visibility.render_visible_objects(vl)
 
 
 def test_hidden_mesh_modifiers_noted():
@@ -340,7 +341,7 @@ def test_emission_node_negative_strength_noted():
 def test_emission_strength_zero_via_emission_node_noted():
     m = cr.diffuse_material((0.0,) * 3, emission=1.0, name="off")
     next(n for n in m.node_tree.nodes if n.type == "EMISSION").inputs["Strength"].default_value = 0.0
-    rho, em, notes = reader.material_rho_emission(m)
+    rho, em, notes = materials.material_rho_emission(m)
     assert np.all(em == 0)
     assert any("'off'" in n and "Strength 0" in n for n in notes), notes
 

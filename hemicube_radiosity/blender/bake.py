@@ -18,16 +18,14 @@ import bpy
 from ..core.runtime.cache import FormFactorCache
 from ..core.runtime.errors import RadiosityError
 from ..core.runtime.forecast import SAID as FORECAST_SAID
-from ..core.pipeline import STAGES, BakeSettings, bake
+from ..core.pipeline import BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
 from .read import scene as read
+from .read.visibility import render_visible_objects
 from . import write
 
 __all__ = ["BakeJob", "StagePrinter", "resolve_objects", "other_meshes", "session_cache",
-           "clear_session_cache", "STAGE_NAMES"]
-
-# every stage a bake reports, in order: the core's, then the Blender layer's
-STAGE_NAMES = ("read",) + tuple(name for name, _ in STAGES) + ("write",)
+           "clear_session_cache"]
 
 
 _SESSION_CACHE = {}
@@ -80,7 +78,7 @@ def other_meshes(context, baked):
     """Meshes a render shows that are not baked (what the render sees is what the bake uses,
     whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
     partial re-bake still sees the rest of the scene's geometry and materials."""
-    return _mesh_sources(read.render_visible_objects(context.view_layer, read.GEOMETRY_TYPES),
+    return _mesh_sources(render_visible_objects(context.view_layer, read.GEOMETRY_TYPES),
                          {o.name for o in baked})
 
 
@@ -138,7 +136,7 @@ class BakeJob:
     def prepare(cls, context, objects, settings: BakeSettings | None = None, cache=None):
         """Read the scene. ``objects``: the selection (objects that are not geometry are ignored).
         Raises :class:`RadiosityError` before any work when the result could not be written as
-        the settings ask (:func:`.read.check_writable`)."""
+        the settings ask (:func:`.read.scene.check_writable`)."""
         settings = settings or BakeSettings()
         settings.validate()
         if settings.method.startswith("embree") and not embree_available():

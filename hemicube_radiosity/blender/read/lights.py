@@ -33,24 +33,24 @@ World         the active World Output's Background (or Emission) Color x Strengt
 Lights are taken by *render* visibility, as Cycles renders them, not the viewport's: a light
 hidden with H, disabled in viewports or in a collection hidden in the viewport still lights;
 ``hide_render``, a collection disabled in renders or excluded from the view layer, does not
-(``read.render_visible_objects``). Also honoured: the light object's ``visible_diffuse`` (off: no
-diffuse light at all in Cycles), the world's ``cycles_visibility.diffuse``. ``diffuse_factor`` is
-not used by Cycles (EEVEE only) and is ignored here too, with a note when it is not 1.
+(``visibility.render_visible_objects``). Also honoured: the light object's ``visible_diffuse``
+(off: no diffuse light at all in Cycles), the world's ``cycles_visibility.diffuse``.
+``diffuse_factor`` is not used by Cycles (EEVEE only) and is ignored here too, with a note when
+it is not 1.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from ...core.light.lamps import AreaLight, PointLight, SpotLight, SunLight
-from .scene import (
-    follow, rgb, is_render_visible, render_visible_objects, unevaluated_note, world_matrix
-)
+from .materials import follow, rgb
+from .visibility import is_render_visible, render_visible_objects, unevaluated_note, world_matrix
 
 __all__ = ["read_lights", "light_from_object", "world_radiance"]
 
 
 def _output_node(nt, kind):
-    outs = [n for n in nt.nodes if n.type == kind and getattr(n, "target", "ALL") in ("ALL", "CYCLES")]
+    outs = [n for n in nt.nodes if n.type == kind and n.target in ("ALL", "CYCLES")]
     return next((n for n in outs if n.is_active_output), outs[0] if outs else None)
 
 
@@ -70,7 +70,7 @@ def _input_value(node, name, notes, what, default):
 
 def _light_node_factor(data, notes, what):
     """Colour factor of a light's own node tree (Cycles multiplies the lamp by it)."""
-    if not getattr(data, "use_nodes", False) or data.node_tree is None:
+    if not data.use_nodes or data.node_tree is None:
         return np.ones(3)
     out = _output_node(data.node_tree, "OUTPUT_LIGHT")
     if out is None:
@@ -93,39 +93,39 @@ def light_from_object(ob, matrix_world, notes):
     data = ob.data
     what = f"light '{ob.name}'"
     M = np.array(matrix_world, dtype=np.float64).reshape(4, 4)
-    if not getattr(ob, "visible_diffuse", True):
+    if not ob.visible_diffuse:
         notes.append(f"{what}: not visible to diffuse rays; left out (as Cycles does)")
         return None
     if data.type == "AREA" and data.cycles.is_portal:
         notes.append(f"{what}: a portal, not a light; left out")
         return None
     color = rgb(data.color)
-    if getattr(data, "use_temperature", False):
+    if getattr(data, "use_temperature", False):          # Blender 4.5 on
         color = color * rgb(data.temperature_color)
     color = color * _light_node_factor(data, notes, what)
-    energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))
+    energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))   # exposure: 4.5 on
     if energy < 0 or np.any(color < 0):
         notes.append(f"{what}: negative power is not supported; left out")
         return None
     if energy == 0 or not np.any(color > 0):
         return None
-    if abs(float(getattr(data, "diffuse_factor", 1.0)) - 1.0) > 1e-6:
+    if abs(float(data.diffuse_factor) - 1.0) > 1e-6:
         notes.append(f"{what}: diffuse factor {data.diffuse_factor:g} ignored (EEVEE only; Cycles ignores it too)")
-    ll = getattr(ob, "light_linking", None)
-    if ll is not None and (ll.receiver_collection is not None or ll.blocker_collection is not None):
+    ll = ob.light_linking
+    if ll.receiver_collection is not None or ll.blocker_collection is not None:
         notes.append(f"{what}: light linking ignored (it lights and is blocked by everything)")
     pos = M[:3, 3].copy()
     down = -M[:3, 2]
     t = data.type
     if t == "POINT":
         return PointLight(pos, color, energy, float(data.shadow_soft_size),
-                          bool(getattr(data, "use_soft_falloff", True)))
+                          bool(data.use_soft_falloff))
     if t == "SPOT":
         sx, sy = np.linalg.norm(M[:3, 0]), np.linalg.norm(M[:3, 1])
         if abs(sx - sy) > 1e-6 * max(sx, sy):
             notes.append(f"{what}: non-uniform scale (elliptic cone in Cycles) taken as a round cone")
         return SpotLight(pos, down, color, energy, float(data.shadow_soft_size), float(data.spot_size),
-                         float(data.spot_blend), bool(getattr(data, "use_soft_falloff", True)))
+                         float(data.spot_blend), bool(data.use_soft_falloff))
     if t == "SUN":
         return SunLight(down, color, energy, float(data.angle))
     if t == "AREA":
@@ -133,7 +133,7 @@ def light_from_object(ob, matrix_world, notes):
             notes.append(f"{what}: spread {np.degrees(data.spread):.0f} deg ignored (taken as 180 deg, "
                          "a Lambertian emitter of the same power)")
         light = AreaLight(M, data.shape, float(data.size), float(data.size_y), color, energy)
-        if not getattr(data, "normalize", True):
+        if not getattr(data, "normalize", True):        # Blender 4.5 on
             light.power_w = energy * light.area          # Cycles: radiance P / pi, not P / (pi A)
         return light
     notes.append(f"{what}: type {t} not supported; left out")
@@ -150,7 +150,7 @@ def _world_tree(world):
     import bpy
 
     nt = world.node_tree
-    if bpy.app.version < (5, 0, 0) and not getattr(world, "use_nodes", True):
+    if bpy.app.version < (5, 0, 0) and not world.use_nodes:
         return None
     return nt
 
@@ -198,7 +198,7 @@ def world_radiance(world, notes):
     """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse)."""
     if world is None:
         return None                  # Cycles renders a scene without a world black, too
-    vis = getattr(world, "cycles_visibility", None)
+    vis = getattr(world, "cycles_visibility", None)   # registered by the Cycles add-on
     if vis is not None and not vis.diffuse:
         notes.append("world: not visible to diffuse rays; no sky light")
         return None
@@ -275,7 +275,7 @@ def _render_light_items(dg, notes):
         if key in seen:
             continue
         ev = ob.evaluated_get(dg)          # hidden with H: still evaluated; disabled: the original
-        if not getattr(ev, "is_evaluated", False):
+        if not ev.is_evaluated:
             n = unevaluated_note(ob)
             if n or ob.data.animation_data is not None:
                 notes.append(f"light '{ob.name}': {n or 'disabled in viewports; light animation not applied'}")
@@ -296,7 +296,7 @@ def read_lights(depsgraph_or_scene):
     notes, lights = [], []
     if hasattr(depsgraph_or_scene, "object_instances"):
         dg = depsgraph_or_scene
-        scene = dg.scene_eval if hasattr(dg, "scene_eval") else dg.scene
+        scene = dg.scene_eval
         items = _render_light_items(dg, notes)
     else:
         scene = depsgraph_or_scene
@@ -305,7 +305,7 @@ def read_lights(depsgraph_or_scene):
     for ob, M in items:
         light = light_from_object(ob, M, notes)
         if light is not None:
-            light.cast_shadows = bool(getattr(ob.data, "use_shadow", True))   # Blender's Shadow switch
+            light.cast_shadows = bool(ob.data.use_shadow)   # Blender's Shadow switch
             lights.append(light)
     world = world_radiance(scene.world, notes)
     return lights, world, notes

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Blender scene -> core input: depsgraph-evaluated meshes in world space, materials -> rho/emission.
+"""Blender scene -> core input: depsgraph-evaluated meshes in world space, split at hard edges.
 
 Nothing here modifies the scene: meshes are evaluated with ``evaluated_get(depsgraph).to_mesh()``
 and freed again.
@@ -18,23 +18,11 @@ borders) is a hard edge: each side gets its own vertex copies and colours do not
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
 seen from the front in world space.
 
-What the render sees: ``render_visible_objects(view_layer)`` lists the objects a
-render shows (not ``hide_render``, in a collection neither excluded nor disabled in renders),
-whatever the viewport shows; an object disabled in viewports is not evaluated by the viewport
-depsgraph, so it is read without modifiers and placed by ``world_matrix`` (noted). Viewport and
-render modifier settings that differ are noted. An emission colour at strength 0 and negative
-emission are no light, each with a note naming the material. Strength 0 is no light in Cycles too;
-negative light is not modelled (the solve needs emission >= 0): Cycles subtracts light for an
-Emission node's negative strength, and for a Principled BSDF's before Blender 5.0 (5.0 clamps that
-one to no light, as here).
-
-Materials: plain colour values are read from the nodes (:func:`material_rho_emission`). Where
-that is not what Cycles renders (colours from textures, colour attributes or other nodes; a
-Principled BSDF, whose specular layer, metallic and transmission take light from its diffuse
-lobe), ``shading.shade`` has Cycles bake its diffuse albedo and emission, per corner or per
-material, on temporary copies. :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission``
-for every corner of ``mesh.face_indices``; the mesh's ``face_rho`` / ``face_emission`` are their
-per-face means.
+Which objects and where: :mod:`.visibility` (what a render sees). Materials: :mod:`.materials`
+(node values) and :mod:`.shading` (Cycles' own evaluation, per corner or per material, on
+temporary copies). :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission`` for every
+corner of ``mesh.face_indices``; the mesh's ``face_rho`` / ``face_emission`` are their per-face
+means.
 
 :class:`SceneInput` carries ``lights`` and ``world`` that ``blender.read.lights.read_lights``
 fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
@@ -48,14 +36,13 @@ import numpy as np
 from ...core.mesh.patches import MeshInput
 from ...core.runtime.errors import RadiosityError
 from . import shading
+from .materials import corner_materials
+from .visibility import render_notes, world_matrix
 
-__all__ = ["ReadError", "ObjectSource", "SceneInput", "material_rho_emission", "read_object",
-           "read_scene", "weld_corners", "RHO_MAX", "render_visible_objects", "is_render_visible",
-           "world_matrix", "GEOMETRY_TYPES", "check_writable"]
+__all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
+           "GEOMETRY_TYPES", "check_writable"]
 
-RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
 COPLANAR_COS = float(np.cos(1e-3))
-DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 # Object types a render draws as surfaces: meshes, and text, curves, surfaces and metaballs, which
 # are read as the mesh Blender evaluates them to (a text object is geometry to an artist). A curve
@@ -101,276 +88,6 @@ class SceneInput:
 
     def notes(self):
         return list(self.skipped) + [f"{o.name}: {n}" for o in self.objects for n in o.notes]
-
-
-# ----------------------------------------------------------------------------- materials
-def rgb(v):
-    """(3,) float64 of a colour value (a socket's default, a light's colour) or of a float."""
-    try:
-        return np.array([float(v[0]), float(v[1]), float(v[2])])
-    except TypeError:  # a float socket
-        return np.array([float(v)] * 3)
-
-
-def _input(node, *names):
-    for n in names:
-        s = node.inputs.get(n)
-        if s is not None:
-            return s
-    return None
-
-
-def _value(node, notes, *names, default=0.0, color=True):
-    s = _input(node, *names)
-    if s is None:
-        return np.full(3, default) if color else default
-    if s.is_linked:
-        notes.append(f"{node.name} '{s.name}' is linked (texture/nodes); used its unlinked value")
-    if color:
-        return rgb(s.default_value)
-    return float(s.default_value)
-
-
-def follow(socket):
-    """The node and output socket feeding ``socket``, skipping reroutes; (None, None) if unlinked
-    (or the link or the node feeding it is muted)."""
-    while socket is not None and socket.is_linked:
-        link = socket.links[0]
-        if not link.is_valid or link.is_muted:
-            return None, None
-        node = link.from_node
-        if node.type == "REROUTE":
-            socket = node.inputs[0]
-            continue
-        if getattr(node, "mute", False):
-            return None, None
-        return node, link.from_socket
-    return None, None
-
-
-def _note_unlit(node, em, strength, color_name, strength_name, notes):
-    """An emission colour with strength 0 is no light in Cycles; say so (Blender 4.2's OBJ
-    importer turns an .mtl ``Ke`` into exactly that: the colour, strength 0)."""
-    if strength == 0 and np.any(em > 0):
-        s = node.inputs.get(strength_name)
-        if s is not None and s.is_linked:
-            return                       # already noted as linked
-        notes.append(f"{node.name} has {color_name} ({em[0]:.3g}, {em[1]:.3g}, {em[2]:.3g}) but "
-                     f"{strength_name} 0: no light (as in Cycles); raise the strength to make it glow")
-
-
-def _principled_clamps_negative_emission():
-    """Whether this Blender's Cycles renders a Principled BSDF's negative Emission Strength as no
-    light (5.0) rather than as negative light (4.2, 4.5)."""
-    import bpy
-
-    return bpy.app.version >= (5, 0, 0)
-
-
-def _principled(node, notes):
-    """(rho, emission) of a Principled BSDF read from its values (the fast path; Cycles' own
-    albedo replaces rho when :mod:`.shading` can bake it)."""
-    rho = _value(node, notes, "Base Color")
-    for name in ("Metallic", "Transmission Weight", "Transmission"):
-        s = node.inputs.get(name)
-        if s is not None and (s.is_linked or float(s.default_value) > 0):
-            notes.append(f"{node.name} '{name}' ignored (diffuse only)")
-            break
-    em = _value(node, notes, "Emission Color", "Emission")
-    strength = _value(node, notes, "Emission Strength", default=1.0, color=False)
-    if strength < 0 and np.any(em > 0):
-        if _principled_clamps_negative_emission():
-            # Cycles 5.0 clamps a Principled BSDF's emission at 0 (measured: no light, bakes 0)
-            notes.append(f"{node.name} Emission Strength {strength:g} is negative: no light "
-                         "(as in Cycles)")
-        else:
-            # Cycles 4.x emits negative light there, as from an Emission node (measured on
-            # 4.2.23 and 4.5.15: a strength -2 panel bakes -2 x its colour and takes from the
-            # floor exactly what strength +2 adds); the solve needs emission >= 0
-            notes.append(f"{node.name} Emission Strength {strength:g} is negative: Cycles "
-                         "subtracts light there, this bake takes it as no light")
-        return rho, np.zeros(3)
-    _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
-    return rho, em * strength
-
-
-def _shader(node, out_socket, mat, notes, depth=0):
-    """(rho, emission) of the shader that ``node`` outputs."""
-    zero = np.zeros(3)
-    if depth > 16:
-        notes.append("shader tree too deep; treated as black")
-        return zero, zero
-    t = node.type
-    if t == "BSDF_PRINCIPLED":
-        return _principled(node, notes)
-    if t == "BSDF_DIFFUSE":
-        return _value(node, notes, "Color"), zero
-    if t == "EMISSION":
-        em = _value(node, notes, "Color")
-        strength = _value(node, notes, "Strength", default=1.0, color=False)
-        if strength < 0 and np.any(em > 0):
-            # Cycles really emits negative light from an Emission node (it darkens what it sees);
-            # the solve needs emission >= 0
-            notes.append(f"{node.name} Strength {strength:g} is negative: Cycles subtracts light there, "
-                         "this bake takes it as no light")
-            return zero, zero
-        _note_unlit(node, em, strength, "Color", "Strength", notes)
-        return zero, em * strength
-    if t in ("MIX_SHADER", "ADD_SHADER"):
-        shaders = [s for s in node.inputs if s.type == "SHADER"]
-        parts = []
-        for s in shaders[:2]:
-            n2, o2 = follow(s)
-            parts.append(_shader(n2, o2, mat, notes, depth + 1) if n2 is not None else (zero, zero))
-        while len(parts) < 2:
-            parts.append((zero, zero))
-        if t == "ADD_SHADER":
-            return parts[0][0] + parts[1][0], parts[0][1] + parts[1][1]
-        fac = float(np.clip(_value(node, notes, "Fac", "Factor", color=False), 0.0, 1.0))
-        return ((1 - fac) * parts[0][0] + fac * parts[1][0], (1 - fac) * parts[0][1] + fac * parts[1][1])
-    if out_socket is not None and out_socket.type in ("RGBA", "VECTOR", "VALUE") and t in ("RGB", "VALUE"):
-        # A colour wired straight into the output renders as emission of that colour.
-        v = out_socket.default_value
-        c = np.array([float(v[0]), float(v[1]), float(v[2])]) if out_socket.type != "VALUE" else np.full(3, float(v))
-        return zero, c
-    notes.append(f"shader '{node.name}' ({node.bl_idname}) approximated by the viewport colour")
-    return np.array(mat.diffuse_color[:3], float), zero
-
-
-def _uses_nodes(mat):
-    """Blender 5 materials always use their node tree (``use_nodes`` is deprecated there)."""
-    import bpy
-
-    if bpy.app.version >= (5, 0, 0):
-        return mat.node_tree is not None
-    return bool(mat.use_nodes) and mat.node_tree is not None
-
-
-def material_rho_emission(mat):
-    """(rho (3,), emission (3,), notes) of a material, in scene-linear radiance units.
-
-    Principled BSDF: Base Color; Emission Color x Emission Strength. Diffuse BSDF: Color.
-    Emission: Color x Strength. Mix/Add shader: mixed/added. Unlinked inputs only (a linked
-    input contributes its unlinked value, noted). No material: grey 0.8. Material without a node
-    tree: its viewport colour. Reflectivity is clipped to [0, 0.999] (noted).
-    """
-    notes = []
-    zero = np.zeros(3)
-    if mat is None:
-        notes.append("no material; grey 0.8")
-        rho, em = np.array(DEFAULT_RHO), zero
-    else:
-        nt = mat.node_tree if _uses_nodes(mat) else None
-        if nt is None:
-            notes.append(f"material '{mat.name}' has no nodes; used its viewport colour")
-            rho, em = np.array(mat.diffuse_color[:3], float), zero
-        else:
-            outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.target in ("ALL", "CYCLES")]
-            out = next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-            if out is None:
-                notes.append(f"material '{mat.name}' has no output node; used its viewport colour")
-                rho, em = np.array(mat.diffuse_color[:3], float), zero
-            else:
-                node, sock = follow(out.inputs["Surface"])
-                if node is None:
-                    notes.append(f"material '{mat.name}' has nothing connected to Surface; black")
-                    rho, em = zero, zero
-                else:
-                    sub = []
-                    rho, em = _shader(node, sock, mat, sub)
-                    notes += [f"material '{mat.name}': {s}" for s in sub]
-    rho = np.asarray(rho, float)
-    em = np.asarray(em, float)
-    where = f" in '{mat.name}'" if mat is not None else ""
-    for what, v in (("reflectivity", rho), ("emission", em)):
-        if not np.all(np.isfinite(v)):
-            notes.append(f"{what} {_fmt(v)} is not a number{where}: taken as 0 there, as Cycles "
-                         "does; fix the value")
-    rho = np.where(np.isfinite(rho), rho, 0.0)
-    em = np.where(np.isfinite(em), em, 0.0)
-    if np.any(em < 0):
-        notes.append(f"negative emission {tuple(np.round(em, 3))} taken as no light"
-                     + (f" in '{mat.name}'" if mat is not None else ""))
-        em = np.maximum(em, 0.0)
-    if np.any(rho > RHO_MAX) or np.any(rho < 0):
-        notes.append(f"reflectivity {tuple(np.round(rho, 3))} clipped to [0, {RHO_MAX}]"
-                     + (f" in '{mat.name}'" if mat is not None else ""))
-        rho = np.clip(rho, 0.0, RHO_MAX)
-    return rho, em, notes
-
-
-# notes of material_rho_emission that a Cycles evaluation makes moot (it reads what they name)
-_FIXED_BY_CYCLES = ("is linked (texture/nodes)", "by the viewport colour", "ignored (diffuse only)",
-                    "has no nodes; used its viewport colour")
-
-
-def _corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
-    """(corner_rho (L,3), corner_emission (L,3), notes) in the order of ``corner_loop``.
-
-    Plain materials give their :func:`material_rho_emission` value at every corner; a material
-    that :func:`.shading.classify` sends to Cycles gives Cycles' value: one per material
-    ('constant'), or the object's baked corners ('corners')."""
-    L = corner_loop.size
-    corner_rho, corner_em = np.empty((L, 3)), np.empty((L, 3))
-    baked = shaded.corners.get(name)
-    notes = []
-    if baked is not None and baked[0].shape[0] != L:
-        notes.append("Cycles' corner colours did not match the mesh read; used per-material values")
-        baked = None
-    for k, m in enumerate(mats):
-        sel = corner_mat == k
-        rho, em, n = material_rho_emission(m)
-        kind, why = shaded.kinds.get(m.original.name_full if m is not None else None, ("plain", []))
-        label = f"material '{m.name}'" if m is not None else ""
-        if kind != "plain" and shaded.failed:
-            n.append(f"{label}: {shaded.failed}; its unlinked values used")
-        elif kind == "constant" and m.original.name_full in shaded.materials:
-            n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
-            c_rho, c_em = shaded.materials[m.original.name_full]
-            n += [f"{label}: {w}" for w in why]
-            if np.any(np.abs(c_rho - rho) > 0.005 * np.maximum(rho, 1e-3)):
-                n.append(f"{label}: diffuse reflectance {_fmt(c_rho)} as Cycles evaluates it (its "
-                         f"colour {_fmt(rho)}; the specular layer, metallic or transmission reflect "
-                         "the rest, which is not baked)")
-            rho, em = _clean(c_rho, c_em, label, n)
-        elif kind == "corners" and baked is not None:
-            n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
-            n += [f"{label}: {w}, evaluated by Cycles at the corners" for w in why]
-            r, e = _clean(baked[0][corner_loop[sel]], baked[1][corner_loop[sel]], label, n)
-            corner_rho[sel], corner_em[sel] = r, e
-            if k in used:
-                notes += [s for s in n if s not in notes]
-            continue
-        elif kind == "corners":
-            n.append(f"{label}: not evaluated by Cycles; its unlinked values used")
-        corner_rho[sel], corner_em[sel] = rho, em
-        if k in used:
-            notes += [s for s in n if s not in notes]
-    return corner_rho, corner_em, notes
-
-
-def _fmt(c):
-    return "(" + ", ".join(f"{x:.3g}" for x in c) + ")"
-
-
-def _clean(rho, em, label, notes):
-    """Cycles' values made what the solve needs: finite, emission >= 0, reflectance in [0, RHO_MAX]."""
-    if not (np.all(np.isfinite(rho)) and np.all(np.isfinite(em))):
-        notes.append(f"{label}: Cycles evaluates it to a value that is not a number at some corners; "
-                     "taken as 0 there")
-        rho = np.where(np.isfinite(rho), rho, 0.0)
-        em = np.where(np.isfinite(em), em, 0.0)
-    if np.any(em < 0):
-        # the node reader has already named the negative strength (an Emission node's, or a
-        # Principled BSDF's before 5.0, whose negative light Cycles bakes too): one note, not two
-        if not any(s.startswith(f"{label}: ") and "is negative" in s for s in notes):
-            notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
-                         "subtracts light there, this bake takes it as no light")
-        em = np.maximum(em, 0.0)
-    if np.any(rho > RHO_MAX + 1e-6) or np.any(rho < 0):
-        notes[:] = [s for s in notes if not (s.startswith("reflectivity (") and "clipped to" in s)]
-        notes.append(f"{label}: reflectivity up to {float(np.max(rho)):.3g} clipped to [0, {RHO_MAX}]")
-    return np.clip(rho, 0.0, RHO_MAX), em
 
 
 # ----------------------------------------------------------------------------- welding
@@ -424,95 +141,6 @@ def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, fa
     lab = _union(L, i[ok], j[ok])
     uniq, first_loop, corner_vertex = np.unique(lab, return_index=True, return_inverse=True)
     return corner_vertex.reshape(-1), loop_vert[first_loop]
-
-
-# ----------------------------------------------------------------------------- render visibility
-def _render_collections(view_layer):
-    """Collections whose objects the render sees in ``view_layer``: the layer-collection tree
-    without excluded layer collections and collections disabled in renders (and everything under
-    them). The viewport's switches (eye, monitor) do not matter to a render."""
-    out, stack = [], [view_layer.layer_collection]
-    while stack:
-        lc = stack.pop()
-        if lc.exclude or lc.collection.hide_render:
-            continue
-        out.append(lc.collection)
-        stack.extend(lc.children)
-    return out
-
-
-def render_visible_objects(view_layer, types=None):
-    """Original objects that a render of ``view_layer`` shows, in view-layer order: in a
-    collection the render sees (not excluded, not disabled in renders up the tree) and not
-    ``hide_render`` themselves, whatever their viewport visibility (hidden with H, disabled in
-    viewports). ``types``: e.g. {'MESH'} or {'LIGHT'} (default: all). Instances made by
-    instancers are not listed (the depsgraph has them)."""
-    names = set()
-    for coll in _render_collections(view_layer):
-        names.update(o.name for o in coll.objects)
-    return [o for o in view_layer.objects
-            if o.name in names and not o.hide_render and (types is None or o.type in types)]
-
-
-def is_render_visible(ob, view_layer):
-    """True when a render of ``view_layer`` shows the original object ``ob``."""
-    ob = getattr(ob, "original", ob)
-    if ob.hide_render or view_layer.objects.get(ob.name) is None:
-        return False
-    return any(c.objects.get(ob.name) is not None for c in _render_collections(view_layer))
-
-
-def world_matrix(obj, depsgraph):
-    """(4, 4) world matrix of ``obj`` as the render places it. Objects disabled in viewports are
-    not evaluated by the viewport depsgraph and their stored ``matrix_world`` may be stale (never
-    computed for an object made by a script), so theirs is rebuilt from location/rotation/scale
-    and the parent chain (constraints and parent bones/vertices are not applied)."""
-    ob_eval = obj.evaluated_get(depsgraph)
-    if getattr(ob_eval, "is_evaluated", True):
-        return np.array(ob_eval.matrix_world, dtype=np.float64)
-    obj = getattr(obj, "original", obj)
-    M = np.array(obj.matrix_basis, dtype=np.float64)
-    if obj.parent is not None:
-        P = world_matrix(obj.parent, depsgraph)
-        M = P @ np.array(obj.matrix_parent_inverse, dtype=np.float64) @ M
-    return M
-
-
-def unevaluated_note(obj):
-    """Why the matrix of an object the viewport does not evaluate may differ from the render's."""
-    what = [w for w, on in (("constraints", len(obj.constraints) > 0),
-                            ("animation", obj.animation_data is not None),
-                            ("parent " + obj.parent_type.lower(),
-                             obj.parent is not None and obj.parent_type != "OBJECT")) if on]
-    if what:
-        return (f"disabled in viewports, so not evaluated; placed by its location/rotation/scale "
-                f"and parent only ({', '.join(what)} not applied)")
-    return None
-
-
-def _render_notes(obj, ob_eval):
-    """What the render sees differently from the viewport-evaluated mesh we read."""
-    notes = []
-    mods = [m for m in obj.modifiers]
-    if not getattr(ob_eval, "is_evaluated", True):
-        n = unevaluated_note(obj)
-        if n:
-            notes.append(n)
-        if any(m.show_render for m in mods):
-            notes.append("disabled in viewports (not evaluated there): read without its modifiers; "
-                         "enable it in viewports for an exact bake")
-            return notes
-    for m in mods:
-        if m.show_render != m.show_viewport:
-            notes.append(f"modifier '{m.name}' is {'on' if m.show_render else 'off'} in renders but "
-                         f"{'on' if m.show_viewport else 'off'} in the viewport; the viewport's mesh was used")
-        elif m.show_render and m.type in ("SUBSURF", "MULTIRES") and m.levels != m.render_levels:
-            notes.append(f"modifier '{m.name}': viewport level {m.levels} used (renders use {m.render_levels})")
-    off = [k for k in ("diffuse", "shadow") if not getattr(obj, f"visible_{k}", True)]
-    if off:
-        notes.append(f"not visible to {' and '.join(off)} rays in Cycles; here it still reflects and "
-                     "casts shadows like any surface")
-    return notes
 
 
 # ----------------------------------------------------------------------------- objects
@@ -606,9 +234,9 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     offsets = np.concatenate([[0], np.cumsum(pt)])
     if shaded is None:
         shaded = shading.shade([obj], depsgraph)
-    notes = _render_notes(obj, ob_eval)
-    corner_rho, corner_em, mat_notes = _corner_materials(obj.name, mats, mi[loop_face], corner_loop,
-                                                          shaded, set(np.unique(mi).tolist()))
+    notes = render_notes(obj, ob_eval)
+    corner_rho, corner_em, mat_notes = corner_materials(obj.name, mats, mi[loop_face], corner_loop,
+                                                         shaded, set(np.unique(mi).tolist()))
     notes += [s for s in mat_notes if s not in notes]
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]

@@ -1,8 +1,8 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Reflectance and emission as Cycles evaluates them, by Cycles itself (Blender glue only).
 
-The reader (``read.py``) takes plain colour values straight from the nodes. Where that is not what
-Cycles renders, Cycles is asked instead:
+The material reader (``materials.py``) takes plain colour values straight from the nodes. Where
+that is not what Cycles renders, Cycles is asked instead:
 
 * **corners**: a material whose Base Color / Color / Emission / Strength / Fac / Metallic / ...
   comes from nodes (image textures through the mesh's UVs, procedural textures, colour
@@ -36,6 +36,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .materials import follow, uses_nodes
+from .visibility import world_matrix
+
 __all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate"]
 
 ATTRIBUTE = "_hr_shading"
@@ -65,20 +68,11 @@ class Shaded:
 
 # ----------------------------------------------------------------------------- which materials
 def _output_node(mat):
-    import bpy
-
-    nt = mat.node_tree
-    if nt is None or (bpy.app.version < (5, 0, 0) and not mat.use_nodes):
+    if not uses_nodes(mat):
         return None
+    nt = mat.node_tree
     outs = [n for n in nt.nodes if n.type == "OUTPUT_MATERIAL" and n.target in ("ALL", "CYCLES")]
     return next((n for n in outs if n.is_active_output), outs[0] if outs else None)
-
-
-def _source(socket):
-    """(node, from socket) feeding ``socket`` past reroutes, or (None, None)."""
-    from .scene import follow
-
-    return follow(socket)
 
 
 def describe(node, socket=None):
@@ -109,7 +103,7 @@ def _shader_nodes(out):
     (the Surface itself)."""
     stack, seen = [out.inputs["Surface"]], set()
     while stack:
-        node, sock = _source(stack.pop())
+        node, sock = follow(stack.pop())
         if node is None or node.name in seen:
             continue
         seen.add(node.name)
@@ -125,7 +119,7 @@ def classify(mat):
         return "plain", []
     out = _output_node(mat)
     if out is None:
-        if mat.node_tree is None or not getattr(mat, "use_nodes", True):
+        if not uses_nodes(mat):
             # Blender < 5 without nodes: Cycles renders a Principled BSDF of the viewport colour
             return "constant", []
         return "plain", []
@@ -150,7 +144,7 @@ def classify(mat):
         for s in node.inputs:
             if s.type == "SHADER" or not s.is_linked or s.name in _GEOMETRY_INPUTS or not s.enabled:
                 continue
-            src, _ = _source(s)
+            src, _ = follow(s)
             if src is None:
                 continue
             if src.type in ("RGB", "VALUE"):            # a constant, but not the socket's own value
@@ -216,7 +210,7 @@ def _bake(scene, objects, kind, pass_filter):
 
 
 def _original(m):
-    return getattr(m, "original", m) if m is not None else None
+    return m.original if m is not None else None
 
 
 def _assign_materials(me, materials):
@@ -247,8 +241,6 @@ def _copy_objects(objects, depsgraph, made_obs, made_meshes):
     ``made_meshes`` as soon as it exists and (object name, copy) to ``made_obs``, so that the
     caller removes whatever was made even when a later copy fails."""
     import bpy
-
-    from .scene import world_matrix
 
     for obj in objects:
         ob_eval = obj.evaluated_get(depsgraph)

@@ -18,6 +18,7 @@ import threading
 
 import bpy
 
+from ...core.pipeline import STAGE_SHARES, STAGES
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.progress import Cancelled
 from ..bake import BakeJob, StagePrinter
@@ -26,9 +27,22 @@ from .. import write
 
 __all__ = ["OBJECT_OT_radiosity_bake", "OBJECT_OT_radiosity_clear", "classes"]
 
-# Share of the progress bar per stage (form factors dominate).
-_STAGE_SPAN = {"patches": (0.0, 0.03), "refine": (0.03, 0.05), "form_factors": (0.05, 0.7), "direct": (0.7, 0.78),
-               "solve": (0.78, 0.82), "vertices": (0.82, 0.95), "estimate": (0.95, 0.97), "write": (0.97, 1.0)}
+_WRITE_SHARE = 3           # writing the result into the scene, in percent as STAGE_SHARES
+
+
+def _stage_spans():
+    """{stage: (start, end)} of the progress bar: the core's stages in order, each as wide as its
+    usual share of a bake's time (``core.pipeline.STAGE_SHARES``), then the write."""
+    shares = [(name, STAGE_SHARES[name]) for name, _ in STAGES] + [("write", _WRITE_SHARE)]
+    total = sum(share for _, share in shares)
+    spans, done = {}, 0
+    for name, share in shares:
+        spans[name] = (done / total, (done + share) / total)
+        done += share
+    return spans
+
+
+_STAGE_SPAN = _stage_spans()
 _PASS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKPADZOOM",
          "MOUSEMOVE", "INBETWEEN_MOUSEMOVE", "NDOF_MOTION"}
 
@@ -36,7 +50,7 @@ _PASS = {"MIDDLEMOUSE", "WHEELUPMOUSE", "WHEELDOWNMOUSE", "TRACKPADPAN", "TRACKP
 def worker_state():
     """What the worker thread tells the modal loop: stage, fraction and message of the progress;
     a user-facing ``error`` line, or a ``bug`` (any other exception, raised on the main thread)."""
-    return {"stage": "patches", "fraction": 0.0, "message": "", "error": None, "bug": None,
+    return {"stage": STAGES[0][0], "fraction": 0.0, "message": "", "error": None, "bug": None,
             "cancelled": False}
 
 
