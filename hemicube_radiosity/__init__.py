@@ -7,7 +7,7 @@ in plain Python; ``register()`` / ``unregister()`` are called by the extension's
 ``__init__.py`` and hand over to :mod:`.blender`.
 """
 
-__version__ = "0.1.0"
+from .version import __version__  # noqa: F401  (the package's version, read by the CLI and tests)
 
 
 def register():

@@ -22,7 +22,7 @@ import time
 
 import bpy
 
-from ... import __version__
+from ...version import __version__
 from ...core.runtime.parallel import cpu_count
 from ...core.settings import schema
 from .parser import INPUT_EXT, PROG, CLIError, bake_settings, setting_flag
