@@ -21,7 +21,7 @@ import hashlib
 
 import numpy as np
 
-from ..runtime.cache import kept
+from ..runtime.cache import Memo
 from ..util.geometry import (
     GROUP_LOOP, GroupOutline, bilinear, group_form_factors, jittered_grid, polygon_form_factors
 )
@@ -174,12 +174,12 @@ def _outline(corners, groups, em_normals):
     for a in (corners, groups, em_normals):
         a = np.ascontiguousarray(a)
         h.update(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes())
-    return kept(_OUTLINES, h.digest(), lambda: GroupOutline.of(corners, groups, em_normals), OUTLINES_KEPT)
+    return _OUTLINES.get(h.digest(), lambda: GroupOutline.of(corners, groups, em_normals))
 
 
 #: Emitter outlines :func:`_outline` keeps.
 OUTLINES_KEPT = 4
-_OUTLINES: dict = {}
+_OUTLINES = Memo(OUTLINES_KEPT)
 
 
 class _Transport:
