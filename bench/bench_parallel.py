@@ -38,7 +38,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from hemicube_radiosity.core.runtime import parallel
+from hemicube_radiosity.core.runtime import forked
 from hemicube_radiosity.core import pipeline, builtin_scenes as scenes  # noqa: E402
 from hemicube_radiosity.core.runtime.parallel import cpu_count  # noqa: E402
 from hemicube_radiosity.core.rays import clear_ray_cache, embree_available  # noqa: E402
@@ -193,14 +193,14 @@ GATHER_THREADS = ("2 gthr", 2, True)
 
 def bake_config(meshes, kw, workers, processes, label=""):
     from hemicube_radiosity.core.output import gather
-    parallel.PROCESSES = processes
+    forked.PROCESSES = processes
     forked_from = gather.PROCESS_RAYS
     if label == GATHER_THREADS[0]:
         gather.PROCESS_RAYS = None
     try:
         return timed_bake(meshes, BakeSettings(workers=workers, **kw))
     finally:
-        parallel.PROCESSES = True
+        forked.PROCESSES = True
         gather.PROCESS_RAYS = forked_from
 
 
@@ -292,7 +292,7 @@ def main(argv=None):
         configs = configs + (GATHER_THREADS,)
     load0 = os.getloadavg()
     print(f"{cpu_count()} CPUs; load average before: {load0[0]:.2f} {load0[1]:.2f} {load0[2]:.2f}; "
-          f"worker processes {'available' if parallel.processes_available() else 'NOT available'}",
+          f"worker processes {'available' if forked.processes_available() else 'NOT available'}",
           flush=True)
     print("configurations: 1 = one worker; 2 = two workers (form factors, large transports and "
           "the final gather on forked processes); 2 thr = two workers on threads only; 2 gthr = "

@@ -171,12 +171,12 @@ def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
         made.append(hashlib.sha256(np.ascontiguousarray(polys).tobytes()).hexdigest())
         return real(cls, polys, groups, normals)
     monkeypatch.setattr(GroupOutline, "of", classmethod(of))
-    monkeypatch.setattr(direct, "_OUTLINES", {})
+    direct._OUTLINES.clear()
     meshes = scenes.tessellate(scenes.cornell_box(), 8)
     s = BakeSettings(workers=1, resolution=16, gather_rays=16)
     kept = bake(meshes, s)
     assert len(made) >= 2 and len(made) == len(set(made))
-    monkeypatch.setattr(direct, "OUTLINES_KEPT", 0)          # made every time, as before
+    monkeypatch.setattr(direct._OUTLINES, "keep", 0)         # made every time, as before
     made.clear()
     again = bake(meshes, s)
     assert len(made) > len(set(made))

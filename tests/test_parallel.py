@@ -1,8 +1,8 @@
 """Both cores (issue 9): form factors, the emitters' transport, the final gather and the whole bake
 are bit-identical with one worker and with two, and cancelling stops the workers.
 
-Form factors run on forked worker processes where :func:`parallel.processes_available` (Linux),
-on threads elsewhere; both paths are checked here (``parallel.PROCESSES`` switched off for the
+Form factors run on forked worker processes where :func:`forked.processes_available` (Linux),
+on threads elsewhere; both paths are checked here (``forked.PROCESSES`` switched off for the
 threads). Batches are made small (module constants and chunk sizes) so that two workers really
 share many batches of these small scenes. No timings are asserted: bench/bench_parallel.py
 measures.
@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core.form_factors import embree as embree_ff, hemicube
-from hemicube_radiosity.core.runtime import parallel
+from hemicube_radiosity.core.runtime import background, forked, native, parallel
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.light.emitters import emitter_transport, vertex_frames
 from hemicube_radiosity.core.output.gather import gather_matrix
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.runtime.parallel import (
-    cpu_count, one_blas_thread, ordered_map, processes_available, resolve_workers, shares
-)
+from hemicube_radiosity.core.runtime.forked import processes_available
+from hemicube_radiosity.core.runtime.native import one_blas_thread
+from hemicube_radiosity.core.runtime.parallel import cpu_count, ordered_map, resolve_workers, shares
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.runtime.progress import Cancelled, Ticker
@@ -41,7 +41,7 @@ def pool_kind(request, monkeypatch):
     """Run a test with worker processes (where there are any) and with threads only."""
     if request.param == "processes" and not processes_available():
         pytest.skip("no 'fork' worker processes here")
-    monkeypatch.setattr(parallel, "PROCESSES", request.param == "processes")
+    monkeypatch.setattr(forked, "PROCESSES", request.param == "processes")
     return request.param
 
 
@@ -135,9 +135,9 @@ def test_a_bake_runs_on_one_blas_thread_and_puts_the_count_back(monkeypatch):
     luminance products): the stages run with one BLAS thread, overlapping bakes share the
     setting, and what was set before is back afterwards, also when a stage fails."""
     from hemicube_radiosity.core import pipeline
-    if not parallel._openblas():
+    if not native.openblas():
         pytest.skip("NumPy's BLAS here is not OpenBLAS")
-    set_threads, get_threads = parallel._openblas()[0]
+    set_threads, get_threads = native.openblas()[0]
     before = get_threads()
     seen = []
     try:
@@ -168,10 +168,10 @@ def test_a_worker_forked_by_a_bake_starts_no_blas_thread():
     """OpenBLAS stops its threads at a fork and starts them again in the child whenever its thread
     count is set there, even to the one it has; a new one spins for 0.1 s. A worker forked inside
     a bake (one BLAS thread already) leaves the count alone: it runs on its one thread."""
-    if not parallel._openblas():
+    if not native.openblas():
         pytest.skip("NumPy's BLAS here is not OpenBLAS")
     with one_blas_thread():
-        got = list(ordered_map(lambda i: (len(os.listdir("/proc/self/task")), parallel._openblas()[0][1]()),
+        got = list(ordered_map(lambda i: (len(os.listdir("/proc/self/task")), native.openblas()[0][1]()),
                                range(4), 2, processes=True))
     assert got == [(1, 1)] * 4
 
@@ -188,7 +188,7 @@ def test_ordered_map_processes_keep_order_and_inherit_fn():
     big = np.arange(200_000, dtype=np.int64)            # held by the closure, never pickled
 
     def f(i):
-        return os.getpid(), int(big[i * 1000]), parallel._IN_WORKER
+        return os.getpid(), int(big[i * 1000]), forked.in_worker()
 
     out = list(ordered_map(f, range(60), 2, processes=True))
     assert [v for _, v, _ in out] == [i * 1000 for i in range(60)]
@@ -328,7 +328,7 @@ def test_workers_die_with_a_killed_baking_process(tmp_path):
 
 
 def test_ordered_map_processes_fall_back_to_threads(monkeypatch):
-    monkeypatch.setattr(parallel, "PROCESSES", False)
+    monkeypatch.setattr(forked, "PROCESSES", False)
     assert not processes_available()
     names = set()
 
@@ -467,7 +467,7 @@ def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
     before = threading.active_count()
     pending = gather_matrix(box, x, n, embree_scene(box), rays=16, chunk_rays=16 * 9, workers=2, hits=True,
                             background=True)
-    assert isinstance(pending, parallel.Background)
+    assert isinstance(pending, background.Background)
     G4, s4, H4 = pending.result()
     assert np.array_equal(G4.indptr, G1.indptr) and np.array_equal(G4.indices, G1.indices)
     assert np.array_equal(G4.data, G1.data) and np.array_equal(s4, s1) and np.array_equal(H4, H1)
@@ -476,9 +476,9 @@ def test_gather_identical_with_two_workers(box, pool_kind, monkeypatch):
 
 @needs_fork
 def test_forked_workers_write_into_a_shared_array():
-    """:func:`.parallel.shared_array`: what forked workers write in place is what the caller
+    """:func:`.forked.shared_array`: what forked workers write in place is what the caller
     reads; each writes its own rows, and only counts travel back through the pipe."""
-    out = parallel.shared_array((6, 3), np.float64)
+    out = forked.shared_array((6, 3), np.float64)
     assert out.shape == (6, 3) and not out.any()
 
     def fill(i):
@@ -487,36 +487,36 @@ def test_forked_workers_write_into_a_shared_array():
     pids = list(ordered_map(fill, range(3), 2, processes=True))
     assert os.getpid() not in pids                                  # written by the workers
     assert np.array_equal(out, np.vstack([np.arange(6).reshape(2, 3) + 10 * i for i in range(3)]))
-    assert parallel.shared_array(0, np.int32).shape == (0,)
+    assert forked.shared_array(0, np.int32).shape == (0,)
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="MADV_REMOVE is Linux's")
 def test_release_tail_hands_back_the_pages_past_what_is_kept():
-    """:func:`.parallel.release_tail`: the items kept, and the rest of their page, are untouched;
+    """:func:`.forked.release_tail`: the items kept, and the rest of their page, are untouched;
     the pages after are handed back (shared memory reads zeros where its pages are gone), so a
     compacted gather keeps only the memory its rows use."""
     import mmap
     page = mmap.PAGESIZE // 8
-    a = parallel.shared_array(10 * page, np.float64)
+    a = forked.shared_array(10 * page, np.float64)
     a[:] = 1.0
     keep = 3 * page + 5
-    parallel.release_tail(a, keep)
+    forked.release_tail(a, keep)
     assert (a[:4 * page] == 1.0).all()               # the kept items and the rest of their page
     assert not a[4 * page:].any()                    # the pages after: gone (zeros)
-    parallel.release_tail(a, 10 * page)              # nothing past the end: nothing happens
+    forked.release_tail(a, 10 * page)              # nothing past the end: nothing happens
     assert (a[:4 * page] == 1.0).all()
 
 
 def test_background_returns_raises_and_stops():
-    """:class:`.parallel.Background`: the value made on its thread, the error raised on the
+    """:class:`.background.Background`: the value made on its thread, the error raised on the
     caller's, and a stop asked for (cancelled while waiting) reaches the thread's loop."""
-    assert parallel.Background(lambda stop: 42).result() == 42
-    assert parallel.Background.ready("made").result() == "made"
+    assert background.Background(lambda stop: 42).result() == 42
+    assert background.Background.ready("made").result() == "made"
 
     def fails(stop):
         raise ValueError("in the thread")
     with pytest.raises(ValueError, match="in the thread"):
-        parallel.Background(fails).result()
+        background.Background(fails).result()
     steps = []
 
     def loop(stop):
@@ -525,7 +525,7 @@ def test_background_returns_raises_and_stops():
             time.sleep(0.01)
         return "stopped"
     before = threading.active_count()
-    b = parallel.Background(loop)
+    b = background.Background(loop)
     polls = []
     with pytest.raises(Cancelled):
         b.result(cancelled=lambda: polls.append(1) or len(polls) > 2, poll=0.01)
@@ -534,10 +534,10 @@ def test_background_returns_raises_and_stops():
 
 @needs_fork
 def test_ahead_makes_its_value_on_a_forked_process_and_is_terminated_when_stopped():
-    """:class:`.parallel.Ahead`: forked when made (on the calling thread), the value made in the
+    """:class:`.background.Ahead`: forked when made (on the calling thread), the value made in the
     other process, its error raised on the caller's thread; closed early, or cancelled while
     the caller waits, the process is terminated at once (here it would sleep ten minutes)."""
-    a = parallel.Ahead.start(lambda: (os.getpid(), np.arange(5) ** 2))
+    a = background.Ahead.start(lambda: (os.getpid(), np.arange(5) ** 2))
     assert len(multiprocessing.active_children()) == 1          # forked already
     pid, value = a.result()
     assert pid != os.getpid() and value.tolist() == [0, 1, 4, 9, 16]
@@ -547,12 +547,12 @@ def test_ahead_makes_its_value_on_a_forked_process_and_is_terminated_when_stoppe
     def fails():
         raise ValueError("in the process")
     with pytest.raises(ValueError, match="in the process"):
-        parallel.Ahead.start(fails).result()
-    slow = parallel.Ahead.start(lambda: time.sleep(600))
+        background.Ahead.start(fails).result()
+    slow = background.Ahead.start(lambda: time.sleep(600))
     t = time.perf_counter()
     slow.close()
     assert multiprocessing.active_children() == [] and time.perf_counter() - t < 60
-    slow = parallel.Ahead.start(lambda: time.sleep(600))
+    slow = background.Ahead.start(lambda: time.sleep(600))
     polls = []
     with pytest.raises(Cancelled):
         slow.result(cancelled=lambda: polls.append(1) or len(polls) > 2, poll=0.01)
@@ -568,7 +568,7 @@ def test_a_worker_killed_half_way_through_its_result_does_not_hang_the_stop():
     import struct
     holder = {}
 
-    class Spy(parallel.Ahead):
+    class Spy(background.Ahead):
         def __init__(self, fn):
             holder["self"] = self
             super().__init__(fn)
@@ -589,8 +589,8 @@ def test_a_worker_killed_half_way_through_its_result_does_not_hang_the_stop():
 
 
 def test_ahead_is_not_started_where_processes_are_not(monkeypatch):
-    monkeypatch.setattr(parallel, "PROCESSES", False)
-    assert parallel.Ahead.start(lambda: 1) is None
+    monkeypatch.setattr(forked, "PROCESSES", False)
+    assert background.Ahead.start(lambda: 1) is None
 
 
 @needs_embree
@@ -619,8 +619,8 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
     # (the box as modelled: its elements are cut; tessellated finer than the detail size: its
     # faces are the elements, and nothing is cut)
     started = []
-    start = parallel.Ahead.start
-    monkeypatch.setattr(parallel.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
+    start = background.Ahead.start
+    monkeypatch.setattr(background.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
     for meshes in (scenes.cornell_box(), scenes.tessellate(scenes.cornell_box(), 8)):
         cache = FormFactorCache()
         started.clear()
@@ -640,7 +640,7 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's heap settings")
 def test_a_bake_keeps_its_freed_heap_and_hands_it_back_after(tmp_path):
-    """:func:`.parallel.kept_heap` (around every bake): temporaries of 20 MB made and dropped
+    """:func:`.native.kept_heap` (around every bake): temporaries of 20 MB made and dropped
     again and again fault their pages in once, not every time; after the block the next free
     hands the heap kept back to the system. In a fresh process, whose glibc has moved its own
     threshold to 30 MB (as a NumPy program does), ten rounds of ten such arrays."""
@@ -648,7 +648,7 @@ def test_a_bake_keeps_its_freed_heap_and_hands_it_back_after(tmp_path):
     script = tmp_path / "heap.py"
     script.write_text("""
 import resource, sys, numpy as np
-from hemicube_radiosity.core.runtime.parallel import kept_heap
+from hemicube_radiosity.core.runtime.native import kept_heap
 def rss():
     with open("/proc/self/statm") as f:
         return int(f.read().split()[1]) * 4096 >> 20
@@ -694,7 +694,7 @@ def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
     before = threading.active_count()
     r2 = bake(scenes.cornell_box(), BakeSettings(workers=2, **s))
     if embree_available():
-        assert isinstance(started[-1], parallel.Background)
+        assert isinstance(started[-1], background.Background)
     assert threading.active_count() == before and multiprocessing.active_children() == []
     assert same_csr(r1.form_factors, r2.form_factors)
     assert np.array_equal(r1.solution.B, r2.solution.B)
@@ -714,7 +714,7 @@ def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
     with pytest.raises(Cancelled):
         bake(scenes.cornell_box(), BakeSettings(workers=2, patch_size=0.5, element_size=0.25, resolution=16,
                                                 gather_rays=16), cancelled=lambda: bool(started))
-    assert isinstance(started[-1], parallel.Background)
+    assert isinstance(started[-1], background.Background)
     assert threading.active_count() == before and multiprocessing.active_children() == []
 
 

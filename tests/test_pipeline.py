@@ -449,7 +449,7 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     once for the patches, once for the elements and again inside a process forked only to
     find the two equal; the bake is the same as one that builds them every time."""
     from hemicube_radiosity.core.output import stage as output
-    from hemicube_radiosity.core.runtime import parallel
+    from hemicube_radiosity.core.runtime import background, forked
     from hemicube_radiosity.core import pipeline
     from hemicube_radiosity.core.builtin_scenes import tessellate
     meshes = tessellate(cornell_box(), 12)                 # 1/6 m cells
@@ -458,8 +458,8 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     real = pipeline.build_patches
     for mod in (pipeline, output):
         monkeypatch.setattr(mod, "build_patches", lambda m, size=None, **k: built.append(size) or real(m, size, **k))
-    start = parallel.Ahead.start
-    monkeypatch.setattr(parallel.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
+    start = background.Ahead.start
+    monkeypatch.setattr(background.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
     r = bake(meshes, s)
     assert built == [None] and started == []
     assert len(r.elements) == len(r.patches) == sum(len(m.face_offsets) - 1 for m in meshes)
@@ -468,7 +468,7 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     monkeypatch.setattr(output, "keeps_faces_whole", lambda *a: False)
     built.clear()
     again = bake(meshes, s)
-    assert built == [0.5, 0.25] and started == ([1] if workers > 1 and parallel.processes_available() else [])
+    assert built == [0.5, 0.25] and started == ([1] if workers > 1 and forked.processes_available() else [])
     for a in ("verts", "polys"):
         assert np.array_equal(getattr(r.elements, a), getattr(again.elements, a))
     assert np.array_equal(r.vertex_radiosity, again.vertex_radiosity)

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .runtime.cache import kept
+from .runtime.cache import Memo
 from .runtime.errors import RadiosityError
 from .util.geometry import in_frames, tangent_frames
 from .util.sampling import cosine_directions, jittered_grid
@@ -116,18 +116,18 @@ class EmbreeScene:
         return np.asarray(self._scene.run(o, d, query="OCCLUDED", **kw)) >= 0
 
 
-_SCENE_CACHE: dict = {}
+_SCENE_CACHE = Memo(4)
 
 
 def embree_scene(patches: PatchSet) -> EmbreeScene:
     """The Embree scene for ``patches``, built once per geometry (the four most recent are kept
     until :func:`clear_ray_cache`)."""
-    return _per_geometry(_SCENE_CACHE, patches, EmbreeScene, 4)
+    return _per_geometry(_SCENE_CACHE, patches, EmbreeScene)
 
 
-def _per_geometry(cache: dict, patches: PatchSet, make, keep: int):
-    """``make(patches)``, kept in ``cache`` by ``patches``' geometry (the ``keep`` most recent)."""
-    return kept(cache, patches.geometry_key(), lambda: make(patches), keep)
+def _per_geometry(cache: Memo, patches: PatchSet, make):
+    """``make(patches)``, kept in ``cache`` by ``patches``' geometry."""
+    return cache.get(patches.geometry_key(), lambda: make(patches))
 
 
 def clear_ray_cache() -> None:
@@ -273,7 +273,7 @@ def occluder(patches, shadows="auto"):
     return NumpyOccluder(_occluding(patches))
 
 
-_OCCLUDING_CACHE: dict = {}
+_OCCLUDING_CACHE = Memo(2)
 
 
 def _occluding(patches: PatchSet) -> PatchSet:
@@ -282,7 +282,7 @@ def _occluding(patches: PatchSet) -> PatchSet:
     ray), built once per geometry (the two most recent are kept)."""
     from .form_factors.drawn import plane_outlines
 
-    return _per_geometry(_OCCLUDING_CACHE, patches, plane_outlines, 2)
+    return _per_geometry(_OCCLUDING_CACHE, patches, plane_outlines)
 
 
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,

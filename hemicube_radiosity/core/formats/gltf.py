@@ -39,7 +39,7 @@ import struct
 import numpy as np
 
 __all__ = ["VIEW_TRANSFORMS", "RADIANCE_ATTRIBUTE", "display_linear", "srgb_encode",
-           "srgb_decode", "tone_map_gltf", "read_gltf", "write_gltf"]
+           "tone_map_gltf", "read_gltf", "write_gltf"]
 
 RADIANCE_ATTRIBUTE = "_RADIANCE"
 VIEW_TRANSFORMS = ("standard", "khronos_neutral", "agx")
@@ -53,12 +53,6 @@ def srgb_encode(x):
     """The sRGB piecewise OETF (IEC 61966-2-1) of linear ``x`` in 0..1."""
     x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
-def srgb_decode(v):
-    """Inverse of :func:`srgb_encode`."""
-    v = np.clip(np.asarray(v, np.float64), 0.0, 1.0)
-    return np.where(v <= 0.04045, v / 12.92, np.power((v + 0.055) / 1.055, 2.4))
 
 
 def _cols(*columns):

@@ -21,7 +21,7 @@ import hashlib
 
 import numpy as np
 
-from ..runtime.cache import kept
+from ..runtime.cache import Memo
 from ..util.geometry import bilinear
 from ..util.sampling import jittered_grid
 from .outline import GroupOutline
@@ -175,12 +175,12 @@ def _outline(corners, groups, em_normals):
     for a in (corners, groups, em_normals):
         a = np.ascontiguousarray(a)
         h.update(str(a.dtype).encode() + str(a.shape).encode() + a.tobytes())
-    return kept(_OUTLINES, h.digest(), lambda: GroupOutline.of(corners, groups, em_normals), OUTLINES_KEPT)
+    return _OUTLINES.get(h.digest(), lambda: GroupOutline.of(corners, groups, em_normals))
 
 
 #: Emitter outlines :func:`_outline` keeps.
 OUTLINES_KEPT = 4
-_OUTLINES: dict = {}
+_OUTLINES = Memo(OUTLINES_KEPT)
 
 
 class _Transport:

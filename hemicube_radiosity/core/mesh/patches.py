@@ -20,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from ..runtime.cache import Memo
 from ..runtime.errors import RadiosityError
 
 __all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces"]
@@ -166,7 +167,7 @@ class PatchSet:
         )
 
 
-_MATERIAL_INDEX: dict = {}     # id(source_face) -> (source_face, owner, face counts, index or None)
+_MATERIAL_INDEX = Memo(8)      # (source_face, owner), face counts -> index or None
 
 
 def _material_index(patches: PatchSet, mats):
@@ -178,9 +179,9 @@ def _material_index(patches: PatchSet, mats):
     if not mats or any(r.ndim != 2 or r.shape[1] != 3 or e.shape != r.shape for r, e in mats):
         return None
     sf, owner = patches.source_face, patches.owner
-    hit = _MATERIAL_INDEX.get(id(sf))
-    if hit is not None and hit[0] is sf and hit[1] is owner and hit[2] == counts:
-        return hit[3]
+    hit = _MATERIAL_INDEX.lookup((sf, owner), counts)
+    if hit is not _MATERIAL_INDEX.MISSING:
+        return hit
     index = None
     o = np.asarray(owner, dtype=np.int64)
     f = np.asarray(sf, dtype=np.int64)
@@ -188,10 +189,7 @@ def _material_index(patches: PatchSet, mats):
         size = np.asarray(counts, dtype=np.int64)
         if o.size == 0 or (f.min() >= 0 and (f < size[o]).all()):
             index = np.concatenate([[0], np.cumsum(size)]).astype(np.int64)[o] + f
-    while len(_MATERIAL_INDEX) >= 8:
-        _MATERIAL_INDEX.pop(next(iter(_MATERIAL_INDEX)))
-    _MATERIAL_INDEX[id(sf)] = (sf, owner, counts, index)
-    return index
+    return _MATERIAL_INDEX.store((sf, owner), index, counts)
 
 
 def poly_geometry(verts, polys):

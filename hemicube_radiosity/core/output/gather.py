@@ -17,9 +17,9 @@ from functools import partial
 import numpy as np
 
 from ..util.geometry import in_frames, tangent_frames
-from ..runtime.parallel import (
-    Background, ordered_map, release_tail, resolve_workers, shared_array, shares, started_map
-)
+from ..runtime.background import Background
+from ..runtime.forked import release_tail, shared_array
+from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
 from ..rays import cosine_lattice
 from ..util.sparse import CSR

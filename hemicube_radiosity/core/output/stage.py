@@ -30,7 +30,8 @@ from .gather import (
 from .interpolate import inverse_bilinear, interpolate_corners, located_corners, locate
 from ..mesh.patches import PatchSet, poly_geometry
 from ..mesh.subdivide import build_patches, keeps_faces_whole
-from ..runtime.parallel import Ahead, resolve_workers
+from ..runtime.background import Ahead
+from ..runtime.parallel import resolve_workers
 from ..runtime.progress import Ticker
 from ..mesh.refine import LUMA
 from ..rays import embree_available, embree_scene, occluder, open_fraction

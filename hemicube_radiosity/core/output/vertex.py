@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from ..mesh.patches import PatchSet
 from ..util.unique import unique_ints, unique_rows
 
@@ -86,21 +86,16 @@ def _boundary_interior_pairs(polys, boundary, interior):
     return unique_rows(np.stack([pv[ok], qv[ok]], 1))
 
 
-_TOPOLOGY: dict = {}     # id(polys) -> (polys, (boundary, pairs)): a relight reuses the patches'
+_TOPOLOGY = Memo(8)      # polys -> (boundary, pairs): a relight reuses the patches'
 
 
 def _topology(polys, V, cnt):
     """(boundary (V,) bool, pairs (K, 2)) of :func:`vertex_radiosity`: geometry only, so kept
     for the last few patch arrays (the same ``polys`` object, as a relight's cached patches are)."""
-    hit = _TOPOLOGY.get(id(polys))
-    if hit is not None and hit[0] is polys:
-        return hit[1]
-    boundary = boundary_vertices(polys, V) & (cnt > 0)
-    out = boundary, _boundary_interior_pairs(polys, boundary, ~boundary & (cnt > 0))
-    while len(_TOPOLOGY) >= 8:
-        _TOPOLOGY.pop(next(iter(_TOPOLOGY)))
-    _TOPOLOGY[id(polys)] = (polys, out)
-    return out
+    def make():
+        boundary = boundary_vertices(polys, V) & (cnt > 0)
+        return boundary, _boundary_interior_pairs(polys, boundary, ~boundary & (cnt > 0))
+    return _TOPOLOGY.of((polys,), make)
 
 
 def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache=None) -> np.ndarray:

@@ -4,18 +4,23 @@ Key = SHA-256 of the patch geometry (vertex positions and patch corners) and the
 shape F (method, resolution, rays, rotation seed). Materials, emission, lamps and the world are
 not in the key: changing them re-solves only. Kept in memory (a few entries, most recent first)
 and, when ``directory`` is set, as ``<key>.npz`` files there.
+
+Beside it, :class:`Memo`: the small in-process memos of what a bake or a relight asks for again
+(ray scenes, hashes of cached arrays, topology, point grids), keyed by a value or by the
+identity of the arrays they were made from, and :func:`clear_memos` to empty them all.
 """
 from __future__ import annotations
 
 import hashlib
 import os
+import weakref
 from collections import OrderedDict
 
 import numpy as np
 
 from ..util.sparse import CSR
 
-__all__ = ["FormFactorCache", "array_key", "cache_key", "cached", "geometry_key", "kept"]
+__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "clear_memos", "geometry_key"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
@@ -24,40 +29,116 @@ def cache_key(geometry_key: bytes, settings_key) -> str:
     return h.hexdigest()
 
 
-def kept(store: dict, key, make, keep: int):
-    """``store[key]``, made by ``make()`` when absent and kept with the ``keep`` most recently
-    made (the oldest go first; with ``keep`` <= 0 nothing is kept): an in-process memo of what
-    a bake asks for again (ray scenes by geometry, emitter outlines)."""
-    if keep <= 0:
-        return make()
-    got = store.get(key)
-    if got is None:
-        got = make()
-        while len(store) >= keep:
+class Memo:
+    """The values a bake asks for again, kept in this process: at most ``keep`` (with
+    ``max_bytes``: at most that many bytes of the arrays held as keys, too), the oldest made
+    (with ``refresh``: the least recently used) dropped first; with ``keep`` <= 0 nothing is
+    kept. Two kinds of key:
+
+    * :meth:`get` by a value (a digest of the geometry: ray scenes, emitter outlines);
+    * :meth:`of` (and :meth:`lookup`, :meth:`store`) by the identity of some objects (the
+      arrays of a relight's cached patches, which are the same objects every time), plus an
+      optional value ``key`` (sizes, a selection's bytes). The objects are held while their
+      value is kept, so their ids cannot be reused meanwhile, and a hit is checked with ``is``.
+      Arrays so keyed must never be changed in place.
+
+    :func:`clear_memos` empties every memo (tests; the ray scenes also clear on their own)."""
+
+    #: What :meth:`lookup` returns when nothing is kept.
+    MISSING = object()
+
+    def __init__(self, keep: int, *, max_bytes=None, refresh=False):
+        self.keep = keep
+        self.max_bytes = max_bytes
+        self.refresh = refresh
+        self._store: dict = {}
+        _MEMOS.add(self)
+
+    def get(self, key, make):
+        """The value under ``key``, made by ``make()`` when absent."""
+        hit = self._hit(key)
+        if hit is not None:
+            return hit[1]
+        value = make()
+        self._put(key, (), value)
+        return value
+
+    def of(self, objs: tuple, make, key=()):
+        """The value for the objects ``objs`` (by identity) and ``key``, made by ``make()``
+        when absent."""
+        value = self.lookup(objs, key)
+        if value is self.MISSING:
+            value = self.store(objs, make(), key)
+        return value
+
+    def lookup(self, objs: tuple, key=()):
+        """The value kept for ``objs`` (by identity) and ``key``, or :data:`MISSING`."""
+        hit = self._hit((tuple(map(id, objs)), key))
+        if hit is None or any(a is not b for a, b in zip(hit[0], objs)):
+            return self.MISSING
+        return hit[1]
+
+    def store(self, objs: tuple, value, key=()):
+        """Keep ``value`` for ``objs`` (by identity) and ``key``; returns ``value``."""
+        self._put((tuple(map(id, objs)), key), tuple(objs), value)
+        return value
+
+    def _hit(self, key):
+        """The entry (objects held, value) under ``key``, or None (always, with ``keep`` <= 0)."""
+        hit = self._store.get(key) if self.keep > 0 else None
+        if hit is not None and self.refresh:
+            self._store[key] = self._store.pop(key)        # the most recently used last
+        return hit
+
+    def _put(self, key, objs: tuple, value) -> None:
+        """Keep (objs, value) under ``key`` as the newest entry, dropping the oldest beyond
+        ``keep`` entries or ``max_bytes`` of objects held."""
+        if self.keep <= 0:
+            return
+        store = self._store
+        store.pop(key, None)
+        size = _nbytes_of(objs)
+        while store and (len(store) >= self.keep or self.max_bytes is not None and
+                         sum(_nbytes_of(held) for held, _ in store.values()) + size > self.max_bytes):
             store.pop(next(iter(store)))
-        store[key] = got
-    return got
+        store[key] = (objs, value)
+
+    def clear(self) -> None:
+        """Forget every value kept (and let go of the objects held)."""
+        self._store.clear()
+
+    def __len__(self) -> int:
+        return len(self._store)
 
 
-_GEOMETRY: dict = {}     # id(polys) -> (verts, polys, key): the last few geometries hashed
+def _nbytes_of(objs) -> int:
+    return sum(int(getattr(o, "nbytes", 0)) for o in objs)
+
+
+_MEMOS = weakref.WeakSet()
+
+
+def clear_memos() -> None:
+    """Empty every :class:`Memo` of the process."""
+    for memo in list(_MEMOS):
+        memo.clear()
+
+
+_GEOMETRY = Memo(16)     # (verts, polys) -> key: the last few geometries hashed
 
 
 def geometry_key(patches) -> bytes:
     """``patches.geometry_key()``, hashed once per pair of ``verts`` and ``polys`` arrays (the
     same objects: a relight's patches and elements share their cached geometry's arrays, and a
     bake keys a dozen products on them). Geometry arrays are never changed in place."""
-    v, p = patches.verts, patches.polys
-    hit = _GEOMETRY.get(id(p))
-    if hit is not None and hit[0] is v and hit[1] is p:
-        return hit[2]
-    key = patches.geometry_key()
-    while len(_GEOMETRY) >= 16:
-        _GEOMETRY.pop(next(iter(_GEOMETRY)))
-    _GEOMETRY[id(p)] = (v, p, key)
-    return key
+    return _GEOMETRY.of((patches.verts, patches.polys), patches.geometry_key)
 
 
-_ARRAYS: dict = {}       # id(array) -> (array, digest): the last few point sets hashed
+#: Bytes of arrays :func:`array_key` keeps alive at most.
+ARRAY_MEMO_BYTES = 64 << 20
+# what is remembered stays alive: at most 32 arrays and ARRAY_MEMO_BYTES of them (a relight's
+# are cached anyway; a bake's one-off point sets go first)
+_ARRAYS = Memo(32, max_bytes=ARRAY_MEMO_BYTES)     # array -> digest: the last few point sets hashed
 
 
 def array_key(a) -> bytes:
@@ -69,24 +150,13 @@ def array_key(a) -> bytes:
     new array each call) is hashed as given."""
     if not isinstance(a, np.ndarray):
         a = np.asarray(a)
-    hit = _ARRAYS.get(id(a))
-    if hit is not None and hit[0] is a:
-        return hit[1]
-    c = np.ascontiguousarray(a)
-    h = hashlib.sha256(str(c.dtype).encode() + str(c.shape).encode())
-    h.update(c.tobytes())
-    key = h.digest()
-    _ARRAYS.pop(id(a), None)
-    # what is remembered stays alive: at most 32 arrays and ARRAY_MEMO_BYTES of them (a relight's
-    # are cached anyway; a bake's one-off point sets go first)
-    while _ARRAYS and (len(_ARRAYS) >= 32 or sum(x.nbytes for x, _ in _ARRAYS.values()) + a.nbytes > ARRAY_MEMO_BYTES):
-        _ARRAYS.pop(next(iter(_ARRAYS)))
-    _ARRAYS[id(a)] = (a, key)
-    return key
 
-
-#: Bytes of arrays :func:`array_key` keeps alive at most.
-ARRAY_MEMO_BYTES = 64 << 20
+    def digest():
+        c = np.ascontiguousarray(a)
+        h = hashlib.sha256(str(c.dtype).encode() + str(c.shape).encode())
+        h.update(c.tobytes())
+        return h.digest()
+    return _ARRAYS.of((a,), digest)
 
 
 def cached(cache, key, make, disk=True):

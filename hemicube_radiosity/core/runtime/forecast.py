@@ -1,6 +1,5 @@
-"""How long a bake will take, said before its long work starts (issue 9: "an estimate of time and
-memory is printed before long work"; the memory is :func:`.pipeline.form_factor_gb`'s, said by
-the patch stage).
+"""How long a bake will take, said before its long work starts (the memory is
+:func:`.pipeline.form_factor_gb`'s, said by the patch stage).
 
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
 receiver (one hemi-cube each) and per piece drawn one by one in it (a curved cluster's faces;

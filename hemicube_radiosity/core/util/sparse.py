@@ -37,24 +37,6 @@ class CSR:
         return int(self.indptr.nbytes + self.indices.nbytes + self.data.nbytes)
 
     @classmethod
-    def from_rows(cls, rows, ncols, meta=None) -> "CSR":
-        """From a list of (cols, vals) pairs, one per row; zero values are dropped."""
-        counts = np.zeros(len(rows) + 1, dtype=np.int64)
-        cols_l, vals_l = [], []
-        for i, (c, v) in enumerate(rows):
-            c = np.asarray(c, dtype=np.int64)
-            v = np.asarray(v, dtype=np.float64)
-            nz = v != 0
-            c, v = c[nz], v[nz]
-            order = np.argsort(c, kind="stable")
-            cols_l.append(c[order])
-            vals_l.append(v[order])
-            counts[i + 1] = c.size
-        indices = np.concatenate(cols_l).astype(np.int32) if cols_l else np.zeros(0, np.int32)
-        data = np.concatenate(vals_l).astype(np.float32) if vals_l else np.zeros(0, np.float32)
-        return cls(np.cumsum(counts), indices, data, (len(rows), int(ncols)), dict(meta or {}))
-
-    @classmethod
     def from_coo(cls, rows, cols, vals, shape, meta=None) -> "CSR":
         """From triplets; duplicates are summed, zeros dropped."""
         rows = np.asarray(rows, dtype=np.int64)
