@@ -3,10 +3,10 @@ three.js in headless Chromium (SwiftShader WebGL) draws, from the demo camera, t
 Cycles drew of the baked copy (``cornell.png``, Standard view): red light bled onto the floor by
 the red wall, the short block's shadow, and the same pixels within a level or two.
 
-Needs node/npm (the npm packages pinned in ``tests/viewer/package-lock.json`` are installed by
-``npm ci`` into the git-ignored ``tests/viewer/node_modules``) and Debian's ``chromium`` (installed
-with apt-get when missing and we are root). When they cannot be had the test is skipped, except
-in CI (``CI=true``), where it fails.
+Needs node, the npm packages pinned in ``tests/support/viewer/package-lock.json`` (in the git-ignored
+``tests/support/viewer/node_modules``) and Debian's ``chromium``: ``make viewer-deps`` installs
+them (``make test`` runs it first); the test installs nothing. Where they are missing the test is
+skipped with a message naming that target, except in CI (``CI=true``), where it fails.
 """
 from __future__ import annotations
 
@@ -25,15 +25,18 @@ import urllib.parse
 import numpy as np
 import pytest
 
-from conftest import ROOT
+from tests.support import ROOT
 
-VIEWER = os.path.join(ROOT, "tests", "viewer")
+pytestmark = [pytest.mark.blender, pytest.mark.cycles, pytest.mark.slow]
+
+VIEWER = os.path.join(ROOT, "tests", "support", "viewer")
 NODE_MODULES = os.path.join(VIEWER, "node_modules")
 IN_CI = os.environ.get("CI", "").lower() in ("true", "1", "yes")
 SIZE = 512           # the demo's --render-size
 
 
 def unavailable(reason):
+    reason += ": run `make viewer-deps`"
     if IN_CI:
         pytest.fail(f"viewer test cannot run in CI: {reason}")
     pytest.skip(reason)
@@ -55,32 +58,18 @@ def _npm_packages_current():
     return {k: v.get("version") for k, v in want.items() if k} == {k: v.get("version") for k, v in have.items()}
 
 
-def _chromium():
-    for name in ("chromium", "chromium-browser"):
-        if shutil.which(name):
-            return shutil.which(name)
-    if hasattr(os, "geteuid") and os.geteuid() == 0 and shutil.which("apt-get"):
-        env = dict(os.environ, DEBIAN_FRONTEND="noninteractive")
-        _run(["apt-get", "update"], 600, env=env)
-        r = _run(["apt-get", "install", "-y", "--no-install-recommends", "chromium"], 900, env=env)
-        if shutil.which("chromium"):
-            return shutil.which("chromium")
-        unavailable("apt-get install chromium failed: " + (r.stderr.strip().splitlines() or ["?"])[-1])
-    unavailable("no chromium on PATH (apt-get install chromium, as root)")
-
-
 @pytest.fixture(scope="session")
 def viewer_tools():
-    """(node, chromium): the npm packages installed from the lock file, Chromium present."""
-    node, npm = shutil.which("node"), shutil.which("npm")
-    if not node or not npm:
-        unavailable("node and npm are needed (apt-get install nodejs npm)")
+    """(node, chromium), both on PATH, with the npm packages the lock file pins installed."""
+    node = shutil.which("node")
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    if not node:
+        unavailable("no node on PATH")
     if not _npm_packages_current():
-        r = _run([npm, "ci", "--no-audit", "--no-fund", "--ignore-scripts"], 600, cwd=VIEWER,
-                 env=dict(os.environ, PUPPETEER_SKIP_DOWNLOAD="1"))
-        if r.returncode != 0:
-            unavailable("npm ci in tests/viewer failed: " + r.stderr.strip()[-500:])
-    return node, _chromium()
+        unavailable("the npm packages of tests/support/viewer are missing or not those its lock file pins")
+    if not chromium:
+        unavailable("no chromium on PATH")
+    return node, chromium
 
 
 @pytest.fixture(scope="module")
@@ -142,7 +131,7 @@ def floor_region(img, camera, x0, x1, y0, y1, n=8):
 
 
 class _Handler(http.server.SimpleHTTPRequestHandler):
-    """tests/viewer at /, the demo's output folder at /model/."""
+    """tests/support/viewer at /, the demo's output folder at /model/."""
 
     model_dir = None
 
