@@ -7,15 +7,14 @@ import os
 import numpy as np
 import pytest
 
-from conftest import ADDON_MODULE, corner_data, disable_addon, enable_addon
+from tests.support.addon import ADDON_MODULE, disable_addon, enable_addon, modal_run, select, sub
+from tests.support.scene import corner_data
+
+pytestmark = pytest.mark.blender
 
 # coarse, and the patches are the baked mesh (no detail size): the module bakes in seconds and its
 # measured expectations are those of the patch solution itself
 BAKE = dict(patch_size=0.25, resolution=32, element_size=0.0)
-
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
 
 
 def mesh_snapshot(me):
@@ -37,14 +36,6 @@ def region(data, x0, x1, y0, y1):
     m = (pos[:, 0] > x0) & (pos[:, 0] < x1) & (pos[:, 1] > y0) & (pos[:, 1] < y1)
     assert m.sum() >= 3, (x0, x1, y0, y1)
     return col[m].mean(axis=0)
-
-
-def select(bpy, objs):
-    for o in bpy.context.view_layer.objects:
-        o.select_set(False)
-    for o in objs:
-        o.select_set(True)
-    bpy.context.view_layer.objects.active = objs[0] if objs else None
 
 
 # ----------------------------------------------------------------------------- the demo scene
@@ -484,79 +475,19 @@ def test_invoke_without_window_runs_synchronously_and_clear_restores(addon, empt
     assert len(bpy.data.meshes) == 1
 
 
-class _FakeUI:
-    """The window-manager/workspace calls the modal loop makes, recorded (no window headless)."""
-
-    def __init__(self):
-        self.progress, self.status, self.timers_removed, self.ended = [], [], 0, False
-
-    def progress_update(self, v):
-        self.progress.append(v)
-
-    def progress_end(self):
-        self.ended = True
-
-    def event_timer_remove(self, timer):
-        self.timers_removed += 1
-
-    def status_text_set(self, text):
-        self.status.append(text)
-
-
-def _modal_run(addon, bpy, objs, cancel_first):
-    """Drive the operator's modal loop (worker thread + timer events) with a recording UI."""
-    import threading
-    import time
-    import types
-
-    ops = sub(addon, "blender.ui.operators")
-    bake = sub(addon, "blender.bake")
-    cls = ops.OBJECT_OT_radiosity_bake
-    ui = _FakeUI()
-
-    class Ctx:
-        window_manager = ui
-        workspace = ui
-
-        def __getattr__(self, name):
-            return getattr(bpy.context, name)
-
-    op = types.SimpleNamespace(reports=[])
-    op.report = lambda level, msg: op.reports.append((level, msg))
-    for name in ("_work", "_progress", "_finish", "_cleanup", "_report_done"):
-        setattr(op, name, types.MethodType(getattr(cls, name), op))
-    bake.clear_session_cache()  # earlier tests baked this geometry: make the form factors run
-    op._job = bake.BakeJob.prepare(bpy.context, objs, bake.BakeSettings(**BAKE))
-    op._cancel = threading.Event()
-    op._state = ops.worker_state()
-    op._timer = object()
-    op._thread = threading.Thread(target=op._work)
-    if cancel_first:
-        esc = types.SimpleNamespace(type="ESC", value="PRESS")
-        assert cls.modal(op, Ctx(), esc) == {"RUNNING_MODAL"}
-    op._thread.start()
-    timer = types.SimpleNamespace(type="TIMER", value="NOTHING")
-    for _ in range(6000):
-        ret = cls.modal(op, Ctx(), timer)
-        if ret != {"RUNNING_MODAL"}:
-            break
-        time.sleep(0.01)
-    return ret, op, ui
-
-
 def test_modal_loop_progress_finish_and_esc_cancel(addon, empty_scene):
     bpy = empty_scene
     objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
     write = sub(addon, "blender.write")
     n_obj = len(bpy.data.objects)
     # Esc: the worker stops, nothing is written, the UI is cleaned up
-    ret, op, ui = _modal_run(addon, bpy, objs, cancel_first=True)
+    ret, op, ui = modal_run(addon, bpy, objs, cancel_first=True)
     assert ret == {"CANCELLED"}
     assert len(bpy.data.objects) == n_obj and write.copies_of([o.name for o in objs]) == []
     assert ui.timers_removed == 1 and ui.ended and ui.status[-1] is None
     assert any("cancelled" in m for _, m in op.reports)
     # to the end: progress rises to the write stage, the result is written on the main thread
-    ret, op, ui = _modal_run(addon, bpy, objs, cancel_first=False)
+    ret, op, ui = modal_run(addon, bpy, objs, cancel_first=False)
     assert ret == {"FINISHED"}
     assert len(write.copies_of([o.name for o in objs])) == 8
     assert ui.progress == sorted(ui.progress) and ui.progress[-1] >= 850

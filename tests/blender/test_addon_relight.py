@@ -4,13 +4,17 @@ from __future__ import annotations
 import importlib
 
 import numpy as np
+import pytest
 
-from conftest import corner_data
-from test_addon import select
+from tests.support.addon import select
+from tests.support.scene import corner_data
+
+pytestmark = pytest.mark.blender
 
 BAKE = dict(patch_size=0.25, resolution=32)
 
 
+@pytest.mark.slow
 def test_relight_in_the_session_reuses_form_factors(addon, empty_scene, monkeypatch, tmp_path):
     bpy = empty_scene
     bake_mod = importlib.import_module(f"{addon.__name__}.blender.bake")

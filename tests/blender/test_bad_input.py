@@ -6,27 +6,24 @@ Blender is involved. The messages are listed with their causes in docs/troublesh
 from __future__ import annotations
 
 import errno
-import importlib
 import io
 import os
 
 import numpy as np
 import pytest
 
-from conftest import file_sha256, node_tree, scene_hash
-from test_addon import select
+from tests.support.addon import modal_run, select, sub
+from tests.support.scene import file_sha256, node_tree, scene_hash
 
 from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings as CoreSettings, bake as core_bake
 from hemicube_radiosity.core.runtime.progress import Cancelled as CoreCancelled
 
+pytestmark = pytest.mark.blender
+
 BAKE = dict(patch_size=0.5, resolution=8, element_size=0.0)
 CLI_BAKE = ["--patch-size", "0.5", "--resolution", "8", "--element-size", "0"]
 QUAD = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
-
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
 
 
 def run_cli(addon, argv):
@@ -593,17 +590,15 @@ def test_cancel_mid_bake_leaves_the_scene_unchanged(addon, empty_scene):
 
 
 def test_modal_esc_and_modal_error_leave_the_scene_unchanged(addon, empty_scene):
-    from test_addon import _modal_run
-
     bpy = empty_scene
     objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
     before = scene_hash(bpy)
-    ret, op, ui = _modal_run(addon, bpy, objs, cancel_first=True)
+    ret, op, ui = modal_run(addon, bpy, objs, cancel_first=True)
     assert ret == {"CANCELLED"} and scene_hash(bpy) == before
     # an error in the worker (the core refuses a mesh) is one ERROR report, nothing written
     sliver = mesh_object(bpy, "Sliver", [(0, 0, 0), (1, 0, 0), (2, 0, 0)], [(0, 1, 2)])
     before = scene_hash(bpy)
-    ret, op, ui = _modal_run(addon, bpy, [sliver], cancel_first=False)
+    ret, op, ui = modal_run(addon, bpy, [sliver], cancel_first=False)
     assert ret == {"CANCELLED"} and scene_hash(bpy) == before
     errors = [m for lvl, m in op.reports if lvl == {"ERROR"}]
     assert errors == ["'Sliver': every face has zero area"]

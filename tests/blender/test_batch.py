@@ -15,7 +15,10 @@ import sys
 
 import pytest
 
-from conftest import ROOT, read_gltf
+from tests.support import ROOT
+from tests.support.gltf import read_gltf
+
+pytestmark = pytest.mark.blender
 
 SMALL = ["--resolution", "8", "--patch-size", "0.5", "--element-size", "0", "--gather-rays", "0"]
 

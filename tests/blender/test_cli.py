@@ -11,13 +11,14 @@ import sys
 import numpy as np
 import pytest
 
-from conftest import ROOT, corner_data, node_tree, read_gltf
+from tests.support import ROOT
+from tests.support.addon import sub
+from tests.support.gltf import read_gltf
+from tests.support.scene import corner_data, node_tree
+
+pytestmark = pytest.mark.blender
 
 BAKE_ARGS = ["--patch-size", "0.25", "--resolution", "32", "--element-size", "0"]
-
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
 
 
 def run(addon, argv):

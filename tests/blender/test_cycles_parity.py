@@ -2,7 +2,7 @@
 """Issue 10: bake what Cycles renders. Each case is a scene whose Cycles bake has no noise
 (uniform worlds over open planes, point lights of radius 0, a sun of angle 0, black occluders so
 nothing bounces), baked by Cycles and by us and compared at Cycles' own face corners with the
-harness of tests/test_lighting_cycles.py. Limit: 2% mean relative error.
+harness of tests/support/cycles_scenes.py. Limit: 2% mean relative error.
 
 * worlds: a 4.x "Use Nodes" off world as Blender 5 loads it (and, on 4.x, as 4.x renders it: its
   ``world.color``), Background strength, a mix of two Backgrounds, no world at all, and a colour
@@ -13,7 +13,7 @@ harness of tests/test_lighting_cycles.py. Limit: 2% mean relative error.
   no light, with a note naming the material and saying what this version's Cycles does (no light,
   or negative light: an Emission node, and a Principled BSDF before 5.0).
 
-Run ``python tests/test_cycles_parity.py`` to print the errors per case.
+Run ``python -m tests.blender.test_cycles_parity`` to print the errors per case.
 """
 from __future__ import annotations
 
@@ -28,7 +28,9 @@ bpy = pytest.importorskip("bpy")
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
 from hemicube_radiosity.blender.read.lights import read_lights, world_radiance  # noqa: E402
-from test_lighting_cycles import RHO, Comparison, floor_object  # noqa: E402
+from tests.support.cycles_scenes import RHO, Comparison, floor_object  # noqa: E402
+
+pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
 TOL = 0.02
 BLENDER_5 = bpy.app.version >= (5, 0, 0)

@@ -13,6 +13,8 @@ bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
 
+pytestmark = [pytest.mark.blender, pytest.mark.cycles]
+
 RHO = 0.8
 
 

@@ -6,13 +6,13 @@ UVs, a procedural texture through a Mix node, a colour attribute, an emission te
 Principled BSDF whose specular layer, metallic or transmission darken its diffuse lobe. It is lit
 so that Cycles' bake has no noise (a uniform world over an open plane, a sun of angle 0), baked by
 Cycles and by us, and compared at Cycles' own corners with the harness of
-tests/test_lighting_cycles.py. Limit: 2% mean relative error (deterministic light).
+tests/support/cycles_scenes.py. Limit: 2% mean relative error (deterministic light).
 
 The reader asks Cycles for the diffuse albedo (DIFFUSE pass, COLOR only) and the emission (EMIT)
 at every corner of a temporary copy; the bake still uses one colour per face (the mean of its
 corners) until the core takes colours per corner, so the floors are cut fine enough (the texture
 varies little across a face). ``test_user_file_is_unchanged`` proves the copies leave nothing
-behind. Run ``python tests/test_cycles_textures.py`` for the errors per case, the errors the
+behind. Run ``python -m tests.blender.test_cycles_textures`` for the errors per case, the errors the
 reader made before (unlinked values, Base Color as the albedo) and the cost of the Cycles bakes.
 """
 from __future__ import annotations
@@ -29,7 +29,9 @@ bpy = pytest.importorskip("bpy")
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
 from hemicube_radiosity.blender.read import shading  # noqa: E402
-from test_lighting_cycles import Comparison  # noqa: E402
+from tests.support.cycles_scenes import Comparison  # noqa: E402
+
+pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
 TOL = 0.02
 SAMPLES = 4          # one light, nothing bouncing: every Cycles sample gives the exact value

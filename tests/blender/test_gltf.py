@@ -3,19 +3,18 @@ COLOR_0 is it through the view transform, and each view transform gives the 8-bi
 Blender's own view of that name gives."""
 from __future__ import annotations
 
-import importlib
 
 import numpy as np
 import pytest
 
-from conftest import corner_data, read_gltf
+from tests.support.addon import sub
+from tests.support.gltf import read_gltf
+from tests.support.scene import corner_data
 from hemicube_radiosity.core.formats.gltf import (
     VIEW_TRANSFORMS, display_linear, srgb_encode, tone_map_gltf
 )
 
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
+pytestmark = pytest.mark.blender
 
 
 def corners(ob, attr="Radiosity"):

@@ -5,26 +5,15 @@ from __future__ import annotations
 import glob
 import os
 import re
-import subprocess
-import sys
 import tomllib
 import zipfile
 
-from conftest import ROOT, manifest_wheels
+import pytest
 
+from tests.support import ROOT
+from tests.support.extension import blender_ext, bpy_scripts, manifest_wheels
 
-def _bpy_scripts():
-    import importlib.util
-
-    spec = importlib.util.find_spec("bpy")
-    base = os.path.dirname(spec.origin)
-    version = next(d for d in os.listdir(base) if d[:1].isdigit() and os.path.isdir(os.path.join(base, d, "scripts")))
-    return os.path.join(base, version, "scripts")
-
-
-def _blender_ext(*args):
-    tool = os.path.join(_bpy_scripts(), "addons_core", "bl_pkg", "cli", "blender_ext.py")
-    return subprocess.run([sys.executable, tool, *args], cwd=ROOT, capture_output=True, text=True, timeout=120)
+pytestmark = pytest.mark.blender
 
 
 def test_manifest_fields():
@@ -55,14 +44,14 @@ def test_minimum_blender_is_the_oldest_tested_and_wheels_follow_the_pins():
 
 
 def test_blender_validator_accepts_manifest():
-    tags = os.path.join(_bpy_scripts(), "modules", "_bpy_internal", "extensions", "tags.py")
-    p = _blender_ext("validate", "--valid-tags", tags, ".")
+    tags = os.path.join(bpy_scripts(), "modules", "_bpy_internal", "extensions", "tags.py")
+    p = blender_ext("validate", "--valid-tags", tags, ".")
     assert p.returncode == 0, p.stdout + p.stderr
     assert "Success" in p.stdout
 
 
 def test_build_zip_contains_the_addon_only(tmp_path, extension_wheels):
-    p = _blender_ext("build", "--source-dir", ".", "--output-dir", str(tmp_path))
+    p = blender_ext("build", "--source-dir", ".", "--output-dir", str(tmp_path))
     assert p.returncode == 0, p.stdout + p.stderr
     (zpath,) = [os.path.join(tmp_path, f) for f in os.listdir(tmp_path) if f.endswith(".zip")]
     names = zipfile.ZipFile(zpath).namelist()

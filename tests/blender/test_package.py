@@ -21,8 +21,10 @@ import zipfile
 
 import pytest
 
-from conftest import ROOT
-from test_manifest import _blender_ext
+from tests.support import ROOT
+from tests.support.extension import blender_ext
+
+pytestmark = pytest.mark.blender
 
 INSTALL = textwrap.dedent("""
     import sys
@@ -56,7 +58,7 @@ BAKE = textwrap.dedent("""
 @pytest.fixture(scope="module")
 def linux_zip(extension_wheels, tmp_path_factory):
     out = tmp_path_factory.mktemp("dist")
-    p = _blender_ext("build", "--source-dir", ".", "--output-dir", str(out), "--split-platforms")
+    p = blender_ext("build", "--source-dir", ".", "--output-dir", str(out), "--split-platforms")
     assert p.returncode == 0, p.stdout + p.stderr
     zips = sorted(f for f in os.listdir(out) if f.endswith(".zip"))
     assert zips == [f"hemicube_radiosity-{v}.zip" for v in

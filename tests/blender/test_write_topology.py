@@ -6,18 +6,17 @@ untouched. A coarse mesh still gets the element mesh. The .glb keeps TEXCOORD_0 
 from __future__ import annotations
 
 import hashlib
-import importlib
 
 import numpy as np
 import pytest
 
-from conftest import corner_data, read_gltf
+from tests.support.addon import sub
+from tests.support.gltf import read_gltf
+from tests.support.scene import corner_data
+
+pytestmark = pytest.mark.blender
 
 N = 16   # the grid's cells per side: faces of 2/16 = 0.125 m, finer than the 0.25 m detail size
-
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
 
 
 def _attr_array(attr):

@@ -4,7 +4,7 @@ cases 3, 4 and 5)."""
 import numpy as np
 import pytest
 
-from analytic import parallel_rectangles, perpendicular_rectangles, point_under_rectangle_corner
+from tests.support.analytic import parallel_rectangles, perpendicular_rectangles, point_under_rectangle_corner
 from hemicube_radiosity.core.light.lamps import PointLight, SpotLight, SunLight
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.pipeline import BakeSettings, bake

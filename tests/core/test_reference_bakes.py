@@ -3,17 +3,15 @@ by ``tools/reference_bakes.py`` on the code before the settings schema and the s
 and again when the solver began to stop on an error bound (moves of at most 6e-5 of the maximum).
 A change that is meant to alter results regenerates the file in the same commit and says why."""
 import os
-import sys
 
 import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "tools"))
-import reference_bakes  # noqa: E402
+from hemicube_radiosity.core.pipeline import BakeSettings
+from tests.support import ROOT
+from tools import reference_bakes
 
-from hemicube_radiosity.core.pipeline import BakeSettings  # noqa: E402
-
-REF = np.load(os.path.join(os.path.dirname(__file__), "data", "reference_bakes.npz"))
+REF = np.load(os.path.join(ROOT, "tests", "data", "reference_bakes.npz"))
 
 
 @pytest.mark.parametrize("name", sorted(reference_bakes.CASES))

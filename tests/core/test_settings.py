@@ -4,7 +4,6 @@ panel shows every panel setting exactly once."""
 from __future__ import annotations
 
 import dataclasses
-import importlib
 import io
 import json
 import types
@@ -13,10 +12,7 @@ import pytest
 
 from hemicube_radiosity.core.runtime.errors import RadiosityError, SettingsError
 from hemicube_radiosity.core.settings import AUTO_SWITCH, BakeSettings, schema
-
-
-def sub(addon, name):
-    return importlib.import_module(f"{addon.__name__}.{name}")
+from tests.support.addon import sub
 
 
 def test_every_setting_has_label_help_and_a_valid_default():
@@ -54,6 +50,7 @@ def test_from_mapping_reads_blender_style_values():
     assert BakeSettings.from_mapping(types.SimpleNamespace(resolution=64)).resolution == 64
 
 
+@pytest.mark.blender
 def test_panel_operator_and_core_share_every_default_choice_and_limit(addon):
     import bpy
 
@@ -89,6 +86,7 @@ def test_panel_operator_and_core_share_every_default_choice_and_limit(addon):
     assert dataclasses.asdict(props.to_settings(scene.hemicube_radiosity)) == dataclasses.asdict(d)
 
 
+@pytest.mark.blender
 def test_cli_options_are_the_schema(addon):
     cli = sub(addon, "blender.cli.main")
     parser = cli.build_parser()
@@ -129,6 +127,7 @@ class _Layout:
         object.__setattr__(self, name, value)
 
 
+@pytest.mark.blender
 def test_panel_draws_every_setting_once_top_first_and_sizes_follow_the_switch(addon, empty_scene):
     bpy = empty_scene
     panel = sub(addon, "blender.ui.panel")
@@ -158,6 +157,7 @@ def test_panel_draws_every_setting_once_top_first_and_sizes_follow_the_switch(ad
         assert [c.radiosity_group for c in kids] == [g for g, _ in panel.SUBPANELS]
 
 
+@pytest.mark.blender
 def test_report_settings_are_the_settings_as_used(addon, tmp_path):
     import bpy
 

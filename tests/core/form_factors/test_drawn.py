@@ -9,6 +9,7 @@ from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.form_factors.drawn import draw_set
 from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut
+from tests.support.shapes import uv_sphere
 
 
 def _grouped(meshes):
@@ -113,8 +114,7 @@ def test_outlines_touching_at_a_corner_are_cut_into_simple_loops():
 
 
 def test_curved_clusters_are_drawn_piece_by_piece():
-    from test_clusters import _uv_sphere
-    pieces = build_patches([_uv_sphere(24, 12)], 0.5)
+    pieces = build_patches([uv_sphere(24, 12)], 0.5)
     clusters = group_pieces(pieces, 0.5)
     d = draw_set(pieces, clusters)
     sizes = np.bincount(clusters.of)

@@ -7,14 +7,13 @@ import pytest
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.form_factors import embree as embree_ff
-from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
+from tests.support.analytic import object_factor, parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core.form_factors.embree import (
     embree_hemicube_form_factors, embree_stochastic_form_factors
 )
 from hemicube_radiosity.core.runtime.progress import Cancelled
 from hemicube_radiosity.core.rays import EmbreeUnavailable, embree_available
-
-needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
+from tests.support.markers import needs_embree
 
 
 def test_closed_forms_are_the_catalogue_values():

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from analytic import object_factor, parallel_rectangles, perpendicular_rectangles
+from tests.support.analytic import object_factor, parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.form_factors.hemicube import (
     hemicube_form_factors, pixel_directions, pixel_weights, receiver_frames

@@ -6,29 +6,8 @@ import pytest
 
 from hemicube_radiosity.core.form_factors import hemicube as H
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut
-
-
-def sphere(n, radius=0.3, at=(1.0, 1.0, 0.3)):
-    """A UV sphere of n x 2n quads (triangle fans at the poles), outward, as a curved mesh of
-    tiny faces: most cover no hemi-cube pixel centre from across the box."""
-    th = np.linspace(0, np.pi, n + 1)[1:-1]
-    ph = np.linspace(0, 2 * np.pi, 2 * n, endpoint=False)
-    t, p = np.meshgrid(th, ph, indexing="ij")
-    ring = np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], axis=-1).reshape(-1, 3)
-    verts = np.concatenate([ring, [[0, 0, 1], [0, 0, -1]]]) * radius + np.asarray(at)
-    top, bot = len(ring), len(ring) + 1
-    m = 2 * n
-    faces = []
-    for i in range(n - 2):
-        for j in range(m):
-            a, b = i * m + j, i * m + (j + 1) % m
-            faces.append([a, a + m, b + m, b])
-    for j in range(m):
-        faces.append([top, j, (j + 1) % m])
-        faces.append([bot, (n - 2) * m + (j + 1) % m, (n - 2) * m + j])
-    return MeshInput.from_faces(verts, faces, rho=(0.7, 0.7, 0.7), name="Sphere")
+from tests.support.shapes import sphere
 
 
 def _grouped(meshes):

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from analytic import point_under_rectangle_corner
+from tests.support.analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.light.emitters import emitter_direct, emitter_transport
 from hemicube_radiosity.core.util.geometry import polygon_form_factors
 from hemicube_radiosity.core.mesh.patches import build_patches

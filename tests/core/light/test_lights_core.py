@@ -12,9 +12,8 @@ from hemicube_radiosity.core.light.lamps import (
     AreaLight, PointLight, SpotLight, SunLight, direct_irradiance, spot_attenuation
 )
 from hemicube_radiosity.core.mesh.patches import build_patches
-from hemicube_radiosity.core.rays import EmbreeUnavailable, NumpyOccluder, embree_available
-
-needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
+from hemicube_radiosity.core.rays import EmbreeUnavailable, NumpyOccluder
+from tests.support.markers import needs_embree
 
 
 def floor(half=2.0, patch=0.25, z=0.0):

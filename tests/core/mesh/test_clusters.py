@@ -4,15 +4,16 @@ hundreds of triangles."""
 import numpy as np
 import pytest
 
-from analytic import parallel_rectangles, perpendicular_rectangles
+from tests.support.analytic import parallel_rectangles, perpendicular_rectangles
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.form_factors.drawn import draw_set
 from hemicube_radiosity.core.form_factors.embree import embree_hemicube_form_factors
 from hemicube_radiosity.core.util.geometry import group_form_factors, polygon_form_factors
 from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
-from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
+from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
+from tests.support.shapes import uv_sphere
 
 
 def cluster_factor(pieces, clusters, F, src=0, dst=1):
@@ -61,27 +62,13 @@ def test_grouping_never_crosses_materials_or_sharp_creases():
         n = p.normals[members]
         assert np.degrees(np.arccos(np.clip(n @ n[0], -1, 1))).max() < 30   # no crease inside
     # a smooth sphere is cut by normal: every cluster within the grouping angle
-    sphere = _uv_sphere(48, 24)
+    sphere = uv_sphere(48, 24)
     ps = build_patches([sphere], 10.0)
     cs = group_pieces(ps, 10.0, max_angle=30)
     assert 10 < len(cs) < 200
     spread = [np.degrees(np.arccos(np.clip(ps.normals[cs.of == k] @ cs.normals[k], -1, 1))).max()
               for k in range(len(cs))]
     assert max(spread) < 30
-
-
-def _uv_sphere(nu, nv):
-    th = np.linspace(0, np.pi, nv + 1)[1:-1]
-    ph = np.linspace(0, 2 * np.pi, nu, endpoint=False)
-    t, f = np.meshgrid(th, ph, indexing="ij")
-    v = np.stack([np.sin(t) * np.cos(f), np.sin(t) * np.sin(f), np.cos(t)], -1).reshape(-1, 3)
-    v = np.vstack([v, [(0, 0, 1), (0, 0, -1)]])
-    top, bot = len(v) - 2, len(v) - 1
-    idx = lambda i, j: i * nu + j % nu
-    faces = [[idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)] for i in range(nv - 2) for j in range(nu)]
-    faces += [[top, idx(0, j), idx(0, j + 1)] for j in range(nu)]
-    faces += [[bot, idx(nv - 2, j + 1), idx(nv - 2, j)] for j in range(nu)]
-    return MeshInput.from_faces(v, faces, name="sphere")
 
 
 def test_parallel_squares_cut_into_hundreds_of_triangles_match_siegel_howell():
@@ -302,7 +289,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     from hemicube_radiosity.core.util import geometry
 
     rng = np.random.default_rng(3)
-    p = build_patches([_uv_sphere(48, 24)], None)
+    p = build_patches([uv_sphere(48, 24)], None)
     c, pn = p.corners(), p.normals
     g = group_pieces(p, 0.7).of                                       # cells and 30-degree normal bins
     outline = geometry.GroupOutline.of(c, g, pn)

@@ -16,9 +16,8 @@ from hemicube_radiosity.core.mesh.contact import cut_along_contacts, open_side
 from hemicube_radiosity.core.output.interpolate import interpolate_at
 from hemicube_radiosity.core.mesh.patches import MeshInput, build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
-from hemicube_radiosity.core.rays import embree_available, embree_scene
-
-needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
+from hemicube_radiosity.core.rays import embree_scene
+from tests.support.markers import needs_embree
 
 X0, X1, Y0, Y1 = 0.83, 1.61, 0.77, 1.49          # the house's footprint, off the element grid
 

@@ -3,7 +3,7 @@ gather that reads exact light where it lands on such places (issue 11)."""
 import numpy as np
 import pytest
 
-from analytic import point_under_rectangle_corner
+from tests.support.analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.output import stage as output
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.light.stage import DirectLight

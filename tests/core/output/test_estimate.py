@@ -21,9 +21,7 @@ from hemicube_radiosity.core.output.estimate import _lit_vertices, _vertex_owner
 from hemicube_radiosity.core.output.interpolate import interpolate_at
 from hemicube_radiosity.core.output.stage import _open_elements, seen_vertices
 from hemicube_radiosity.core.mesh.patches import MeshInput
-from hemicube_radiosity.core.rays import embree_available
-
-needs_embree = pytest.mark.skipif(not embree_available(), reason="the gather needs Embree")
+from tests.support.markers import needs_embree
 
 
 def _measured(meshes, settings, world=None):
@@ -45,6 +43,7 @@ def _open_box():
     return [box[0], *box[6:]]          # the floor and the two blocks, under the sky
 
 
+@pytest.mark.slow
 @needs_embree
 @pytest.mark.parametrize("case", ["cornell_one_sided", "open_box_sky"])
 def test_estimated_error_is_within_a_factor_two_of_the_measured(case):
@@ -61,6 +60,7 @@ def test_estimated_error_is_within_a_factor_two_of_the_measured(case):
     assert r.timings["estimate"] > 0
 
 
+@pytest.mark.slow
 @needs_embree
 def test_estimated_error_with_a_lamp_lighting_the_ceiling_from_its_back():
     """A two-sided lamp 2 mm under the ceiling: 1.2% estimated against 2.1% measured. At twice

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from analytic import point_under_rectangle_corner
+from tests.support.analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.output.gather import (
     final_gather, gather_matrix, patch_parameters, surface_values
 )

@@ -10,7 +10,7 @@ from hemicube_radiosity.core.runtime.forecast import OTHER, curved_pieces
 from hemicube_radiosity.core.form_factors.stage import receivers_needed
 from hemicube_radiosity.core.pipeline import BakeSettings, _cut, bake
 
-from test_hemicube_cull import sphere
+from tests.support.shapes import sphere
 
 SMALL = dict(patch_size=0.5, element_size=0.25, resolution=16, gather_rays=16)
 

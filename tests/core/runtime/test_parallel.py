@@ -30,9 +30,9 @@ from hemicube_radiosity.core.mesh.patches import build_patches
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.runtime.progress import Cancelled, Ticker
 from hemicube_radiosity.core.rays import embree_available, embree_scene
+from tests.support import ROOT
+from tests.support.markers import needs_embree
 from hemicube_radiosity.core.settings import BakeSettings
-
-needs_embree = pytest.mark.skipif(not embree_available(), reason="embreex is not installed")
 needs_fork = pytest.mark.skipif(not processes_available(), reason="no 'fork' worker processes here")
 
 
@@ -263,6 +263,7 @@ def test_ordered_map_processes_are_terminated_when_the_consumer_stops():
             os.kill(pid, 0)
 
 
+@pytest.mark.blender
 @needs_fork
 def test_form_factor_workers_start_nothing_inside_blender(box, monkeypatch):
     """Inside Blender ``sys.executable`` is the Blender binary and the modal operator bakes in a
@@ -304,10 +305,9 @@ def test_workers_die_with_a_killed_baking_process(tmp_path):
     import subprocess
     import time
 
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     script = tmp_path / "orphan.py"
     script.write_text(_ORPHAN_SCRIPT)
-    p = subprocess.Popen([sys.executable, str(script), root], stdout=subprocess.PIPE, text=True)
+    p = subprocess.Popen([sys.executable, str(script), ROOT], stdout=subprocess.PIPE, text=True)
     try:
         pids = [int(p.stdout.readline()) for _ in range(2)]      # both workers are drawing
     finally:
@@ -668,9 +668,8 @@ c = np.ones(1 << 17)
 del c
 print(out, inside, held, rss())
 """)
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     got = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, check=True,
-                         env={**os.environ, "PYTHONPATH": root}).stdout.split()
+                         env={**os.environ, "PYTHONPATH": ROOT}).stdout.split()
     out, inside, held, after = map(int, got)
     assert out > 20000 and inside < out / 4          # 200 MB a round faulted in once, not ten times
     assert held > 150 and after < held - 100         # kept while the bake runs, handed back after it
