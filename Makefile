@@ -1,7 +1,9 @@
 # The two commands a newcomer needs: `make demo` and `make test`.
 # Both create .venv on first use from requirements-dev.txt; nothing installed by hand is assumed.
 #
-#   make test        the whole suite on Blender 5.0 (bpy 5.0.1)
+#   make test        the whole suite on Blender 5.0 (bpy 5.0.1), after `make viewer-deps`
+#   make viewer-deps what tests/blender/test_viewer.py needs: Debian's chromium, node and npm (apt-get,
+#                    as root) and the npm packages tests/support/viewer/package-lock.json pins
 #   make test-lts    the suite on Blender 4.2 LTS and 4.5 LTS (.venv-4.2, .venv-4.5; not part of `make test`)
 #   make demo        bake the Cornell box into demo/out/
 #   make bench       benchmarks (docs/performance.md)
@@ -14,7 +16,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP_Q  := -q --disable-pip-version-check
 
-.PHONY: venv test test-lts lts-venvs demo bench package wheels clean distclean
+.PHONY: venv test viewer-deps test-lts lts-venvs demo bench package wheels clean distclean
 
 # $(call ensure_venv,DIR,REQUIREMENTS): (re)build DIR unless it is a working Python 3.11 venv that
 # has installed exactly REQUIREMENTS (a stamp named after the file's checksum, written only when
@@ -40,8 +42,26 @@ endef
 venv:
 	$(call ensure_venv,$(VENV),requirements-dev.txt)
 
+# The viewer test installs nothing: its browser and npm packages come from here. Where they cannot
+# be had (not root, offline) the suite still runs and that test is skipped, naming this target.
 test: venv
+	@$(MAKE) --no-print-directory viewer-deps || echo "make: viewer-deps failed: tests/blender/test_viewer.py will be skipped" >&2
 	$(PY) -m pytest -q tests
+
+VIEWER_DIR := tests/support/viewer
+APT_GET    := DEBIAN_FRONTEND=noninteractive apt-get
+
+viewer-deps: $(VIEWER_DIR)/node_modules/.package-lock.json
+	@command -v chromium >/dev/null || command -v chromium-browser >/dev/null || { \
+		[ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null || { echo "make: chromium is missing: run 'apt-get install chromium' as root" >&2; exit 1; }; \
+		$(APT_GET) update -q && $(APT_GET) install -y -q --no-install-recommends chromium; }
+
+# npm ci rewrites node_modules/.package-lock.json: newer than the lock file once they agree
+$(VIEWER_DIR)/node_modules/.package-lock.json: $(VIEWER_DIR)/package-lock.json
+	@command -v npm >/dev/null || { \
+		[ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null || { echo "make: node and npm are missing: run 'apt-get install nodejs npm' as root" >&2; exit 1; }; \
+		$(APT_GET) update -q && $(APT_GET) install -y -q --no-install-recommends nodejs npm; }
+	cd $(VIEWER_DIR) && PUPPETEER_SKIP_DOWNLOAD=1 npm ci --no-audit --no-fund --ignore-scripts
 
 demo: venv
 	$(PY) -m hemicube_radiosity demo --output-dir demo/out

@@ -13,7 +13,7 @@ quantity in radiance units,
 
     B = E + rho * H / pi          (W m^-2 sr^-1, scene linear)
 
-Conventions established by experiment with bpy 5.0.1 (tests/test_cycles_reference.py keeps them
+Conventions established by experiment with bpy 5.0.1 (tests/blender/test_cycles_reference.py keeps them
 true; numbers are exact to float precision where no sampling is involved):
 
 * An emissive face of Emission strength 1 (white) bakes to 1.0 in COMBINED (the EMIT pass).

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Pictures for docs/lighting.md: the same scene rendered by Cycles and shown from our bake.
 
-For each case of tests/test_lighting_cycles.py (same scenes, same bakes) three renders from one
+For each case of tests/support/cycles_scenes.py (same scenes, same bakes) three renders from one
 camera, side by side in ``docs/img/lighting_<case>.png``:
 
 1. Cycles path-traced render of the scene (its lamps, world and materials);
@@ -29,7 +29,7 @@ sys.path.insert(0, ROOT)
 import bpy  # noqa: E402
 from mathutils import Vector  # noqa: E402
 
-from tests import test_lighting_cycles as cases  # noqa: E402
+from tests.support import cycles_scenes as cases  # noqa: E402
 from tools import cycles_reference as cr  # noqa: E402
 
 CAMERAS = {   # eye, target

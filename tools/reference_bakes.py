@@ -1,4 +1,4 @@
-"""Reference bakes for tests/test_reference_bakes.py: run once on the code a refactor starts from,
+"""Reference bakes for tests/core/test_reference_bakes.py: run once on the code a refactor starts from,
 so that the test can prove the refactored code gives the same numbers. Written first on cfa6419
 (before the settings schema and the stage list); written again when the solver began to stop on
 an error bound (96b8da5: results moved by at most 6e-5 of the maximum), when the final gather

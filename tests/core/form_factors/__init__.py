@@ -1,0 +1,1 @@
+"""Tests of ``hemicube_radiosity/core/form_factors/``."""

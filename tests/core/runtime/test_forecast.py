@@ -1,0 +1,58 @@
+"""The time a bake expects, said before its form factors (core/runtime/forecast.py): counted from the
+bake's own receivers, curved pieces and output vertices; none when the form factors are cached.
+(How close it comes to the time taken is measured by bench/bench_dense.py, not here: timings in
+unit tests are this shared machine's noise.)"""
+import numpy as np
+
+from hemicube_radiosity.core import builtin_scenes as scenes
+from hemicube_radiosity.core.runtime.cache import FormFactorCache
+from hemicube_radiosity.core.runtime.forecast import OTHER, curved_pieces
+from hemicube_radiosity.core.form_factors.stage import receivers_needed
+from hemicube_radiosity.core.pipeline import BakeSettings, _cut, bake
+
+from tests.support.shapes import sphere
+
+SMALL = dict(patch_size=0.5, element_size=0.25, resolution=16, gather_rays=16)
+
+
+def test_forecast_is_said_before_the_form_factors_and_counts_the_bake():
+    said = []
+    cache = FormFactorCache()
+    r = bake(scenes.cornell_box(), BakeSettings(workers=1, **SMALL), cache=cache,
+             progress=lambda stage, fr, msg: said.append((stage, fr, msg)))
+    f = r.forecast
+    ff = [m for st, _, m in said if st == "form_factors" and m]
+    said_at = ff.index(f.describe())
+    assert f.describe().startswith("expected about")
+    eta = [i for i, m in enumerate(ff) if "ETA" in m]
+    assert eta and min(eta) > said_at                   # said before the hemi-cubes' progress
+    u = r.patches if r.clusters is None else r.clusters
+    assert f.receivers == len(receivers_needed(u)) and f.workers == 1
+    # the output it counted is the output the bake made, less the vertices that the cut along
+    # contacts adds (made meanwhile, on two workers) and those split at partitions: 606 of 676
+    assert 0.85 * len(r.elements.verts) <= f.vertices <= len(r.elements.verts)
+    assert f.seconds > 0 and np.isclose(f.seconds, (1 + OTHER) * (f.form_factors + f.output))
+    # a relight reads F from the cache: nothing long to forecast
+    again = bake(scenes.cornell_box(), BakeSettings(workers=1, **SMALL), cache=cache)
+    assert again.form_factor_source == "cached" and again.forecast is None
+
+
+def test_forecast_follows_the_output_and_the_workers():
+    coarse = bake(scenes.cornell_box(), BakeSettings(workers=1, **SMALL)).forecast
+    fine = bake(scenes.cornell_box(), BakeSettings(workers=1, **{**SMALL, "element_size": 0.125})).forecast
+    assert fine.vertices > 2 * coarse.vertices and fine.output > 2 * coarse.output
+    assert fine.form_factors == coarse.form_factors                  # the same patches
+    two = bake(scenes.cornell_box(), BakeSettings(workers=2, **SMALL)).forecast
+    assert two.workers == 2 and two.seconds < coarse.seconds
+
+
+def test_curved_pieces_are_those_of_bent_clusters():
+    """A flat cluster is drawn as its outline however it is cut; a curved one face by face."""
+    flat = scenes.tessellate(scenes.cornell_box(), 4)
+    pieces, clusters = _cut(flat, BakeSettings().resolved(flat))
+    assert clusters is not None and curved_pieces(pieces, clusters) == 0
+    ball = scenes.cornell_box() + [sphere(20)]
+    pieces, clusters = _cut(ball, BakeSettings().resolved(ball))
+    on_ball = np.array([pieces.object_names[o] == "Sphere" for o in pieces.owner])
+    n = curved_pieces(pieces, clusters)
+    assert 0.8 * on_ball.sum() <= n <= on_ball.sum()

@@ -1,0 +1,25 @@
+"""The bake gives the numbers it gave before a refactor: ``tests/data/reference_bakes.npz`` was written
+by ``tools/reference_bakes.py`` on the code before the settings schema and the stage list (cfa6419),
+and again when the solver began to stop on an error bound (moves of at most 6e-5 of the maximum).
+A change that is meant to alter results regenerates the file in the same commit and says why."""
+import os
+
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.pipeline import BakeSettings
+from tests.support import ROOT
+from tools import reference_bakes
+
+REF = np.load(os.path.join(ROOT, "tests", "data", "reference_bakes.npz"))
+
+
+@pytest.mark.parametrize("name", sorted(reference_bakes.CASES))
+def test_same_numbers_as_before(name):
+    got = reference_bakes.run_case(name, lambda d: BakeSettings(**{**reference_bakes.PINNED, **d}))
+    for key, value in got.items():
+        ref = REF[f"{name}/{key}"]
+        assert value.shape == ref.shape, key
+        scale = float(np.max(np.abs(ref)))
+        assert scale > 0
+        np.testing.assert_allclose(value, ref, rtol=0, atol=1e-6 * scale, err_msg=f"{name}/{key}")
