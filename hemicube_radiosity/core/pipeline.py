@@ -17,7 +17,8 @@ import numpy as np
 
 from .runtime.cache import FormFactorCache, cache_key, cached
 from .mesh.clusters import Clusters, group_pieces
-from .light.stage import DirectLight, direct_stage, patch_average, source_term
+from .light.points import patch_average
+from .light.stage import DirectLight, direct_stage, source_term
 from .runtime.errors import SettingsError
 from .output.estimate import estimate_stage
 from .light.lamps import SpotLight, SunLight, direct_irradiance

@@ -17,19 +17,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
+from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .lamps import direct_irradiance
+from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
-from ..util.spatial import morton_order
 from ..rays import embree_available, embree_scene, occluder, open_fraction, sky_fraction
 from ..util.unique import unique_ints
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
 
-__all__ = ["DirectLight", "direct_stage", "source_term", "turned_around"]
+__all__ = ["DirectLight", "direct_stage", "source_term"]
 
 
 @dataclass
@@ -205,27 +205,6 @@ def _unit_owner(light: "DirectLight") -> np.ndarray:
     return first
 
 
-def grid_points(patches: PatchSet, n: int, rng=None):
-    """(N, n*n, 3) points at the centres of an n x n grid of each patch's bilinear map (a
-    triangle is a quad with two corners equal) and (N, n*n) their area weights (summing to 1).
-    ``rng`` (a NumPy Generator): each point jittered within its cell instead (a stratified
-    sample, so a mean over them has no bias where the light changes within a cell)."""
-    t = np.arange(n)
-    i, j = [a.ravel()[None, :, None] for a in np.meshgrid(t, t, indexing="ij")]   # (1, n^2, 1)
-    if rng is None:
-        u, v = (i + 0.5) / n, (j + 0.5) / n
-    else:
-        N = len(patches)
-        u, v = (i + rng.uniform(size=(N, n * n, 1))) / n, (j + rng.uniform(size=(N, n * n, 1))) / n
-    c = patches.corners()[:, None]                                                  # (N, 1, 4, 3)
-    c0, c1, c2, c3 = c[:, :, 0], c[:, :, 1], c[:, :, 2], c[:, :, 3]
-    x = (1 - u) * (1 - v) * c0 + u * (1 - v) * c1 + u * v * c2 + (1 - u) * v * c3
-    du = (1 - v) * (c1 - c0) + v * (c2 - c3)
-    dv = (1 - u) * (c3 - c0) + u * (c2 - c1)
-    w = np.linalg.norm(np.cross(du, dv), axis=-1)
-    return x, w / np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
-
-
 def _face_groups(patches: PatchSet, emitters, first, of_face) -> np.ndarray | None:
     """(M,) the emitting patches ``emitters`` of each input face as one unit (``of_face`` (M,):
     their face, numbered 0..; ``first``: each face's first row of ``emitters``), or None where
@@ -287,165 +266,6 @@ def _whole_groups(patches: PatchSet, emitters, groups, min_area) -> np.ndarray:
     return unique_ints(to[groups], return_inverse=True)[1].reshape(-1)
 
 
-def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
-    """(N,) int: the piece whose centre stands for each piece's light. A piece stands for
-    itself, except in a cluster of more than ``k`` pieces: there the pieces are put in Morton
-    order of their centres (in the cluster's bounding box), the order is cut into ``k`` runs of
-    equal area, and each run's pieces take the light at the centre of the run's piece nearest
-    the run's area centroid (a k-point midpoint rule over compact regions). So a cluster's light costs ``k`` points however
-    finely it was modelled, and its area mean is a ``k``-point stratified estimate. The same
-    array for the same patch and cluster arrays (a relight's points keep their keys)."""
-    objs = (patches.centers, patches.areas, clusters.of)
-    stand = _CENTRES.lookup(objs, ("stand", k))
-    if stand is not _CENTRES.MISSING:
-        return stand
-    of, a, c = clusters.of, patches.areas, patches.centers
-    stand = np.arange(len(of))
-    big = np.flatnonzero(clusters.sizes[of] > k)
-    if len(big):
-        cl = of[big]
-        order = morton_order(c[big], cl, len(clusters))
-        rows, cl = big[order], cl[order]
-        cum = np.cumsum(a[rows])
-        first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
-        start = np.repeat(cum[first] - a[rows[first]], np.diff(np.r_[first, len(rows)]))
-        total = np.bincount(cl, weights=a[rows], minlength=len(clusters))[cl]
-        with np.errstate(divide="ignore", invalid="ignore"):      # a cluster of no area: one run
-            frac = np.where(total > 0, (cum - 0.5 * a[rows] - start) / total, 0.0)
-        run = np.clip((frac * k).astype(np.int64), 0, k - 1)
-        # each run's stand-in: its piece nearest the run's area centroid
-        rid = unique_ints(cl * k + run, return_inverse=True)[1]
-        w = a[rows]
-        mid = np.stack([np.bincount(rid, weights=w * c[rows, ax]) for ax in range(3)], 1)
-        mid /= np.maximum(np.bincount(rid, weights=w), 1e-300)[:, None]
-        d = np.einsum("ij,ij->i", c[rows] - mid[rid], c[rows] - mid[rid])
-        near = np.lexsort((d, rid))
-        best = near[np.r_[0, np.flatnonzero(np.diff(rid[near])) + 1]]
-        stand[rows] = rows[best[rid]]
-    stand.flags.writeable = False
-    return _CENTRES.store(objs, stand, ("stand", k))
-
-
-def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=None, rng=None,
-                  stand=None) -> np.ndarray:
-    """(N, 3) area-weighted mean over n x n points of every patch of ``light_at(points, normals,
-    where) -> (P, 3)`` (n = 1: at the centres). The points are the centres of an n x n grid of
-    the patch's bilinear map (a triangle is a quad with two corners equal), weighted by the map's
-    area there. ``centre_only`` (N,) bool: patches taken at their centre whatever n (the faces of
-    a grouped cluster, whose mean over many faces already samples the light).
-    ``weight_at(points, normals) -> (P,)`` in [0, 1]: how much each point counts besides its
-    area (a point the rest of the scene cannot see, 0); a patch whose points all weigh 0 takes
-    the plain area mean. ``rng``: jittered points (see :func:`grid_points`). ``stand`` (N,)
-    int (:func:`stand_ins`): a centre-only piece takes the light at its stand-in's centre."""
-    some = centre_only is not None and centre_only.any()
-    if (not some or stand is None) and (n <= 1 or some and centre_only.all()):
-        return light_at(patches.centers, patches.normals, "centres")
-    if some:
-        lit = centre_only
-        if stand is not None:
-            lit = np.zeros(len(patches), bool)
-            lit[stand[centre_only]] = True      # the centres that stand for the rest
-        out = np.empty((len(patches), 3))
-        if lit.all():
-            out[:] = light_at(patches.centers, patches.normals, "centres")
-        else:
-            out[lit] = light_at(*_centres(patches, lit), "grouped-centres")
-        if stand is not None:                   # every row at once (a masked scatter of rows: 4x slower)
-            out = out.take(np.where(centre_only, stand, np.arange(len(patches))), axis=0)
-        rest = np.flatnonzero(~centre_only)
-        if len(rest):
-            if n <= 1 or rng is not None:
-                out[rest] = patch_average(_rows(patches, rest), n, light_at, weight_at=weight_at, rng=rng)
-            else:
-                out[rest] = _grid_average(grid_of(patches, rest, n), n, light_at, weight_at)
-        return out
-    if rng is None:
-        return _grid_average(grid_of(patches, None, n), n, light_at, weight_at)
-    x, w = grid_points(patches, n, rng)
-    N, K = x.shape[:2]
-    return _grid_average((x, x.reshape(N * K, 3), np.repeat(patches.normals, K, axis=0), w), n, light_at,
-                         weight_at)
-
-
-def _grid_average(grid, n, light_at, weight_at=None) -> np.ndarray:
-    """:func:`patch_average` over the points of ``grid`` (:func:`grid_of`)."""
-    _, x, nrm, w = grid
-    N, K = w.shape
-    if weight_at is not None:
-        seen = w * np.asarray(weight_at(x, nrm), dtype=np.float64).reshape(N, K)
-        total = seen.sum(axis=1, keepdims=True)
-        w = np.where(total > 0, seen / np.where(total > 0, total, 1.0), w)
-    D = light_at(x, nrm, f"patch-points-{n}").reshape(N, K, 3)
-    return np.einsum("nk,nkc->nc", w, D)
-
-
-def _rows(patches: PatchSet, rows) -> PatchSet:
-    """The patches ``rows`` (the same vertex array)."""
-    return PatchSet(patches.verts, patches.polys[rows], patches.centers[rows], patches.normals[rows],
-                    patches.areas[rows], patches.rho[rows], patches.emission[rows], patches.owner[rows],
-                    patches.source_face[rows], patches.object_names)
-
-
-_GRIDS = Memo(8, refresh=True)     # (verts, polys), (n, N, rows) -> grid: the most recently used kept
-
-
-def grid_of(patches: PatchSet, rows, n: int):
-    """:func:`grid_points` (n x n, not jittered) of the patches ``rows`` (int array; None: all)
-    as (points (R, K, 3), the same as (R K, 3), their normals (R K, 3), weights (R, K)),
-    read-only, kept for the last few patch arrays and rows: the same arrays for the same
-    geometry, so the point sets a relight lights again (the keys of their transports, exposure
-    and crossings) are hashed once, and the points are not made again (the dense Cornell room's
-    patch grids, twice a relight, and its refine grids)."""
-    rk = b"" if rows is None else np.ascontiguousarray(rows, dtype=np.int64).tobytes()
-
-    def make():
-        sub = patches if rows is None else _rows(patches, rows)
-        x, w = grid_points(sub, n)
-        N, K = x.shape[:2]
-        grid = (x, x.reshape(N * K, 3), np.repeat(sub.normals, K, axis=0), w)
-        for a in grid:
-            a.flags.writeable = False
-        return grid
-    return _GRIDS.of((patches.verts, patches.polys), make, (int(n), len(patches), rk))
-
-
-#: A cluster's light from at most this many x patch_light_points^2 centres (:func:`stand_ins`).
-#: At 4 (16 centres) one stand-in of the 54k-triangle box's ceiling fell beside the lamp, whose back
-#: lights the ceiling through a 2 mm gap in a band a few millimetres wide, and its light stood for a
-#: sixteenth of the cluster: the ceiling's reflected light came out 42% too high, the walls' 2%, the
-#: probes' bias +0.77% (RMS 3.10% against Cycles). From 8 on the means agree with lighting every
-#: face centre (RMS 3.00%, bias +0.39%; the 200k box 2.99 -> 2.96%) for 0.03 s more direct stage.
-STAND_INS = 8
-#: (centers, normals), mask bytes -> their rows (:func:`_centres`); (centers, areas, cluster
-#: of), k -> stand-ins (:func:`stand_ins`): the last eight of either
-_CENTRES = Memo(8)
-
-
-def _centres(patches: PatchSet, select) -> tuple:
-    """(centres (M, 3), normals (M, 3)) of the patches ``select`` (N,) bool, the same arrays for
-    the same patch arrays and selection (a relight's: its transports' keys hash them once,
-    :func:`.cache.array_key`). The arrays are read-only."""
-    c, n = patches.centers, patches.normals
-
-    def make():
-        rows = (c[select], n[select])
-        for a in rows:
-            a.flags.writeable = False
-        return rows
-    return _CENTRES.of((c, n), make, (np.packbits(select).tobytes(), len(select)))
-
-
-def turned_around(patches: PatchSet) -> PatchSet:
-    """The same patches facing the other way: corners in reverse order, normals negated."""
-    polys = patches.polys.copy()
-    tri = polys[:, 3] < 0
-    polys[~tri] = polys[~tri][:, ::-1]
-    polys[tri, :3] = polys[tri, 2::-1]
-    return PatchSet(patches.verts, polys, patches.centers, -patches.normals, patches.areas,
-                    patches.rho, patches.emission, patches.owner, patches.source_face,
-                    list(patches.object_names))
-
-
 def source_term(patches, F, *, direct_irradiance=None, world=None) -> np.ndarray:
     """S = emission + rho * H_direct / pi + rho * sky * L_world  (radiance units, (N, 3)).
 
@@ -493,7 +313,7 @@ def _unknowns_direct(ctx, seen, rd, stand) -> np.ndarray:
     lit = np.zeros(len(p), bool)
     lit[stand[multi]] = True
     e = np.zeros(len(p))
-    e[lit] = seen(*_centres(p, lit))
+    e[lit] = seen(*centres_of(p, lit))
     w[multi] *= e[stand[multi]]
     total = np.bincount(c.of, weights=w, minlength=len(c))
     mean = np.stack([np.bincount(c.of, weights=w * rd[:, k], minlength=len(c)) for k in range(3)], 1)

@@ -17,7 +17,8 @@ import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .clusters import make_clusters
-from ..light.stage import LUMA, DirectLight, grid_of
+from ..light.points import grid_of
+from ..light.stage import LUMA, DirectLight
 from .patches import PatchSet, poly_geometry
 from ..rays import embree_available, embree_scene
 from ..util.unique import unique_ints

@@ -59,7 +59,7 @@ def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
 def test_grid_of_is_grid_points_kept_for_the_geometry():
     # the patch grids a relight lights again: grid_points' values, the same arrays the second time
     from hemicube_radiosity.core import builtin_scenes as scenes
-    from hemicube_radiosity.core.light.stage import _rows, grid_of, grid_points, patch_average
+    from hemicube_radiosity.core.light.points import grid_of, grid_points, patch_average, rows_of as _rows
     ps = build_patches(scenes.cornell_box(), 0.25)
     rows = np.arange(3, len(ps), 2)
     x, w = grid_points(_rows(ps, rows), 3)
