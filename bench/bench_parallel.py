@@ -38,7 +38,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(HERE)
 sys.path.insert(0, ROOT)
 
-from hemicube_radiosity.core.runtime import forked
+from hemicube_radiosity.core.runtime import forked  # noqa: E402
 from hemicube_radiosity.core import pipeline, builtin_scenes as scenes  # noqa: E402
 from hemicube_radiosity.core.runtime.parallel import cpu_count  # noqa: E402
 from hemicube_radiosity.core.rays import clear_ray_cache, embree_available  # noqa: E402
@@ -251,8 +251,8 @@ def gather_only(rounds):
     runs, first, forked_from = {}, None, gather.PROCESS_RAYS
     try:
         for _ in range(rounds):
-            for name, w, forked in (("1", 1, True), ("2 forked", 2, True), ("2 threads", 2, False)):
-                gather.PROCESS_RAYS = 0 if forked else None
+            for name, w, by_fork in (("1", 1, True), ("2 forked", 2, True), ("2 threads", 2, False)):
+                gather.PROCESS_RAYS = 0 if by_fork else None
                 c, t = cpu_time(), time.perf_counter()
                 G, sky, H = gather.gather_matrix(el, x, n, scene, rays=rays, workers=w, hits=True)
                 runs.setdefault(name, []).append((time.perf_counter() - t, cpu_time() - c))

@@ -24,7 +24,8 @@ from .output.estimate import estimate_stage
 from .light.lamps import SpotLight, SunLight, direct_irradiance
 from .form_factors.stage import compute_form_factors, form_factor_stage, receivers_needed
 from .mesh.contact import cut_along_contacts
-from .output.stage import mesh_faces, meshes_key, output_elements, start_elements, vertex_stage
+from .mesh.elements import mesh_faces, meshes_key, output_elements, start_elements
+from .output.stage import vertex_stage
 from .runtime.native import kept_heap, one_blas_thread
 from .mesh.patches import PatchError, PatchSet
 from .mesh.subdivide import build_patches, keeps_faces_whole

@@ -348,7 +348,7 @@ def test_relight_that_moves_the_bright_areas_chooses_again_and_equals_a_cold_bak
     a relight that only scales the light reuses it, while one that moves the light elsewhere (a
     second lamp low on the red wall turned from as bright as the ceiling lamp to dim) chooses
     again and builds a new one, never reads a stale one, and equals a cold bake."""
-    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.output import indirect as output
     from hemicube_radiosity.core.builtin_scenes import quad
 
     def scene(top, low, wall=None):
@@ -448,7 +448,7 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     output elements (:func:`.patches.keeps_faces_whole`): the bake builds its faces once, not
     once for the patches, once for the elements and again inside a process forked only to
     find the two equal; the bake is the same as one that builds them every time."""
-    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.mesh import elements as output
     from hemicube_radiosity.core.runtime import background, forked
     from hemicube_radiosity.core import pipeline
     from hemicube_radiosity.core.builtin_scenes import tessellate

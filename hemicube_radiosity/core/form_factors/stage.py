@@ -13,6 +13,7 @@ import numpy as np
 from . import embree as embree_ff
 from ..runtime.cache import cache_key, geometry_key
 from .hemicube import hemicube_form_factors
+from ..mesh.elements import output_vertices_ahead
 from ..mesh.patches import PatchSet
 from ..util.sparse import CSR
 
@@ -77,5 +78,4 @@ def _forecast(ctx, receivers):
     output vertices as it will have (:func:`.output.output_vertices_ahead`: the elements before
     their cut along contacts, which is made meanwhile on a process of its own)."""
     from ..runtime.forecast import forecast
-    from ..output.stage import output_vertices_ahead
     return forecast(ctx, receivers, output_vertices_ahead(ctx))

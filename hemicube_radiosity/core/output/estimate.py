@@ -29,7 +29,9 @@ import numpy as np
 from ..light.emitters import vertex_frames
 from ..light.stage import LUMA
 from .interpolate import interpolate_located, locate
-from .stage import _open_elements, abrupt_elements, seen_vertices, vertex_stage
+from .abrupt import abrupt_elements
+from .sides import open_elements, seen_vertices
+from .stage import vertex_stage
 from ..rays import embree_available
 
 __all__ = ["ErrorEstimate", "estimate_stage", "relative_rms"]
@@ -76,7 +78,7 @@ def relative_rms(a, b, mask=None) -> float:
 
 def _lit_vertices(elements, opened=None) -> np.ndarray:
     """(V,) bool: vertices of at least one element that does not emit and that the scene sees
-    (``opened`` (N,) > 0, :func:`.output._open_elements`; None: every element): a floor under a
+    (``opened`` (N,) > 0, :func:`.sides.open_elements`; None: every element): a floor under a
     block is nobody's error."""
     keep = np.zeros(len(elements.verts), bool)
     dark = elements.emission.max(axis=1) <= 0
@@ -116,7 +118,7 @@ def estimate_stage(ctx) -> None:
         return
     t = time.perf_counter()
     fine, X = ctx.elements, ctx.vertex_radiosity
-    mask = _lit_vertices(fine, _open_elements(ctx, fine)) & seen_vertices(ctx, fine)
+    mask = _lit_vertices(fine, open_elements(ctx, fine)) & seen_vertices(ctx, fine)
     ctx.say(0.0, "estimating the error: sampling noise")
     noise = detail = 0.0
     if s.gather_rays >= 2 and embree_available():

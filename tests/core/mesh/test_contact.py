@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from hemicube_radiosity.core.mesh import elements
 from hemicube_radiosity.core.output import stage as output
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.contact import cut_along_contacts, open_side
@@ -67,10 +68,10 @@ def test_the_ground_beside_a_house_on_one_face_is_the_cut_grounds(monkeypatch):
 
     e = off(_ground_beside(False))
     assert np.sqrt(np.mean(e ** 2)) < 0.015 and np.abs(e).max() < 0.06 and abs(e.mean()) < 0.005
-    monkeypatch.setattr(output, "cut_along_contacts", lambda elements, faces: elements)
+    monkeypatch.setattr(elements, "cut_along_contacts", lambda elements, faces: elements)
     e = off(_ground_beside(False))
     assert 0.02 < np.sqrt(np.mean(e ** 2)) < 0.05 and np.abs(e).max() < 0.25 and abs(e.mean()) < 0.015
-    monkeypatch.setattr(output, "_open_side", lambda *a, **k: None)
+    monkeypatch.setattr(output, "buried_side", lambda *a, **k: None)
     e = off(_ground_beside(False))
     assert np.sqrt(np.mean(e ** 2)) > 0.08 and e.mean() < -0.03
 

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from tests.support.analytic import point_under_rectangle_corner
-from hemicube_radiosity.core.output import stage as output
+from hemicube_radiosity.core.output import indirect as output
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.light.stage import DirectLight
 from hemicube_radiosity.core.mesh.patches import MeshInput

@@ -19,7 +19,7 @@ from hemicube_radiosity.core import pipeline, builtin_scenes as scenes
 from hemicube_radiosity.core.light.emitters import vertex_frames
 from hemicube_radiosity.core.output.estimate import _lit_vertices, _vertex_owner, relative_rms
 from hemicube_radiosity.core.output.interpolate import interpolate_at
-from hemicube_radiosity.core.output.stage import _open_elements, seen_vertices
+from hemicube_radiosity.core.output.sides import open_elements, seen_vertices
 from tests.support.markers import needs_embree
 
 
@@ -31,7 +31,7 @@ def _measured(meshes, settings, world=None):
         world=world)
     xv, nv, _ = vertex_frames(r.elements)
     truth = interpolate_at(fine.elements, fine.vertex_radiosity, xv, _vertex_owner(r.elements), nv)
-    opened = _open_elements(SimpleNamespace(settings=r.settings, cache=None), r.elements)
+    opened = open_elements(SimpleNamespace(settings=r.settings, cache=None), r.elements)
     ctx = SimpleNamespace(settings=r.settings, cache=None)
     seen = seen_vertices(ctx, r.elements)      # a buried corner carries the open side's limit
     return r, relative_rms(r.vertex_radiosity, truth, _lit_vertices(r.elements, opened) & seen)

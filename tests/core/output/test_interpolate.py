@@ -170,7 +170,7 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
     the patch solution reaches its element vertices at their patch's corner, without `locate`
     (Suzanne at level 3: 4.7 s -> 0.2 s). The bake is what the search gives to 1e-6 of its
     mean; only the coarse room's element vertices are searched for."""
-    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.output import indirect as output
     from hemicube_radiosity.core.pipeline import BakeSettings, bake
     from hemicube_radiosity.core.builtin_scenes import cornell_box, tessellate
 

@@ -600,7 +600,7 @@ def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_k
     bake's own process cuts nothing, and the bake is the one-worker bake, bit for bit. On one
     worker, or with threads only, it is cut in place, as before. A bake stopped early leaves no
     process behind."""
-    from hemicube_radiosity.core.output import stage as output
+    from hemicube_radiosity.core.mesh import elements as output
     calls = []
     real = output.cut_along_contacts
     monkeypatch.setattr(output, "cut_along_contacts", lambda *a, **k: calls.append(os.getpid()) or real(*a, **k))
@@ -686,8 +686,8 @@ def test_bake_identical_with_two_workers(method, monkeypatch, pool_kind):
     from hemicube_radiosity.core.output import gather, stage as output
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)           # the gather forked, in the background
     started = []
-    start = output._start_gather
-    monkeypatch.setattr(output, "_start_gather", lambda *a: started.append(start(*a)) or started[-1])
+    start = output.start_gather
+    monkeypatch.setattr(output, "start_gather", lambda *a: started.append(start(*a)) or started[-1])
     r1 = bake(scenes.cornell_box(), BakeSettings(workers=1, **s))
     assert started == [] or started == [None]
     before = threading.active_count()
@@ -707,8 +707,8 @@ def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
     from hemicube_radiosity.core.output import gather, stage as output
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)
     started = []
-    start = output._start_gather
-    monkeypatch.setattr(output, "_start_gather", lambda *a: started.append(start(*a)) or started[-1])
+    start = output.start_gather
+    monkeypatch.setattr(output, "start_gather", lambda *a: started.append(start(*a)) or started[-1])
     before = threading.active_count()
     with pytest.raises(Cancelled):
         bake(scenes.cornell_box(), BakeSettings(workers=2, patch_size=0.5, element_size=0.25, resolution=16,
