@@ -310,7 +310,7 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     onto back faces), as does what the solve's rows do not see. 'direct' holds the direct
     light's own emitted / received / absorbed / escaped; ``imbalance`` is relative, as in
     :func:`.solve.energy_balance` (the direct part balances by construction: its escape is
-    measured as what did not arrive, checked against closed forms in tests/test_hard_cases.py)."""
+    measured as what did not arrive, checked against closed forms in tests/core/test_hard_cases.py)."""
     p, u = ctx.patches, ctx.unknowns
     # the areas over three bands: the same products as p.areas[:, None]'s, without broadcasting
     # a (N, 1) factor along the short axis (5x as long)
@@ -349,11 +349,11 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time
 # in percent (for progress bars; the form factors dominate). A new stage is one entry here.
-_STAGE_LIST = (("patches", patch_stage, 3), ("refine", refine_stage, 2),
+STAGE_LIST = (("patches", patch_stage, 3), ("refine", refine_stage, 2),
                ("form_factors", form_factor_stage, 65), ("direct", direct_stage, 8),
                ("solve", solve_stage, 4), ("vertices", vertex_stage, 13), ("estimate", estimate_stage, 2))
-STAGES = tuple((name, stage) for name, stage, _ in _STAGE_LIST)
-STAGE_SHARES = {name: share for name, _, share in _STAGE_LIST}
+STAGES = tuple((name, stage) for name, stage, _ in STAGE_LIST)
+STAGE_SHARES = {name: share for name, _, share in STAGE_LIST}
 
 
 def _madvise_switch():

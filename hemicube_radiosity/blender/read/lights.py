@@ -10,8 +10,8 @@ per thing.
 
 Units (Blender hands Cycles ``color x energy x 2**exposure``, times the black-body colour when
 ``use_temperature``, times the light's Emission node colour x strength when it has nodes;
-the numbers below are checked against Cycles bakes in tests/test_cycles_reference.py and
-tests/test_lighting_cycles.py):
+the numbers below are checked against Cycles bakes in tests/blender/test_cycles_reference.py and
+tests/blender/test_lighting_cycles.py):
 
 ============  =====================================================================
 POINT         radiant intensity P / (4 pi) W/sr; ``shadow_soft_size`` is the radius,
