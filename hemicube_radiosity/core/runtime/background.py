@@ -85,7 +85,7 @@ class Background:
 class Ahead:
     """``fn()`` made on one forked process while the caller goes on with other work: a bake's
     geometry-only work that a later stage reads (the output elements' cut along contacts,
-    :func:`.output.start_elements`) runs beside the stages before it, which leave a core idle
+    :func:`.elements.start_elements`) runs beside the stages before it, which leave a core idle
     (the patches, the refinement, the direct light: one core each). The process is forked on
     the calling thread when this is made and inherits ``fn`` and what it holds; only the value
     comes back (pickled). Use :meth:`start`, which returns None where no process can be forked

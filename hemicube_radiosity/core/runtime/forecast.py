@@ -5,12 +5,11 @@ A bake's time goes to two kinds of work (``docs/performance.md``): the form fact
 receiver (one hemi-cube each) and per piece drawn one by one in it (a curved cluster's faces;
 a flat cluster is drawn as its outline, whatever it is cut into), and the output, per output
 vertex (the final gather's rays, the exact direct light and what shines). The rates below were
-measured on one worker on this project's 2-core machine (``bench/bench_dense.py`` prints the
-forecast beside the time it took), from the Cornell box, the box tessellated to 2k, 14k and 54k
-triangles and Suzanne at subdivision levels 2 and 3: on one worker the forecast was 0.76-1.63x
-the time taken, on two 0.58-1.43x (the Cornell box's lamp makes more of its output shine than
-the rate assumes; the 54k box's output is cheaper per vertex). A faster or slower machine
-scales all of it. It is said once the patches are known and before the form factors, with the
+measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
+``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
+subdivided: the forecast stays within :data:`SPREAD` of the time taken (the Cornell box's lamp
+makes more of its output shine than the rate assumes; a dense mesh's output is cheaper per
+vertex). A faster or slower machine scales all of it. It is said once the patches are known and before the form factors, with the
 output elements cut already (cached: the vertex stage finds them), and kept on the result
 (``BakeResult.forecast``, the report's 'forecast'); a bake whose form factors come from the
 cache (a relight) has nothing long to forecast.
@@ -36,12 +35,12 @@ PER_CURVED_PIECE = 5e-8
 PER_VERTEX = 2.2e-4
 #: The other stages (patches, refinement, direct light at the patches, solve) as a share of these.
 OTHER = 0.15
-#: The time taken over the forecast, as measured (module docstring): 0.61-1.72x, and 1.76x for
-#: ``make demo``'s bake of the Cornell box in a new process (2.3 s for 1.3 s). Said as a range
+#: The time taken over the forecast, as measured (module docstring), the most for ``make demo``'s
+#: bake of the Cornell box in a new process (its start-up counts too). Said as a range
 #: beside the figure, with a margin above, so that a bake in the Cornell box's case (the most
 #: over its forecast) is not a surprise.
 SPREAD = (0.6, 2.0)
-#: Speed-up of each worker after the first (two workers measured 1.3-1.5x one).
+#: Speed-up of each worker after the first (``docs/performance.md``, 'Both cores').
 PER_EXTRA_WORKER = 0.4
 
 

@@ -158,7 +158,7 @@ def shared_array(shape, dtype) -> np.ndarray:
 
     Why: a large bake's final gather sends a hundred MB of rows and hits back from its workers;
     pickled through the pipe, each is copied four times (pickled, written, read, unpickled),
-    which cost ten times the CPU of the same map returning nothing."""
+    which cost many times the CPU of the same map returning nothing."""
     shape = tuple(int(x) for x in np.atleast_1d(shape))
     dtype = np.dtype(dtype)
     size = max(1, int(np.prod(shape, dtype=np.int64)) * dtype.itemsize)

@@ -10,7 +10,7 @@ the caller's thread, one by one.
 Two ways to run the batches (measured by ``bench/bench_parallel.py``):
 
 * **Threads** (the default). Enough where the heavy calls release the GIL: Embree's form-factor
-  rays run about twice as fast on two threads, and processes measured no faster there.
+  rays scale on threads, and processes gain nothing there.
 * **Forked processes** (``processes=True``: the hemi-cube rasteriser, :mod:`.hemicube`), whose
   many small NumPy operations hold the GIL much of the time. The workers are forked from the
   caller when the map starts and inherit ``fn`` (:mod:`.forked`). Where 'fork' is not available
@@ -98,8 +98,8 @@ def shares(fn, n) -> list:
 
     Why not :func:`ordered_map` with ``n`` threads: the caller would only wait, and each share
     would start on a thread started for it while the first share already runs and takes the
-    GIL between its NumPy calls: the second share started late, and relights ran measurably
-    slower and with more spread (``bench/bench_relight_dense.py``)."""
+    GIL between its NumPy calls: the second share started late, and relights ran slower and
+    with more spread (``bench/bench_relight_dense.py``, ``docs/performance.md``)."""
     n = int(n)
     if n <= 1 or in_worker():
         return [fn(i) for i in range(n)]

@@ -3,7 +3,7 @@
 NumPy finds unique rows by viewing each row as one structured record and sorting the records,
 which compares them field by field through a generic comparison: on this project's keys (edges
 as vertex pairs, pieces as (object, material, normal bin, cell) rows) that sort was most of a
-dense mesh's grouping (0.38 s of the 54k-triangle Cornell box's 0.58 s 'patches' stage).
+dense mesh's grouping (``docs/performance.md``).
 :func:`unique_rows` sorts integer rows as one packed int64 key when their ranges allow it, and
 any other rows with :func:`numpy.lexsort`, and returns the same arrays as ``np.unique``: the
 rows in lexicographic order, the inverse (always 1-D) and the counts.
@@ -51,15 +51,14 @@ def unique_rows(a, return_inverse=False, return_counts=False):
 def unique_ints(x, return_index=False, return_inverse=False, return_counts=False, grouped=False):
     """``np.unique(x, return_index=..., return_inverse=..., return_counts=...)`` for an integer
     array (flattened; the inverse is 1-D), the same arrays, faster: each value is packed with its
-    position into one int64 and the packed values are sorted, not argsorted (a gather's chunk of
-    a million hits: 60 ms in ``np.unique``, 7 ms to sort). Falls back to ``np.unique`` for other
+    position into one int64 and the packed values are sorted, not argsorted (several times
+    faster than ``np.unique`` on a gather's chunk of hits). Falls back to ``np.unique`` for other
     dtypes or where value range and position do not fit in 63 bits.
 
     ``grouped``: ``x`` comes in short runs, each above the one before (a matrix's entries row by
     row, each row's columns in any order: ``row * n + col`` with the rows ascending). The packed
-    values are then sorted by NumPy's stable sort, a merge sort that takes runs as it finds them:
-    a gather chunk's 262,144 (point, vertex) keys, 13.6 -> 6.5 ms (the quicksort's is faster on
-    values in no order: 14.4 against 18.5 ms). Every packed value is distinct (each holds its
+    values are then sorted by NumPy's stable sort, a merge sort that takes runs as it finds them,
+    about twice as fast there (the quicksort is faster on values in no order). Every packed value is distinct (each holds its
     position), so both sorts give the same arrays."""
     x = np.asarray(x).reshape(-1)
     flags = dict(return_index=return_index, return_inverse=return_inverse, return_counts=return_counts)
