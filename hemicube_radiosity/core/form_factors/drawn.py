@@ -3,7 +3,7 @@
 A wall modelled as 10,000 triangles and grouped into tens of clusters (:mod:`clusters`) covers
 the same pixels whether its triangles are drawn or each cluster's outline is: the union of a
 planar cluster's pieces *is* the polygon its boundary edges bound. So the hemi-cube's cost per
-receiver follows the clusters' outlines, not the modelling (issue 9):
+receiver follows the clusters' outlines, not the modelling:
 
 * a cluster whose pieces lie in one plane, whose boundary (the directed piece edges whose
   reverse is not in the cluster) is one simple loop, is drawn as that loop triangulated

@@ -51,7 +51,7 @@ def hemicube_directions(resolution: int):
     """Unnormalised local directions through every hemi-cube pixel centre, and their weights.
 
     Returns (dirs (3R^2, 3), weights (3R^2,)): the rasteriser's own pixel order and delta form
-    factors (:func:`hemicube.pixel_directions`, :func:`hemicube.pixel_weights`), so the two
+    factors (:func:`.pixels.pixel_directions`, :func:`.pixels.pixel_weights`), so the two
     methods sample and weigh the same pixels alike.
     """
     R = int(resolution)
@@ -80,9 +80,9 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
     unique (row, column) entries, so the rows are assembled as they come, without a global sort
     (whose temporaries peaked at several times the size of F). ``workers`` threads cast batches
     at once (:func:`.parallel.ordered_map`: still assembled in receiver order, so bit-identical).
-    Threads, not the rasteriser's worker processes: Embree traverses without the GIL, so two
-    threads already cast ~1.8-2x as fast as one, and processes measured no faster (their rows
-    are pickled back; bench/bench_parallel.py, docs/performance.md 'Both cores')."""
+    Threads, not the rasteriser's worker processes: Embree traverses without the GIL, so threads
+    already scale, and processes gain nothing (their rows are pickled back;
+    bench/bench_parallel.py, docs/performance.md 'Both cores')."""
     scene = embree_scene(patches)
     n, centres, normals, column = _receivers(patches, clusters)
     eps = 1e-5 * scene.scale

@@ -235,7 +235,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     Parameters
     ----------
     patches : PatchSet
-        Convex planar quads and triangles (as :func:`patches.build_patches` makes them).
+        Convex planar quads and triangles (as :func:`.subdivide.build_patches` makes them).
     resolution : int
         Pixels across the top face (even); side faces have ``resolution // 2`` rows.
     rotate_seed : int or None

@@ -75,7 +75,7 @@ def form_factor_stage(ctx) -> None:
 
 def _forecast(ctx, receivers):
     """:func:`.forecast.forecast` of this bake, before its form factors, for about as many
-    output vertices as it will have (:func:`.output.output_vertices_ahead`: the elements before
+    output vertices as it will have (:func:`.elements.output_vertices_ahead`: the elements before
     their cut along contacts, which is made meanwhile on a process of its own)."""
     from ..runtime.forecast import forecast
     return forecast(ctx, receivers, output_vertices_ahead(ctx))

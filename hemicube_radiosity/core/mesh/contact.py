@@ -124,8 +124,8 @@ def _pair_segments(origin, n, cutters, face, eps):
     two farthest apart of the cutter's corners on the plane and its edges' crossings of it,
     clipped to the face with its border widened by ``eps``; kept when the cutter reaches the
     plane and more than ``eps`` of the segment is on the face. Cutters parallel to the face
-    are left out by the caller. Pair by pair in a loop this was most of the dense box's cut
-    (1,588 faces at 14k triangles: 0.67 s, now 0.23 s)."""
+    are left out by the caller. All pairs at once: pair by pair in a loop this was most of a
+    dense mesh's cut."""
     P = len(origin)
     h = np.einsum("pkj,pj->pk", cutters - origin[:, None], n)              # (P, 4) heights
     pts = np.zeros((P, 8, 3))

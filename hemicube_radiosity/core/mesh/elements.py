@@ -51,7 +51,7 @@ def mesh_faces(ctx) -> PatchSet:
 
 
 def _faces_whole(ctx, size) -> bool:
-    """:func:`.patches.keeps_faces_whole` of the meshes at ``size``, once a bake (the start of the
+    """:func:`.subdivide.keeps_faces_whole` of the meshes at ``size``, once a bake (the start of the
     bake asks it for the detail size, and the elements again)."""
     return cached(ctx.cache, cache_key(_meshes_key(ctx), ("faces-whole", size)),
                   lambda: keeps_faces_whole(ctx.meshes, size), disk=False)
@@ -129,7 +129,7 @@ def start_elements(ctx):
     """The output elements' cut along contacts (:func:`cut_elements`: the bake's one long piece
     of geometry work done on one core) started on a forked process at the start of the bake,
     beside the patches, the refinement, the form factors and the direct light;
-    :func:`cut_elements` takes it. A :class:`.parallel.Ahead`, or None: one worker, no
+    :func:`cut_elements` takes it. A :class:`.background.Ahead`, or None: one worker, no
     elements, the elements cached (a relight forks nothing: forking costs more than it saves),
     or no face cut to the detail size (the elements are the input's faces: nothing to cut),
     no process forked. The process returns the same cut as

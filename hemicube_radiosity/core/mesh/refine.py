@@ -92,7 +92,7 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
     """Split patches where the direct light changes abruptly, up to ``levels`` times.
 
     ``light_at(points (P, 3), normals (P, 3)) -> (P, S)``: the luminance arriving directly from
-    each of S sources apart (:meth:`.direct_light.DirectLight.sources_at`). A patch is split
+    each of S sources apart (:meth:`.light.stage.DirectLight.sources_at`). A patch is split
     when the light of one source is :func:`abrupt` over an ``n`` x ``n`` grid of its points,
     ``floor`` a fraction of that source's area-weighted mean over the scene (taken once, from
     the patches as given). Each source is judged on its own and only by ratios, so a relight
