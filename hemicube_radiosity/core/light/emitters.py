@@ -7,7 +7,7 @@ light is most of the detail in a bake, so it is computed apart:
     D(x) = sum_e L_e * F(x -> e) * V(x, e)
 
 with F the exact unoccluded point-to-polygon form factor (Lambert's contour formula, after
-clipping the emitter to the receiver's horizon: :func:`.geometry.polygon_form_factors`) and V
+clipping the emitter to the receiver's horizon: :func:`.polygon_ff.polygon_form_factors`) and V
 the visible share of that form factor, from stratified sample points on the emitter (shadow
 rays, :mod:`.rays`), each weighted by its part of F (cos at x times cos at the emitter over the
 squared distance): a large lamp half hidden from a point near it is dimmed by the part of F it
@@ -167,10 +167,9 @@ def _share(seen, weight):
 
 
 def _outline(corners, groups, em_normals):
-    """:meth:`.geometry.GroupOutline.of` the emitter groups, kept for the :data:`OUTLINES_KEPT`
+    """:meth:`.outline.GroupOutline.of` the emitter groups, kept for the :data:`OUTLINES_KEPT`
     most recent emitter sets (by the bytes of their corners, groups and normals): a bake's
-    transports ask for the same lamps again and again (the 54k-triangle box's eleven for three
-    sets, 8 ms each)."""
+    transports ask for the same lamps again and again, and a dense lamp's outline is not free."""
     h = hashlib.sha256()
     for a in (corners, groups, em_normals):
         a = np.ascontiguousarray(a)
@@ -263,16 +262,14 @@ class _Transport:
         more than one worker and enough rays to pay for a fork, the chunks run on forked
         processes (:func:`.parallel.ordered_map`): the many small NumPy steps of the contour
         integrals hold the GIL, so on threads the chunks did not scale; on processes they do.
-        (embreex itself lets go of the GIL while it casts: a Python thread kept 70-100% of its
-        speed beside a cast of 2M rays, and two threads cast 2M rays each in half the time of
-        two casts in a row.) Otherwise on threads.
+        (embreex itself lets go of the GIL while it casts: casts on two threads scale.)
+        Otherwise on threads.
 
         Grouped emitters (a few groups, each one contour over its outline) are mostly rays, and
-        run on threads: no fork, no copy-on-write, nothing pickled. The 54k-triangle box's
-        two-worker bake, paired: 3.90 / 3.59 / 3.69 / 3.90 s on threads against 4.06 / 3.78 /
-        3.82 / 4.07 s forked (14:25 UTC); Suzanne the same within 1%. Patches shining one by
-        one stay forked: the coarse box's lamp cut into 100 patches took 10.0-11.7 s on threads
-        against 5.7-7.1 s forked for its two largest transports."""
+        run on threads: no fork, no copy-on-write, nothing pickled (on a dense mesh threads were
+        as fast as forked processes, or a little faster). Patches shining one by one stay
+        forked: a lamp cut into many patches is contour integrals, which forked processes ran
+        far faster than threads."""
         P, step = len(self.points), self.step
         rays = P * self.ys.shape[0] * max(self.S, 1) * (self.scene is not None)
         if workers > 1:          # a few chunks a worker, so that they end together
@@ -314,8 +311,8 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     processes for large transports, see :meth:`_Transport.run`); T is bit-identical for any
     count. ``ticker`` is polled after every chunk. ``chunk_rays``: first-pass rays a chunk casts
     at most (at most 4,096 points a chunk): the chunks are independent, so T is the same for any
-    size. A quarter million keeps a chunk's temporaries in the heap's kept pages: a million (the
-    54k-triangle box's lamp groups: 88 chunks on two threads) faulted 43k fresh pages in.
+    size. A quarter million keeps a chunk's temporaries in the heap's kept pages: a million (a dense
+    mesh's lamp groups) faulted many fresh pages in.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -348,5 +345,5 @@ def emitter_direct(patches: PatchSet, points, normals, *, scene=None, samples=16
 def apply_transport(T, L):
     """``T @ L`` for a (P, M) transport and (M, k) emitter radiances, without BLAS: a BLAS
     product starts threads that, on a busy machine (or inside Blender's own threads), turned
-    this 10 ms product into seconds of waiting."""
+    a product of milliseconds into seconds of waiting."""
     return np.einsum("pm,mk->pk", T, np.asarray(L, dtype=np.float64), dtype=np.float64)

@@ -38,7 +38,7 @@ Cycles turns it into radiance with ``eval_fac`` (``intern/cycles/scene/light.cpp
   (Cycles 4.x and later; 3.x used ``0.25 / area``), i.e. a Lambertian emitter of radiance
   ``L = P / (pi A)``, ``A = |X| size_x * |Y| size_y`` (times pi/4 for DISK/ELLIPSE), X and Y the
   first two columns of the object matrix. ``H = pi L F`` with F the exact point-to-polygon
-  form factor (Lambert's contour integral, :func:`.geometry.polygon_form_factor`) of the part of
+  form factor (Lambert's contour integral, :func:`.polygon_ff.polygon_form_factor`) of the part of
   the light above the receiver's horizon. Disks and ellipses are regular 64-gons of the same
   area. The *spread* setting is ignored (taken as the default 180 degrees).
 

@@ -145,8 +145,8 @@ def grid_of(patches: PatchSet, rows, n: int):
     as (points (R, K, 3), the same as (R K, 3), their normals (R K, 3), weights (R, K)),
     read-only, kept for the last few patch arrays and rows: the same arrays for the same
     geometry, so the point sets a relight lights again (the keys of their transports, exposure
-    and crossings) are hashed once, and the points are not made again (the dense Cornell room's
-    patch grids, twice a relight, and its refine grids)."""
+    and crossings) are hashed once, and the points are not made again (a relight's patch grids,
+    asked for twice, and its refine grids)."""
     rk = b"" if rows is None else np.ascontiguousarray(rows, dtype=np.int64).tobytes()
 
     def make():
@@ -161,11 +161,10 @@ def grid_of(patches: PatchSet, rows, n: int):
 
 
 #: A cluster's light from at most this many x patch_light_points^2 centres (:func:`stand_ins`).
-#: At 4 (16 centres) one stand-in of the 54k-triangle box's ceiling fell beside the lamp, whose back
-#: lights the ceiling through a 2 mm gap in a band a few millimetres wide, and its light stood for a
-#: sixteenth of the cluster: the ceiling's reflected light came out 42% too high, the walls' 2%, the
-#: probes' bias +0.77% (RMS 3.10% against Cycles). From 8 on the means agree with lighting every
-#: face centre (RMS 3.00%, bias +0.39%; the 200k box 2.99 -> 2.96%) for 0.03 s more direct stage.
+#: At 4 (16 centres) one stand-in of a densely tessellated box's ceiling fell beside the lamp, whose
+#: back lights the ceiling through a 2 mm gap in a band a few millimetres wide, and its light stood
+#: for a sixteenth of the cluster: the ceiling's reflected light came out 42% too high. From 8 on the
+#: means agree with lighting every face centre, for little more time in the direct stage.
 STAND_INS = 8
 
 

@@ -261,8 +261,8 @@ def _clipped_contour(x, n, edges, plane_normal):
     Returns (F, ok): ok False where the crossings do not pair up (then F is not valid).
 
     Points that see the whole region at or below their horizon see nothing of it (F = 0, ok):
-    they are answered from the edges' heights alone. They were 88% of the points clipped on
-    the 54k-triangle box (a group in front of a point but wholly behind its tangent plane)."""
+    they are answered from the edges' heights alone. They were most of the points clipped on
+    a dense mesh (a group in front of a point but wholly behind its tangent plane)."""
     x, n = np.asarray(x, dtype=np.float64), np.asarray(n, dtype=np.float64)
     F, ok = np.zeros(len(x)), np.ones(len(x), bool)
     # the corners' heights over each horizon, with a margin for round-off (the exact heights

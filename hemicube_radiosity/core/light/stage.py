@@ -85,9 +85,9 @@ class DirectLight:
             per_face = int(count.max())
             # the face's rays shared out, but at least 2 per patch (a 2 x 2 jittered grid): with
             # one ray a point sees each patch all lit or all dark, never in part, so a penumbra
-            # is never found nor refined (:func:`.direct.emitter_transport`) and a soft shadow
-            # steps in as many levels as the face has patches (issue 11: the Cornell box's
-            # light, cut in 9, made the roughest part of its bake)
+            # is never found nor refined (:func:`.emitters.emitter_transport`) and a soft shadow
+            # steps in as many levels as the face has patches (the Cornell box's light, cut
+            # in 9, made the roughest part of its bake)
             budget = int(settings.direct_samples)
             samples = max(min(2, budget), -(-budget // per_face))
             groups = _face_groups(patches, emitters, first, of_face) if per_face > 1 else None
@@ -114,7 +114,7 @@ class DirectLight:
     def emitted(self) -> np.ndarray:
         """(M, 3) radiance of each column of the transport: per emitting patch, or the
         area-weighted mean of each group. Made once (read-only): every point set lit asks for it
-        (a relight's dozen, 0.45 ms)."""
+        (a relight's dozen)."""
         if self._emitted is None:
             L = self.patches.emission[self.emitters]
             if self.groups is not None:
@@ -182,7 +182,7 @@ class DirectLight:
         (where many points are averaged, as a gather's hits are)."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
-            # the transport's sums as direct.apply_transport's, bit for bit, several times faster
+            # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
             D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True),
                                    self.emitted(), transposed=True)
         if self.world is not None:
@@ -212,11 +212,11 @@ def _face_groups(patches: PatchSet, emitters, first, of_face) -> np.ndarray | No
     emission (a texture's): then every patch shines on its own, sharing its face's rays
     (:meth:`DirectLight.plan`).
     A face's patches cut from one flat face of one emission light as the face does: its form
-    factor is its outline's (one contour, :func:`.geometry.group_form_factors`) and its
+    factor is its outline's (one contour, :func:`.polygon_ff.group_form_factors`) and its
     ``direct_samples`` rays spread over it by area, as a lamp modelled as many faces and grouped
     into a cluster. Each patch shining apart cost every point a contour and at least 4 rays per
     patch: the Cornell box at 0.05 m patches cut its 0.5 m lamp into 100 of them, 400 rays and
-    100 contours per point, 34 s of its 51 s bake on two workers."""
+    100 contours per point, most of its bake."""
     groups = np.asarray(of_face, dtype=np.int64).reshape(-1)
     lead = emitters[first][groups]                       # each patch's face's first patch
     same_light = np.all(patches.emission[emitters] == patches.emission[lead], axis=1)
