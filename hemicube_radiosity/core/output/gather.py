@@ -26,11 +26,9 @@ from ..util.sparse import CSR
 from ..util.unique import unique_ints
 
 #: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
-#: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). The
-#: gather alone (bench_parallel.py --gather, the dense box's 51,200 faces, an idle machine):
-#: 2.57 s on one worker, 1.62 s median forked, 2.03 s on threads. In whole bakes the
-#: difference stays inside what the order of the configurations moves (+-1.3 s of the
-#: vertices stage's 7-9 s; see the commit that set this).
+#: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). On
+#: a dense mesh the gather alone runs faster forked than on threads (``bench_parallel.py
+#: --gather``, ``docs/performance.md`` 'Both cores'); in whole bakes the difference is small.
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
@@ -99,15 +97,14 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     geometry only: a relight reuses it. ``workers``: workers casting chunks of points at once (0 = every
     core, 1 = serial): threads, or forked processes from :data:`PROCESS_RAYS` rays on (only the
     chunk starts go out, each chunk's rows come back); G is bit-identical for any count.
-    ``chunk_rays``: rays cast and summed at once (65,536: the serial gather of the 13k vertices
-    of the 2k-triangle box took 2.0-2.3 s in chunks of a million, 1.0 s in a quarter million, its
-    temporaries then fitting the caches better; and a forked worker faults every page of its
-    first chunk's temporaries in fresh, zeroed by the kernel: on the 54k-triangle box with two
-    workers, chunks of a quarter million cost the two workers 120k page faults and 0.65-1.1 s of
-    system time, these 75k and 0.27-0.46 s, and 3.7-4.3 -> 2.9-3.2 s of CPU in all). ``hits``: also return the rays' hit points, ``(G, sky, H)`` with H (h, 5) float32 rows
+    ``chunk_rays``: rays cast and summed at once (65,536: smaller chunks' temporaries fit the
+    caches better, about twice as fast as chunks of a million; and a forked worker faults every
+    page of its first chunk's temporaries in fresh, zeroed by the kernel, so smaller chunks
+    also cost fewer page faults and less system time). ``hits``: also return the rays' hit
+    points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
     :func:`correct_hits`; each hit carries weight ``1 / rays`` in G). ``background``: return a
-    :class:`.parallel.Background` whose ``result()`` is what the call returns, so the caller can
+    :class:`.background.Background` whose ``result()`` is what the call returns, so the caller can
     go on with other work while the workers cast (only when the chunks run on forked processes:
     otherwise the result is made before the call returns); ``ticker`` is then used only before
     the call returns: poll cancellation with ``result(cancelled)``.
@@ -202,9 +199,9 @@ class _SharedRows:
         """(columns, values, hits or None) of every chunk, in the order of ``chunks`` ((s, e, h)
         as :meth:`write` returned them, ``s`` increasing): each chunk's entries and hits moved
         down to follow the one before, in place, as views of the shared arrays; the pages past
-        them are handed back (:func:`.parallel.release_tail`). A concatenation into new arrays
-        (the 54k-triangle box's 150 MB of rows and hits) had every page of them mapped and
-        zeroed anew: 0.4 s of system time on the thread that collected them."""
+        them are handed back (:func:`.forked.release_tail`). A concatenation into new arrays
+        (a dense mesh's hundred MB of rows and hits) had every page of them mapped and zeroed
+        anew, in system time on the thread that collected them."""
         e_at = h_at = 0
         for s, e, h in chunks:               # a chunk never moves up: e_at <= 4 R s, h_at <= R s
             a, b = 4 * self.R * s, self.R * s
@@ -294,10 +291,9 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
     :data:`CORRECTION_SHARE`, each made into its rows of C on its own thread
     (:func:`.parallel.shares`; NumPy lets go of the GIL in the large array operations). H's rows
     are in order (the gather's chunks are), so each share's entries come sorted and summed in
-    the same order as in one piece: C is the same, bit for bit, for any count. With two
-    workers, Suzanne (level 3) in the Cornell box, 612k hits on abrupt elements: 1.64 s on the
-    bake's thread while the other core waited, 0.63 s so (with :func:`.interpolate.inverse_bilinear`
-    2.5x as fast); the 54k-triangle box's 241k hits: 0.25 -> 0.17 s."""
+    the same order as in one piece: C is the same, bit for bit, for any count. Why: on
+    one thread, a dense curved mesh's many hits on abrupt elements kept the other core
+    waiting."""
     P, V = G.shape
     R = G.meta["rays"]
     H = H[select[H[:, 1].astype(np.int64)]]
@@ -386,9 +382,8 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
 
     A run's columns and values are read as stored (int32, float32: half the memory traffic of
     whole-matrix intp and float64 copies) and widened once into buffers that every band reads
-    (float32 to float64 is exact: the same products). The dense room's G (3.7M entries) is read
-    from memory, not the caches, at every product: one thread's product took 19.5 ms with the
-    widened copies kept on G, 16.9 ms so (paired runs)."""
+    (float32 to float64 is exact: the same products). A dense mesh's G is read from memory, not the
+    caches, at every product: widened copies kept on G made the product slower, not faster."""
     cols, data = G.indices, G.data
     wide = data.dtype == np.float64
     ibuf, dbuf, buf = np.empty(0, np.intp), np.empty(0), np.empty(0)
@@ -409,7 +404,7 @@ def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
             d[...] = data[s:e]
         for k in range(xt.shape[0]):
             # 'wrap' (the columns are in range: the same values) skips take's buffered bounds
-            # check: with it the gathers were half the dense room's product
+            # check: with it the gathers were half a dense mesh's product
             np.take(xt[k], idx, out=p, mode="wrap")
             np.multiply(p, d, out=p)
             out[rows, k] = np.add.reduceat(p, starts)
@@ -435,13 +430,12 @@ def _row_runs(ip, r0, r1, chunk) -> list:
 
 def transport_product(T, L, transposed=False) -> np.ndarray:
     """``T @ L`` for a dense (P, M) transport (float32) and (M, 3) radiances, in float64, equal
-    bit for bit to :func:`.direct.apply_transport` (each sum runs over m in order; with one
+    bit for bit to :func:`.emitters.apply_transport` (each sum runs over m in order; with one
     band einsum sums otherwise, to the last bit) and, without BLAS either, several times
     faster: the sums run down the rows of T transposed, whole rows at a time (einsum's
-    mixed-precision loop took 7.6 ms for the 13,249 x 37 transport of the dense room's shining
-    groups, this 1.1 ms). ``transposed``: ``T`` is given as :func:`transposed_transport` made
-    it, (M, P) float64 (kept with a cached transport, so a relight neither transposes nor casts
-    it: 0.6 ms), the same sums."""
+    mixed-precision loop is the slow part). ``transposed``: ``T`` is given as
+    :func:`transposed_transport` made it, (M, P) float64 (kept with a cached transport, so a
+    relight neither transposes nor casts it), the same sums."""
     L = np.asarray(L, dtype=np.float64)
     Tt = np.asarray(T) if transposed else np.ascontiguousarray(np.asarray(T).T)
     if Tt.shape[0] == 0:

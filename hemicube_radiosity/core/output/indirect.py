@@ -169,7 +169,7 @@ def _gather_key(ctx, elements):
 def start_gather(ctx, elements, xv, nv):
     """The gather of :func:`_gather_rays` started on its forked workers, collected on a thread
     while the vertex stage goes on (the vertices' direct light, the open side, what shines: the
-    work that does not read G); a :class:`.parallel.Background` for :func:`_gather_rays`, or
+    work that does not read G); a :class:`.background.Background` for :func:`_gather_rays`, or
     None where G is cached or the gather would not run on forked workers (one worker, few rays,
     no Embree): then it is made where it is read, as before. The same G, bit for bit."""
     if ctx.settings.gather_rays <= 0 or not embree_available() or resolve_workers(ctx.settings.workers) <= 1:

@@ -48,7 +48,7 @@ def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:
     """``mesh`` (patches or elements) with a vertex split where elements that share it, both
     seen by the scene (:func:`open_elements`), lie on the two sides of another surface: a floor
     running on under a single-plane partition, the side walls and ceiling it stands against.
-    Each side's copy of the vertex is evaluated on its side (:func:`.direct.vertex_frames`
+    Each side's copy of the vertex is evaluated on its side (:func:`.emitters.vertex_frames`
     moves it toward its own elements), averages and extrapolates its own side's patches, and
     the gather's rays read it on its side: shared, the vertices on the partition's line took
     half the lit side's light into the dark half (2.7% of the lit floor next to the line). A

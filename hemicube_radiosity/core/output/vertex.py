@@ -54,7 +54,7 @@ def exposure(F, areas=None) -> np.ndarray:
     lamp (its row sum from the computed rows, ``sum_j A_j F_ji / A_i``, is what it would see),
     while a buried patch is seen only through the odd pixel leaking past the solid's edges
     (measured up to 1.2% of its hemisphere beside a block sunk 10 cm while pixels were sampled
-    at their centres, none since: :data:`.hemicube.SAMPLE_X`): below ``BURIED`` it counts as
+    at their centres, none since: :data:`.pixels.SAMPLE_X`): below ``BURIED`` it counts as
     buried (0), else as exposed (1).
     Without ``areas`` every empty row counts as exposed. (Counting them all as exposed gave a
     floor patch wholly under a block the weight of an open one: the vertices it shares with
@@ -169,8 +169,7 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
 
 def _nonzero_rows(Bt):
     """(N,) bool: the rows of B not all 0, from Bt = B.T (bands, N) contiguous, a band at a time
-    (``B.any(axis=1)`` over its short rows took 0.3 ms for the dense Cornell room's 25k
-    elements); None without bands."""
+    (faster than ``B.any(axis=1)`` over its short rows); None without bands."""
     if Bt.ndim != 2 or Bt.shape[0] == 0:
         return None
     live = Bt[0] != 0
@@ -184,8 +183,8 @@ def _lu(M):
     partial pivoting (as LAPACK's getrf: the unit lower factor below the diagonal, the upper on
     and above), or None when a pivot is 0 (singular: :func:`_fit_solve` lets LAPACK say so).
     The fits' matrices depend on the geometry only: factored once, a relight substitutes
-    (LAPACK's batched solve took 0.8 ms for the dense Cornell room's 850 fits, 3 ms on a busy
-    machine: OpenBLAS's threads, not the arithmetic)."""
+    (LAPACK's batched solve was slower, the more so on a busy machine: OpenBLAS's threads, not
+    the arithmetic)."""
     A = np.array(M, dtype=np.float64)
     T, n, _ = A.shape
     perm = np.tile(np.arange(n), (T, 1))
@@ -228,7 +227,7 @@ def _fit_solve(M, lu, rhs):
 
 
 def frames(patches: PatchSet, weights=None, cache=None):
-    """:func:`.direct.vertex_frames` ``(points, normals, rho)`` with ``weights``, its points and
+    """:func:`.emitters.vertex_frames` ``(points, normals, rho)`` with ``weights``, its points and
     normals (geometry and weights only) kept in ``cache`` with the means' weights: a relight
     only averages the new reflectivity to the vertices, as vertex_frames does (bit for bit)."""
     from ..light.emitters import vertex_frames, vertex_weights
