@@ -110,10 +110,10 @@ class BakeContext:
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
-    ahead: dict = field(default_factory=dict)   # name -> parallel.Ahead: work started at the bake's start
+    ahead: dict = field(default_factory=dict)   # name -> background.Ahead: work started at the bake's start
 
     def meshes_key(self) -> bytes:
-        """:func:`.output.meshes_key` of the meshes, hashed once a bake (the patch and the
+        """:func:`.elements.meshes_key` of the meshes, hashed once a bake (the patch and the
         vertex stages key their cached geometry on it)."""
         if self._meshes_key is None:
             self._meshes_key = meshes_key(self.meshes)
@@ -128,8 +128,7 @@ class BakeContext:
     def to_unknowns(self, per_patch):
         """(K, ...) area-weighted mean per cluster of a per-patch array (itself without clusters).
         A (P, k) array by a bincount per band (``Clusters.area_mean``, the same sums bit for bit
-        as ``np.add.at``'s: 0.5 -> 0.05 ms for the dense Cornell room's 7,502 pieces, twice a
-        relight)."""
+        as ``np.add.at``'s, about ten times faster; a relight asks twice)."""
         if self.clusters is None:
             return per_patch
         if np.ndim(per_patch) == 2:
@@ -197,7 +196,7 @@ def patch_stage(ctx) -> None:
 def _cut(meshes, s, faces=None):
     """(patches, clusters or None): the meshes cut to the patch size and small faces grouped.
     ``faces()``: ``build_patches(meshes)``, the meshes' faces as they are (the bake's, built once
-    a bake: :func:`.output.mesh_faces`), the patches where the size cuts no face."""
+    a bake: :func:`.elements.mesh_faces`), the patches where the size cuts no face."""
     faces = faces or (lambda: build_patches(meshes, None))
     try:
         whole = keeps_faces_whole(meshes, s.patch_size)
@@ -222,7 +221,7 @@ def form_factor_gb(n, settings) -> float:
 
 
 def solve_stage(ctx) -> None:
-    """Fill ``ctx.solution``: B = S + rho F B per band (:func:`.solve.solve`). On the exact
+    """Fill ``ctx.solution``: B = S + rho F B per band (:func:`.solvers.solve`). On the exact
     direct path the solve carries reflected light only; the solution reports B = E + R."""
     s, p = ctx.settings, ctx.unknowns
     computed = np.zeros(len(p), bool)
@@ -309,7 +308,7 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     light does not deliver to any patch's front escapes (through openings into the world, or
     onto back faces), as does what the solve's rows do not see. 'direct' holds the direct
     light's own emitted / received / absorbed / escaped; ``imbalance`` is relative, as in
-    :func:`.solve.energy_balance` (the direct part balances by construction: its escape is
+    :func:`.residual.energy_balance` (the direct part balances by construction: its escape is
     measured as what did not arrive, checked against closed forms in tests/core/test_hard_cases.py)."""
     p, u = ctx.patches, ctx.unknowns
     # the areas over three bands: the same products as p.areas[:, None]'s, without broadcasting
@@ -331,7 +330,7 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     world, recv, absorbed = _world_and_direct(ctx, a, D, computed)
     if ctx.direct_source is not None:
         # what the parts of patches the scene cannot see reflect (a ceiling above a lamp's back)
-        # lands on what encloses them, not in the solve (direct_light._seen_weight)
+        # lands on what encloses them, not in the solve (light/stage.py, _seen_weight)
         absorbed = absorbed + (u.areas[:, None] * (ctx.to_unknowns(p.rho * D) - ctx.direct_source)).sum(axis=0)
     emitted = surf + lamps + sun + world
     direct = {"emitted": emitted, "received": recv, "absorbed": absorbed, "escaped": emitted - recv}
@@ -377,10 +376,8 @@ def small_pages():
     NumPy asks Linux for transparent huge pages (madvise) on every array of 4 MB or more. Where
     the kernel serves them on request (``/sys/kernel/mm/transparent_hugepage/enabled`` =
     'madvise', a common default), a bake, which makes thousands of such short-lived
-    temporaries, ran about 20% slower with them on this project's machine (faulting 2 MB pages
-    in, zeroed and compacted for, cost more than they saved): the 2k-triangle box 5.2-5.3 s
-    against 4.1-4.6 s on one worker, the 54k box 9.9-10.9 s against 7.6-8.9 s on two (paired
-    runs). Where the kernel gives huge pages always, or never, this changes nothing."""
+    temporaries, ran clearly slower with them, on one worker and on two (faulting 2 MB pages
+    in, zeroed and compacted for, cost more than they saved). Where the kernel gives huge pages always, or never, this changes nothing."""
     switch = _madvise_switch()
     before = switch(False) if switch is not None else None
     try:
@@ -409,7 +406,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
                       progress, cancelled, patches=patches, given=patches is not None)
     t0 = time.perf_counter()
-    with small_pages(), one_blas_thread(), kept_heap():   # (parallel.one_blas_thread, kept_heap: why)
+    with small_pages(), one_blas_thread(), kept_heap():   # (runtime/native.py says why)
         ctx.check()
         try:
             # geometry a later stage reads, made on a core the first stages leave idle

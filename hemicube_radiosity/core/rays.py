@@ -293,8 +293,7 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     floor buried inside a block, has none; a point in the open has all, one in a corner about
     half. ``scene``: :func:`.rays.embree_scene` of ``patches``. One jittered pattern (seeded)
     for every point, in its normal's frame. Geometry only. ``workers`` (0 = every core):
-    threads casting a few chunks of points each (Embree lets go of the GIL: the 54k-triangle
-    box's 53,792 centres took 0.23-0.26 s on one thread, 0.14-0.25 s on two); each point's
+    threads casting a few chunks of points each (Embree lets go of the GIL while it casts); each point's
     value does not depend on the chunks, so the result is the same for any count."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -329,15 +328,14 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
     """(rays, 3) cosine-distributed local directions (+Z the normal) from a Fibonacci lattice of
     the unit square, (u, v) = ((i + 1/2) / n, i / golden ratio) mod 1, shifted by a seeded
     random offset (a Cranley-Patterson rotation: over seeds its mean is the exact integral),
-    mapped as :func:`.geometry.cosine_directions` does (u the squared radius on the disk, v the
+    mapped as :func:`.sampling.cosine_directions` does (u the squared radius on the disk, v the
     angle: Vogel's sunflower, lifted to the hemisphere).
 
     For a pattern every point shares, what matters is how evenly it covers any sliver of the
     hemisphere: as a point moves, the rays that cross an object's outline switch from sky to
     object one at a time, and an uneven pattern makes uneven steps between neighbouring
     points. The lattice covers slivers more evenly than a jittered grid: on the open yard's
-    ground and walls the sky's roughness at 256 rays is what a jittered grid reaches at 1,024
-    (issue 11)."""
+    ground and walls the sky's roughness at 256 rays is what a jittered grid reaches at 1,024."""
     n = int(rays)
     shift = np.random.default_rng(seed).uniform(size=2)
     i = np.arange(n)

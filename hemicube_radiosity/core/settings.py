@@ -2,7 +2,7 @@
 
 :class:`BakeSettings` is the single source of the bake's settings. The Blender layer generates its
 property group and the operator's properties from :func:`schema` (``blender/ui/props.py``), the CLI
-its options (``blender/cli/main.py``), and the report is ``dataclasses.asdict(settings)``. Adding a
+its options (``blender/cli/parser.py``), and the report is ``dataclasses.asdict(settings)``. Adding a
 setting is one field here (plus the code that reads it and its test); the panel, the operator, the
 CLI and the report follow.
 
