@@ -1,28 +1,7 @@
 """Reference bakes for tests/core/test_reference_bakes.py: run once on the code a refactor starts from,
-so that the test can prove the refactored code gives the same numbers. Written first on cfa6419
-(before the settings schema and the stage list); written again when the solver began to stop on
-an error bound (96b8da5: results moved by at most 6e-5 of the maximum), when the final gather
-began to read the output mesh instead of the patches (the two gathered cases), and when patches
-began to be split where the direct light changes abruptly and weighted by the part the scene
-sees, with the gather reading exact light where it lands on such elements, the world's light
-exact at every point, and 128 gather rays by default (issue 11), and when the hemi-cube began to
-snap vertices to a sub-pixel grid and give a pixel centre on a shared edge to one polygon by a
-fill rule, not to whichever depth rounded nearer (issue 12: scale invariance), and when each chunk
-of an emitter transport began to draw its penumbra rays from its own random stream (so chunks can
-run on worker processes), and when the vertex stage began to read abrupt elements on a grid, let
-bright areas shine, judge both on the light arriving, and cast the lattice ray pattern (issue 11),
-and when patches and output elements began to be cut along contact lines, buried corners to take
-the open side's limit, the gather to run once more at the elements' level, the hemi-cube to sample
-pixels a hair off their centres and element vertices to be located in the patch they lie in
-(issues 11 and 12), and when contact segments began to be clipped to the face they cut (issue 9:
-the short block's top is no longer cut along the tall block's line beside it), and when the
-penumbra's extra shadow rays began to aim at targets shared by every point instead of drawn
-per chunk of the transport (issue 9: the chunks are cut to share the work between workers, and T
-no longer depends on how they are cut), and when the patches cut from one emitting face began to
-shine as one unit, with shadow rays spread over a group in compact strata and weighted by their
-part of the form factor (issue 9: a lamp cut into 100 patches cost every point 100 contours and
-400 rays), and when that weight began to take each target's own normal, 0 where it faces away
-(a group of shining pieces on two surfaces, a curved lamp's far side).
+so that the test can prove the refactored code gives the same numbers. Written again only by a
+change meant to move the numbers (a new method, a fixed error, a random stream cut otherwise);
+``git log tests/data/reference_bakes.npz`` lists those changes and why each moved them.
 
     .venv/bin/python tools/reference_bakes.py tests/data/reference_bakes.npz
 
