@@ -1,4 +1,4 @@
-"""Hard cases and bad input (issue 12): each is a correct bake, or one line naming the object (or
+"""Hard cases and bad input: each is a correct bake, or one line naming the object (or
 file) and the problem, with a non-zero exit from the CLI, the input file byte-identical and the
 scene unchanged (``conftest.scene_hash``: every mesh's vertices, faces and attributes, every
 object's visibility). Core-level where the core decides, through the operator and the CLI where

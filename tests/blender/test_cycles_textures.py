@@ -336,7 +336,7 @@ if __name__ == "__main__":
 
     for name, make in CASES.items():
         c = make()
-        shading.shade = lambda objects, dg: shading.Shaded()      # the reader before issue 10
+        shading.shade = lambda objects, dg: shading.Shaded()      # the reader before Cycles' shading was baked
         try:
             old = Comparison(c.objects, samples=SAMPLES)
         finally:

@@ -1,6 +1,5 @@
 """The paper's weak spots as numbers: a small bright emitter close to a surface, zero-thickness
-walls, objects that pierce each other, open scenes under a black world (issue 12's numerical
-cases 3, 4 and 5)."""
+walls, objects that pierce each other, open scenes under a black world."""
 import numpy as np
 import pytest
 

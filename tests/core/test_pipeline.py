@@ -413,7 +413,7 @@ def test_relight_reads_materials_as_the_patches_and_clusters_do():
 
 def test_a_bake_runs_on_small_pages_and_puts_numpys_setting_back(monkeypatch):
     """NumPy's huge-page advice is off while the stages run (a bake's many large temporaries
-    ran 20% slower on huge pages) and as it was afterwards, also when a stage fails."""
+    ran slower on huge pages) and as it was afterwards, also when a stage fails."""
     from hemicube_radiosity.core import pipeline
     from hemicube_radiosity.core.builtin_scenes import cornell_box
 
@@ -445,7 +445,7 @@ def test_a_bake_runs_on_small_pages_and_puts_numpys_setting_back(monkeypatch):
 @pytest.mark.parametrize("workers", [1, 2])
 def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for_them(monkeypatch, workers):
     """A mesh whose faces are smaller than the patch and detail sizes is its own patches and
-    output elements (:func:`.patches.keeps_faces_whole`): the bake builds its faces once, not
+    output elements (:func:`.subdivide.keeps_faces_whole`): the bake builds its faces once, not
     once for the patches, once for the elements and again inside a process forked only to
     find the two equal; the bake is the same as one that builds them every time."""
     from hemicube_radiosity.core.mesh import elements as output

@@ -158,7 +158,7 @@ def test_a_curved_lamps_far_side_does_not_shadow_its_near_side():
 def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
     """The transports of a bake (stand-ins, vertices, gather hits, bright areas) ask for the
     same lamps' outlines again and again: each emitter set's outline is made once and kept
-    (direct._outline), and the bake is the same as one that makes it every time."""
+    (emitters._outline), and the bake is the same as one that makes it every time."""
     import hashlib
     from hemicube_radiosity.core.light import emitters as direct
     from hemicube_radiosity.core.light.outline import GroupOutline

@@ -1,4 +1,4 @@
-"""Surfaces standing on others (core/mesh/contact.py, issues 11 and 12): output elements cut along
+"""Surfaces standing on others (core/mesh/contact.py): output elements cut along
 the contact lines, vertices there apart on each side, buried corners given the open side's limit.
 
 A house standing on one large ground face under a uniform sky: uncut, the output elements
@@ -219,8 +219,7 @@ def test_a_blocks_foot_on_a_dense_floor_reads_the_open_floor():
     from floor triangles with corners under the block. Those corners are read as their open
     side, as the cut elements of the coarse box have it: the blocks' sides at the floor match
     the coarse bake (cut along the contacts) within 6% (1.5% and 1.1% here). Read as what they
-    gathered (nothing: they are under the block), the short block's foot came out 14% dark
-    (the bench's 54k-triangle box: probe RMS 3.29%, 3.11% read as the open side)."""
+    gathered (nothing: they are under the block), the short block's foot came out 14% dark."""
     s = BakeSettings(patch_size=0.5)
     dense = bake(scenes.tessellate(scenes.cornell_box(), 18), s)
     coarse = bake(scenes.cornell_box(), s)

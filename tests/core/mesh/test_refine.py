@@ -1,5 +1,5 @@
 """Refinement where the light changes abruptly, the part of a patch the scene sees, and a final
-gather that reads exact light where it lands on such places (issue 11)."""
+gather that reads exact light where it lands on such places."""
 import numpy as np
 import pytest
 
@@ -170,7 +170,7 @@ def test_a_soft_shadow_is_smooth_when_the_lamp_is_cut_into_patches():
     differences along the row 19x the exact light's). At least 2 rays per patch (a 2 x 2 grid)
     find it and refine it: 1.8% RMS, 6x (what is left: a shadow's edge that passes between a
     patch's points unseen). The nine patches of one face now shine as one unit, the same 36
-    rays spread over the whole face in compact strata (:func:`.direct._group_samples`), each
+    rays spread over the whole face in compact strata (:func:`.emitters._group_samples`), each
     weighted by its share of the form factor: 1.1% RMS, 4.8x (with the face's 16 rays alone:
     1.7%, 8.5x)."""
     q = scenes.quad
@@ -202,7 +202,7 @@ def test_a_bright_spot_on_a_floor_lights_a_wall_without_blotches():
     independent truth. 64 gather rays read the bright spot under the lamp with the few rays
     that land on it, a different few at each vertex: 21% RMS error, second differences along
     the wall 27% of the floor's light (measured). The spot's brightest part lights the wall as
-    a lamp does (:func:`.output._hot_elements`): 8.0% and 14%, bias +0.7%."""
+    a lamp does (:func:`.shine.hot_elements`): 8.0% and 14%, bias +0.7%."""
     q = scenes.quad
     h, z, L, rho = 0.1, 0.6, 10.0, 0.8
     lamp = q([(-h, -h, z), (-h, h, z), (h, h, z), (h, -h, z)], (0, 0, 0), (L,) * 3, name="Lamp")

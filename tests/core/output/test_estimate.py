@@ -1,4 +1,4 @@
-"""The report's estimated error (core/output/estimate.py, issue 11) against the error it estimates.
+"""The report's estimated error (core/output/estimate.py) against the error it estimates.
 
 Truth here is the same bake converged: output elements a third the size and 512 gather rays,
 interpolated to the default bake's vertices (Cycles' version of this check, on the bench scenes,

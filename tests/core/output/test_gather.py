@@ -102,7 +102,7 @@ def test_product_is_matvec_bit_for_bit(dtype):
 
 def test_transport_product_transposed_is_apply_transport_bit_for_bit():
     # the relight keeps its cached transports transposed to float64 (gather.transposed_transport):
-    # the same sums as the (P, M) float32 transport and as direct.apply_transport's einsum
+    # the same sums as the (P, M) float32 transport and as emitters.apply_transport's einsum
     from hemicube_radiosity.core.light.emitters import apply_transport
     from hemicube_radiosity.core.output.gather import transport_product, transposed_transport
     rng = np.random.default_rng(3)
@@ -133,8 +133,8 @@ def test_gather_directions_are_the_einsum_of_the_frames_bit_for_bit():
 
 
 def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeypatch):
-    """The hits cut at row boundaries into shares, one per thread (issue 9: Suzanne's 612k hits
-    on abrupt elements were 1.6 s on one core), and each share into runs: C is the same for any
+    """The hits cut at row boundaries into shares, one per thread (a dense curved mesh's
+    many hits on abrupt elements kept one core busy and the other waiting), and each share into runs: C is the same for any
     count and any run length, and it is what
     :func:`correct_hits` adds (its independent sum) for values read through ``read``."""
     from hemicube_radiosity.core.output import gather

@@ -41,7 +41,7 @@ def test_triangle_patches_interpolate_barycentrically():
     np.testing.assert_allclose(got[:, 0], [1 + 0.25 * 2 + 0.25 * 4, 1 + 0.5 * 2 + 0.5 * 4, 1.0], rtol=1e-9)
 
 
-# ----------------------------------------------------------------------------- the grid search (issue 9)
+# ----------------------------------------------------------------------------- the grid search
 import pytest  # noqa: E402
 
 from hemicube_radiosity.core.output import interpolate
@@ -58,7 +58,7 @@ from hemicube_radiosity.core.util.spatial import k_nearest  # noqa: E402
 
 
 def _brute_locate(ps, points, owner=None, normals=None, candidates=8):
-    """locate as it was before the grid (issue 9): every point against every patch centre of its
+    """locate as it was before the grid: every point against every patch centre of its
     object, the ``candidates`` nearest by ``np.argpartition``, tried in the order it gives."""
     points = np.asarray(points, float)
     powner = ps.owner if owner is not None else np.zeros(len(ps), np.int64)
@@ -168,7 +168,7 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
     """A dense object in a coarse room (the Cornell box's tall block as 4,000 triangles, finer
     than the patches and the detail size): its faces are whole as patches and as elements, so
     the patch solution reaches its element vertices at their patch's corner, without `locate`
-    (Suzanne at level 3: 4.7 s -> 0.2 s). The bake is what the search gives to 1e-6 of its
+    (the search costs per vertex, and a dense object has many). The bake is what the search gives to 1e-6 of its
     mean; only the coarse room's element vertices are searched for."""
     from hemicube_radiosity.core.output import indirect as output
     from hemicube_radiosity.core.pipeline import BakeSettings, bake

@@ -1,7 +1,7 @@
 """The time a bake expects, said before its form factors (core/runtime/forecast.py): counted from the
 bake's own receivers, curved pieces and output vertices; none when the form factors are cached.
 (How close it comes to the time taken is measured by bench/bench_dense.py, not here: timings in
-unit tests are this shared machine's noise.)"""
+unit tests are mostly the noise of whatever else the machine runs.)"""
 import numpy as np
 
 from hemicube_radiosity.core import builtin_scenes as scenes

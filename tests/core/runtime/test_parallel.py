@@ -1,4 +1,4 @@
-"""Both cores (issue 9): form factors, the emitters' transport, the final gather and the whole bake
+"""Both cores: form factors, the emitters' transport, the final gather and the whole bake
 are bit-identical with one worker and with two, and cancelling stops the workers.
 
 Form factors run on forked worker processes where :func:`forked.processes_available` (Linux),
@@ -596,7 +596,7 @@ def test_ahead_is_not_started_where_processes_are_not(monkeypatch):
 @needs_embree
 def test_the_element_cut_made_ahead_is_the_one_made_in_place(monkeypatch, pool_kind):
     """On two workers the output elements' cut along contacts starts on a process of its own
-    when the bake starts (:func:`.output.start_elements`) and the vertex stage takes it: the
+    when the bake starts (:func:`.elements.start_elements`) and the vertex stage takes it: the
     bake's own process cuts nothing, and the bake is the one-worker bake, bit for bit. On one
     worker, or with threads only, it is cut in place, as before. A bake stopped early leaves no
     process behind."""

@@ -110,7 +110,7 @@ def test_cancel_stops_the_solve():
         solve(CSR.from_dense(F), rho, S, tol=1e-12, cancelled=lambda: True)
 
 
-# ---- reflectivity near 1: stop on an error bound, accelerate, never hang (issue 12) ----
+# ---- reflectivity near 1: stop on an error bound, accelerate, never hang ----
 
 def _closed_box_F():
     from hemicube_radiosity.core.form_factors.hemicube import hemicube_form_factors
