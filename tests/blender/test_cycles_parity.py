@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Issue 10: bake what Cycles renders. Each case is a scene whose Cycles bake has no noise
+"""Bake what Cycles renders. Each case is a scene whose Cycles bake has no noise
 (uniform worlds over open planes, point lights of radius 0, a sun of angle 0, black occluders so
 nothing bounces), baked by Cycles and by us and compared at Cycles' own face corners with the
 harness of tests/support/cycles_scenes.py. Limit: 2% mean relative error.

@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Issue 10: reflectance and emission as Cycles evaluates them (``blender/read/shading.py``).
+"""Reflectance and emission as Cycles evaluates them (``blender/read/shading.py``).
 
 Each case is a floor whose colour comes from nodes Cycles evaluates (an image texture through
 UVs, a procedural texture through a Mix node, a colour attribute, an emission texture) or from a

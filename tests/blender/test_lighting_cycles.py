@@ -1,5 +1,5 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
-"""Issue 4: the same Blender scene baked by Cycles and by our add-on agrees, light type by type.
+"""The same Blender scene baked by Cycles and by our add-on agrees, light type by type.
 
 Each case (``tests/support/cycles_scenes.py``) builds a small scene in bpy, bakes it with Cycles
 (tools/cycles_reference.py: COMBINED = E + rho H / pi at every face corner) and with our pipeline

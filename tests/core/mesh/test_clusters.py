@@ -213,7 +213,7 @@ def test_dense_cornell_box_bakes_like_the_coarse_one():
 
 
 def test_a_dense_lamp_split_in_cells_has_straight_cell_outlines():
-    """Issue 9: a lamp modelled as 3,362 triangles and split into 9 cells by a grid that does not
+    """A lamp modelled as 3,362 triangles and split into 9 cells by a grid that does not
     follow its mesh has cell borders along jagged triangle paths (34-62 edges per cell, 342 in
     all, before); straightened (the same polyline for both cells of a border) each cell has 4 or
     5 edges (38), and the cells' sum is still the whole lamp's closed form (to 3e-16): its
@@ -310,7 +310,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
 
 
 def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
-    """Issue 9: the direct stage lights a grouped cluster at 32 stand-in centres (area strata in
+    """The direct stage lights a grouped cluster at 32 stand-in centres (area strata in
     Morton order), not at every face's, so its cost follows the clusters. Each cluster's direct
     source still matches the closed-form mean over all its faces (a Lambertian square lamp over
     a floor of 20,000 triangles, nothing in between)."""
