@@ -7,9 +7,10 @@ a flat cluster is drawn as its outline, whatever it is cut into), and the output
 vertex (the final gather's rays, the exact direct light and what shines). The rates below were
 measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
 ``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
-subdivided: the forecast stays within :data:`SPREAD` of the time taken (the Cornell box's lamp
-makes more of its output shine than the rate assumes; a dense mesh's output is cheaper per
-vertex). A faster or slower machine scales all of it. It is said once the patches are known and before the form factors, with the
+subdivided: the time taken came out between about 0.6 and 1.8 times the forecast, hence the
+range :data:`SPREAD` (the Cornell box's lamp makes more of its output shine than the rate
+assumes; a dense mesh's output is cheaper per vertex). A faster or slower machine scales all
+of it. It is said once the patches are known and before the form factors, with the
 output elements cut already (cached: the vertex stage finds them), and kept on the result
 (``BakeResult.forecast``, the report's 'forecast'); a bake whose form factors come from the
 cache (a relight) has nothing long to forecast.
