@@ -5,7 +5,7 @@ grouped into ~555 patches by the default settings), the coarse ``cornell_box()``
 patches, each baked by the NumPy hemi-cube and by Embree, and Suzanne at subdivision level 3 in
 the box (bench_curved.py's scene, the hemi-cube only), in turn with 1 worker, 2 workers (the
 hemi-cube's form factors on two forked processes, :mod:`core.runtime.parallel`) and, unless
-``--no-threads``, 2 workers with processes switched off (``parallel.PROCESSES = False``:
+``--no-threads``, 2 workers with processes switched off (``forked.PROCESSES = False``:
 everything on threads, as before), ``--repeat`` times (each stage's best wall time kept, with
 its CPU time: on a shared machine the best run is the one least disturbed). Per stage it prints
 wall and CPU seconds (CPU of this process and of its worker processes: with two busy workers CPU

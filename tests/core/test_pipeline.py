@@ -5,6 +5,7 @@ import pytest
 from hemicube_radiosity.core.runtime.cache import FormFactorCache
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 from hemicube_radiosity.core.builtin_scenes import CORNELL_WHITE, box, closed_box, cornell_box
+from tests.support.patching import everywhere
 
 METHODS = ["hemicube", "embree"]
 
@@ -142,8 +143,9 @@ def test_relight_reuses_form_factors_and_equals_a_cold_bake():
 
 def test_relight_with_lamps_reuses_form_factors_and_direct_transport(monkeypatch):
     """A new lamp colour, a new emission strength and a new wall colour: F and the emitters'
-    direct-light transport come from the cache (no hemi-cube, no emitter ray is cast), and the
-    result equals a cold bake of the changed scene."""
+    direct-light transport come from the cache (no hemi-cube; no emitter ray is cast before the
+    vertex stage, which casts only for the points where the changed light is now abrupt), and
+    the result equals a cold bake of the changed scene."""
     from hemicube_radiosity.core.light import emitters as direct
     from hemicube_radiosity.core import pipeline
     from hemicube_radiosity.core.light.lamps import PointLight
@@ -157,15 +159,24 @@ def test_relight_with_lamps_reuses_form_factors_and_direct_transport(monkeypatch
     lamp2 = PointLight(position=(1.0, 0.6, 1.5), color=(1.0, 0.5, 0.2), power_w=40.0, radius=0.0)
     cold = bake(changed, s, lights=[lamp2])
 
-    def no_rays(*a, **k):
-        raise AssertionError("the emitters' transport must come from the cache")
-
     def no_hemicubes(*a, **k):
         raise AssertionError("form factors must come from the cache")
 
-    monkeypatch.setattr(direct, "emitter_transport", no_rays)
-    monkeypatch.setattr(pipeline, "compute_form_factors", no_hemicubes)
+    running, cast = [], []                     # the stage running; the stage of every transport
+    real = direct.emitter_transport
+
+    def spy(*a, **k):
+        cast.append(running[-1])
+        return real(*a, **k)
+
+    def named(name, stage):
+        return lambda ctx: running.append(name) or stage(ctx)
+
+    everywhere(monkeypatch, direct.emitter_transport, spy)
+    everywhere(monkeypatch, pipeline.compute_form_factors, no_hemicubes)
+    monkeypatch.setattr(pipeline, "STAGES", tuple((n, named(n, f)) for n, f in pipeline.STAGES))
     warm = bake(changed, s, cache=cache, lights=[lamp2])
+    assert running[:3] == ["patches", "refine", "form_factors"] and set(cast) <= {"vertices"}, cast
     assert warm.form_factor_source == "cached"
     np.testing.assert_allclose(warm.solution.B, cold.solution.B, rtol=1e-6, atol=1e-9)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
@@ -243,9 +254,9 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
     def forbidden(*a, **k):
         raise AssertionError("a relight must not recompute geometry-only work")
 
-    for mod, name in ((pipeline, "compute_form_factors"), (direct, "emitter_transport"),
-                      (gather, "gather_matrix"), (pipeline, "build_patches")):
-        monkeypatch.setattr(mod, name, forbidden)
+    for fn in (pipeline.compute_form_factors, direct.emitter_transport, gather.gather_matrix,
+               pipeline.build_patches):
+        everywhere(monkeypatch, fn, forbidden)
     warm = bake(changed, s, cache=cache)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
     # the cached element mesh took its materials from the changed meshes
@@ -336,8 +347,8 @@ def test_relight_of_a_lamp_under_a_ceiling_casts_no_ray_and_equals_a_cold_bake(m
         for name in ("intersect", "occluded"):
             if hasattr(cls, name):
                 monkeypatch.setattr(cls, name, forbidden)
-    monkeypatch.setattr(pipeline, "compute_form_factors", forbidden)
-    monkeypatch.setattr(pipeline, "build_patches", forbidden)
+    everywhere(monkeypatch, pipeline.compute_form_factors, forbidden)
+    everywhere(monkeypatch, pipeline.build_patches, forbidden)
     warm = bake(changed, s, cache=cache)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
 

@@ -86,8 +86,8 @@ class Memo:
     def _hit(self, key):
         """The entry (objects held, value) under ``key``, or None (always, with ``keep`` <= 0)."""
         hit = self._store.get(key) if self.keep > 0 else None
-        if hit is not None and self.refresh:
-            self._store[key] = self._store.pop(key)        # the most recently used last
+        if hit is not None and self.refresh:                # the most recently used last
+            self._store[key] = hit = self._store.pop(key, hit)   # (another thread may have dropped it)
         return hit
 
     def _put(self, key, objs: tuple, value) -> None:
