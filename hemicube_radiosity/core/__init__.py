@@ -7,12 +7,11 @@ stage lives in the package that owns its work, so the folders read as the data f
 ==============  =========================  ===================================================
 stage           package                    entry function
 ==============  =========================  ===================================================
-patches         ``mesh/``                  ``pipeline.patch_stage`` (``mesh.patches.build_patches``,
-                                           ``mesh.clusters.group_pieces``)
+patches         ``mesh/``                  ``mesh.stage.patch_stage``
 refine          ``mesh/``                  ``mesh.refine.refine_stage``
 form_factors    ``form_factors/``          ``form_factors.stage.form_factor_stage``
 direct          ``light/``                 ``light.stage.direct_stage``
-solve           ``solve/``                 ``pipeline.solve_stage`` (``solve.solvers.solve``)
+solve           ``solve/``                 ``solve.stage.solve_stage``
 vertices        ``output/``                ``output.stage.vertex_stage``
 estimate        ``output/``                ``output.estimate.estimate_stage``
 ==============  =========================  ===================================================

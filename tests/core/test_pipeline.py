@@ -5,6 +5,7 @@ import pytest
 from hemicube_radiosity.core.runtime.cache import FormFactorCache
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 from hemicube_radiosity.core.builtin_scenes import CORNELL_WHITE, box, closed_box, cornell_box
+from hemicube_radiosity.core.mesh import subdivide
 from tests.support.patching import everywhere
 
 METHODS = ["hemicube", "embree"]
@@ -255,7 +256,7 @@ def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(m
         raise AssertionError("a relight must not recompute geometry-only work")
 
     for fn in (pipeline.compute_form_factors, direct.emitter_transport, gather.gather_matrix,
-               pipeline.build_patches):
+               subdivide.build_patches):
         everywhere(monkeypatch, fn, forbidden)
     warm = bake(changed, s, cache=cache)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
@@ -348,7 +349,7 @@ def test_relight_of_a_lamp_under_a_ceiling_casts_no_ray_and_equals_a_cold_bake(m
             if hasattr(cls, name):
                 monkeypatch.setattr(cls, name, forbidden)
     everywhere(monkeypatch, pipeline.compute_form_factors, forbidden)
-    everywhere(monkeypatch, pipeline.build_patches, forbidden)
+    everywhere(monkeypatch, subdivide.build_patches, forbidden)
     warm = bake(changed, s, cache=cache)
     np.testing.assert_allclose(warm.vertex_radiosity, cold.vertex_radiosity, rtol=1e-6, atol=1e-9)
 
@@ -459,24 +460,20 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     output elements (:func:`.subdivide.keeps_faces_whole`): the bake builds its faces once, not
     once for the patches, once for the elements and again inside a process forked only to
     find the two equal; the bake is the same as one that builds them every time."""
-    from hemicube_radiosity.core.mesh import elements as output
     from hemicube_radiosity.core.runtime import background, forked
-    from hemicube_radiosity.core import pipeline
     from hemicube_radiosity.core.builtin_scenes import tessellate
     meshes = tessellate(cornell_box(), 12)                 # 1/6 m cells
     s = BakeSettings(workers=workers, patch_size=0.5, element_size=0.25, resolution=16, gather_rays=16)
     built, started = [], []
-    real = pipeline.build_patches
-    for mod in (pipeline, output):
-        monkeypatch.setattr(mod, "build_patches", lambda m, size=None, **k: built.append(size) or real(m, size, **k))
+    real = subdivide.build_patches
+    everywhere(monkeypatch, real, lambda m, size=None, **k: built.append(size) or real(m, size, **k))
     start = background.Ahead.start
     monkeypatch.setattr(background.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
     r = bake(meshes, s)
     assert built == [None] and started == []
     assert len(r.elements) == len(r.patches) == sum(len(m.face_offsets) - 1 for m in meshes)
     # the same bake with the faces measured as too large to keep (build_patches every time)
-    monkeypatch.setattr(pipeline, "keeps_faces_whole", lambda *a: False)
-    monkeypatch.setattr(output, "keeps_faces_whole", lambda *a: False)
+    everywhere(monkeypatch, subdivide.keeps_faces_whole, lambda *a: False)
     built.clear()
     again = bake(meshes, s)
     assert built == [0.5, 0.25] and started == ([1] if workers > 1 and forked.processes_available() else [])

@@ -9,7 +9,7 @@ source term, in the same radiance units as the patches' emission, is::
 
     S = emission + rho * H_direct / pi
 
-(``core.pipeline.source_term`` does exactly this). The lamps themselves are not patches: they
+(``core.light.stage.source_term`` does exactly this). The lamps themselves are not patches: they
 are not seen by the form factors and receive no light.
 
 Units: Cycles' conventions (checked in Blender's source)

@@ -1,5 +1,5 @@
 """How long a bake will take, said before its long work starts (the memory is
-:func:`.pipeline.form_factor_gb`'s, said by the patch stage).
+:func:`..mesh.stage.form_factor_gb`'s, said by the patch stage).
 
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
 receiver (one hemi-cube each) and per piece drawn one by one in it (a curved cluster's faces;

@@ -9,7 +9,8 @@ from hemicube_radiosity.core.mesh.clusters import group_pieces
 from hemicube_radiosity.core.form_factors.drawn import draw_set
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
-from hemicube_radiosity.core.pipeline import BakeSettings, _cut
+from hemicube_radiosity.core.mesh.stage import cut_patches as _cut
+from hemicube_radiosity.core.pipeline import BakeSettings
 from tests.support.shapes import uv_sphere
 
 

@@ -7,7 +7,8 @@ import pytest
 from hemicube_radiosity.core.form_factors import frustum, pixels, raster
 from hemicube_radiosity.core.form_factors import hemicube as H
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.pipeline import BakeSettings, _cut
+from hemicube_radiosity.core.mesh.stage import cut_patches as _cut
+from hemicube_radiosity.core.pipeline import BakeSettings
 from tests.support.shapes import sphere
 
 

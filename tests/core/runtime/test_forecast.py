@@ -8,7 +8,8 @@ from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.runtime.cache import FormFactorCache
 from hemicube_radiosity.core.runtime.forecast import OTHER, curved_pieces
 from hemicube_radiosity.core.form_factors.stage import receivers_needed
-from hemicube_radiosity.core.pipeline import BakeSettings, _cut, bake
+from hemicube_radiosity.core.mesh.stage import cut_patches as _cut
+from hemicube_radiosity.core.pipeline import BakeSettings, bake
 
 from tests.support.shapes import sphere
 
