@@ -20,6 +20,7 @@ from .clusters import make_clusters
 from ..light.points import grid_of
 from ..light.stage import LUMA, DirectLight
 from .patches import PatchSet, poly_geometry
+from .stage import form_factor_gb
 from ..rays import embree_available, embree_scene
 from ..util.unique import unique_ints
 
@@ -195,10 +196,22 @@ def refine_stage(ctx) -> None:
                              min_area=min_area, say=say, crossed=_crossing(p, ctx.cache))
     if len(refined) == len(p):
         return
+    clusters = None
     if ctx.clusters is not None:
         of = ctx.clusters.of[parent]
         child = np.flatnonzero(np.bincount(parent, minlength=len(p))[parent] > 1)
         of[child] = of.max() + 1 + np.arange(child.size)
-        ctx.clusters = make_clusters(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
+        clusters = make_clusters(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
+    before = len(ctx.unknowns)
+    after = len(refined if clusters is None else clusters)
+    if after > s.max_patches or form_factor_gb(after, s) > s.max_memory_gb:
+        # the limits the patch stage checked hold after refinement too: the patches stay as cut
+        ctx.notes.append(
+            f"refining where the light changes abruptly would make {after} patches, past the "
+            f"limit of {s.max_patches} patches or {s.max_memory_gb:g} GB of form factors: the "
+            f"{before} patches are kept unrefined (shadow edges only as sharp as the detail size "
+            "allows); raise Max Patches or the memory budget to refine them")
+        return
+    ctx.clusters = clusters if clusters is not None else ctx.clusters
     ctx.notes.append(f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
     ctx.patches = refined

@@ -241,3 +241,18 @@ def test_a_bright_spot_on_a_floor_lights_a_wall_without_blotches():
     assert np.sqrt(np.mean(err ** 2)) < 0.12
     assert abs(err.mean()) < 0.02
     assert np.sqrt(np.mean(d2 ** 2)) < 0.2
+
+
+def test_refinement_keeps_the_patch_limit():
+    """Splitting where the light changes abruptly never takes a bake past ``max_patches``: with
+    a limit between the Cornell box's patches as cut and as refined, the patches stay as cut, the
+    bake says why and names the setting to raise, and it bakes as a bake that never refines."""
+    plain = bake(scenes.cornell_box(), BakeSettings(refine_levels=0))
+    free = bake(scenes.cornell_box(), BakeSettings())
+    assert free.unknowns > plain.unknowns                 # the defaults do refine this box
+    limit = (plain.unknowns + free.unknowns) // 2
+    capped = bake(scenes.cornell_box(), BakeSettings(max_patches=limit))
+    assert capped.unknowns == plain.unknowns <= limit
+    said = [n for n in capped.notes if "kept unrefined" in n]
+    assert len(said) == 1 and f"would make {free.unknowns} patches" in said[0] and "Max Patches" in said[0]
+    assert np.array_equal(capped.vertex_radiosity, plain.vertex_radiosity)
