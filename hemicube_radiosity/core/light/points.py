@@ -47,9 +47,11 @@ def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
     finely it was modelled, and its area mean is a ``k``-point stratified estimate. The same
     array for the same patch and cluster arrays (a relight's points keep their keys)."""
     objs = (patches.centers, patches.areas, clusters.of)
-    stand = _CENTRES.lookup(objs, ("stand", k))
-    if stand is not _CENTRES.MISSING:
-        return stand
+    return _CENTRES.of(objs, lambda: _stand_ins(patches, clusters, k), ("stand", k))
+
+
+def _stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
+    """:func:`stand_ins`, made."""
     of, a, c = clusters.of, patches.areas, patches.centers
     stand = np.arange(len(of))
     big = np.flatnonzero(clusters.sizes[of] > k)
@@ -74,7 +76,7 @@ def stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
         best = near[np.r_[0, np.flatnonzero(np.diff(rid[near])) + 1]]
         stand[rows] = rows[best[rid]]
     stand.flags.writeable = False
-    return _CENTRES.store(objs, stand, ("stand", k))
+    return stand
 
 
 def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=None, rng=None,

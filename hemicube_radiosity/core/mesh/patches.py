@@ -179,17 +179,19 @@ def _material_index(patches: PatchSet, mats):
     if not mats or any(r.ndim != 2 or r.shape[1] != 3 or e.shape != r.shape for r, e in mats):
         return None
     sf, owner = patches.source_face, patches.owner
-    hit = _MATERIAL_INDEX.lookup((sf, owner), counts)
-    if hit is not _MATERIAL_INDEX.MISSING:
-        return hit
-    index = None
+    return _MATERIAL_INDEX.of((sf, owner), lambda: _face_index(sf, owner, counts), counts)
+
+
+def _face_index(source_face, owner, counts):
+    """(N,) int64 each patch's face in the faces of all meshes laid end to end (``counts`` faces
+    per mesh), or None when an owner or a face is out of range."""
     o = np.asarray(owner, dtype=np.int64)
-    f = np.asarray(sf, dtype=np.int64)
-    if o.size == 0 or (o.min() >= 0 and o.max() < len(mats)):
+    f = np.asarray(source_face, dtype=np.int64)
+    if o.size == 0 or (o.min() >= 0 and o.max() < len(counts)):
         size = np.asarray(counts, dtype=np.int64)
         if o.size == 0 or (f.min() >= 0 and (f < size[o]).all()):
-            index = np.concatenate([[0], np.cumsum(size)]).astype(np.int64)[o] + f
-    return _MATERIAL_INDEX.store((sf, owner), index, counts)
+            return np.concatenate([[0], np.cumsum(size)]).astype(np.int64)[o] + f
+    return None
 
 
 def poly_geometry(verts, polys):

@@ -212,6 +212,7 @@ def refine_stage(ctx) -> None:
             f"{before} patches are kept unrefined (shadow edges only as sharp as the detail size "
             "allows); raise Max Patches or the memory budget to refine them")
         return
-    ctx.clusters = clusters if clusters is not None else ctx.clusters
+    if clusters is not None:
+        ctx.clusters = clusters
     ctx.notes.append(f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
     ctx.patches = refined

@@ -7,20 +7,19 @@ and, when ``directory`` is set, as ``<key>.npz`` files there.
 
 Beside it, :class:`Memo`: the small in-process memos of what a bake or a relight asks for again
 (ray scenes, hashes of cached arrays, topology, point grids), keyed by a value or by the
-identity of the arrays they were made from, and :func:`clear_memos` to empty them all.
+identity of the arrays they were made from.
 """
 from __future__ import annotations
 
 import hashlib
 import os
-import weakref
 from collections import OrderedDict
 
 import numpy as np
 
 from ..util.sparse import CSR
 
-__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "clear_memos", "geometry_key"]
+__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key"]
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:
@@ -36,23 +35,17 @@ class Memo:
     kept. Two kinds of key:
 
     * :meth:`get` by a value (a digest of the geometry: ray scenes, emitter outlines);
-    * :meth:`of` (and :meth:`lookup`, :meth:`store`) by the identity of some objects (the
-      arrays of a relight's cached patches, which are the same objects every time), plus an
-      optional value ``key`` (sizes, a selection's bytes). The objects are held while their
-      value is kept, so their ids cannot be reused meanwhile, and a hit is checked with ``is``.
-      Arrays so keyed must never be changed in place.
-
-    :func:`clear_memos` empties every memo (tests; the ray scenes also clear on their own)."""
-
-    #: What :meth:`lookup` returns when nothing is kept.
-    MISSING = object()
+    * :meth:`of` by the identity of some objects (the arrays of a relight's cached patches,
+      which are the same objects every time), plus an optional value ``key`` (sizes, a
+      selection's bytes). The objects are held while their value is kept, so their ids cannot
+      be reused meanwhile, and a hit is checked with ``is``. Arrays so keyed must never be
+      changed in place."""
 
     def __init__(self, keep: int, *, max_bytes=None, refresh=False):
         self.keep = keep
         self.max_bytes = max_bytes
         self.refresh = refresh
         self._store: dict = {}
-        _MEMOS.add(self)
 
     def get(self, key, make):
         """The value under ``key``, made by ``make()`` when absent."""
@@ -66,21 +59,12 @@ class Memo:
     def of(self, objs: tuple, make, key=()):
         """The value for the objects ``objs`` (by identity) and ``key``, made by ``make()``
         when absent."""
-        value = self.lookup(objs, key)
-        if value is self.MISSING:
-            value = self.store(objs, make(), key)
-        return value
-
-    def lookup(self, objs: tuple, key=()):
-        """The value kept for ``objs`` (by identity) and ``key``, or :data:`MISSING`."""
-        hit = self._hit((tuple(map(id, objs)), key))
-        if hit is None or any(a is not b for a, b in zip(hit[0], objs)):
-            return self.MISSING
-        return hit[1]
-
-    def store(self, objs: tuple, value, key=()):
-        """Keep ``value`` for ``objs`` (by identity) and ``key``; returns ``value``."""
-        self._put((tuple(map(id, objs)), key), tuple(objs), value)
+        ids = (tuple(map(id, objs)), key)
+        hit = self._hit(ids)
+        if hit is not None and all(a is b for a, b in zip(hit[0], objs)):
+            return hit[1]
+        value = make()
+        self._put(ids, tuple(objs), value)
         return value
 
     def _hit(self, key):
@@ -113,15 +97,6 @@ class Memo:
 
 def _nbytes_of(objs) -> int:
     return sum(int(getattr(o, "nbytes", 0)) for o in objs)
-
-
-_MEMOS = weakref.WeakSet()
-
-
-def clear_memos() -> None:
-    """Empty every :class:`Memo` of the process."""
-    for memo in list(_MEMOS):
-        memo.clear()
 
 
 _GEOMETRY = Memo(16)     # (verts, polys) -> key: the last few geometries hashed
