@@ -104,14 +104,29 @@ def plot_group(c):
     return c["method"]
 
 
-def plot_time_vs_error(results, img_dir):
-    """Error against time, Cycles' sweep and our candidates' frontiers, one panel a scene:
-    docs/img/perf_time_vs_error.png."""
+def _pyplot():
+    """matplotlib's pyplot on the Agg backend (no display here)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    return plt
 
+
+def _save(plt, fig, img_dir, name, dpi):
+    """Lay ``fig`` out, write it to ``img_dir/name`` and close it; returns the path."""
+    fig.tight_layout()
     os.makedirs(img_dir, exist_ok=True)
+    path = os.path.join(img_dir, name)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+    return path
+
+
+def plot_time_vs_error(results, img_dir):
+    """Error against time, Cycles' sweep and our candidates' frontiers, one panel a scene:
+    docs/img/perf_time_vs_error.png."""
+    plt = _pyplot()
+
     scs = results["scenes"]
     fig, axes = plt.subplots(1, len(scs), figsize=(5.2 * len(scs), 4.4), squeeze=False)
     group_colours = {"hemicube": "tab:blue", "embree": "tab:orange", "embree_stochastic": "tab:green",
@@ -144,18 +159,12 @@ def plot_time_vs_error(results, img_dir):
         ax.set_title(f"{sc['name']}: {sc['fine_faces']} faces", fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = os.path.join(img_dir, "perf_time_vs_error.png")
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, img_dir, "perf_time_vs_error.png", dpi=110)
 
 
 def plot_dense(res, img_dir):
     """Bake time and probe error against triangles, ours and Cycles: docs/img/perf_dense.png."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     rows = [r for r in res["rows"] if "core_seconds" in r.get("ours", {})]
     if not rows:
@@ -176,19 +185,12 @@ def plot_dense(res, img_dir):
         ax.set_ylabel(y)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    os.makedirs(img_dir, exist_ok=True)
-    path = os.path.join(img_dir, "perf_dense.png")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, img_dir, "perf_dense.png", dpi=100)
 
 
 def plot_parallel(res, img_dir):
     """Each stage's wall time on 1 and 2 workers, one panel a case: docs/img/perf_parallel.png."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = _pyplot()
 
     cases = res.get("cases") or {}
     if not cases:
@@ -206,12 +208,7 @@ def plot_parallel(res, img_dir):
         ax.set_ylabel("wall time (s)")
         ax.set_title(label, fontsize=10)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    os.makedirs(img_dir, exist_ok=True)
-    path = os.path.join(img_dir, "perf_parallel.png")
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, img_dir, "perf_parallel.png", dpi=100)
 
 
 def _img(path, doc, alt):
