@@ -29,6 +29,7 @@ fills; the bake passes them on to ``core.pipeline.bake(lights=, world=)``.
 """
 from __future__ import annotations
 
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -188,6 +189,13 @@ def _within_faces(corner, offsets, per_face):
     return corner if spread > 1e-6 else None
 
 
+def material_ids(mats) -> np.ndarray:
+    """(S,) int64 an id per material slot, the same for one material in every object (its
+    name's CRC-32; an empty slot, Blender's default surface, is 0): which faces may be grouped
+    into one patch (:func:`core.mesh.clusters.piece_materials`)."""
+    return np.array([zlib.crc32(m.name_full.encode()) if m is not None else 0 for m in mats], np.int64)
+
+
 def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
     :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
@@ -241,7 +249,8 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
-                     _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em))
+                     _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
+                     material_ids(mats)[mi])
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 

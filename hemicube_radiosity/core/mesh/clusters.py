@@ -4,11 +4,13 @@ A wall modelled as 10,000 triangles is lit like a wall of four quads, so it shou
 :func:`build_patches` never makes a piece larger than its input face; here the *small* pieces
 are grouped into clusters of about the patch size:
 
-* the same object and the same material (reflectivity and emission, or ``material`` ids),
+* the same object and the same material (``material`` ids, :func:`piece_materials`: a textured
+  material groups as a plain one, the cluster solving with its pieces' area-mean reflectance),
 * normals within ``max_angle`` of each other (a curved surface becomes several clusters, each
   nearly planar: the pieces' normals are binned on the cube map, cells ``max_angle`` wide),
 * the same cell of a world grid of the patch size (by the centre of the piece's bounding box),
-  and connected through shared vertices.
+  and connected through shared corner *positions* (not vertex ids: a flat-shaded, auto-smoothed
+  or UV-seamed mesh has its vertices split along every edge, and groups as its smooth twin).
 
 Only whole input faces (and pieces much smaller than the patch size) are grouped: pieces that
 :func:`build_patches` cut from a coarse face already have the patch size and each stay a patch of
@@ -28,7 +30,7 @@ import numpy as np
 from .patches import PatchSet
 from ..util.unique import unique_ints, unique_rows
 
-__all__ = ["Clusters", "group_pieces", "DEFAULT_MAX_ANGLE"]
+__all__ = ["Clusters", "group_pieces", "piece_materials", "welded", "DEFAULT_MAX_ANGLE"]
 
 DEFAULT_MAX_ANGLE = 30.0       # degrees: normal spread allowed within one cluster
 
@@ -145,11 +147,47 @@ def connected_components(keys, polys):
         label = new
 
 
+def welded(verts, polys) -> np.ndarray:
+    """``polys`` (N, 4) (-1: a triangle's fourth) with every vertex id replaced by the id of its
+    position (V, 3): vertices at one place (within 1e-9 of the scene's diagonal) get one id,
+    so faces meet where their corners meet, whatever the mesh's vertex splits."""
+    v = np.asarray(verts, dtype=np.float64)
+    if not len(v):
+        return np.asarray(polys)
+    tol = 1e-9 * (float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) or 1.0)
+    ids = unique_rows(np.round(v / tol).astype(np.int64), return_inverse=True)[1].reshape(-1)
+    polys = np.asarray(polys, dtype=np.int64)
+    return np.where(polys < 0, -1, ids[np.maximum(polys, 0)])
+
+
+def piece_materials(pieces: PatchSet, meshes) -> np.ndarray:
+    """(P,) int64 material key of each piece: pieces with equal keys may share a patch.
+
+    A face of a mesh that names its materials (``MeshInput.face_material``) keys on that id and
+    its emitted radiance, so a textured reflectance groups (the patch solves with the area mean,
+    the output keeps each corner's); a face of a mesh that does not keys on its reflectance and
+    emitted radiance. Emitters group only with equal emission."""
+    rows = []
+    for m in meshes:
+        rho, em = np.asarray(m.face_rho, float), np.asarray(m.face_emission, float)
+        F = len(rho)
+        ids = getattr(m, "face_material", None)
+        if ids is None:
+            rows.append(np.hstack([np.zeros((F, 1)), rho, em]))
+        else:
+            ids = np.asarray(ids, dtype=np.float64).reshape(-1, 1)
+            rows.append(np.hstack([np.ones((F, 1)), ids, np.zeros((F, 2)), em]))
+    key = unique_rows(np.concatenate(rows), return_inverse=True)[1].reshape(-1)
+    start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
+    return key[start[pieces.owner.astype(np.int64)] + pieces.source_face.astype(np.int64)].astype(np.int64)
+
+
 def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None) -> Clusters | None:
     """Group ``pieces`` into clusters of about ``size`` (see the module docstring); None when no
     two pieces would be grouped (every patch is its own piece).
 
-    ``material``: (P,) int material id per piece (default: equal reflectivity and emission)."""
+    ``material``: (P,) int material key per piece (:func:`piece_materials`; default: equal
+    reflectivity and emission)."""
     if not size or len(pieces) == 0:
         return None
     small = _small(pieces, size)
@@ -172,7 +210,7 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     # a piece that is not small keys on its own index: it stays alone
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
     key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
-    label = connected_components(key, pieces.polys)
+    label = connected_components(key, welded(pieces.verts, pieces.polys))
     of = unique_ints(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):
         return None

@@ -43,6 +43,10 @@ class MeshInput:
     corner_rho, corner_emission: (L, 3) or None, the same at every face corner (in
                   ``face_indices`` order) where they vary within a face (a texture); the output's
                   vertices take them, the solve the per-face values.
+    face_material:(F,) int or None, which material each face has (any ids, equal for one
+                  material across meshes): faces of one material may be grouped into one patch
+                  although a texture varies their reflectivity (:func:`.clusters.piece_materials`);
+                  None: faces group only where reflectivity and emission are equal.
     """
 
     verts: np.ndarray
@@ -53,6 +57,7 @@ class MeshInput:
     name: str = "mesh"
     corner_rho: np.ndarray | None = None
     corner_emission: np.ndarray | None = None
+    face_material: np.ndarray | None = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):

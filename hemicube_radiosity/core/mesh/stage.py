@@ -8,7 +8,7 @@ geometry, so a relight re-reads them) and ``ctx.clusters`` (None where no faces 
 from __future__ import annotations
 
 from ..runtime.cache import cache_key, cached
-from .clusters import group_pieces
+from .clusters import group_pieces, piece_materials
 from .contact import cut_along_contacts
 from .elements import mesh_faces
 from .patches import PatchError
@@ -54,7 +54,8 @@ def cut_patches(meshes, s, faces=None):
     except PatchError:
         whole = False                         # build_patches says what is wrong, in its order
     pieces = faces() if whole else build_patches(meshes, s.patch_size)
-    clusters = group_pieces(pieces, s.patch_size, s.group_angle) if s.group_faces else None
+    clusters = group_pieces(pieces, s.patch_size, s.group_angle, piece_materials(pieces, meshes)) \
+        if s.group_faces else None
     if clusters is None:
         # cut along where surfaces stand on others, as the output is (core/mesh/contact.py): a patch
         # across a partition off the patch grid lit the dark side with the lit side's light

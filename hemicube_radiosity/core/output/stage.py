@@ -51,8 +51,12 @@ def vertex_stage(ctx) -> None:
     ctx.elements = patches
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
-        B = _incoming(ctx.solution.B - u.emission, u.rho) if lighting or textured else ctx.solution.B
-        ctx.vertex_radiosity = vertex_radiosity(patches, ctx.to_patches(B), weights=weights, cache=ctx.cache)
+        if lighting or textured:
+            B = ctx.to_patches(_incoming(ctx.solution.B - u.emission, u.rho))
+        else:
+            B = patches.emission + _reflected_by_patches(ctx, ctx.solution.B - u.emission) \
+                if ctx.clusters is not None else ctx.solution.B
+        ctx.vertex_radiosity = vertex_radiosity(patches, B, weights=weights, cache=ctx.cache)
         if textured:                          # each vertex its own colour times the light there
             _, _, rho_v = vertex_frames(patches)
             E_v = vertex_radiosity(patches, patches.emission, cache=ctx.cache)
@@ -63,7 +67,7 @@ def vertex_stage(ctx) -> None:
     # the paper
     rest = ctx.reflected - ctx.direct_source
     sided = sided_mesh(ctx, patches)         # each side of a partition its own vertices
-    rest_v = vertex_radiosity(sided, ctx.to_patches(rest), weights=weights, cache=ctx.cache)
+    rest_v = vertex_radiosity(sided, _reflected_by_patches(ctx, rest), weights=weights, cache=ctx.cache)
     in_v = None
     if lighting:
         in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, u.rho)), weights=weights,
@@ -104,6 +108,21 @@ def vertex_stage(ctx) -> None:
         return
     E_v = vertex_radiosity(ctx.elements, ctx.elements.emission, cache=ctx.cache)
     ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v)
+
+
+def _reflected_by_patches(ctx, reflected):
+    """(N, 3) per patch of the light the unknowns reflect, (K, 3): a patch grouped into a
+    cluster of another reflectivity (a textured material, grouped: the cluster solves with the
+    area mean) reflects the light arriving at its cluster with its own reflectivity; every
+    other patch takes its unknown's value as it is."""
+    spread = ctx.to_patches(reflected)
+    if ctx.clusters is None:
+        return spread
+    rho = ctx.patches.rho
+    other = np.abs(rho - ctx.to_patches(ctx.clusters.rho)) > 1e-9      # not the mean's rounding
+    if not other.any():
+        return spread
+    return np.where(other, ctx.to_patches(_incoming(reflected, ctx.clusters.rho)) * rho, spread)
 
 
 def _incoming(reflected, rho):
