@@ -21,7 +21,7 @@ from .mesh.clusters import Clusters
 from .mesh.elements import meshes_key, output_elements, start_elements
 from .mesh.patches import PatchSet
 from .mesh.refine import refine_stage
-from .mesh.stage import patch_stage
+from .mesh.stage import check_before_cutting, patch_stage
 from .output.estimate import estimate_stage
 from .output.stage import vertex_stage
 from .runtime.cache import FormFactorCache
@@ -224,6 +224,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     t0 = time.perf_counter()
     with small_pages(), one_blas_thread(), kept_heap():   # (runtime/native.py says why)
         ctx.check()
+        check_before_cutting(meshes if patches is None else None, settings)
         try:
             # geometry a later stage reads, made on a core the first stages leave idle
             ctx.ahead["elements"] = start_elements(ctx)

@@ -1,4 +1,6 @@
 """The whole core bake on closed-form and measured cases (furnace, Cornell box)."""
+import re
+
 import numpy as np
 import pytest
 
@@ -234,8 +236,42 @@ def test_elements_keep_sharp_shadows_that_coarse_patches_lose():
 def test_too_many_patches_stop_before_the_form_factors_with_a_clear_error():
     from hemicube_radiosity.core.mesh.patches import PatchError
 
-    with pytest.raises(PatchError, match=r"makes \d+ patches, more than the limit of 500"):
+    with pytest.raises(PatchError, match=r"makes [\d,]+ patches, more than the limit of 500") as refused:
         bake(cornell_box(), BakeSettings(patch_size=0.1, max_patches=500))
+    # the size it names passes, and makes as many patches as it says (it was measured)
+    size, n = re.search(r"a patch size of ([\d.]+) makes ([\d,]+)$", str(refused.value).split(";")[0]).groups()
+    r = bake(cornell_box(), BakeSettings(patch_size=float(size), max_patches=500, refine_levels=0))
+    assert r.unknowns == int(n.replace(",", "")) <= 500
+
+
+def test_an_absurd_patch_size_is_refused_from_the_faces_before_anything_is_cut(monkeypatch):
+    """Half a millimetre in a 2 m box would be 50 million patches: refused from the faces' edges
+    and areas; nothing is cut at that size (cutting it took minutes and 18 GB in two processes).
+    The size the refusal names was measured by cutting at it."""
+    from hemicube_radiosity.core.mesh import subdivide as sub
+    from hemicube_radiosity.core.mesh.patches import PatchError
+
+    real = sub._subdivide
+
+    def guarded(verts, polys, size):
+        assert not size or size > 0.01, f"cut at {size}"
+        return real(verts, polys, size)
+    monkeypatch.setattr(sub, "_subdivide", guarded)
+    with pytest.raises(PatchError, match=r"a patch size of 0.0005 makes about [\d,]+ patches, more than "
+                       r"the limit of 20,000 \(Max Patches\): a patch size of ([\d.]+) makes ([\d,]+);") as refused:
+        bake(cornell_box(), BakeSettings(patch_size=0.0005, element_size=0.0005 / 3))
+    size = float(re.search(r": a patch size of ([\d.]+) makes", str(refused.value)).group(1))
+    assert 0.03 < size < 0.1
+
+
+def test_an_absurd_detail_size_is_refused_before_anything_is_cut(monkeypatch):
+    from hemicube_radiosity.core.mesh import subdivide as sub
+    from hemicube_radiosity.core.mesh.patches import PatchError
+
+    monkeypatch.setattr(sub, "_subdivide", lambda v, p, size: pytest.fail(f"cut at {size}"))
+    with pytest.raises(PatchError, match=r"a detail size of 0.0001 cuts the scene into at least [\d,]+ "
+                       r"output elements, more than the limit of 400,000 \(Max Details\): use a detail size of"):
+        bake(cornell_box(), BakeSettings(patch_size=0.5, element_size=0.0001))
 
 
 def test_relight_with_elements_and_gather_casts_nothing_and_equals_a_cold_bake(monkeypatch):

@@ -7,10 +7,13 @@ geometry, so a relight re-reads them) and ``ctx.clusters`` (None where no faces 
 """
 from __future__ import annotations
 
+import math
+
 from ..runtime.cache import cache_key, cached
 from .clusters import group_pieces, piece_materials
 from .contact import cut_along_contacts
 from .elements import mesh_faces
+from .limits import CLUSTER_SPAN, passing_size, patches_about, pieces_at_least
 from .patches import PatchError
 from .subdivide import build_patches, keeps_faces_whole
 
@@ -29,17 +32,9 @@ def patch_stage(ctx) -> None:
     elif s.group_faces:
         ctx.clusters = group_pieces(ctx.patches, s.patch_size, s.group_angle)
     n = len(ctx.unknowns)
-    if n > s.max_patches:
-        raise PatchError(f"a patch size of {s.patch_size} makes {n} patches, more than the limit "
-                         f"of {s.max_patches}: use a larger patch size (and a detail size for "
-                         "sharp output)" + ("" if s.group_faces else ", or group small faces"))
+    if n > patch_limit(s):
+        raise PatchError(_refusal(None if ctx.given else ctx.meshes, s, n, ""))
     gb = form_factor_gb(n, s)
-    if gb > s.max_memory_gb:
-        size = s.patch_size or 0.0
-        hint = (f": use a larger patch size (now {size:.3g}; {2 * size:.3g} needs about "
-                f"{form_factor_gb(n / 4, s):.2g} GB)") if size else ": set a patch size"
-        raise PatchError(f"{n} patches need about {gb:.2g} GB of form factors, more than the "
-                         f"memory budget of {s.max_memory_gb:g} GB{hint}")
     grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
     ctx.say(1.0, f"{n} patches{grouped}; form factors at most {1024 * gb:.0f} MB")
 
@@ -70,3 +65,62 @@ def form_factor_gb(n, settings) -> float:
     hemi-cube pixel (or ray) and per patch, 8 bytes each (float32 value, int32 column)."""
     per_row = settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
     return n * min(n, per_row) * 8 / 2 ** 30
+
+
+def patch_limit(settings) -> int:
+    """The most patches a bake takes: ``max_patches``, and no more than the form factors'
+    memory budget holds (:func:`form_factor_gb`)."""
+    per_row = settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
+    entries = settings.max_memory_gb * 2 ** 30 / 8
+    by_memory = math.isqrt(int(entries)) if entries <= per_row ** 2 else int(entries // per_row)
+    return int(min(settings.max_patches, by_memory))
+
+
+def _limit_name(settings, n) -> str:
+    if n > settings.max_patches:
+        return f"the limit of {settings.max_patches:,} (Max Patches)"
+    return (f"the {patch_limit(settings):,} whose form factors fit the memory budget of "
+            f"{settings.max_memory_gb:g} GB (about {form_factor_gb(n, settings):.2g} GB)")
+
+
+def _refusal(meshes, s, n, about) -> str:
+    """The message refusing ``n`` patches at ``s.patch_size``, naming a size that passes,
+    measured by cutting the meshes at it (``meshes`` None: patches handed in, nothing to cut)."""
+    size = s.patch_size or 0.0
+    msg = f"a patch size of {size:.3g} makes {about}{int(n):,} patches, more than {_limit_name(s, n)}"
+    limit = patch_limit(s)
+    found = None
+    if meshes is not None and size:
+        def count(s2):
+            if pieces_at_least(meshes, s2.patch_size) > 50 * limit:
+                return math.inf
+            pieces, clusters = cut_patches(meshes, s2)
+            return len(pieces if clusters is None else clusters)
+        found = passing_size(meshes, s, limit, count)
+    if found is not None:
+        msg += f": a patch size of {found[0]:.3g} makes {found[1]:,}"
+    else:
+        msg += ": use a larger patch size"
+    if not s.group_faces:
+        msg += " (or group small faces)"
+    return msg + "; a detail size keeps the output sharp"
+
+
+def check_before_cutting(meshes, s) -> None:
+    """Refuse sizes that make far too many patches or output elements, counted from the faces'
+    edges and areas before anything is cut (:mod:`.limits`): the patches when even the largest
+    clusters could not bring them under :func:`patch_limit`, the elements when they are more
+    than ``max_elements`` at least."""
+    if meshes is None:
+        return
+    if s.patch_size:
+        about = patches_about(meshes, s.patch_size, s.group_faces)
+        if about > CLUSTER_SPAN * patch_limit(s):
+            raise PatchError(_refusal(meshes, s, about, "about "))
+    if s.uses_elements():
+        at_least = pieces_at_least(meshes, s.element_size)
+        if at_least > s.max_elements:
+            need = float(s.element_size) * math.sqrt(at_least / s.max_elements) * 1.1
+            raise PatchError(f"a detail size of {s.element_size:.3g} cuts the scene into at least "
+                             f"{int(at_least):,} output elements, more than the limit of "
+                             f"{s.max_elements:,} (Max Details): use a detail size of {need:.3g} or more")
