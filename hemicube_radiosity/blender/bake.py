@@ -194,7 +194,8 @@ class BakeJob:
         r = self.result
         detail = "" if r.elements is r.patches else f" ({len(r.elements)} output elements)"
         estimate = "" if r.error_estimate is None else f", {r.error_estimate.describe()}"
-        return (f"Radiosity: {len(r.patches)} patches{detail}, {r.form_factors.nnz} form factors "
+        grouped = "" if r.clusters is None else f" (grouped from {len(r.patches)} pieces)"
+        return (f"Radiosity: {r.unknowns} patches solved{grouped}{detail}, {r.form_factors.nnz} form factors "
                 f"({r.form_factor_source}), {r.solution.iterations} iterations, residual "
                 f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s{estimate}")
 
@@ -208,6 +209,7 @@ class BakeJob:
             "settings": dataclasses.asdict(r.settings),
             "timings": {k: float(v) for k, v in self.timings.items()},
             "patches": int(len(r.patches)),
+            "solved": int(r.unknowns),
             "elements": int(len(r.elements)),
             "per_object": _per_object(r),
             "nonzeros": int(r.form_factors.nnz),
@@ -228,14 +230,20 @@ class BakeJob:
 
 
 def _per_object(r) -> dict:
-    """{object name: {"patches": n, "elements": m}}: how finely each object was solved (after
-    refinement where the light changes abruptly) and written."""
+    """{object name: {"patches": n, "elements": m, "solved": k, "patch_size": s, "detail_size": d}}:
+    how finely each object was cut (after refinement where the light changes abruptly), solved
+    (the patches its grouped faces make, each counted with the object of its first face) and
+    written, and the sizes it was cut at (an object far larger than the scene gets its own:
+    core/mesh/sizes.py)."""
     import numpy as np
 
     names = r.patches.object_names
     p = np.bincount(r.patches.owner, minlength=len(names))
     e = np.bincount(r.elements.owner, minlength=len(names))
-    return {n: {"patches": int(p[i]), "elements": int(e[i])} for i, n in enumerate(names)}
+    k = np.bincount(r.clusters.owner if r.clusters is not None else r.patches.owner, minlength=len(names))
+    return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
+                "patch_size": r.object_sizes(i)[0], "detail_size": r.object_sizes(i)[1]}
+            for i, n in enumerate(names)}
 
 
 def _jsonable(x):

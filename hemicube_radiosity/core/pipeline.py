@@ -21,6 +21,7 @@ from .mesh.clusters import Clusters
 from .mesh.elements import meshes_key, output_elements, start_elements
 from .mesh.patches import PatchSet
 from .mesh.refine import refine_stage
+from .mesh.sizes import with_auto_scales
 from .mesh.stage import check_before_cutting, patch_stage
 from .output.estimate import estimate_stage
 from .output.stage import vertex_stage
@@ -28,7 +29,7 @@ from .runtime.cache import FormFactorCache
 from .runtime.errors import SettingsError
 from .runtime.native import kept_heap, one_blas_thread
 from .runtime.progress import Cancelled
-from .settings import BakeSettings
+from .settings import AUTO_PATCHES_PER_DIAGONAL, BakeSettings
 from .solve.solvers import Solution
 from .solve.stage import solve_stage
 from .util.sparse import CSR
@@ -59,6 +60,7 @@ class BakeResult:
     clusters: Clusters | None = None          # small faces grouped: solution.B is per cluster
     error_estimate: object = None             # core.output.estimate.ErrorEstimate with settings.estimate_error
     forecast: object = None                   # core.runtime.forecast.Forecast: the time expected (None: F was cached)
+    size_scales: tuple = ()                   # per object: its sizes are the settings' times this (core.mesh.sizes)
 
     def __post_init__(self):
         if self.elements is None:
@@ -68,6 +70,13 @@ class BakeResult:
     def unknowns(self) -> int:
         """How many patches were solved for (clusters, or the patches themselves)."""
         return len(self.patches if self.clusters is None else self.clusters)
+
+    def object_sizes(self, i) -> tuple:
+        """(patch size, detail size) object ``i`` was cut at, in world units (None: not cut)."""
+        k = self.size_scales[i] if i < len(self.size_scales) else 1.0
+        s = self.settings
+        return tuple(None if not isinstance(v, (int, float)) or not v else float(v) * k
+                     for v in (s.patch_size, s.element_size))
 
     @property
     def patch_radiosity(self) -> np.ndarray:
@@ -159,7 +168,7 @@ class BakeContext:
         return BakeResult(self.patches, self.form_factors, self.solution, self.vertex_radiosity,
                           self.timings, self.form_factor_source, self.source, self.irradiance,
                           self.notes, self.elements, self.settings, self.clusters, self.error_estimate,
-                          self.forecast)
+                          self.forecast, tuple(m.size_scale for m in self.meshes or ()))
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time
@@ -214,6 +223,8 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     settings = settings or BakeSettings()
     settings.validate()
     if meshes is not None:
+        if settings.patch_size == "auto":        # a ground plane around the scene: its own size
+            meshes = with_auto_scales(meshes, AUTO_PATCHES_PER_DIAGONAL)
         settings = settings.resolved(meshes)
     elif "auto" in (settings.patch_size, settings.element_size):
         raise SettingsError("'auto' sizes need the meshes")

@@ -264,9 +264,8 @@ class BakeSettings:
         """A copy with 'auto' sizes turned into world units for ``meshes`` (core.mesh.patches.MeshInput)."""
         patch, element = self.patch_size, self.element_size
         if patch == "auto":
-            lo = np.min([np.min(m.verts, axis=0) for m in meshes], axis=0)
-            hi = np.max([np.max(m.verts, axis=0) for m in meshes], axis=0)
-            patch = float(np.linalg.norm(hi - lo)) / AUTO_PATCHES_PER_DIAGONAL or None
+            from .mesh.sizes import auto_sizes
+            patch = auto_sizes(meshes, AUTO_PATCHES_PER_DIAGONAL)[0]
         if element == "auto":
             element = patch / AUTO_ELEMENTS_PER_PATCH if patch else None
         if self.output_mode == "in_place":

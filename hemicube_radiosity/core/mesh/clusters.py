@@ -99,6 +99,7 @@ class Clusters:
 
 
 def _small(pieces: PatchSet, size) -> np.ndarray:
+    # ``size``: a number, or (P,) each piece's (its object's: :mod:`.sizes`)
     """(P,) pieces that are whole input faces (not cut to the patch size) or smaller than a third
     of a patch (cut from a face only a little larger than a patch): those are grouped. Pieces cut
     from a coarse face already have about the patch's area (a quad more than a quarter of it on
@@ -123,6 +124,19 @@ def _normal_bins(normals, max_angle):
     cells = int(np.ceil(2.0 / step))
     ij = np.clip(np.floor((uv + 1.0) / step), 0, cells - 1).astype(np.int64)
     return (face * cells + ij[:, 0]) * cells + ij[:, 1]
+
+
+def _plane_groups(pieces: PatchSet, key, size) -> np.ndarray:
+    """(P,) int64 equal for pieces of one key whose planes are within about a quarter of
+    ``size`` of each other along the key's mean normal (a floor and a rug group; a floor and a
+    table top above it in the same cell do not)."""
+    K = int(key.max()) + 1
+    w = pieces.areas
+    n = np.stack([np.bincount(key, weights=w * pieces.normals[:, k], minlength=K) for k in range(3)], 1)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    d = np.einsum("ij,ij->i", n[key], pieces.centers)
+    return unique_rows(np.stack([key, np.floor(d / (0.25 * np.asarray(size))).astype(np.int64)], 1),
+                       return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
 def connected_components(keys, polys):
@@ -182,14 +196,17 @@ def piece_materials(pieces: PatchSet, meshes) -> np.ndarray:
     return key[start[pieces.owner.astype(np.int64)] + pieces.source_face.astype(np.int64)].astype(np.int64)
 
 
-def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None) -> Clusters | None:
+def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None, scales=None) -> Clusters | None:
     """Group ``pieces`` into clusters of about ``size`` (see the module docstring); None when no
-    two pieces would be grouped (every patch is its own piece).
+    two pieces would be grouped (every patch is its own piece). ``scales`` (M,): each object's
+    factor on ``size`` (``MeshInput.size_scale``; default 1).
 
     ``material``: (P,) int material key per piece (:func:`piece_materials`; default: equal
     reflectivity and emission)."""
     if not size or len(pieces) == 0:
         return None
+    if scales is not None and np.any(np.asarray(scales) != 1.0):
+        size = float(size) * np.asarray(scales, dtype=np.float64)[pieces.owner]
     small = _small(pieces, size)
     if small.sum() < 2:
         return None
@@ -204,13 +221,17 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     centre = 0.5 * (corners.min(axis=1) + corners.max(axis=1))
     # (a centre on a cell border, as a grid of quads puts whole rows of them, goes the same way
     # for every one: rounded to 1e-9 of a cell first, float noise does not pick the side)
-    cell = np.floor(np.round((centre - lo) / size, 9)).astype(np.int64)
+    cell = np.floor(np.round((centre - lo) / np.reshape(size, (-1, 1)), 9)).astype(np.int64)
     parts = np.stack([pieces.owner.astype(np.int64), np.asarray(material, np.int64).reshape(-1),
                       _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)
     # a piece that is not small keys on its own index: it stays alone
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
     key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
-    label = connected_components(key, welded(pieces.verts, pieces.polys))
+    polys = welded(pieces.verts, pieces.polys)
+    # pieces of one key in one plane meet through a vertex of their own: surfaces that touch
+    # without sharing corners (T-junctions, the rule in game levels) group as if they did
+    plane = key.max() + 1 + _plane_groups(pieces, key, size)
+    label = connected_components(key, np.concatenate([polys, (plane + polys.max() + 1)[:, None]], 1))
     of = unique_ints(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):
         return None

@@ -33,6 +33,8 @@ def meshes_key(meshes) -> bytes:
         for a in (m.verts, m.face_offsets, m.face_indices):
             a = np.ascontiguousarray(a)
             h.update(str(a.shape).encode() + a.tobytes())
+        if getattr(m, "size_scale", 1.0) != 1.0:
+            h.update(repr(float(m.size_scale)).encode())
     return h.digest()
 
 

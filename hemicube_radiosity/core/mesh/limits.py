@@ -73,9 +73,10 @@ def pieces_at_least(meshes, size) -> float:
         if not size:
             total += len(k)
             continue
-        n = _spans(sides[:, 0], size) * _spans(sides[:, 1], size)
+        s = size * m.size_scale
+        n = _spans(sides[:, 0], s) * _spans(sides[:, 1], s)
         big = k > 4                          # an n-gon: split first, into pieces of its area
-        n[big] = np.maximum(areas[big] / size ** 2, _spans(sides[big, 0], size))
+        n[big] = np.maximum(areas[big] / s ** 2, _spans(sides[big, 0], s))
         total += float(n.sum())
     return total
 
@@ -88,10 +89,11 @@ def patches_about(meshes, size, group=True) -> float:
     total = 0.0
     for m in meshes:
         areas, sides, k = face_spans(m)
-        n = _spans(sides[:, 0], size) * _spans(sides[:, 1], size)
-        n[k > 4] = np.maximum(1.0, areas[k > 4] / size ** 2)
-        alone = (n > 1) & (areas / n >= size * size / 3)
-        total += float(n[alone].sum()) + max(1.0, float(areas[~alone].sum()) / size ** 2)
+        s = size * m.size_scale
+        n = _spans(sides[:, 0], s) * _spans(sides[:, 1], s)
+        n[k > 4] = np.maximum(1.0, areas[k > 4] / s ** 2)
+        alone = (n > 1) & (areas / n >= s * s / 3)
+        total += float(n[alone].sum()) + max(1.0, float(areas[~alone].sum()) / s ** 2)
     return total
 
 

@@ -47,6 +47,8 @@ class MeshInput:
                   material across meshes): faces of one material may be grouped into one patch
                   although a texture varies their reflectivity (:func:`.clusters.piece_materials`);
                   None: faces group only where reflectivity and emission are equal.
+    size_scale:   this mesh is cut at the patch and detail sizes times this (an object far
+                  larger than the rest of the scene: :mod:`.sizes`).
     """
 
     verts: np.ndarray
@@ -58,6 +60,7 @@ class MeshInput:
     corner_rho: np.ndarray | None = None
     corner_emission: np.ndarray | None = None
     face_material: np.ndarray | None = None
+    size_scale: float = 1.0
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):

@@ -49,8 +49,8 @@ def cut_patches(meshes, s, faces=None):
     except PatchError:
         whole = False                         # build_patches says what is wrong, in its order
     pieces = faces() if whole else build_patches(meshes, s.patch_size)
-    clusters = group_pieces(pieces, s.patch_size, s.group_angle, piece_materials(pieces, meshes)) \
-        if s.group_faces else None
+    clusters = group_pieces(pieces, s.patch_size, s.group_angle, piece_materials(pieces, meshes),
+                            [m.size_scale for m in meshes]) if s.group_faces else None
     if clusters is None:
         # cut along where surfaces stand on others, as the output is (core/mesh/contact.py): a patch
         # across a partition off the patch grid lit the dark side with the lit side's light

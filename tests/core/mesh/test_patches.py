@@ -85,6 +85,66 @@ def test_mixed_triangles_and_quads_conform():
     np.testing.assert_allclose(ps.areas.sum(), 1.5, rtol=1e-12)
 
 
+def _irregular_plane(rng):
+    """A 10 x 10 plane on a grid of random spacing, each cell a quad or one of its two
+    triangulations: neighbours of every size and shape, sharing their vertices."""
+    n = rng.integers(2, 8)
+    xs = np.sort(np.concatenate([[0, 10], rng.uniform(0, 10, n)]))
+    ys = np.sort(np.concatenate([[0, 10], rng.uniform(0, 10, n)]))
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    v = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], 1)
+    N, faces = len(ys), []
+    for i in range(len(xs) - 1):
+        for j in range(N - 1):
+            a = i * N + j
+            q = [a, a + N, a + N + 1, a + 1]
+            kind = rng.integers(3)
+            faces += [q] if kind == 0 else ([q[:3], [q[0], q[2], q[3]]] if kind == 1 else [[q[0], q[1], q[3]], q[1:]])
+    return MeshInput.from_faces(v, faces)
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_faces_of_any_shape_are_cut_without_cracks_or_overlaps(seed):
+    """Each face is cut as a grid of its own whose points on a side are that side's own cuts:
+    every patch edge inside the plane is used twice, once each way (no T-junction, no overlap),
+    the outline is the plane's, the area is the plane's and every patch faces up."""
+    m = _irregular_plane(np.random.default_rng(seed))
+    for size in (0.3, 1.0, 2.7):
+        ps = build_patches(m, size)
+        directed = Counter()
+        for p in ps.polys:
+            k = 4 if p[3] >= 0 else 3
+            for i in range(k):
+                directed[int(p[i]), int(p[(i + 1) % k])] += 1
+        assert max(directed.values()) == 1
+        outline = [e for e in directed if e[::-1] not in directed]
+        assert sum(np.linalg.norm(ps.verts[a] - ps.verts[b]) for a, b in outline) == pytest.approx(40.0, rel=1e-12)
+        assert ps.areas.sum() == pytest.approx(100.0, rel=1e-12)
+        assert np.all(ps.areas > 0) and np.all(ps.normals[:, 2] > 1 - 1e-12)
+
+
+def test_one_long_edge_does_not_cut_a_whole_triangle_mesh():
+    """A 10 m sliver beside a grid of 5 cm triangles, at a 1 m patch size: the sliver is cut
+    along its length, the triangles stay whole. (Equalising every triangle's sides spread the
+    sliver's ten segments over the whole connected grid: 100 pieces a triangle.)"""
+    g = np.linspace(0.0, 1.0, 21)
+    X, Y = np.meshgrid(g, g, indexing="ij")
+    v = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], 1)
+    faces = []
+    for i in range(20):
+        for j in range(20):
+            a = i * 21 + j
+            faces += [[a, a + 21, a + 22], [a, a + 22, a + 1]]
+    tip = len(v)
+    v = np.vstack([v, [[0.025, -10.0, 0.0]]])
+    faces.append([0, tip, 21])                   # the sliver shares the grid's first 5 cm edge
+    ps = build_patches(MeshInput.from_faces(v, faces), 1.0)
+    sliver = ps.source_face == len(faces) - 1
+    assert (~sliver).sum() == 800                 # the grid's triangles, whole
+    assert 10 <= sliver.sum() <= 121              # the sliver cut along its ten metres (11 x 11 at most)
+    assert ps.areas[sliver].sum() == pytest.approx(0.25, rel=1e-12)
+
+
 def test_convex_ngon_and_concave_ngon():
     pent = [[0, 0, 0], [2, 0, 0], [2.5, 1, 0], [1, 2, 0], [-0.5, 1, 0]]
     ps = build_patches(MeshInput.from_faces(pent, [[0, 1, 2, 3, 4]]), None)

@@ -1,0 +1,68 @@
+"""Automatic sizes: the patch size of a scene from the extent of what was modelled in it, and a
+coarser one for an object that reaches far beyond the rest (a ground plane around a room, a
+terrain around a town).
+
+The 'auto' patch size is a fraction of the scene's bounding-box diagonal. One huge plane under a
+10 m room (221 m across, two triangles) made that diagonal 22 times the room's: patches of 22 m,
+the room one patch. Here an object is *huge* when its own diagonal is more than
+:data:`HUGE_EXTENT` times that of everything else together while it holds less than
+:data:`HUGE_FACES` of the scene's faces (a room modelled as one mesh holds most of them: it is
+the scene, not beside it; an object of fewer than :data:`HUGE_FEW` faces always may be huge).
+Huge objects are left out of the extent, one at a time, largest
+first, and are cut at a size of their own: the same fraction of their own diagonal, never finer
+than the scene's (:attr:`.patches.MeshInput.size_scale`).
+
+Units: world units.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+__all__ = ["auto_sizes", "with_auto_scales", "HUGE_EXTENT", "HUGE_FACES", "HUGE_FEW"]
+
+#: An object this many times larger across than the rest of the scene together may be huge...
+HUGE_EXTENT = 3.0
+#: ... if it holds less than this fraction of the scene's faces, or fewer than HUGE_FEW faces.
+HUGE_FACES = 0.1
+HUGE_FEW = 100
+
+
+def _boxes(meshes):
+    lo = np.array([np.min(m.verts, axis=0) for m in meshes], dtype=np.float64).reshape(-1, 3)
+    hi = np.array([np.max(m.verts, axis=0) for m in meshes], dtype=np.float64).reshape(-1, 3)
+    return lo, hi
+
+
+def auto_sizes(meshes, per_diagonal):
+    """(size, scales): the patch size, the diagonal of the scene without its huge objects divided
+    by ``per_diagonal`` (None for a scene of no extent), and (M,) float each mesh's factor on
+    it (1, or a huge object's own diagonal / ``per_diagonal`` / size)."""
+    meshes = [m for m in meshes]
+    if not meshes:
+        return None, np.zeros(0)
+    lo, hi = _boxes(meshes)
+    diag = np.linalg.norm(hi - lo, axis=1)
+    faces = np.array([len(m.face_offsets) - 1 for m in meshes], dtype=np.float64)
+    core = np.ones(len(meshes), bool)
+    for i in np.argsort(-diag, kind="stable")[:len(meshes) - 1]:
+        rest = core.copy()
+        rest[i] = False
+        extent = float(np.linalg.norm(hi[rest].max(axis=0) - lo[rest].min(axis=0)))
+        if diag[i] > HUGE_EXTENT * extent and faces[i] < max(HUGE_FACES * faces.sum(), HUGE_FEW):
+            core[i] = False
+        else:
+            break
+    size = float(np.linalg.norm(hi[core].max(axis=0) - lo[core].min(axis=0))) / per_diagonal or None
+    scales = np.ones(len(meshes))
+    if size:
+        scales[~core] = np.maximum(1.0, diag[~core] / per_diagonal / size)
+    return size, scales
+
+
+def with_auto_scales(meshes, per_diagonal) -> list:
+    """``meshes`` with each huge object's ``size_scale`` set (:func:`auto_sizes`): copies sharing
+    the arrays; the others as they are."""
+    _, scales = auto_sizes(meshes, per_diagonal)
+    return [m if s == 1.0 else replace(m, size_scale=float(s)) for m, s in zip(meshes, scales)]
