@@ -43,6 +43,9 @@ __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene
            "GEOMETRY_TYPES", "check_writable"]
 
 COPLANAR_COS = float(np.cos(1e-3))
+# a face is of zero area below this fraction of the object's squared size (its bounding box
+# diagonal): core.mesh.subdivide.build_patches drops such faces and refuses a mesh of nothing else
+ZERO_AREA = 1e-12
 
 # Object types a render draws as surfaces: meshes, and text, curves, surfaces and metaballs, which
 # are read as the mesh Blender evaluates them to (a text object is geometry to an artist). A curve
@@ -168,16 +171,20 @@ def _mesh_arrays(me):
 
 
 def _newell(verts, corner_vertex, poly_start, poly_total):
-    """Unit face normals (F,3) from world-space corners."""
+    """(unit face normals (F,3), face areas (F,)) from world-space corners. Taken relative to each
+    face's first corner (no cancellation far from the origin): for a triangle and a quad the area
+    is the core's own (half the cross product of the sides, of the diagonals), for an n-gon its
+    area projected on its mean plane."""
     L = corner_vertex.size
     loop_face = np.repeat(np.arange(poly_start.size), poly_total)
     pos = np.arange(L) - poly_start[loop_face]
     nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
-    a, b = verts[corner_vertex], verts[corner_vertex[nxt]]
+    origin = verts[corner_vertex[poly_start]][loop_face]
+    a, b = verts[corner_vertex] - origin, verts[corner_vertex[nxt]] - origin
     n = np.zeros((poly_start.size, 3))
     np.add.at(n, loop_face, np.cross(a, b))
     ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0), 0.5 * ln[:, 0]
 
 
 def _within_faces(corner, offsets, per_face):
@@ -224,7 +231,11 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         raise ReadError(f"'{obj.name}' has a zero scale; nothing to bake")
     flipped = det < 0
     mi = np.clip(mi, 0, len(mats) - 1)
-    normals = _newell(verts_w, lv, ps, pt) * (-1.0 if flipped else 1.0)
+    normals, areas = _newell(verts_w, lv, ps, pt)
+    span = np.ptp(verts_w[used], axis=0)
+    if not np.any(areas > ZERO_AREA * float(span @ span)):
+        raise ReadError(f"'{obj.name}': every face has zero area")
+    normals *= -1.0 if flipped else 1.0
     corner_vertex, src_vertex = weld_corners(lv, le, ps, pt, mi, sm, sh, normals)
     # face rings in face order; reversed per face when the matrix mirrors
     F = ps.size
@@ -248,27 +259,36 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
 
 def read_scene(depsgraph, objects, others=()) -> SceneInput:
     """``objects`` are baked; ``others`` take part as occluders/emitters only. The materials that
-    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`)."""
+    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`).
+
+    An object that cannot be baked (no faces, every face of zero area, positions or transform
+    not finite, a zero scale: :func:`read_object`'s :class:`ReadError`) is left out with one note
+    naming it and why, and the rest bakes: one broken object must not stop a scene of hundreds.
+    Only when none of ``objects`` is left is the bake refused, with that object's own line (or
+    one line naming them all)."""
     shaded = shading.shade(list(objects) + list(others), depsgraph)
-    out, skipped = [], []
+    out, skipped, problems = [], [], []
     for o in objects:
         try:
             out.append(read_object(o, depsgraph, True, shaded))
         except ReadError as ex:
-            if o.type == "MESH" or "has no faces" not in str(ex):
-                raise
-            # a guide curve, a metaball whose surface is its family's: nothing to bake here
+            problems.append(str(ex))
             skipped.append(f"{ex}; left out")
-    if objects and not any(s.bake for s in out):
-        raise ReadError(skipped[0].rsplit(";", 1)[0] if len(skipped) == 1 else
-                        "none of the selected objects has faces: "
-                        + ", ".join(repr(o.name) for o in objects))
+    if objects and not out:
+        raise ReadError(problems[0] if len(problems) == 1 else _none_bakeable(problems))
     for o in others:
         try:
             out.append(read_object(o, depsgraph, False, shaded))
         except ReadError:
             continue  # an occluder without faces simply does not occlude
     return SceneInput(out, skipped=skipped)
+
+
+def _none_bakeable(problems, shown=3):
+    """One line for a selection of which no object can be baked."""
+    more = len(problems) - shown
+    return (f"none of the {len(problems)} selected objects can be baked: " + "; ".join(problems[:shown])
+            + (f"; and {more} more" if more > 0 else ""))
 
 
 def _no_faces_why(obj):
