@@ -4,7 +4,7 @@ by the add-on, ``blender -b -c hemicube_radiosity bake ...`` (same code, :func:`
 ``in_blender=True``: returns the exit code and never calls ``sys.exit``).
 
 bake INPUT [-o OUTPUT ...] [--objects NAME ...] [bake settings]
-    INPUT: .blend, .obj (+.mtl), .gltf or .glb. Without --objects every visible mesh is baked.
+    INPUT: .blend, .obj (+.mtl), .gltf, .glb or .ply. Without --objects every visible mesh is baked.
     OUTPUT: any format of :data:`.export.EXPORTERS` (.glb, .gltf, .blend, .npz, .json), by its
     extension; ``--report`` and ``--patches`` are the .json and .npz outputs by another name.
 demo [--output-dir DIR]
@@ -39,7 +39,7 @@ __all__ = ["main", "flush_c_stdio"]
 
 # ----------------------------------------------------------------------------- helpers
 def load_input(path):
-    """Replace the current file with INPUT (an empty scene plus the import for .obj/.gltf/.glb)."""
+    """Replace the current file with INPUT (an empty scene plus the import for .obj/.gltf/.glb/.ply)."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in INPUT_EXT:
         raise CLIError(f"unsupported input {path!r}: expected one of {', '.join(INPUT_EXT)}", 2)
@@ -53,6 +53,8 @@ def load_input(path):
         bpy.ops.wm.read_homefile(use_empty=True)
         if ext == ".obj":
             bpy.ops.wm.obj_import(filepath=path)
+        elif ext == ".ply":
+            bpy.ops.wm.ply_import(filepath=path)
         else:
             bpy.ops.import_scene.gltf(filepath=path)
     except RuntimeError as ex:
