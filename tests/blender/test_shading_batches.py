@@ -152,3 +152,29 @@ def test_reader_uses_the_batch_values():
         alone = reader.read_object(ob, bpy.context.evaluated_depsgraph_get())
         np.testing.assert_allclose(src.corner_rho, alone.corner_rho, atol=1e-6, err_msg=ob.name)
         np.testing.assert_allclose(src.mesh.face_rho, alone.mesh.face_rho, atol=1e-6)
+
+
+def test_missing_image_uses_the_sockets_own_value(tmp_path):
+    """An image whose file is missing renders magenta in Cycles; baked, every such surface would
+    reflect 0.999 of red and blue (sauer_pandora ships without its textures). It is read as the
+    socket's own value instead, the same as the material without the texture, with a note."""
+    cr.new_empty_scene()
+    img = bpy.data.images.new("gone.png", 4, 4)
+    img.source, img.filepath = "FILE", str(tmp_path / "gone.png")
+    lost = _textured("Lost", img)
+    base = (0.6, 0.5, 0.4)
+    next(n for n in lost.node_tree.nodes if n.type == "BSDF_PRINCIPLED").inputs["Base Color"].default_value = (*base, 1)
+    plain = _material("Plain", base)[0]
+    obs = [_grid("lost", 2, [lost]), _grid("plain", 2, [plain])]
+    links = len(lost.node_tree.links)
+    dg = bpy.context.evaluated_depsgraph_get()
+    assert [n.name for n in shading.missing_images(lost)] == ["Image Texture"]
+    s = reader.read_scene(dg, obs)
+    a, b = s.objects
+    np.testing.assert_allclose(a.corner_rho, b.corner_rho, atol=1e-6)
+    # Cycles' diffuse albedo of the default Principled BSDF: 0.770 / 0.8 of Base Color
+    np.testing.assert_allclose(a.corner_rho[0], 0.9626151 * np.array(base), rtol=1e-4)
+    assert any("'Lost'" in n and "image 'gone.png' cannot be read" in n and "magenta" in n
+               for n in a.notes), a.notes
+    assert len(lost.node_tree.links) == links
+    assert sorted(m.name for m in bpy.data.materials) == ["Lost", "Plain"]
