@@ -138,6 +138,8 @@ def test_cli_bakes_the_rest_and_prints_one_note_per_object(addon, empty_scene, t
     rc = sub(addon, "blender.cli.main").main(["bake", src, "-o", str(tmp_path / "b.json"), *CLI_BAKE],
                                              in_blender=True, out=out, err=err)
     assert rc == 0, err.getvalue()
-    notes = [ln for ln in out.getvalue().splitlines() if "left out" in ln]
+    notes = [ln for ln in out.getvalue().splitlines() if "note:" in ln and "left out" in ln]
     assert sorted(notes) == sorted(f"radiosity: note: {w}" for w in WHY.values()), out.getvalue()
+    # the read's own line, before the stages
+    assert "radiosity: read: 2 object(s) to bake (3 left out), 0 other(s), 2 faces (" in out.getvalue()
     assert (tmp_path / "b.json").exists()

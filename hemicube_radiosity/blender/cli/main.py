@@ -79,6 +79,15 @@ def _select_objects(names, input_path="the input"):
     return out
 
 
+def _read_line(job):
+    """What the read gave: '755 object(s) to bake (20 left out), 0 other(s), 262526 faces'."""
+    si = job.scene_input
+    baked = sum(o.bake for o in si.objects)
+    faces = sum(len(o.mesh.face_offsets) - 1 for o in si.objects)
+    left = f" ({len(si.skipped)} left out)" if si.skipped else ""
+    return f"{baked} object(s) to bake{left}, {len(si.objects) - baked} other(s), {faces} faces"
+
+
 def _outputs(args, *paths):
     """Every output the command line asks for, checked before any work: (path, ...)."""
     wanted = [p for p in (*paths, *getattr(args, "output", []), args.patches) if p]
@@ -133,6 +142,8 @@ def cmd_bake(args, out):
     objects = _select_objects(args.objects, os.path.abspath(args.input))
     job = BakeJob.prepare(bpy.context, objects, settings, cache=_cache(settings))
     job.timings["load"] = t_loaded - t_start
+    if not args.quiet:
+        print(f"radiosity: read: {_read_line(job)} ({job.timings['read']:.2f} s)", file=out, flush=True)
     _bake_and_write(job, args, outputs, out, t_start, input=os.path.abspath(args.input))
     return job
 
