@@ -12,7 +12,7 @@ import os
 import numpy as np
 import pytest
 
-from tests.support.addon import modal_run, select, sub
+from tests.support.addon import MODAL_BAKE, modal_run, select, sub
 from tests.support.scene import file_sha256, node_tree, scene_hash
 
 from hemicube_radiosity.core.mesh.patches import MeshInput, PatchError
@@ -596,10 +596,10 @@ def test_modal_esc_and_modal_error_leave_the_scene_unchanged(addon, empty_scene)
     before = scene_hash(bpy)
     ret, op, ui = modal_run(addon, bpy, objs, cancel_first=True)
     assert ret == {"CANCELLED"} and scene_hash(bpy) == before
-    # an error in the worker (the core refuses a mesh) is one ERROR report, nothing written
-    sliver = mesh_object(bpy, "Sliver", [(0, 0, 0), (1, 0, 0), (2, 0, 0)], [(0, 1, 2)])
+    # an error in the worker (the core refuses the patches: more than Max Patches) is one ERROR
+    # report, nothing written
     before = scene_hash(bpy)
-    ret, op, ui = modal_run(addon, bpy, [sliver], cancel_first=False)
+    ret, op, ui = modal_run(addon, bpy, objs, cancel_first=False, settings=dict(MODAL_BAKE, max_patches=4))
     assert ret == {"CANCELLED"} and scene_hash(bpy) == before
     errors = [m for lvl, m in op.reports if lvl == {"ERROR"}]
-    assert errors == ["'Sliver': every face has zero area"]
+    assert len(errors) == 1 and "limit of 4" in errors[0] and "\n" not in errors[0], errors

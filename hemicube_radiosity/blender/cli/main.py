@@ -4,7 +4,7 @@ by the add-on, ``blender -b -c hemicube_radiosity bake ...`` (same code, :func:`
 ``in_blender=True``: returns the exit code and never calls ``sys.exit``).
 
 bake INPUT [-o OUTPUT ...] [--objects NAME ...] [bake settings]
-    INPUT: .blend, .obj (+.mtl), .gltf or .glb. Without --objects every visible mesh is baked.
+    INPUT: .blend, .obj (+.mtl), .gltf, .glb or .ply. Without --objects every visible mesh is baked.
     OUTPUT: any format of :data:`.export.EXPORTERS` (.glb, .gltf, .blend, .npz, .json), by its
     extension; ``--report`` and ``--patches`` are the .json and .npz outputs by another name.
 demo [--output-dir DIR]
@@ -39,7 +39,7 @@ __all__ = ["main", "flush_c_stdio"]
 
 # ----------------------------------------------------------------------------- helpers
 def load_input(path):
-    """Replace the current file with INPUT (an empty scene plus the import for .obj/.gltf/.glb)."""
+    """Replace the current file with INPUT (an empty scene plus the import for .obj/.gltf/.glb/.ply)."""
     ext = os.path.splitext(path)[1].lower()
     if ext not in INPUT_EXT:
         raise CLIError(f"unsupported input {path!r}: expected one of {', '.join(INPUT_EXT)}", 2)
@@ -53,6 +53,8 @@ def load_input(path):
         bpy.ops.wm.read_homefile(use_empty=True)
         if ext == ".obj":
             bpy.ops.wm.obj_import(filepath=path)
+        elif ext == ".ply":
+            bpy.ops.wm.ply_import(filepath=path)
         else:
             bpy.ops.import_scene.gltf(filepath=path)
     except RuntimeError as ex:
@@ -75,6 +77,15 @@ def _select_objects(names, input_path="the input"):
             raise CLIError(f"{n!r} is not a mesh object (it is a {o.type.lower()})")
         out.append(o)
     return out
+
+
+def _read_line(job):
+    """What the read gave: '755 object(s) to bake (20 left out), 0 other(s), 262526 faces'."""
+    si = job.scene_input
+    baked = sum(o.bake for o in si.objects)
+    faces = sum(len(o.mesh.face_offsets) - 1 for o in si.objects)
+    left = f" ({len(si.skipped)} left out)" if si.skipped else ""
+    return f"{baked} object(s) to bake{left}, {len(si.objects) - baked} other(s), {faces} faces"
 
 
 def _outputs(args, *paths):
@@ -131,6 +142,8 @@ def cmd_bake(args, out):
     objects = _select_objects(args.objects, os.path.abspath(args.input))
     job = BakeJob.prepare(bpy.context, objects, settings, cache=_cache(settings))
     job.timings["load"] = t_loaded - t_start
+    if not args.quiet:
+        print(f"radiosity: read: {_read_line(job)} ({job.timings['read']:.2f} s)", file=out, flush=True)
     _bake_and_write(job, args, outputs, out, t_start, input=os.path.abspath(args.input))
     return job
 

@@ -21,7 +21,7 @@ __all__ = ["PROG", "INPUT_EXT", "BATCH_FORMATS", "CLIError", "setting_flag", "ad
            "build_parser", "bake_settings"]
 
 PROG = "hemicube_radiosity"
-INPUT_EXT = (".blend", ".obj", ".gltf", ".glb")
+INPUT_EXT = (".blend", ".obj", ".gltf", ".glb", ".ply")
 BATCH_FORMATS = ("glb", "gltf", "blend")
 
 
@@ -87,7 +87,7 @@ def add_setting_options(p):
 def build_parser():
     p = _Parser(prog=PROG, description="Hemi-cube radiosity baking with Blender (bpy).")
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
-    b = sub.add_parser("bake", help="bake a scene file", description="Bake a .blend/.obj/.gltf/.glb.",
+    b = sub.add_parser("bake", help="bake a scene file", description="Bake a .blend/.obj/.gltf/.glb/.ply.",
                        usage="%(prog)s INPUT [-o OUTPUT ...] [options]  (--help lists them)")
     b.add_argument("input", metavar="INPUT", help="scene file: " + ", ".join(INPUT_EXT))
     b.add_argument("-o", "--output", action="append", default=[], metavar="OUTPUT",

@@ -113,7 +113,8 @@ def _principled(node, notes):
             notes.append(f"{node.name} Emission Strength {strength:g} is negative: Cycles "
                          "subtracts light there, this bake takes it as no light")
         return rho, np.zeros(3)
-    _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
+    if not np.all(em == 1.0):       # white at strength 0 is every new Principled BSDF: no intent
+        _note_unlit(node, em, strength, "Emission Color", "Emission Strength", notes)
     return rho, em * strength
 
 

@@ -44,6 +44,9 @@ __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene
            "GEOMETRY_TYPES", "check_writable"]
 
 COPLANAR_COS = float(np.cos(1e-3))
+# a face is of zero area below this fraction of the object's squared size (its bounding box
+# diagonal): core.mesh.subdivide.build_patches drops such faces and refuses a mesh of nothing else
+ZERO_AREA = 1e-12
 
 # Object types a render draws as surfaces: meshes, and text, curves, surfaces and metaballs, which
 # are read as the mesh Blender evaluates them to (a text object is geometry to an artist). A curve
@@ -145,40 +148,62 @@ def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, fa
 
 
 # ----------------------------------------------------------------------------- objects
+def _layer(me, name, n, dtype, key="value"):
+    """Attribute ``name`` of ``me`` as (n,) ``dtype``, or None when the mesh has no such layer. An
+    attribute's ``foreach_get`` copies its array in one go (about 50 times faster than the same
+    values through ``me.loops`` / ``me.polygons`` / ``me.edges``, which go item by item)."""
+    a = me.attributes.get(name)
+    if a is None or len(a.data) != n:
+        return None
+    out = np.empty(n, dtype)
+    a.data.foreach_get(key, out)
+    return out
+
+
+def _get(coll, prop, n, dtype):
+    out = np.empty(n, dtype)
+    if n:
+        coll.foreach_get(prop, out)
+    return out
+
+
 def _mesh_arrays(me):
+    """(positions, loop vertex, loop edge, face loop start, face loop count, material index, smooth,
+    sharp edge) of an evaluated mesh, from its attribute layers (Blender 4+: '.corner_vert',
+    '.corner_edge', 'material_index', 'sharp_face', 'sharp_edge'; an absent layer is its default,
+    0 or False), falling back to the item properties."""
     nv, nl, nf, ne = len(me.vertices), len(me.loops), len(me.polygons), len(me.edges)
-    co = np.empty(nv * 3, np.float32)
-    me.vertices.foreach_get("co", co)
-    lv = np.empty(nl, np.int32)
-    me.loops.foreach_get("vertex_index", lv)
-    le = np.empty(nl, np.int32)
-    me.loops.foreach_get("edge_index", le)
-    ps = np.empty(nf, np.int32)
-    me.polygons.foreach_get("loop_start", ps)
-    pt = np.empty(nf, np.int32)
-    me.polygons.foreach_get("loop_total", pt)
-    mi = np.empty(nf, np.int32)
-    me.polygons.foreach_get("material_index", mi)
-    sm = np.empty(nf, bool)
-    me.polygons.foreach_get("use_smooth", sm)
-    sh = np.zeros(ne, bool)
-    if ne:
-        me.edges.foreach_get("use_edge_sharp", sh)
+    co = _get(me.vertices, "co", nv * 3, np.float32)
+    lv = _layer(me, ".corner_vert", nl, np.int32)
+    lv = _get(me.loops, "vertex_index", nl, np.int32) if lv is None else lv
+    le = _layer(me, ".corner_edge", nl, np.int32)
+    le = _get(me.loops, "edge_index", nl, np.int32) if le is None else le
+    ps = _get(me.polygons, "loop_start", nf, np.int32)
+    pt = _get(me.polygons, "loop_total", nf, np.int32)
+    mi = _layer(me, "material_index", nf, np.int32)
+    mi = np.zeros(nf, np.int32) if mi is None else mi
+    sharp_face = _layer(me, "sharp_face", nf, bool)
+    sm = np.ones(nf, bool) if sharp_face is None else ~sharp_face
+    sh = _layer(me, "sharp_edge", ne, bool)
+    sh = np.zeros(ne, bool) if sh is None else sh
     return (co.reshape(-1, 3).astype(np.float64), lv.astype(np.int64), le.astype(np.int64),
             ps.astype(np.int64), pt.astype(np.int64), mi.astype(np.int64), sm, sh)
 
 
 def _newell(verts, corner_vertex, poly_start, poly_total):
-    """Unit face normals (F,3) from world-space corners."""
+    """(unit face normals (F,3), face areas (F,)) from world-space corners. Taken relative to each
+    face's first corner (no cancellation far from the origin): for a triangle and a quad the area
+    is the core's own (half the cross product of the sides, of the diagonals), for an n-gon its
+    area projected on its mean plane."""
     L = corner_vertex.size
     loop_face = np.repeat(np.arange(poly_start.size), poly_total)
     pos = np.arange(L) - poly_start[loop_face]
     nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
-    a, b = verts[corner_vertex], verts[corner_vertex[nxt]]
-    n = np.zeros((poly_start.size, 3))
-    np.add.at(n, loop_face, np.cross(a, b))
+    origin = verts[corner_vertex[poly_start]][loop_face]
+    a, b = verts[corner_vertex] - origin, verts[corner_vertex[nxt]] - origin
+    n = np.add.reduceat(np.cross(a, b), poly_start, axis=0) if L else np.zeros((0, 3))
     ln = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0)
+    return np.divide(n, ln, out=np.zeros_like(n), where=ln > 0), 0.5 * ln[:, 0]
 
 
 def _within_faces(corner, offsets, per_face):
@@ -232,7 +257,11 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         raise ReadError(f"'{obj.name}' has a zero scale; nothing to bake")
     flipped = det < 0
     mi = np.clip(mi, 0, len(mats) - 1)
-    normals = _newell(verts_w, lv, ps, pt) * (-1.0 if flipped else 1.0)
+    normals, areas = _newell(verts_w, lv, ps, pt)
+    span = np.ptp(verts_w[used], axis=0)
+    if not np.any(areas > ZERO_AREA * float(span @ span)):
+        raise ReadError(f"'{obj.name}': every face has zero area")
+    normals *= -1.0 if flipped else 1.0
     corner_vertex, src_vertex = weld_corners(lv, le, ps, pt, mi, sm, sh, normals)
     # face rings in face order; reversed per face when the matrix mirrors
     F = ps.size
@@ -257,27 +286,36 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
 
 def read_scene(depsgraph, objects, others=()) -> SceneInput:
     """``objects`` are baked; ``others`` take part as occluders/emitters only. The materials that
-    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`)."""
+    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`).
+
+    An object that cannot be baked (no faces, every face of zero area, positions or transform
+    not finite, a zero scale: :func:`read_object`'s :class:`ReadError`) is left out with one note
+    naming it and why, and the rest bakes: one broken object must not stop a scene of hundreds.
+    Only when none of ``objects`` is left is the bake refused, with that object's own line (or
+    one line naming them all)."""
     shaded = shading.shade(list(objects) + list(others), depsgraph)
-    out, skipped = [], []
+    out, skipped, problems = [], [], []
     for o in objects:
         try:
             out.append(read_object(o, depsgraph, True, shaded))
         except ReadError as ex:
-            if o.type == "MESH" or "has no faces" not in str(ex):
-                raise
-            # a guide curve, a metaball whose surface is its family's: nothing to bake here
+            problems.append(str(ex))
             skipped.append(f"{ex}; left out")
-    if objects and not any(s.bake for s in out):
-        raise ReadError(skipped[0].rsplit(";", 1)[0] if len(skipped) == 1 else
-                        "none of the selected objects has faces: "
-                        + ", ".join(repr(o.name) for o in objects))
+    if objects and not out:
+        raise ReadError(problems[0] if len(problems) == 1 else _none_bakeable(problems))
     for o in others:
         try:
             out.append(read_object(o, depsgraph, False, shaded))
         except ReadError:
             continue  # an occluder without faces simply does not occlude
     return SceneInput(out, skipped=skipped)
+
+
+def _none_bakeable(problems, shown=3):
+    """One line for a selection of which no object can be baked."""
+    more = len(problems) - shown
+    return (f"none of the {len(problems)} selected objects can be baked: " + "; ".join(problems[:shown])
+            + (f"; and {more} more" if more > 0 else ""))
 
 
 def _no_faces_why(obj):

@@ -24,6 +24,24 @@ copies in a temporary scene: each object's evaluated mesh is copied with all its
 world matrix with the object's materials, baked, read with ``foreach_get`` and removed with the
 scene; the user's objects, meshes, materials and scenes are never written.
 
+Blender's bake operator runs Cycles once per selected object, and each run syncs the whole
+temporary scene (every copy, every image): baking N objects one by one costs N times the scene.
+So the copies are **joined** into one mesh per group (:func:`_batches`) and baked in one run: an
+INT corner attribute numbers every corner before the join, and maps the baked values back to
+each object's loops after it. A material's albedo does not depend on where its object is, except
+through object-space inputs (Generated or Object coordinates, Object Info, box-projected images,
+procedural textures with their default coordinates, object-space normal maps): objects with such
+a material are baked as themselves, one run each (:func:`object_independent`). The groups share
+their render UV map and the colour attributes their materials name, so a texture reads the same
+layer on the joined mesh as on the object (measured on bitterli_wooden_staircase, 349 textured
+objects of 775: 698 Cycles runs of 0.43 s each, 6 min, before; 2 runs after).
+
+An image texture whose image cannot be read (its file is missing, or no image is set) renders
+magenta in Cycles, an alarm colour: baked, it would make every such surface reflect 0.999 of its
+red and blue light (sauer_pandora ships without its 206 textures). Such a material is baked as a
+temporary copy with those textures unlinked, so the sockets' own values are used, and a note
+names the image (:func:`missing_images`).
+
 Cycles places a vertex bake's sample on the corner itself with the view along the normal, so the
 values are those at the corner's UV / position, for a view straight onto the surface (the
 specular layer's darkening varies with the view angle in a render; the bake, and Cycles' own
@@ -39,10 +57,12 @@ import numpy as np
 from .materials import follow, uses_nodes
 from .visibility import world_matrix
 
-__all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate"]
+__all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate", "object_independent",
+           "missing_images"]
 
 ATTRIBUTE = "_hr_shading"
 SCENE = "_hr_shading"
+CORNER_ID = "_hr_corner"      # INT corner attribute: the corner's index over all copies of a batch
 # inputs that change no colour (bump and normal maps, tangents): a link there needs no Cycles
 _GEOMETRY_INPUTS = {"Normal", "Coat Normal", "Clearcoat Normal", "Tangent"}
 _KNOWN = {"BSDF_PRINCIPLED", "BSDF_DIFFUSE", "EMISSION", "MIX_SHADER", "ADD_SHADER"}
@@ -176,6 +196,128 @@ def may_emit(mat):
     return False
 
 
+# nodes whose value depends on the object they shade (its space, its bounds, its identity)
+_OBJECT_NODES = {"OBJECT_INFO", "PARTICLE_INFO", "POINT_INFO", "HAIR_INFO", "CURVES_INFO", "SCRIPT",
+                 "TANGENT", "UVALONGSTROKE"}
+# textures whose unlinked Vector is not Generated coordinates (the image: the UV map)
+_OWN_COORDINATES = {"TEX_IMAGE", "TEX_ENVIRONMENT", "TEX_SKY"}
+
+
+def _tree_nodes(nt, seen=None):
+    """Every node of ``nt`` and of the node groups inside it, once each."""
+    seen = set() if seen is None else seen
+    if nt is None or nt.name_full in seen:
+        return
+    seen.add(nt.name_full)
+    for node in nt.nodes:
+        yield node
+        if node.type == "GROUP":
+            yield from _tree_nodes(node.node_tree, seen)
+
+
+def _object_dependent(node):
+    t = node.type
+    if t in _OBJECT_NODES:
+        return True
+    if t == "TEX_COORD":
+        return any(o.is_linked for o in node.outputs if o.name != "UV")
+    if t == "ATTRIBUTE":
+        return node.attribute_type != "GEOMETRY"
+    if t == "UVMAP":
+        return node.from_instancer
+    if t == "NORMAL_MAP":
+        return node.space in ("OBJECT", "BLENDER_OBJECT")
+    if t == "VECT_TRANSFORM":
+        return "OBJECT" in (node.convert_from, node.convert_to)
+    if t == "TEX_IMAGE":
+        return node.projection != "FLAT"
+    if t.startswith("TEX_") and t not in _OWN_COORDINATES:
+        v = node.inputs.get("Vector")
+        return v is not None and v.enabled and not v.is_linked     # Generated coordinates
+    return False
+
+
+def object_independent(mat):
+    """True when ``mat`` shades the same at a corner whatever object carries it (module
+    docstring): its corners may be baked on a mesh joined from several objects."""
+    if mat is None or not uses_nodes(mat):
+        return True
+    return not any(_object_dependent(n) for n in _tree_nodes(mat.node_tree))
+
+
+def _named_layers(mat):
+    """Names of the mesh layers the material reads: '' for the render colour attribute."""
+    names = set()
+    if mat is None or not uses_nodes(mat):
+        return names
+    for n in _tree_nodes(mat.node_tree):
+        if n.type == "VERTEX_COLOR":
+            names.add(n.layer_name)
+        elif n.type == "ATTRIBUTE":
+            names.add(n.attribute_name)
+        elif n.type in ("UVMAP", "NORMAL_MAP") and n.uv_map:
+            names.add(n.uv_map)
+    return names
+
+
+def _batch_key(me, materials, independent):
+    """Which joined batch the copy ``me`` can go in, or None (bake it as itself): copies in one
+    batch have the same render UV map and the same layers (name, domain, type) under the names
+    their materials read, so the joined mesh feeds each material what the object did."""
+    names = set()
+    for m in materials:
+        if m is None:
+            continue
+        if m.name_full not in independent:
+            independent[m.name_full] = (object_independent(m), _named_layers(m))
+        ok, used = independent[m.name_full]
+        if not ok:
+            return None
+        names |= used
+    uv = next((l.name for l in me.uv_layers if l.active_render), None)
+    render = me.color_attributes.default_color_name or ""
+    layers = []
+    for n in sorted(names):
+        a = me.attributes.get(n or render) if (n or render) else None
+        layers.append((n, a.name, a.domain, a.data_type) if a is not None else (n, None, None, None))
+    return uv, tuple(layers)
+
+
+def missing_images(mat):
+    """The Image Texture nodes of ``mat`` (not inside node groups) whose image Cycles cannot read
+    and renders magenta: no image set, or a file image of no pixels (``Image.size`` is 0 when
+    the file cannot be loaded)."""
+    if mat is None or not uses_nodes(mat):
+        return []
+    out = []
+    for n in mat.node_tree.nodes:
+        if n.type != "TEX_IMAGE" or not any(o.is_linked for o in n.outputs):
+            continue
+        img = n.image
+        if img is None or (img.source == "FILE" and img.packed_file is None and tuple(img.size) == (0, 0)):
+            out.append(n)
+    return out
+
+
+def _missing_note(node):
+    img = node.image
+    if img is None:
+        return f"'{node.name}' has no image (Cycles renders it magenta): the inputs it feeds use their own values"
+    return (f"image '{img.name}' cannot be read ({img.filepath or 'no file'}; Cycles renders it magenta): "
+            "the inputs it feeds use their own values")
+
+
+def _stand_in(mat, nodes):
+    """A temporary copy of ``mat`` without the links out of ``nodes``."""
+    copy = mat.copy()
+    nt = copy.node_tree
+    names = {n.name for n in nodes}
+    for link in list(nt.links):
+        if link.from_node.name in names:
+            nt.links.remove(link)
+    return copy
+
+
 # ----------------------------------------------------------------------------- Cycles bakes
 def _configure(scene):
     scene.render.engine = "CYCLES"
@@ -213,6 +355,10 @@ def _original(m):
     return m.original if m is not None else None
 
 
+def _stand_in_for(m, stand_ins):
+    return stand_ins.get(m.name_full, m) if m is not None else None
+
+
 def _assign_materials(me, materials):
     """Make ``materials`` the material slots of mesh ``me``, in order (slot k: material index k)."""
     me.materials.clear()
@@ -235,11 +381,12 @@ def _quad_mesh(materials):
     return me
 
 
-def _copy_objects(objects, depsgraph, made_obs, made_meshes):
+def _copy_objects(objects, depsgraph, made_obs, made_meshes, stand_ins):
     """A temporary object per object of ``objects``: a copy of its evaluated mesh with all its
-    attributes, the original materials of its slots, at its world matrix. Appends each mesh to
-    ``made_meshes`` as soon as it exists and (object name, copy) to ``made_obs``, so that the
-    caller removes whatever was made even when a later copy fails."""
+    attributes, the original materials of its slots (or their ``stand_ins``, by name_full), at its
+    world matrix. Appends each mesh to ``made_meshes`` as soon as it exists and (object name,
+    copy) to ``made_obs``, so that the caller removes whatever was made even when a later copy
+    fails."""
     import bpy
 
     for obj in objects:
@@ -247,18 +394,18 @@ def _copy_objects(objects, depsgraph, made_obs, made_meshes):
         me = bpy.data.meshes.new_from_object(ob_eval, preserve_all_data_layers=True,
                                              depsgraph=depsgraph)
         made_meshes.append(me)
-        _assign_materials(me, [_original(s.material) for s in ob_eval.material_slots])
+        _assign_materials(me, [_stand_in_for(_original(s.material), stand_ins)
+                               for s in ob_eval.material_slots])
         ob = bpy.data.objects.new(SCENE, me)
         ob.matrix_world = _matrix(world_matrix(obj, depsgraph))
         made_obs.append((obj.name, ob))
 
 
 def _prepare_bake(scene, obs):
-    """Link ``obs`` into ``scene``, give each mesh the FLOAT_COLOR corner attribute the bakes
-    write (active for baking, the render colour attribute unchanged), select them all and make
-    the first one active."""
+    """Give each mesh of ``obs`` (in ``scene``) the FLOAT_COLOR corner attribute the bakes write
+    (active for baking, the render colour attribute unchanged), select them all and make the
+    first one active."""
     for ob in obs:
-        scene.collection.objects.link(ob)
         me = ob.data
         render = me.color_attributes.default_color_name
         attr = me.color_attributes.new(ATTRIBUTE, "FLOAT_COLOR", "CORNER")
@@ -271,16 +418,86 @@ def _prepare_bake(scene, obs):
     vl.objects.active = obs[0]
 
 
-def _split_results(made_obs, rho, em, constants):
-    """The baked corner values by owner: ({object name: (rho, em)}, {material name_full: (rho,
-    em)}); a material's values are the mean over the four corners of its quad."""
-    corners, materials = {}, {}
-    for (name, _), r, e in zip(made_obs, rho, em):
-        if name is not None:
-            corners[name] = (r, e)
+@dataclass
+class _Run:
+    """One object of the bake: a copy of its own (``names`` one name), a join of several copies
+    (``ids``: the corner id of every loop, ``counts``: each name's loop count, in id order), or the
+    quads of the 'constant' materials (no names)."""
+
+    ob: object
+    names: tuple = ()
+    ids: np.ndarray | None = None
+    counts: tuple = ()
+
+
+def _join_batches(scene, copies, made_obs, made_meshes):
+    """:class:`_Run` objects for ``copies`` ([(object name, copy)], linked in ``scene``): the
+    copies of one :func:`_batch_key` joined into one mesh (a new object at the identity, so the
+    corners keep their world positions), the others as they are. The join objects are appended
+    to ``made_obs`` and their meshes to ``made_meshes``, for :func:`_remove`."""
+    import bpy
+
+    independent, groups, runs = {}, {}, []
+    for name, ob in copies:
+        key = _batch_key(ob.data, list(ob.data.materials), independent)
+        if key is None:
+            runs.append(_Run(ob, (name,)))
         else:
+            groups.setdefault(key, []).append((name, ob))
+    vl = scene.view_layers[0]
+    for (uv, layers), members in groups.items():
+        if len(members) == 1:
+            runs.append(_Run(members[0][1], (members[0][0],)))
+            continue
+        counts, base = [], 0
+        for _, ob in members:
+            n = len(ob.data.loops)
+            ob.data.attributes.new(CORNER_ID, "INT", "CORNER").data.foreach_set(
+                "value", np.arange(base, base + n, dtype=np.int32))
+            counts.append(n)
+            base += n
+        me = bpy.data.meshes.new(SCENE)
+        made_meshes.append(me)
+        target = bpy.data.objects.new(SCENE, me)
+        made_obs.append((None, target))
+        scene.collection.objects.link(target)
+        obs = [target] + [ob for _, ob in members]
+        with bpy.context.temp_override(scene=scene, view_layer=vl, active_object=target, object=target,
+                                       selected_objects=obs, selected_editable_objects=obs):
+            res = bpy.ops.object.join()
+        if "FINISHED" not in res:
+            raise RuntimeError(f"joining the copies: {res}")
+        me = target.data
+        if uv is not None and me.uv_layers.get(uv) is not None:
+            me.uv_layers[uv].active_render = True
+        render = next((a for n, a, _, _ in layers if n == "" and a), None)
+        if render is not None and me.color_attributes.get(render) is not None:
+            me.color_attributes.default_color_name = render
+        ids = np.empty(len(me.loops), np.int32)
+        me.attributes[CORNER_ID].data.foreach_get("value", ids)
+        if ids.size != base or np.bincount(ids, minlength=base).max(initial=1) != 1:
+            raise RuntimeError("joining the copies changed their corners")
+        runs.append(_Run(target, tuple(n for n, _ in members), ids, tuple(counts)))
+    return runs
+
+
+def _split_results(runs, rho, em, constants):
+    """The baked corner values by owner: ({object name: (rho, em)}, {material name_full: (rho,
+    em)}); a joined run's corners go back to each object's loops by their ids, a material's
+    values are the mean over the four corners of its quad."""
+    corners, materials = {}, {}
+    for run, r, e in zip(runs, rho, em):
+        if not run.names:
             for k, m in enumerate(constants):
                 materials[m.name_full] = (r[4 * k:4 * k + 4].mean(axis=0), e[4 * k:4 * k + 4].mean(axis=0))
+        elif run.ids is None:
+            corners[run.names[0]] = (r, e)
+        else:
+            full_r, full_e = np.empty_like(r), np.empty_like(e)
+            full_r[run.ids], full_e[run.ids] = r, e
+            starts = np.concatenate([[0], np.cumsum(run.counts)])
+            for name, a, b in zip(run.names, starts[:-1], starts[1:]):
+                corners[name] = (full_r[a:b], full_e[a:b])
     return corners, materials
 
 
@@ -289,16 +506,23 @@ def _remove(scene, made_obs, made_meshes):
     import bpy
 
     for _, ob in made_obs:
-        bpy.data.objects.remove(ob)
+        try:
+            bpy.data.objects.remove(ob)
+        except ReferenceError:          # joined into another copy: Blender removed it
+            pass
     for me in made_meshes:
-        bpy.data.meshes.remove(me)
+        try:
+            bpy.data.meshes.remove(me)
+        except ReferenceError:
+            pass
     bpy.data.scenes.remove(scene)
 
 
-def evaluate(objects, depsgraph, constants=(), emit=True):
+def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None):
     """Bake albedo and emission of ``objects`` (original mesh objects) at every corner of their
     evaluated meshes, and of the ``constants`` materials on a quad each, in one temporary scene.
-    ``emit`` False: no material can emit, the EMIT bake is skipped (zeros).
+    ``emit`` False: no material can emit, the EMIT bake is skipped (zeros). ``stand_ins``:
+    {material name_full: the material baked in its place}.
 
     Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
@@ -309,21 +533,27 @@ def evaluate(objects, depsgraph, constants=(), emit=True):
     made_obs, made_meshes = [], []
     try:
         _configure(scene)
-        _copy_objects(objects, depsgraph, made_obs, made_meshes)
+        stand_ins = stand_ins or {}
+        _copy_objects(objects, depsgraph, made_obs, made_meshes, stand_ins)
+        for _, ob in made_obs:
+            scene.collection.objects.link(ob)
+        runs = _join_batches(scene, list(made_obs), made_obs, made_meshes)
         constants = list(constants)
         if constants:
-            me = _quad_mesh(constants)
+            me = _quad_mesh([_stand_in_for(m, stand_ins) for m in constants])
             made_meshes.append(me)
             made_obs.append((None, bpy.data.objects.new(SCENE, me)))
-        obs = [ob for _, ob in made_obs]
-        if not obs:
+            scene.collection.objects.link(made_obs[-1][1])
+            runs.append(_Run(made_obs[-1][1]))
+        if not runs:
             return {}, {}, 0.0
+        obs = [r.ob for r in runs]
         _prepare_bake(scene, obs)
         t = time.perf_counter()
         rho = _bake(scene, obs, "DIFFUSE", {"COLOR"})
         em = _bake(scene, obs, "EMIT", set()) if emit else [np.zeros_like(r) for r in rho]
         seconds = time.perf_counter() - t
-        return (*_split_results(made_obs, rho, em, constants), seconds)
+        return (*_split_results(runs, rho, em, constants), seconds)
     finally:
         _remove(scene, made_obs, made_meshes)
 
@@ -337,32 +567,45 @@ def _matrix(M):
 def shade(objects, depsgraph) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
     ones that need it, in one batch. Never raises for a Cycles problem: ``failed`` says why."""
+    import bpy
+
     out = Shaded()
-    need, constants, emit = [], {}, False
-    for obj in objects:
-        if obj.type != "MESH":
-            continue
-        ob_eval = obj.evaluated_get(depsgraph)
-        if len(ob_eval.data.polygons) == 0:
-            continue                     # the reader refuses it (or skips it as an occluder)
-        corners = False
-        for s in ob_eval.material_slots:
-            m = _original(s.material)
-            if m is None:
-                continue
-            if m.name_full not in out.kinds:
-                out.kinds[m.name_full] = classify(m)
-            kind = out.kinds[m.name_full][0]
-            emit |= kind != "plain" and may_emit(m)
-            corners |= kind == "corners"
-            if kind == "constant":
-                constants[m.name_full] = m
-        if corners:
-            need.append(obj)
-    if not need and not constants:
-        return out
+    need, constants, emit, stand_ins = [], {}, False, {}
     try:
-        out.corners, out.materials, out.seconds = evaluate(need, depsgraph, constants.values(), emit)
-    except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
-        out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
-    return out
+        for obj in objects:
+            if obj.type != "MESH":
+                continue
+            ob_eval = obj.evaluated_get(depsgraph)
+            if len(ob_eval.data.polygons) == 0:
+                continue                     # the reader refuses it (or skips it as an occluder)
+            corners = False
+            for s in ob_eval.material_slots:
+                m = _original(s.material)
+                if m is None:
+                    continue
+                if m.name_full not in out.kinds:
+                    missing = missing_images(m)
+                    if missing:
+                        stand_ins[m.name_full] = _stand_in(m, missing)
+                        kind, why = classify(stand_ins[m.name_full])
+                        out.kinds[m.name_full] = (kind, [_missing_note(n) for n in missing] + why)
+                    else:
+                        out.kinds[m.name_full] = classify(m)
+                kind = out.kinds[m.name_full][0]
+                emit |= kind != "plain" and may_emit(_stand_in_for(m, stand_ins))
+                corners |= kind == "corners"
+                if kind == "constant":
+                    constants[m.name_full] = m
+            if corners:
+                need.append(obj)
+        if not need and not constants:
+            return out
+        try:
+            out.corners, out.materials, out.seconds = evaluate(need, depsgraph, constants.values(), emit,
+                                                               stand_ins)
+        except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
+            out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
+        return out
+    finally:
+        for m in stand_ins.values():
+            bpy.data.materials.remove(m)
