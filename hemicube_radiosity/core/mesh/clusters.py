@@ -126,6 +126,17 @@ def _normal_bins(normals, max_angle):
     return (face * cells + ij[:, 0]) * cells + ij[:, 1]
 
 
+def _clutter(pieces: PatchSet, corners, size) -> np.ndarray:
+    """(P,) bool pieces of objects whose bounding box's diagonal is under ``size`` (a number, or
+    (P,) each piece's): small separate things (pebbles, cups, books) grouped as a volume."""
+    M = int(pieces.owner.max()) + 1
+    lo = np.full((M, 3), np.inf)
+    hi = np.full((M, 3), -np.inf)
+    np.minimum.at(lo, pieces.owner, corners.min(axis=1))
+    np.maximum.at(hi, pieces.owner, corners.max(axis=1))
+    return np.linalg.norm(hi - lo, axis=1)[pieces.owner] < size
+
+
 def _plane_groups(pieces: PatchSet, key, size) -> np.ndarray:
     """(P,) int64 equal for pieces of one key whose planes are within about a quarter of
     ``size`` of each other along the key's mean normal (a floor and a rug group; a floor and a
@@ -222,15 +233,21 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     # (a centre on a cell border, as a grid of quads puts whole rows of them, goes the same way
     # for every one: rounded to 1e-9 of a cell first, float noise does not pick the side)
     cell = np.floor(np.round((centre - lo) / np.reshape(size, (-1, 1)), 9)).astype(np.int64)
-    parts = np.stack([pieces.owner.astype(np.int64), np.asarray(material, np.int64).reshape(-1),
+    # clutter: the pieces of objects smaller than a patch group across objects (owner -1),
+    # whether or not they touch: 1,500 pebbles in a cell are a few patches, not 1,500 x 6
+    clutter = _clutter(pieces, corners, size) & small
+    owner = np.where(clutter, -1, pieces.owner.astype(np.int64))
+    parts = np.stack([owner, np.asarray(material, np.int64).reshape(-1),
                       _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)
     # a piece that is not small keys on its own index: it stays alone
     parts = np.where(small[:, None], parts, -1 - np.arange(len(pieces))[:, None])
     key = unique_rows(parts, return_inverse=True)[1].reshape(-1)
     polys = welded(pieces.verts, pieces.polys)
     # pieces of one key in one plane meet through a vertex of their own: surfaces that touch
-    # without sharing corners (T-junctions, the rule in game levels) group as if they did
-    plane = key.max() + 1 + _plane_groups(pieces, key, size)
+    # without sharing corners (T-junctions, the rule in game levels) group as if they did;
+    # clutter's pieces of one key all do
+    plane = _plane_groups(pieces, key, size)
+    plane = np.where(clutter, plane.max() + 1 + key, plane)
     label = connected_components(key, np.concatenate([polys, (plane + polys.max() + 1)[:, None]], 1))
     of = unique_ints(label, return_inverse=True)[1].reshape(-1).astype(np.int64)
     if of.max() + 1 == len(pieces):

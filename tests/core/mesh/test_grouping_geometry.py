@@ -132,3 +132,60 @@ def floor_vertices(result, owner):
     ids = np.unique(e.polys[e.owner == owner].ravel())
     ids = ids[ids >= 0]
     return {tuple(np.round(e.verts[i], 6)): result.vertex_radiosity[i] for i in ids}
+
+
+def pebbles(n, seed=3, side=0.01, area=(2.0, 2.0)):
+    """``n`` separate 1 cm boxes scattered on a floor (clutter), one object each."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for i, (x, y) in enumerate(rng.uniform((0.1, 0.1), (area[0] - 0.1, area[1] - 0.1), (n, 2))):
+        out.append(scenes.box((x, y, 0.0), (x + side, y + side, side), rho=(0.6, 0.5, 0.4), bottom=False,
+                              name=f"Pebble{i}"))
+    return out
+
+
+def test_1500_pebbles_are_grouped_across_objects_as_a_few_patches():
+    """Each pebble is a separate object smaller than a patch: grouped as a volume (by material,
+    normal and cell, not by object), they cost a few patches per cell and normal, not five per
+    pebble (7,500, refused at the limit before)."""
+    from hemicube_radiosity.core.mesh.stage import cut_patches
+
+    room = [scenes.box((0, 0, 0), (2.0, 2.0, 2.0), inward=True, name="room")]
+    s = BakeSettings().resolved(room)
+    pieces, clusters = cut_patches(room + pebbles(1500), s)
+    assert len(pieces) >= 7500
+    per_cell = 5 * int(np.ceil(2.0 / s.patch_size)) ** 2        # five normals over the floor's cells
+    pebble = clusters.owner >= 1
+    assert pebble.sum() <= per_cell
+    # every cluster of pebbles keeps one normal and one material: their tops face up together
+    top = pieces.normals[:, 2] > 0.99
+    assert np.all(np.bincount(clusters.of[top], minlength=len(clusters))[clusters.of[~top & (pieces.owner >= 1)]] == 0)
+
+
+def test_grouped_clutter_is_lit_as_the_ungrouped_pebbles():
+    """300 pebbles under a lamp: grouped across objects, the light on their corners and on the
+    floor's as bright as in the bake with one patch per face. (Corner by corner they scatter
+    by 9-11% RMS: the ungrouped bake's 1 cm faces each see the room from one hemi-cube, and a few
+    of its corners inside overlapping pebbles are black.)"""
+    room = [scenes.box((0, 0, 0), (2.0, 2.0, 2.0), inward=True, name="room")]
+    lamp = scenes.quad([(0.7, 0.7, 1.99), (1.3, 0.7, 1.99), (1.3, 1.3, 1.99), (0.7, 1.3, 1.99)],
+                       emission=(6.0, 6.0, 6.0), name="lamp")
+    lamp = MeshInput(lamp.verts, lamp.face_offsets, lamp.face_indices[::-1].copy(), lamp.face_rho,
+                     lamp.face_emission, "lamp")
+    scene = room + [lamp] + pebbles(300)
+    s = dict(patch_size=0.25, element_size=None, refine_levels=0, resolution=64)
+    grouped = bake(scene, BakeSettings(**s))
+    single = bake(scene, BakeSettings(group_faces=False, **s))
+    assert grouped.unknowns < single.unknowns - 1000
+    a, b = ({}, {})
+    for r, d in ((grouped, a), (single, b)):
+        for o in range(2, len(scene)):
+            d.update(floor_vertices(r, o))
+    common = sorted(a.keys() & b.keys())
+    assert len(common) > 0.9 * len(a)
+    a, b = (np.array([d[k] for k in common]) for d in (a, b))
+    np.testing.assert_allclose(a.mean(axis=0), b.mean(axis=0), rtol=0.02)      # measured 0.5-1.2%
+    fa, fb = (floor_vertices(r, 0) for r in (grouped, single))
+    common = sorted(fa.keys() & fb.keys())                   # the room's own corners
+    fa, fb = (np.array([d[k] for k in common]) for d in (fa, fb))
+    assert np.sqrt(np.mean((fa - fb) ** 2)) / fb.mean() < 0.02
