@@ -19,7 +19,8 @@ __all__ = ["setting_annotations", "SETTING_NAMES", "enum_items", "panel_settings
 
 _AUTO_LABEL = "Automatic Sizes"
 _AUTO_HELP = ("Patch size = the scene's diagonal / 14 and detail size = a third of it (the "
-              "benchmark's best trade-off at any scale); off: use the sizes below")
+              "benchmark's best trade-off at any scale; an object far larger than the rest, such "
+              "as a ground plane, gets a size of its own); off: use the sizes below")
 _LIMITS = ("min", "max", "soft_min", "soft_max", "step", "precision", "unit", "subtype", "maxlen")
 
 

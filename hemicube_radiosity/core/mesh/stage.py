@@ -35,7 +35,7 @@ def patch_stage(ctx) -> None:
     if n > patch_limit(s):
         raise PatchError(_refusal(None if ctx.given else ctx.meshes, s, n, ""))
     gb = form_factor_gb(n, s)
-    grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} faces"
+    grouped = "" if ctx.clusters is None else f" grouped from {len(ctx.patches)} pieces"
     ctx.say(1.0, f"{n} patches{grouped}; form factors at most {1024 * gb:.0f} MB")
 
 

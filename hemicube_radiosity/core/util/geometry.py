@@ -43,7 +43,9 @@ def orthonormal_basis(m):
     helper = np.zeros_like(m)
     helper[np.arange(len(m)), np.argmin(np.abs(m), axis=1)] = 1.0
     e1 = np.cross(helper, m)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    # a zero ``m`` (a face of no area's normal) gets the x axis, not NaN
+    length = np.linalg.norm(e1, axis=1, keepdims=True)
+    e1 = np.divide(e1, length, out=np.tile([1.0, 0.0, 0.0], (len(m), 1)), where=length > 0)
     return e1, np.cross(m, e1)
 
 
