@@ -11,7 +11,7 @@ from __future__ import annotations
 import importlib
 import time
 from contextlib import contextmanager
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from .mesh.clusters import Clusters
 from .mesh.elements import meshes_key, output_elements, start_elements
 from .mesh.patches import PatchSet
 from .mesh.refine import refine_stage
-from .mesh.sizes import with_auto_scales
+from .mesh.sizes import fitted_detail, with_auto_scales
 from .mesh.stage import check_before_cutting, patch_stage
 from .output.estimate import estimate_stage
 from .output.stage import vertex_stage
@@ -225,7 +225,11 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     if meshes is not None:
         if settings.patch_size == "auto":        # a ground plane around the scene: its own size
             meshes = with_auto_scales(meshes, AUTO_PATCHES_PER_DIAGONAL)
+        auto_detail = settings.element_size == "auto"
         settings = settings.resolved(meshes)
+        if auto_detail and settings.element_size:   # as fine as the elements' limit allows
+            settings = replace(settings, element_size=fitted_detail(
+                meshes, settings.element_size, settings.patch_size, settings.max_elements))
     elif "auto" in (settings.patch_size, settings.element_size):
         raise SettingsError("'auto' sizes need the meshes")
     # without a cache to keep, one for this bake alone: stages that ask for the same

@@ -20,13 +20,34 @@ from dataclasses import replace
 
 import numpy as np
 
-__all__ = ["auto_sizes", "with_auto_scales", "HUGE_EXTENT", "HUGE_FACES", "HUGE_FEW"]
+__all__ = ["auto_sizes", "with_auto_scales", "fitted_detail", "DETAIL_SHARE", "HUGE_EXTENT", "HUGE_FACES", "HUGE_FEW"]
 
 #: An object this many times larger across than the rest of the scene together may be huge...
 HUGE_EXTENT = 3.0
 #: ... if it holds less than this fraction of the scene's faces, or fewer than HUGE_FEW faces.
 HUGE_FACES = 0.1
 HUGE_FEW = 100
+
+
+#: The 'auto' detail size makes at most this share of ``max_elements`` (counted before cutting).
+DETAIL_SHARE = 0.5
+
+
+def fitted_detail(meshes, detail, patch, max_elements):
+    """The 'auto' detail size ``detail`` raised in steps of 1.25 until the elements it makes at
+    least (:func:`.limits.pieces_at_least`) are within :data:`DETAIL_SHARE` of ``max_elements``;
+    None (no finer output than the patches) when that reaches ``patch``. A scene of many long
+    thin faces (curtains, cables) cut at a third of the patch size made 641,000 elements at
+    least, past the limit: the default must bake."""
+    from .limits import pieces_at_least
+
+    if not detail:
+        return detail
+    while pieces_at_least(meshes, detail) > DETAIL_SHARE * max_elements:
+        detail *= 1.25
+        if patch and detail >= patch:
+            return None
+    return detail
 
 
 def _boxes(meshes):

@@ -51,3 +51,20 @@ def test_a_room_on_a_huge_plane_bakes_at_the_room_s_cost():
     room = both.elements.owner < len(scenes.cornell_box())
     assert len(both.elements.verts) < 2 * len(alone.elements.verts)
     assert np.all(np.isfinite(both.vertex_radiosity)) and room.any()
+
+
+def test_the_auto_detail_size_fits_the_elements_limit():
+    """Long thin faces cut at a third of the patch size would pass Max Details: the automatic
+    detail size grows until the elements fit, so the default bakes; a detail size set by hand
+    is refused instead, naming one that fits."""
+    from hemicube_radiosity.core.mesh.patches import PatchError
+
+    strips = [MeshInput.from_faces([(0, y, 0.5), (2.0, y, 0.5), (2.0, y + 0.004, 0.5)], [(0, 1, 2)],
+                                   name=f"Strip{i}") for i, y in enumerate(np.linspace(0.1, 1.9, 50))]
+    scene = scenes.cornell_box() + strips
+    s = BakeSettings(refine_levels=0, resolution=16, max_elements=20000)
+    r = bake(scene, s)
+    auto = np.linalg.norm([2, 2, 2]) / K / 3
+    assert auto < r.settings.element_size < r.settings.patch_size and len(r.elements) <= 20000
+    with pytest.raises(PatchError, match="Max Details"):
+        bake(scene, BakeSettings(refine_levels=0, resolution=16, max_elements=20000, element_size=auto))
