@@ -525,6 +525,25 @@ def _errors(x, ref, mask):
     return out
 
 
+def coarser_settings(defaults, cyc_npz):
+    """The coarser run's settings: patches twice the defaults' size, output elements as fine as
+    theirs. From the defaults' resolved sizes; where the defaults were refused, from the 'auto'
+    rule on the scene's diagonal (Cycles' corners span the same render-visible meshes). None when
+    neither is known."""
+    from hemicube_radiosity.core.settings import AUTO_ELEMENTS_PER_PATCH, AUTO_PATCHES_PER_DIAGONAL
+
+    res = defaults.get("resolved") if not failed(defaults) else None
+    if res and res.get("patch_size"):
+        return {"patch_size": 2 * res["patch_size"], "element_size": res["element_size"] or 0}
+    if cyc_npz is None or not os.path.exists(cyc_npz):
+        return None
+    with np.load(cyc_npz) as z:
+        if not len(z["pos"]):
+            return None
+        patch = float(np.linalg.norm(np.ptp(z["pos"], axis=0))) / AUTO_PATCHES_PER_DIAGONAL
+    return {"patch_size": 2 * patch, "element_size": patch / AUTO_ELEMENTS_PER_PATCH}
+
+
 def run_scene(spec, args):
     log(f"\n=== {spec.folder}: {spec.file} ({spec.triangles:,} triangles in the README), light '{spec.light}'")
     os.makedirs(WORK_DIR, exist_ok=True)
@@ -554,10 +573,10 @@ def run_scene(spec, args):
         row[label] = rec
         brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "peak_mb", "max_rss_mb")}
         log(f"{label}: {json.dumps(brief, default=float)[:500]}")
-        if label == "defaults" and not failed(rec) and isinstance(rec.get("resolved"), dict) \
-                and rec["resolved"].get("patch_size"):
-            res = rec["resolved"]
-            runs.append(("coarser", {"patch_size": 2 * res["patch_size"], "element_size": res["element_size"] or 0}))
+        if label == "defaults":
+            coarser = coarser_settings(rec, cyc_npz if have_ref else None)
+            if coarser:
+                runs.append(("coarser", coarser))
     if have_ref and row["cycles"].get("error") is None:   # Cycles' own error, when no bake of ours ran
         _, c, n = compare(cyc_npz, None)
         row["cycles"].update(error=c, compared=n)
@@ -577,6 +596,10 @@ def targets(res):
         n, d, c, k = r["name"], r.get("defaults") or {}, r.get("cycles") or {}, r.get("coarser") or {}
         if failed(d):
             out.append((f"`{n}`: bakes with the defaults", failed(d), False))
+            if k and not failed(k):
+                out.append((f"`{n}`: (refused defaults) bakes with patches x2", f"{k['patches']:,} patches in"
+                            f" {k['seconds']:.1f} s, peak {k['peak_mb']:,.0f} MB, RMS "
+                            f"{_f((k.get('error') or {}).get(sve.METRIC), '{:.2%}')}", True))
             continue
         out.append((f"`{n}`: the defaults bake in under {MEMORY_TARGET_MB / 1024:g} GB",
                     f"peak {d['peak_mb']:,.0f} MB (Blender included)", d["peak_mb"] < MEMORY_TARGET_MB))
@@ -622,14 +645,15 @@ def table(res):
         ref_t = _f((c.get("ref") or {}).get("seconds"), "{:.0f}")
         if failed(c):
             cyc_t = f"failed: {failed(c)}"
+        ke = "n/a" if not k else (f"failed: {failed(k)}" if failed(k) else
+                                  f"{_f((k.get('error') or {}).get(sve.METRIC), '{:.2%}')} ({k.get('patches', 0):,};"
+                                  f" {_f(k.get('seconds'))} s, {_f(k.get('peak_mb'), '{:,.0f}')} MB)")
         if failed(d):
             rows.append([f"`{r['name']}`", _f(tri, "{:,}"), "", f"**failed**: {failed(d)}", "", _f(d.get("max_rss_mb"), "{:,.0f}"),
-                         "", "", cyc_t, cyc_e, ref_t])
+                         "", ke, cyc_t, cyc_e, ref_t])
             continue
         st = d.get("stages", {})
         stages = " / ".join(_f(st.get(s), "{:.2f}") for s in ("read", "form_factors", "direct", "solve", "vertices", "write"))
-        ke = "n/a" if not k else (f"failed: {failed(k)}" if failed(k) else
-                                  f"{_f((k.get('error') or {}).get(sve.METRIC), '{:.2%}')} ({k.get('patches', 0):,})")
         rows.append([f"`{r['name']}`", _f(tri, "{:,}"), f"{d['patches']:,}", _f(d["seconds"]), stages,
                      _f(d["peak_mb"], "{:,.0f}"), _rms(d.get("error")), ke, cyc_t, cyc_e,
                      ref_t])
