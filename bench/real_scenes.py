@@ -12,7 +12,9 @@ are published). Without that folder this prints one line and exits 0. Smallest f
 
 1. **Loading.** A .blend is opened, a .gltf/.glb/.obj goes through the CLI's own ``load_input``
    (Blender's importers), the bunny's .ply through ``bpy.ops.wm.ply_import`` (Y up turned to Z up).
-   ``sauer_pandora`` is in Cube 2 units: its objects are scaled by 0.05 (metres).
+   ``sauer_pandora`` is in Cube 2 units: its objects are scaled by 0.05 (metres). Image-texture
+   nodes whose file is missing (pandora's textures are not included) are removed from the materials
+   (:func:`drop_missing_images`): Cycles would shade them magenta.
 2. **Light**, the same for Cycles and for us (:func:`light_scene`):
 
    * ``file``: the light the file has (``bitterli_grey_white_room``: its HDR world, which our reader
@@ -255,11 +257,34 @@ def light_scene(spec):
     raise ValueError(f"unknown light {spec.light!r}")
 
 
+def drop_missing_images():
+    """Remove material image-texture nodes whose file is missing (sauer_pandora ships without its
+    textures): Cycles would shade them magenta, so the colour falls back to the socket's own value
+    on both sides. Returns how many nodes went."""
+    import bpy
+
+    gone = 0
+    for mat in bpy.data.materials:
+        nt = mat.node_tree
+        if nt is None:
+            continue
+        for node in list(nt.nodes):
+            if node.type != "TEX_IMAGE":
+                continue
+            im = node.image
+            path = bpy.path.abspath(im.filepath, library=im.library) if im is not None else ""
+            if im is None or (im.source == "FILE" and im.packed_file is None and not os.path.exists(path)):
+                nt.nodes.remove(node)
+                gone += 1
+    return gone
+
+
 def prepare(spec):
-    """Load ``spec``'s file and light it; returns (seconds, what light)."""
+    """Load ``spec``'s file, drop its missing textures and light it; returns (seconds, what light)."""
     t = time.perf_counter()
     load_scene(os.path.join(SCENES_DIR, spec.folder, spec.file), spec.scale)
-    what = light_scene(spec)
+    gone = drop_missing_images()
+    what = light_scene(spec) + (f"; {gone} image nodes with a missing file removed" if gone else "")
     return time.perf_counter() - t, what
 
 
