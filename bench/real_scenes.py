@@ -701,7 +701,10 @@ def main(argv=None):
     if not os.path.isdir(SCENES_DIR):
         log(f"real scenes: {SCENES_DIR} not found; skipped")
         return 0
-    specs = scene_list(names=args.scenes.split(",") if args.scenes else None, quick=args.quick)
+    try:
+        specs = scene_list(names=args.scenes.split(",") if args.scenes else None, quick=args.quick)
+    except ValueError as exc:
+        ap.error(str(exc))
     path = args.results or os.path.join(OUT_DIR, "real_scenes_quick.json" if args.quick else "real_scenes.json")
     res = {"quick": args.quick, "machine": sve.machine_info(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
            "ref_spp": args.ref_spp, "cand_spp": CAND_SPP, "command": " ".join(["bench/real_scenes.py", *argv]),
