@@ -402,6 +402,10 @@ def real_section(res):
             if d.get("vertices_nan"):
                 bits.append(f"**{d['vertices_nan']:,} of {d['vertices']:,} output vertices NaN**")
         notes.append(f"- `{sc['name']}`: " + "; ".join(b for b in bits if b) + ".")
+    done = {sc["name"] for sc in res["scenes"]}
+    missing = [s.folder for s in real_scenes.SPECS if s.folder not in done]
+    if missing:
+        notes.append("- Not in this run: " + ", ".join(f"`{m}`" for m in missing) + ".")
     return L + notes + [""]
 
 
