@@ -7,6 +7,7 @@
 #   make test-lts    the suite on Blender 4.2 LTS and 4.5 LTS (.venv-4.2, .venv-4.5; not part of `make test`)
 #   make demo        bake the Cornell box into demo/out/
 #   make bench       benchmarks (docs/performance.md)
+#   make bench-real  the real scenes of ../shared/scenes alone (BENCH_ARGS="--quick" or "--scenes a,b")
 #   make package     one extension zip per platform in dist/, each with its embreex wheel
 #   make clean       dist/, wheels/ and caches;  make distclean: also every .venv*
 #
@@ -16,7 +17,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP_Q  := -q --disable-pip-version-check
 
-.PHONY: venv test viewer-deps test-lts lts-venvs demo bench package wheels clean distclean
+.PHONY: venv test viewer-deps test-lts lts-venvs demo bench bench-real package wheels clean distclean
 
 # $(call ensure_venv,DIR,REQUIREMENTS): (re)build DIR unless it is a working Python 3.11 venv that
 # has installed exactly REQUIREMENTS (a stamp named after the file's checksum, written only when
@@ -92,6 +93,10 @@ endef
 bench: venv
 	$(ensure_bench)
 	$(PY) bench/run_all.py $(BENCH_ARGS)
+
+bench-real: venv
+	$(ensure_bench)
+	$(PY) bench/real_scenes.py $(BENCH_ARGS)
 
 # ---------------------------------------------------------------- extension zips
 # One zip per platform (blender_ext.py build --split-platforms), each bundling the embreex wheel

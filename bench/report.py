@@ -15,6 +15,8 @@ be rewritten without running anything. A missing file leaves its section and tar
     relight_dense.json                 bench_relight_dense.py: a dense room's relight
     curved.json                        bench_curved.py: Suzanne subdivided in the Cornell box
     formfactors.json                   bench_formfactors.py: ms per hemi-cube, NumPy and Embree
+    real_scenes.json, real_scenes_quick.json
+                                       real_scenes.py: the defaults on ../shared/scenes against Cycles
 
 Of a pair, the newer file is read (``--quick``: the quick one). The targets are those each
 benchmark prints (speed_vs_error.targets, bench_dense.targets) and the thresholds of issue 9 the
@@ -34,6 +36,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 
 import bench_dense  # noqa: E402
+import real_scenes  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 
 OUT_DIR = os.path.join(ROOT, "bench", "out")
@@ -64,7 +67,8 @@ def load(force_quick=False):
             "dense": _newer("dense.json", "dense_quick.json", force_quick),
             "parallel": _read("bench_parallel.json"), "batch": _read("bench_batch.json"),
             "relight": _read("relight_dense.json"), "curved": _read("curved.json"),
-            "formfactors": _read("formfactors.json")}
+            "formfactors": _read("formfactors.json"),
+            "real": _newer("real_scenes.json", "real_scenes_quick.json", force_quick)}
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -236,6 +240,8 @@ def targets(r):
         out.append((f"Both cores: a bake on 2 workers ~{CORES_TARGET}x one (issue 9)",
                     f"whole bake {_x(whole[best])} ({best}; the machine's ceiling {_x(par.get('ceiling'))});"
                     f" form factors best {_x(max(ff.values()))}" + _quick(par), whole[best] >= CORES_TARGET))
+    if r.get("real"):
+        out += [(f"Real scenes: {t}", m + _quick(r["real"]), ok) for t, m, ok in real_scenes.targets(r["real"])]
     b = r["batch"]
     if b:
         out.append((f"Batch: {b['files']} demo-size files, `-j 2` ~{b['target']}x `-j 1` on {b['cores']} cores",
@@ -371,6 +377,38 @@ def dense_section(res, doc, img_dir):
     return L + [""]
 
 
+def real_section(res):
+    """bench/real_scenes.py: one row a scene of ../shared/scenes, failures as rows."""
+    L = ["## Real scenes" + _quick(res), "",
+         f"`bench/real_scenes.py` (`make bench-real`): the scenes of `../shared/scenes`, made by others (credits in its"
+         f" README.md), each lit as the module says (a sun and a sky where the file has no light, point lamps inside"
+         f" the closed `sauer_pandora`), baked by us with `BakeSettings()` through the CLI's `BakeJob` (one child"
+         f" process a bake, peak resident set with Blender) and once with patches twice as large (\"coarser\");"
+         f" Cycles COMBINED vertex bakes of the same scene at {res['cand_spp']} spp and, as the reference,"
+         f" {res['ref_spp']} spp (not 4,096: minutes per 64 samples on the big scenes on 2 cores). RMS at Cycles' face"
+         " corners matched by position and normal, zero-area faces, emitters and never-lit corners left out, the"
+         " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
+         " filled the cache). Failures (refused, crashed, timed out) are rows with their first error line."
+         + (f" The run took {res['seconds'] / 60:.0f} min." if res.get("seconds") else ""), ""]
+    L += real_scenes.table(res) + [""]
+    notes = []
+    for sc in res["scenes"]:
+        d, c = sc.get("defaults") or {}, sc.get("cycles") or {}
+        bits = [c.get("light") or d.get("light") or sc.get("light_kind", "")]
+        if not real_scenes.failed(d) and d:
+            bits.append(f"{d.get('compared', 0):,} of {c.get('corners', 0):,} corners compared")
+            if d.get("corners_unmatched"):
+                bits.append(f"{d['corners_unmatched']:,} not matched to a face of ours")
+            if d.get("vertices_nan"):
+                bits.append(f"**{d['vertices_nan']:,} of {d['vertices']:,} output vertices NaN**")
+        notes.append(f"- `{sc['name']}`: " + "; ".join(b for b in bits if b) + ".")
+    done = {sc["name"] for sc in res["scenes"]}
+    missing = [s.folder for s in real_scenes.SPECS if s.folder not in done]
+    if missing:
+        notes.append("- Not in this run: " + ", ".join(f"`{m}`" for m in missing) + ".")
+    return L + notes + [""]
+
+
 def parallel_section(res, doc, img_dir):
     L = ["## Both cores: one worker against two" + _quick(res), "",
          f"`bench/bench_parallel.py`: each case baked with 1 worker, 2 workers (forked processes where they pay) and"
@@ -447,6 +485,8 @@ def write(r, doc=DOC, img_dir=IMG_DIR):
         L += sve_section(r["sve"], doc, img_dir)
     if r["dense"]:
         L += dense_section(r["dense"], doc, img_dir)
+    if r.get("real"):
+        L += real_section(r["real"])
     if r["parallel"] and r["parallel"].get("cases"):
         L += parallel_section(r["parallel"], doc, img_dir)
     for key, section in (("relight", relight_section), ("curved", curved_section), ("batch", batch_section),

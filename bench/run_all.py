@@ -9,7 +9,8 @@ The benchmarks: form-factor speed (``bench_formfactors.py``), the batch speed-up
 -j 2 against -j 1), the stages on 1 and 2 workers (``bench_parallel.py``), the tessellation sweep
 (``bench_dense.py``), a dense room's relight (``bench_relight_dense.py``), Suzanne subdivided in the
 Cornell box (``bench_curved.py``), then speed against error (``speed_vs_error.py``, which gets the
-other arguments; ``--quick`` goes to every script). Exits non-zero when a script fails; targets
+other arguments; ``--quick`` goes to every script), then the real scenes of ../shared/scenes
+(``real_scenes.py``: skipped with one line where that folder is absent; ``--quick``: two small ones). Exits non-zero when a script fails; targets
 that do not hold are printed, not failed (they are measurements, not tests).
 """
 from __future__ import annotations
@@ -41,6 +42,7 @@ def main(argv):
     for name in BENCHES:
         rc |= run(os.path.join(HERE, name), quick)
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
+    rc |= run(os.path.join(HERE, "real_scenes.py"), quick)
     rc |= run(os.path.join(HERE, "report.py"), quick)
     print(f"\nmake bench: {time.perf_counter() - t:.0f} s", flush=True)
     return 1 if rc else 0
