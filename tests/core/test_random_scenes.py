@@ -172,6 +172,67 @@ def test_a_grid_split_per_face_is_lit_as_the_same_grid_welded(group_faces, trian
 # crashes found, kept
 
 
+@pytest.mark.parametrize("seed", [1016])
+def test_seeds_that_crashed_bake(seed):
+    """Dense-sweep seeds that crashed: 1016 (a room whose 6 x 6 floor has a 12 x 12 textured rug
+    lying on it) hit the contact cut's empty grid expansion, as the 100 x 100 floor below did."""
+    sc = scene(seed, budget=15000)
+    check(_bake(sc, BakeSettings()), sc)
+
+
+Q = [(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]
+
+
+def _lamp():
+    return quad([(0.3, 0.3, 1), (0.3, 0.7, 1), (0.7, 0.7, 1), (0.7, 0.3, 1)], (0, 0, 0), (5, 5, 5), name="lamp")
+
+
+def _with_corners(rho, name="textured"):
+    m = quad(Q, name=name)
+    return MeshInput(m.verts, m.face_offsets, m.face_indices, m.face_rho, m.face_emission, name, np.asarray(rho))
+
+
+ABSURD = {
+    "a zero-area face": lambda: [MeshInput.from_faces([(0, 0, 0), (1, 0, 0), (2, 0, 0)], [[0, 1, 2]], name="line"),
+                                 quad(Q, name="floor"), _lamp()],
+    "a vertex twice in a face": lambda: [MeshInput.from_faces(Q, [[0, 1, 1, 2, 3]], name="rep"), _lamp()],
+    "one point": lambda: [MeshInput.from_faces([(0, 0, 0)] * 4, [[0, 1, 2, 3]], name="point")],
+    "a mesh of no faces": lambda: [MeshInput.from_faces(Q, [], name="none"), _lamp()],
+    "a bow tie": lambda: [MeshInput.from_faces([(0, 0, 0), (1, 1, 0), (1, 0, 0), (0, 1, 0)], [[0, 1, 2, 3]],
+                                               name="bowtie"), _lamp()],
+    "a warped quad": lambda: [MeshInput.from_faces([(0, 0, 0), (1, 0, 0.8), (1, 1, 0), (0, 1, 0.8)], [[0, 1, 2, 3]],
+                                                   name="warp"), _lamp()],
+    "a face doubled": lambda: [MeshInput.from_faces(Q, [[0, 1, 2, 3], [0, 1, 2, 3]], name="doubled"), _lamp()],
+    "a face doubled and reversed": lambda: [MeshInput.from_faces(Q, [[0, 1, 2, 3], [0, 1, 2, 3], [3, 2, 1, 0]],
+                                                                 name="doubled"), _lamp()],
+    "a nanometre emitter alone": lambda: [MeshInput.from_faces([(0, 0, 0), (1e-9, 0, 0), (0, 1e-9, 0)], [[0, 1, 2]],
+                                                               emission=(1, 1, 1), name="tiny")],
+    "a face 1e8 away": lambda: [MeshInput.from_faces(np.array(Q) * 1e7 + 1e8, [[0, 1, 2, 3]], name="far"), _lamp()],
+    "an n-gon with a spike": lambda: [MeshInput.from_faces([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0.5, 0.5, 0), (1, 1, 0),
+                                                            (0, 1, 0)], [list(range(6))], name="spike"), _lamp()],
+    "corner_rho of the wrong shape": lambda: [_with_corners(np.full((3, 3), 0.5)), _lamp()],
+    "corner_rho of 2": lambda: [_with_corners(np.full((4, 3), 2.0)), _lamp()],
+    "corner_rho NaN": lambda: [_with_corners(np.full((4, 3), np.nan)), _lamp()],
+    "a mesh of no vertices": lambda: [MeshInput.from_faces(np.zeros((0, 3)), [], name="empty"), _lamp()],
+}
+SETTINGS_OWNS = pytest.mark.xfail(strict=True, raises=ValueError, reason="BakeSettings.resolved takes the min of "
+                                  "a mesh with no vertices (core/settings.py): issue 29")
+
+
+@pytest.mark.parametrize("name, patch_size", [
+    pytest.param(k, size, id=f"{k}-{'auto' if size else 'face'}",
+                 marks=SETTINGS_OWNS if (k, size) == ("a mesh of no vertices", "auto") else ())
+    for k in ABSURD for size in ("auto", 0.0)])
+def test_absurd_input_bakes_or_is_refused_in_one_line(name, patch_size):
+    """Degenerate, doubled, far, tiny or malformed input: a sound result or a RadiosityError,
+    never a raw exception. Found here: a doubled face (form_factors/drawn.py, IndexError) and
+    corner values of the wrong shape (output/corners.py, IndexError; now refused with the faces')."""
+    from tests.support.random_scenes import Scene
+
+    sc = Scene(ABSURD[name](), parts=[name])
+    check(_bake(sc, BakeSettings(patch_size=patch_size, element_size="auto" if patch_size else None)), sc)
+
+
 def test_a_textured_100_by_100_floor_under_a_block_bakes():
     """The crash that started issue 29: a room whose floor is a 100 x 100 grid with an image
     texture, a block standing on it, default settings. The output elements' contact cut matched
