@@ -156,8 +156,10 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     loops = {}
     ends = np.r_[0, np.flatnonzero(np.diff(cl)) + 1, cl.size]
     for s, e in zip(ends[:-1], ends[1:]):
+        if e - s < 3:                 # (no boundary edge at all: s = e = 0, a face doubled)
+            continue
         k_ = int(cl[s])
-        if k_ in broken or e - s < 3:
+        if k_ in broken:
             continue
         found = _loops(a[s:e].tolist(), b[s:e].tolist(), pos, normals[k_])
         if found is not None:

@@ -373,7 +373,7 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         dims = (i1 - i0 + 1)[ids]
         n = np.prod(dims, axis=1)
         own = np.repeat(ids, n)
-        off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+        off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)   # (no ids: empty)
         d = dims[np.repeat(np.arange(len(ids)), n)]
         g = i0[own] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
         return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own

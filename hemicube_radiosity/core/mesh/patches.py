@@ -219,7 +219,8 @@ def poly_geometry(verts, polys):
 
 
 def check_faces(mesh: MeshInput, verts, idx, sizes):
-    """Raise :class:`PatchError` naming the object when the faces are unusable.
+    """Raise :class:`PatchError` naming the object when the faces are unusable (or the values at
+    their corners, ``corner_rho`` / ``corner_emission``: one row a corner, as the faces' values).
 
     verts (V, 3) float64, idx (L,) int64 ``face_indices``, sizes (F,) int64 corners per face.
     """
@@ -232,3 +233,13 @@ def check_faces(mesh: MeshInput, verts, idx, sizes):
         raise PatchError(f"{mesh.name!r}: a face refers to a vertex that does not exist")
     if not np.all(np.isfinite(verts)):
         raise PatchError(f"{mesh.name!r}: vertex positions are not finite (NaN or infinity)")
+    for which in ("rho", "emission"):             # a texture's values at the corners, as the faces'
+        c = getattr(mesh, "corner_" + which)
+        if c is None:
+            continue
+        c = np.asarray(c, dtype=np.float64)
+        if c.shape != (idx.size, 3):
+            raise PatchError(f"{mesh.name!r}: corner_{which} must have shape ({idx.size}, 3), one row a face corner")
+        if not np.all(np.isfinite(c)) or np.any(c < 0) or (which == "rho" and np.any(c >= 1)):
+            raise PatchError(f"{mesh.name!r}: corner {which} must be finite and "
+                             + ("in [0, 1) in each band" if which == "rho" else ">= 0"))

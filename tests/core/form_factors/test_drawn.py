@@ -133,3 +133,17 @@ def test_collinear_border_points_are_left_out_on_both_sides_alike(n):
     from hemicube_radiosity.core.mesh.clusters import make_clusters
     d = draw_set(pieces, make_clusters(pieces, of))
     assert d.outlined.all() and len(d) == 4 and len(d.verts) == 6
+
+
+@pytest.mark.parametrize("faces", [[[0, 1, 2, 3], [0, 1, 2, 3]], [[0, 1, 2, 3], [0, 1, 2, 3], [3, 2, 1, 0]]])
+def test_a_face_modelled_twice_is_drawn_as_its_pieces(faces):
+    """A quad doubled (Blender's duplicate faces, the same vertices and winding) has no boundary
+    edge: every edge is used twice. It has no outline, so it is drawn as its pieces. Before, the
+    loop over each cluster's boundary edges read the first of none (an IndexError, found by
+    tests/core/test_random_scenes.py's absurd inputs with one patch per face)."""
+    from hemicube_radiosity.core.mesh.clusters import make_clusters
+
+    quad = MeshInput.from_faces([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], faces, name="doubled")
+    pieces = build_patches([quad], None)
+    d = draw_set(pieces, make_clusters(pieces, np.zeros(len(pieces), np.int64)))
+    assert not d.outlined.any() and len(d) == len(pieces)

@@ -246,3 +246,26 @@ def test_a_blocks_foot_on_a_dense_floor_reads_the_open_floor():
                              normals=normals[keep]) @ lum
         assert len(ours) >= 20
         assert abs(ours.mean() / ref.mean() - 1) < 0.06, name
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_overlapping_boxes_are_every_overlapping_pair(seed):
+    """contact._overlapping against every pair compared, with many small boxes against a few
+    large ones (a dense floor's elements against a block's sides: every large box covers more
+    than 64 grid cells, so no box of that set goes through the grid). Before, an empty set of
+    small boxes broke the grid's expansion (``np.repeat`` of (1,) by (0,)): a 100 x 100 textured
+    floor with a block standing on it crashed in the elements' cut."""
+    from hemicube_radiosity.core.mesh.contact import _overlapping
+
+    rng = np.random.default_rng(seed)
+    lo_a = rng.uniform(0, 4, (300, 3)) * [1, 1, 0]
+    hi_a = lo_a + rng.uniform(0.01, 0.04, (300, 3))
+    big = seed % 2 == 0                        # the other set: all large, or some of each
+    lo_b = rng.uniform(0, 3, (5, 3))
+    hi_b = lo_b + rng.uniform(0.5, 1.5, (5, 3)) * ([1, 1, 1] if big else rng.uniform(0.01, 1, (5, 1)))
+    for a, b, swap in (((lo_a, hi_a), (lo_b, hi_b), False), ((lo_b, hi_b), (lo_a, hi_a), True)):
+        i, j = _overlapping(a[0], a[1], b[0], b[1])
+        want = np.all((a[0][:, None] <= b[1][None]) & (a[1][:, None] >= b[0][None]), axis=2)
+        got = np.zeros_like(want)
+        got[i, j] = True
+        assert np.array_equal(got, want) and len(i) == want.sum(), swap

@@ -1,4 +1,5 @@
 """Patch builder: areas, normals, shared vertices, n-gons, errors."""
+import re
 from collections import Counter
 
 import numpy as np
@@ -317,3 +318,18 @@ def test_keeps_faces_whole_names_the_object_as_build_patches_does():
     bad = MeshInput.from_faces([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 5]], name="Broken")
     with pytest.raises(PatchError, match="'Broken'.*vertex that does not exist"):
         keeps_faces_whole([bad], 0.1)
+
+
+@pytest.mark.parametrize("corner, message", [
+    (np.full((3, 3), 0.5), "corner_rho must have shape (4, 3)"),
+    (np.full((4, 3), 1.0), "corner rho must be finite and in [0, 1)"),
+    (np.full((4, 3), np.nan), "corner rho must be finite"),
+])
+def test_corner_values_are_checked_as_the_faces_are(corner, message):
+    """A texture's values at the corners (MeshInput.corner_rho) of the wrong shape read past the
+    corners in the output stage (an IndexError in core/output/corners.py); out of range, they
+    lit vertices brighter than any source. They are refused with the faces' own checks."""
+    m = MeshInput.from_faces([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [[0, 1, 2, 3]], name="tex")
+    m.corner_rho = corner
+    with pytest.raises(PatchError, match=re.escape(f"'tex': {message}")):
+        build_patches([m], 0.5)
