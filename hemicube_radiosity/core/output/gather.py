@@ -46,7 +46,16 @@ def patch_parameters(patches: PatchSet):
     e2 = np.where(tri[:, None], c[:, 2] - c[:, 0], c[:, 3] - c[:, 0])
     a, b, d = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
     det = a * d - b * b
-    inv = np.stack([np.stack([d, -b], 1), np.stack([-b, a], 1)], 1) / det[:, None, None]
+    # a patch whose e1 and e2 are parallel (a quad with a straight angle at c0, a sliver of no
+    # area) has no inverse: its points are placed along the longer of the two edges instead
+    ok = det > 1e-12 * a * d
+    inv = np.stack([np.stack([d, -b], 1), np.stack([-b, a], 1)], 1) / np.where(ok, det, 1.0)[:, None, None]
+    if not ok.all():
+        bad = np.flatnonzero(~ok)
+        along = a[bad] >= d[bad]
+        inv[bad] = 0.0
+        inv[bad[along], 0, 0] = 1.0 / np.maximum(a[bad[along]], 1e-300)
+        inv[bad[~along], 1, 1] = 1.0 / np.maximum(d[bad[~along]], 1e-300)
     return c[:, 0], e1, e2, inv, tri
 
 
