@@ -143,23 +143,20 @@ def _floor_light(r):
     return {tuple(x): val for x, val in zip(pos, y)}
 
 
-GROUPING_BY_IDS = pytest.mark.xfail(strict=True, reason="grouping by vertex ids: issue 29")
-
-
-@pytest.mark.parametrize("group_faces, triangles", [pytest.param(True, False, marks=GROUPING_BY_IDS),
-                                                    pytest.param(True, True, marks=GROUPING_BY_IDS),
-                                                    (False, True)])
+@pytest.mark.parametrize("group_faces, triangles", [(True, False), (True, True), (False, True)])
 def test_a_grid_split_per_face_is_lit_as_the_same_grid_welded(group_faces, triangles):
     """A 16 x 16 floor in a lit room with a block standing on it, welded (smooth shading) and
     split per face (flat shading): the same faces, so the same light at every floor vertex
     (split copies averaged), within the gather's noise: 2% at the 95th percentile, 5% at most,
     of the floor's median. Measured without grouping: 0.7% / 2.4% (quads), 1.0% / 2.6%
-    (triangles); with grouping, whose clusters follow shared vertex ids (a split grid is not
-    grouped at all: 682 unknowns against 290), 3.8% / 10% and 5.1% / 10%."""
+    (triangles); with grouping, which connects faces through welded corner positions (when it
+    followed vertex ids a split grid was not grouped at all: 682 unknowns against 290, and
+    3.8% / 10% and 5.1% / 10% off)."""
     floor = grid((0, 0, 0), (2, 0, 0), (0, 2, 0), 16, 16, triangles=triangles, rho=(0.6, 0.5, 0.4), name="floor")
     s = BakeSettings(patch_size=0.5, element_size=0.25, group_faces=group_faces)
     welded = bake(_room(floor), s)
     split = bake(_room(split_per_face(floor)), s)
+    assert split.unknowns == welded.unknowns
     a, b = _floor_light(welded), _floor_light(split)
     assert a.keys() == b.keys()
     ya = np.array([a[k] for k in a])
@@ -215,14 +212,8 @@ ABSURD = {
     "corner_rho NaN": lambda: [_with_corners(np.full((4, 3), np.nan)), _lamp()],
     "a mesh of no vertices": lambda: [MeshInput.from_faces(np.zeros((0, 3)), [], name="empty"), _lamp()],
 }
-SETTINGS_OWNS = pytest.mark.xfail(strict=True, raises=ValueError, reason="BakeSettings.resolved takes the min of "
-                                  "a mesh with no vertices (core/settings.py): issue 29")
-
-
 @pytest.mark.parametrize("name, patch_size", [
-    pytest.param(k, size, id=f"{k}-{'auto' if size else 'face'}",
-                 marks=SETTINGS_OWNS if (k, size) == ("a mesh of no vertices", "auto") else ())
-    for k in ABSURD for size in ("auto", 0.0)])
+    pytest.param(k, size, id=f"{k}-{'auto' if size else 'face'}") for k in ABSURD for size in ("auto", 0.0)])
 def test_absurd_input_bakes_or_is_refused_in_one_line(name, patch_size):
     """Degenerate, doubled, far, tiny or malformed input: a sound result or a RadiosityError,
     never a raw exception. Found here: a doubled face (form_factors/drawn.py, IndexError) and

@@ -51,9 +51,11 @@ def fitted_detail(meshes, detail, patch, max_elements):
 
 
 def _boxes(meshes):
-    lo = np.array([np.min(m.verts, axis=0) for m in meshes], dtype=np.float64).reshape(-1, 3)
-    hi = np.array([np.max(m.verts, axis=0) for m in meshes], dtype=np.float64).reshape(-1, 3)
-    return lo, hi
+    """(M, 3) lower and upper corners of each mesh's bounding box (NaN for a mesh of no vertices)."""
+    box = [(np.min(m.verts, axis=0), np.max(m.verts, axis=0)) if len(m.verts) else (np.full(3, np.nan),) * 2
+           for m in meshes]
+    return (np.array([b[0] for b in box], dtype=np.float64).reshape(-1, 3),
+            np.array([b[1] for b in box], dtype=np.float64).reshape(-1, 3))
 
 
 def auto_sizes(meshes, per_diagonal):
@@ -61,9 +63,11 @@ def auto_sizes(meshes, per_diagonal):
     by ``per_diagonal`` (None for a scene of no extent), and (M,) float each mesh's factor on
     it (1, or a huge object's own diagonal / ``per_diagonal`` / size)."""
     meshes = [m for m in meshes]
-    if not meshes:
-        return None, np.zeros(0)
+    some = np.array([len(m.verts) > 0 for m in meshes], bool)
+    if not some.any():                          # nothing to measure: build_patches says why
+        return None, np.ones(len(meshes))
     lo, hi = _boxes(meshes)
+    lo[~some], hi[~some] = lo[some].min(axis=0), hi[some].max(axis=0)   # no extent of their own
     diag = np.linalg.norm(hi - lo, axis=1)
     faces = np.array([len(m.face_offsets) - 1 for m in meshes], dtype=np.float64)
     core = np.ones(len(meshes), bool)
