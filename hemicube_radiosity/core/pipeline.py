@@ -223,8 +223,9 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     settings = settings or BakeSettings()
     settings.validate()
     if meshes is not None:
-        if settings.patch_size == "auto":        # a ground plane around the scene: its own size
-            meshes = with_auto_scales(meshes, AUTO_PATCHES_PER_DIAGONAL)
+        if settings.patch_size:                  # a ground plane around the scene: its own size
+            meshes = with_auto_scales(meshes, AUTO_PATCHES_PER_DIAGONAL,
+                                      None if settings.patch_size == "auto" else float(settings.patch_size))
         auto_detail = settings.element_size == "auto"
         settings = settings.resolved(meshes)
         if auto_detail and settings.element_size:   # as fine as the elements' limit allows

@@ -10,7 +10,8 @@ the room one patch. Here an object is *huge* when its own diagonal is more than
 the scene, not beside it; an object of fewer than :data:`HUGE_FEW` faces always may be huge).
 Huge objects are left out of the extent, one at a time, largest
 first, and are cut at a size of their own: the same fraction of their own diagonal, never finer
-than the scene's (:attr:`.patches.MeshInput.size_scale`).
+than the scene's (:attr:`.patches.MeshInput.size_scale`), whether the scene's size is automatic
+or set by hand (a 32 m patch size set for a town left its 2.9 km terrain 900,000 detail elements).
 
 Units: world units.
 """
@@ -58,10 +59,11 @@ def _boxes(meshes):
             np.array([b[1] for b in box], dtype=np.float64).reshape(-1, 3))
 
 
-def auto_sizes(meshes, per_diagonal):
+def auto_sizes(meshes, per_diagonal, size=None):
     """(size, scales): the patch size, the diagonal of the scene without its huge objects divided
-    by ``per_diagonal`` (None for a scene of no extent), and (M,) float each mesh's factor on
-    it (1, or a huge object's own diagonal / ``per_diagonal`` / size)."""
+    by ``per_diagonal`` (None for a scene of no extent; ``size`` when given, a size set by hand),
+    and (M,) float each mesh's factor on it (1, or for a huge object its own diagonal /
+    ``per_diagonal`` / size where that is larger)."""
     meshes = [m for m in meshes]
     some = np.array([len(m.verts) > 0 for m in meshes], bool)
     if not some.any():                          # nothing to measure: build_patches says why
@@ -79,15 +81,17 @@ def auto_sizes(meshes, per_diagonal):
             core[i] = False
         else:
             break
-    size = float(np.linalg.norm(hi[core].max(axis=0) - lo[core].min(axis=0))) / per_diagonal or None
+    if size is None:
+        size = float(np.linalg.norm(hi[core].max(axis=0) - lo[core].min(axis=0))) / per_diagonal or None
     scales = np.ones(len(meshes))
     if size:
         scales[~core] = np.maximum(1.0, diag[~core] / per_diagonal / size)
     return size, scales
 
 
-def with_auto_scales(meshes, per_diagonal) -> list:
-    """``meshes`` with each huge object's ``size_scale`` set (:func:`auto_sizes`): copies sharing
-    the arrays; the others as they are."""
-    _, scales = auto_sizes(meshes, per_diagonal)
+def with_auto_scales(meshes, per_diagonal, size=None) -> list:
+    """``meshes`` with each huge object's ``size_scale`` set (:func:`auto_sizes`; ``size``: a
+    patch size set by hand, else the automatic one): copies sharing the arrays; the others as
+    they are."""
+    _, scales = auto_sizes(meshes, per_diagonal, size)
     return [m if s == 1.0 else replace(m, size_scale=float(s)) for m, s in zip(meshes, scales)]

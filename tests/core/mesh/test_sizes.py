@@ -68,3 +68,11 @@ def test_the_auto_detail_size_fits_the_elements_limit():
     assert auto < r.settings.element_size < r.settings.patch_size and len(r.elements) <= 20000
     with pytest.raises(PatchError, match="Max Details"):
         bake(scene, BakeSettings(refine_levels=0, resolution=16, max_elements=20000, element_size=auto))
+
+
+def test_a_patch_size_set_by_hand_leaves_a_huge_plane_its_own_size():
+    s = BakeSettings(patch_size=0.5, element_size=0.1, refine_levels=0, resolution=16)
+    r = bake(scenes.cornell_box() + [ground()], s)
+    plane = r.object_sizes(len(r.patches.object_names) - 1)
+    assert r.object_sizes(0) == (0.5, 0.1)
+    assert plane[0] == pytest.approx(220 * np.sqrt(2) / K, rel=1e-3) and plane[1] == pytest.approx(plane[0] / 5)
