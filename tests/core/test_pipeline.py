@@ -516,3 +516,15 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     for a in ("verts", "polys"):
         assert np.array_equal(getattr(r.elements, a), getattr(again.elements, a))
     assert np.array_equal(r.vertex_radiosity, again.vertex_radiosity)
+
+
+def test_a_scene_that_nothing_lights_says_so_and_bakes_black():
+    """No emitting face, no lamp, no world: the bake is black, and says why (a real file with no
+    light, or Lamps and World turned off, baked to black without a word)."""
+    dark = cornell_box(light_radiance=0.0)
+    r = bake(dark, BakeSettings(patch_size=0.7, refine_levels=0, resolution=12))
+    assert np.all(r.vertex_radiosity == 0)
+    assert any(n.startswith("nothing lights the scene") for n in r.notes)
+    lit = bake(cornell_box(), BakeSettings(patch_size=0.7, refine_levels=0, resolution=12))
+    assert not any(n.startswith("nothing lights the scene") for n in lit.notes)
+    assert lit.vertex_radiosity.max() > 0
