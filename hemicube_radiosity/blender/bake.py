@@ -241,9 +241,9 @@ def _per_object(r) -> dict:
     p = np.bincount(r.patches.owner, minlength=len(names))
     e = np.bincount(r.elements.owner, minlength=len(names))
     k = np.bincount(r.clusters.owner if r.clusters is not None else r.patches.owner, minlength=len(names))
+    sizes = [r.object_sizes(i) for i in range(len(names))]
     return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
-                "patch_size": r.object_sizes(i)[0], "detail_size": r.object_sizes(i)[1]}
-            for i, n in enumerate(names)}
+                "patch_size": sizes[i][0], "detail_size": sizes[i][1]} for i, n in enumerate(names)}
 
 
 def _jsonable(x):

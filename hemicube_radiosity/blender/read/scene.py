@@ -221,6 +221,28 @@ def material_ids(mats) -> np.ndarray:
     return np.array([zlib.crc32(m.name_full.encode()) if m is not None else 0 for m in mats], np.int64)
 
 
+def _in_world(obj, depsgraph, co, lv):
+    """(verts_w (V, 3) world positions, used (V,) bool vertices a face uses, M (4, 4) the world
+    matrix, flipped: M mirrors) of an object's vertices ``co`` (V, 3) used by the corners ``lv``;
+    :class:`ReadError` for positions or a transform that are not finite, or a zero scale. ``co``
+    is changed: unused vertices are set to 0 (a NaN there must not spread)."""
+    used = np.zeros(len(co), bool)
+    used[lv] = True
+    bad = np.flatnonzero(used & ~np.all(np.isfinite(co), axis=1))
+    if bad.size:
+        raise ReadError(f"'{obj.name}': {bad.size} vertex position(s) are not finite (NaN or "
+                        f"infinity), first vertex {int(bad[0])}: fix or delete them")
+    M = world_matrix(obj, depsgraph)
+    if not np.all(np.isfinite(M)):
+        raise ReadError(f"'{obj.name}': its transform is not finite (NaN or infinity in location, "
+                        "rotation or scale)")
+    co[~used] = 0.0      # loose vertices are not read; a NaN there must not spread
+    det = float(np.linalg.det(M[:3, :3]))
+    if abs(det) < 1e-300:
+        raise ReadError(f"'{obj.name}' has a zero scale; nothing to bake")
+    return co @ M[:3, :3].T + M[:3, 3], used, M, det < 0
+
+
 def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
     :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
@@ -240,22 +262,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         ob_eval.to_mesh_clear()
     if ps.size == 0:
         raise ReadError(f"'{obj.name}' has no faces" + _no_faces_why(obj))
-    used = np.zeros(len(co), bool)
-    used[lv] = True
-    bad = np.flatnonzero(used & ~np.all(np.isfinite(co), axis=1))
-    if bad.size:
-        raise ReadError(f"'{obj.name}': {bad.size} vertex position(s) are not finite (NaN or "
-                        f"infinity), first vertex {int(bad[0])}: fix or delete them")
-    M = world_matrix(obj, depsgraph)
-    if not np.all(np.isfinite(M)):
-        raise ReadError(f"'{obj.name}': its transform is not finite (NaN or infinity in location, "
-                        "rotation or scale)")
-    co[~used] = 0.0      # loose vertices are not read; a NaN there must not spread
-    verts_w = co @ M[:3, :3].T + M[:3, 3]
-    det = float(np.linalg.det(M[:3, :3]))
-    if abs(det) < 1e-300:
-        raise ReadError(f"'{obj.name}' has a zero scale; nothing to bake")
-    flipped = det < 0
+    verts_w, used, M, flipped = _in_world(obj, depsgraph, co, lv)
     mi = np.clip(mi, 0, len(mats) - 1)
     normals, areas = _newell(verts_w, lv, ps, pt)
     span = np.ptp(verts_w[used], axis=0)

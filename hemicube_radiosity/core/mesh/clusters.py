@@ -99,9 +99,9 @@ class Clusters:
 
 
 def _small(pieces: PatchSet, size) -> np.ndarray:
-    # ``size``: a number, or (P,) each piece's (its object's: :mod:`.sizes`)
     """(P,) pieces that are whole input faces (not cut to the patch size) or smaller than a third
-    of a patch (cut from a face only a little larger than a patch): those are grouped. Pieces cut
+    of a patch (cut from a face only a little larger than a patch): those are grouped. ``size``:
+    a number, or (P,) each piece's (its object's: :mod:`.sizes`). Pieces cut
     from a coarse face already have about the patch's area (a quad more than a quarter of it on
     each side, a triangle half of that) and stay alone."""
     face = pieces.owner.astype(np.int64) * (1 << 32) + pieces.source_face

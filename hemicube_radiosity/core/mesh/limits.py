@@ -64,17 +64,23 @@ def _spans(length, size):
     return np.maximum(1.0, np.ceil(length / size - 1e-6))
 
 
+def _grids(mesh, size):
+    """Per face of ``mesh`` at ``size`` times its ``size_scale``: (areas (F,), n (F,) the cells of
+    its grid (an n-gon: the square of its longest side's count), corners (F,), that size, sides
+    (F, 2) of :func:`face_spans`)."""
+    areas, sides, k = face_spans(mesh)
+    s = size * mesh.size_scale
+    return areas, _spans(sides[:, 0], s) * _spans(sides[:, 1], s), k, s, sides
+
+
 def pieces_at_least(meshes, size) -> float:
     """How many pieces :func:`.subdivide.build_patches` makes at ``size`` at least (None or 0:
     the faces, an n-gon at least one)."""
+    if not size:
+        return float(sum(len(m.face_offsets) - 1 for m in meshes))
     total = 0.0
     for m in meshes:
-        areas, sides, k = face_spans(m)
-        if not size:
-            total += len(k)
-            continue
-        s = size * m.size_scale
-        n = _spans(sides[:, 0], s) * _spans(sides[:, 1], s)
+        areas, n, k, s, sides = _grids(m, size)
         big = k > 4                          # an n-gon: split first, into pieces of its area
         n[big] = np.maximum(areas[big] / s ** 2, _spans(sides[big, 0], s))
         total += float(n.sum())
@@ -88,9 +94,7 @@ def patches_about(meshes, size, group=True) -> float:
         return pieces_at_least(meshes, size)
     total = 0.0
     for m in meshes:
-        areas, sides, k = face_spans(m)
-        s = size * m.size_scale
-        n = _spans(sides[:, 0], s) * _spans(sides[:, 1], s)
+        areas, n, k, s, _ = _grids(m, size)
         n[k > 4] = np.maximum(1.0, areas[k > 4] / s ** 2)
         alone = (n > 1) & (areas / n >= s * s / 3)
         total += float(n[alone].sum()) + max(1.0, float(areas[~alone].sum()) / s ** 2)

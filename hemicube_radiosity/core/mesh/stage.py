@@ -63,14 +63,18 @@ def cut_patches(meshes, s, faces=None):
 def form_factor_gb(n, settings) -> float:
     """Upper bound of F's memory for ``n`` patches in GB: a row holds at most one entry per
     hemi-cube pixel (or ray) and per patch, 8 bytes each (float32 value, int32 column)."""
-    per_row = settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
-    return n * min(n, per_row) * 8 / 2 ** 30
+    return n * min(n, _row_entries(settings)) * 8 / 2 ** 30
+
+
+def _row_entries(settings) -> int:
+    """The most entries a row of F holds: a hemi-cube's pixels, or the stochastic rays."""
+    return settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
 
 
 def patch_limit(settings) -> int:
     """The most patches a bake takes: ``max_patches``, and no more than the form factors'
     memory budget holds (:func:`form_factor_gb`)."""
-    per_row = settings.rays_per_patch if settings.method == "embree_stochastic" else 3 * settings.resolution ** 2
+    per_row = _row_entries(settings)
     entries = settings.max_memory_gb * 2 ** 30 / 8
     by_memory = math.isqrt(int(entries)) if entries <= per_row ** 2 else int(entries // per_row)
     return int(min(settings.max_patches, by_memory))

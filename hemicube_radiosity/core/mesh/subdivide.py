@@ -131,9 +131,8 @@ def keeps_faces_whole(meshes, patch_size) -> bool:
     them). Raises :class:`PatchError` as :func:`build_patches` does for faces that are unusable."""
     if patch_size is None or patch_size <= 0:
         return True
-    base = patch_size
     for mesh in [meshes] if isinstance(meshes, MeshInput) else meshes:
-        patch_size = base * mesh.size_scale
+        size = patch_size * mesh.size_scale
         verts = np.asarray(mesh.verts, dtype=np.float64)
         off = np.asarray(mesh.face_offsets, dtype=np.int64)
         idx = np.asarray(mesh.face_indices, dtype=np.int64)
@@ -145,11 +144,11 @@ def keeps_faces_whole(meshes, patch_size) -> bool:
         nxt[off[1:] - 1] = off[:-1]
         a, b = idx, idx[nxt]
         lo, hi = np.minimum(a, b), np.maximum(a, b)
-        if not np.any(sizes > 4) and np.all(_segment_counts(verts[lo], verts[hi], patch_size) == 1):
+        if not np.any(sizes > 4) and np.all(_segment_counts(verts[lo], verts[hi], size) == 1):
             continue
         # else cut unless only faces grouped whole use the longer edges (the n-gons split first)
         v, polys, _ = to_tris_and_quads(mesh)
-        if np.any(_edge_segments(v, polys, patch_size)[3] > 1):
+        if np.any(_edge_segments(v, polys, size)[3] > 1):
             return False
     return True
 
