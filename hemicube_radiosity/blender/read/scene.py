@@ -37,6 +37,7 @@ import numpy as np
 from ...core.mesh.patches import MeshInput
 from ...core.runtime.errors import RadiosityError
 from . import shading
+from .face_emission import face_means
 from .materials import corner_materials
 from .visibility import render_notes, world_matrix
 
@@ -284,6 +285,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     notes += [s for s in mat_notes if s not in notes]
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
+    em = face_means(shaded, obj.name, em, corner_loop, offsets, mats, mi)   # emission over the face
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi])

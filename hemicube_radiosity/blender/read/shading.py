@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .face_emission import sample_faces
 from .materials import follow, uses_nodes
 from .visibility import world_matrix
 
@@ -77,11 +78,17 @@ class Shaded:
     corners:   object name -> (rho (nloops, 3), emission (nloops, 3)) in evaluated-mesh loop order
     failed:    why Cycles could not be asked (the reader's own values are used), or None
     seconds:   time of the Cycles bake calls
+    face_emission: object name -> (nloops, 3) the mean emission over the face of each loop's
+               polygon (:mod:`.face_emission`), for objects with a material in ``sampled``
+    sampled:   name_full of the 'corners' materials that may emit (their faces' emission is
+               their mean over the face, not their corners')
     """
 
     kinds: dict = field(default_factory=dict)
     materials: dict = field(default_factory=dict)
     corners: dict = field(default_factory=dict)
+    face_emission: dict = field(default_factory=dict)
+    sampled: set = field(default_factory=set)
     failed: str | None = None
     seconds: float = 0.0
 
@@ -518,13 +525,16 @@ def _remove(scene, made_obs, made_meshes):
     bpy.data.scenes.remove(scene)
 
 
-def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None):
+def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sampled=()):
     """Bake albedo and emission of ``objects`` (original mesh objects) at every corner of their
     evaluated meshes, and of the ``constants`` materials on a quad each, in one temporary scene.
     ``emit`` False: no material can emit, the EMIT bake is skipped (zeros). ``stand_ins``:
-    {material name_full: the material baked in its place}.
+    {material name_full: the material baked in its place}. ``sampled``: names of the materials
+    (as baked: stand-ins by their own name) whose objects also get their faces' mean emission
+    (:func:`.face_emission.sample_faces`).
 
-    Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds).
+    Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds,
+    {object name: (L, 3) each loop's face mean emission}).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
     """
     import bpy
@@ -546,16 +556,28 @@ def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None):
             scene.collection.objects.link(made_obs[-1][1])
             runs.append(_Run(made_obs[-1][1]))
         if not runs:
-            return {}, {}, 0.0
+            return {}, {}, 0.0, {}
         obs = [r.ob for r in runs]
         _prepare_bake(scene, obs)
         t = time.perf_counter()
         rho = _bake(scene, obs, "DIFFUSE", {"COLOR"})
         em = _bake(scene, obs, "EMIT", set()) if emit else [np.zeros_like(r) for r in rho]
+        means = sample_faces(scene, runs, set(sampled), _bake, _prepare_bake, made_obs, made_meshes,
+                             ATTRIBUTE) if emit and sampled else {}
         seconds = time.perf_counter() - t
-        return (*_split_results(runs, rho, em, constants), seconds)
+        loops = [_per_loop(runs[i].ob.data, m) for i, m in means.items()]
+        face_em = _split_results([runs[i] for i in means], loops, loops, [])[0]
+        return (*_split_results(runs, rho, em, constants), seconds,
+                {name: v[0] for name, v in face_em.items()})
     finally:
         _remove(scene, made_obs, made_meshes)
+
+
+def _per_loop(me, per_face):
+    """(nloops, 3) each loop of mesh ``me`` given its polygon's row of ``per_face``."""
+    pt = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("loop_total", pt)
+    return per_face[np.repeat(np.arange(pt.size), pt)]
 
 
 def _matrix(M):
@@ -570,7 +592,7 @@ def shade(objects, depsgraph) -> Shaded:
     import bpy
 
     out = Shaded()
-    need, constants, emit, stand_ins = [], {}, False, {}
+    need, constants, emit, stand_ins, sampled = [], {}, False, {}, set()
     try:
         for obj in objects:
             if obj.type != "MESH":
@@ -592,8 +614,12 @@ def shade(objects, depsgraph) -> Shaded:
                     else:
                         out.kinds[m.name_full] = classify(m)
                 kind = out.kinds[m.name_full][0]
-                emit |= kind != "plain" and may_emit(_stand_in_for(m, stand_ins))
+                emits = kind != "plain" and may_emit(_stand_in_for(m, stand_ins))
+                emit |= emits
                 corners |= kind == "corners"
+                if kind == "corners" and emits:
+                    out.sampled.add(m.name_full)
+                    sampled.add(_stand_in_for(m, stand_ins).name_full)
                 if kind == "constant":
                     constants[m.name_full] = m
             if corners:
@@ -601,8 +627,8 @@ def shade(objects, depsgraph) -> Shaded:
         if not need and not constants:
             return out
         try:
-            out.corners, out.materials, out.seconds = evaluate(need, depsgraph, constants.values(), emit,
-                                                               stand_ins)
+            out.corners, out.materials, out.seconds, out.face_emission = evaluate(
+                need, depsgraph, constants.values(), emit, stand_ins, sampled)
         except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
             out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
         return out
