@@ -18,6 +18,8 @@ A field's ``metadata`` (see :func:`setting`):
                     ``auto_size`` switch, with ``manual`` as the length it shows when that is off.
     cli             the CLI flag when it is not ``--field-name`` ("--no-lights" for a switch that
                     is on by default).
+    off             for a switch that is on by default: what its CLI flag (which turns it off)
+                    does, as its own sentence; ``help`` says what the switch does when on.
 """
 from __future__ import annotations
 
@@ -102,10 +104,14 @@ class BakeSettings:
     # -- the top of the panel
     output_mode: str = setting("copy", "Output", "Where the result goes", "main", choices=OUTPUT_MODES)
     use_lights: bool = setting(True, "Lamps and World", "Light objects and the world's background "
-                               "light the scene, in Cycles' units", "main", cli="--no-lights")
+                               "light the scene, in Cycles' units", "main", cli="--no-lights",
+                               off="Ignore light objects and the world: only emissive surfaces "
+                               "light the scene")
     include_others: bool = setting(True, "Other Visible Meshes", "Visible meshes that are not "
                                    "selected take part as occluders and emitters (they get no "
-                                   "result)", "main", cli="--no-others")
+                                   "result)", "main", cli="--no-others",
+                                   off="Only the objects baked take part: other visible meshes "
+                                   "neither occlude nor emit")
     # -- patches
     patch_size: float | str | None = setting(
         "auto", "Patch Size", "Target edge length of a radiosity patch; 0 keeps every face as one "
@@ -120,7 +126,9 @@ class BakeSettings:
                                 "dense mesh) are grouped into patches of about the patch size, so "
                                 "the solve follows how the light varies, not how finely the mesh "
                                 "is modelled; direct light and the output stay on every face",
-                                "patches", cli="--no-group-faces")
+                                "patches", cli="--no-group-faces",
+                                off="Keep every face as its own patch, however small (slow on a "
+                                "dense mesh)")
     group_angle: float = setting(30.0, "Grouping Angle", "Faces whose normals differ by more "
                                  "than this many degrees are not grouped into one patch",
                                  "patches", min=1.0, max=90.0)
@@ -163,7 +171,9 @@ class BakeSettings:
                                        "sides, as Cycles' Emission shader does (a lamp panel just "
                                        "under a ceiling lights the ceiling too); off: the front "
                                        "only, the paper's model. Needs exact direct light",
-                                       "light", cli="--one-sided-emission")
+                                       "light", cli="--one-sided-emission",
+                                       off="Emissive faces light their front only (the paper's "
+                                       "model)")
     patch_light_points: int = setting(2, "Light Points per Patch", "Direct light for the solve "
                                       "is averaged over n x n points of each patch (1: its centre "
                                       "only, the paper's way; more: a patch next to a bright lamp "

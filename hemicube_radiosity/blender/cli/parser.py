@@ -66,15 +66,21 @@ def setting_flag(s):
 
 
 def add_setting_options(p):
-    """One option per setting of the core schema, with its default, choices and help."""
+    """One option per setting of the core schema, with its default, choices and help. A switch
+    that is on by default gets a flag that turns it off, helped by the schema's ``off`` sentence
+    (what turning it off does), not by the switch's own; a setting whose default is nothing
+    (None, '') says no default."""
     for s in schema():
         flag = setting_flag(s)
-        help = s.help.replace("%", "%%")
         if s.type is bool:
+            help = (s.meta["off"] if s.default else s.help).replace("%", "%%")
             action = "store_false" if s.default else "store_true"
             p.add_argument(flag, dest=s.name, action=action, default=s.default, help=help)
             continue
-        kw = dict(dest=s.name, default=s.default, help=f"{help} (default %(default)s)")
+        help = s.help.replace("%", "%%")
+        if s.default not in (None, ""):
+            help += " (default %(default)s)"
+        kw = dict(dest=s.name, default=s.default, help=help)
         if s.choices is not None:
             kw.update(choices=s.values, type=str.lower)
         elif s.meta.get("size"):
