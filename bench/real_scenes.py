@@ -415,7 +415,8 @@ def ours_child(name, corners_npz, out_npz, settings_json):
                converged=bool(r.solution.converged), nnz=int(r.form_factors.nnz),
                resolved={k: getattr(r.settings, k) for k in ("patch_size", "element_size", "resolution", "method")},
                triangles=int(sum(np.sum(np.diff(m.face_offsets) - 2) for m in job.scene_input.meshes)),
-               notes=list(job.notes)[:12], n_notes=len(job.notes))
+               warnings=list(job.messages().warnings), notes=list(job.messages().notes),
+               n_notes=len(job.notes))
     if corners_npz and os.path.exists(corners_npz):
         t = time.perf_counter()
         with np.load(corners_npz) as z:

@@ -18,6 +18,7 @@ import bpy
 from ..core.runtime.cache import FormFactorCache
 from ..core.runtime.errors import RadiosityError
 from ..core.runtime.forecast import SAID as FORECAST_SAID
+from ..core.runtime.notes import grouped
 from ..core.pipeline import BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
 from .read import scene as read
@@ -190,21 +191,34 @@ class BakeJob:
                 progress.finish()
         return self.written
 
-    def summary(self):
+    def messages(self):
+        """The notes as a person reads them (:func:`core.runtime.notes.grouped`): warnings
+        first, one line per kind naming the objects, materials or lights it concerns."""
+        return grouped(self.notes)
+
+    def counts(self) -> dict:
+        """What the bake solved and wrote: ``faces`` of the meshes read (baked and others),
+        ``patches_solved`` (the unknowns: grouped faces count once), ``pieces`` (what was cut
+        and drawn), ``output_vertices`` (the output mesh's vertices, whose colours are written)."""
         r = self.result
-        detail = "" if r.elements is r.patches else f" ({len(r.elements)} output elements)"
+        return {"faces": int(sum(m.face_offsets.size - 1 for m in self.scene_input.meshes)),
+                "patches_solved": int(r.unknowns), "pieces": int(len(r.patches)),
+                "output_vertices": int(len(r.elements.verts))}
+
+    def summary(self):
+        r, c = self.result, self.counts()
         estimate = "" if r.error_estimate is None else f", {r.error_estimate.describe()}"
-        grouped = "" if r.clusters is None else f" (grouped from {len(r.patches)} pieces)"
-        return (f"Radiosity: {r.unknowns} patches solved{grouped}{detail}, {r.form_factors.nnz} form factors "
-                f"({r.form_factor_source}), {r.solution.iterations} iterations, residual "
-                f"{r.solution.residual:.1e}, {r.timings['total']:.1f} s{estimate}")
+        return (f"Radiosity: {c['patches_solved']:,} patches solved from {c['faces']:,} faces, "
+                f"{c['output_vertices']:,} output vertices{estimate}; {r.solution.iterations} "
+                f"iterations, residual {r.solution.residual:.1e}, {r.timings['total']:.1f} s")
 
     def report(self, **extra) -> dict:
         """Everything a pipeline wants to know about the bake, JSON-ready: the settings as used
         ('auto' sizes in scene units), every stage's time, counts (also per object), convergence,
         energy balance, the estimated error (with ``estimate_error``, else None), objects, notes,
-        plus ``extra``."""
-        r = self.result
+        plus ``extra``. ``warnings`` and ``notes`` are the grouped lines (:meth:`messages`),
+        ``note_lines`` every line as each reader and stage said it."""
+        r, messages = self.result, self.messages()
         rep = {
             "settings": dataclasses.asdict(r.settings),
             "timings": {k: float(v) for k, v in self.timings.items()},
@@ -223,14 +237,18 @@ class BakeJob:
             "objects": [o.name for o in self.scene_input.objects if o.bake],
             "occluders": [o.name for o in self.scene_input.objects if not o.bake],
             "written": [o.name for o in self.written],
-            "notes": list(self.notes),
+            **self.counts(),
+            "warnings": list(messages.warnings),
+            "notes": list(messages.notes),
+            "note_lines": [str(n) for n in self.notes],
         }
         rep.update(extra)
         return rep
 
 
 def _per_object(r) -> dict:
-    """{object name: {"patches": n, "elements": m, "solved": k, "patch_size": s, "detail_size": d}}:
+    """{object name: {"patches": n, "elements": m, "solved": k, "vertices": v, "patch_size": s,
+    "detail_size": d}}:
     how finely each object was cut (after refinement where the light changes abruptly), solved
     (the patches its grouped faces make, each counted with the object of its first face) and
     written, and the sizes it was cut at (an object far larger than the scene gets its own:
@@ -241,9 +259,15 @@ def _per_object(r) -> dict:
     p = np.bincount(r.patches.owner, minlength=len(names))
     e = np.bincount(r.elements.owner, minlength=len(names))
     k = np.bincount(r.clusters.owner if r.clusters is not None else r.patches.owner, minlength=len(names))
+    polys = r.elements.polys
+    vert_owner = np.full(len(r.elements.verts), -1, np.int64)
+    corner = polys >= 0
+    vert_owner[polys[corner]] = np.broadcast_to(r.elements.owner[:, None], polys.shape)[corner]
+    v = np.bincount(vert_owner[vert_owner >= 0], minlength=len(names))
     sizes = [r.object_sizes(i) for i in range(len(names))]
     return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
-                "patch_size": sizes[i][0], "detail_size": sizes[i][1]} for i, n in enumerate(names)}
+                "vertices": int(v[i]), "patch_size": sizes[i][0], "detail_size": sizes[i][1]}
+            for i, n in enumerate(names)}
 
 
 def _jsonable(x):

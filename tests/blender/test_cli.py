@@ -269,6 +269,15 @@ def test_demo_command_writes_glb_and_png(addon, tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and struct.unpack(">II", data[16:24]) == (48, 48)
     rep = json.load(open(tmp_path / "cornell_report.json"))
     assert rep["timings"]["render"] > 0 and rep["patches"] > 50
+    # the demo says no note and no warning: one summary line with what was solved and written
+    assert " note: " not in out and " warning: " not in out, out
+    assert rep["warnings"] == [] and rep["notes"] == []
+    # the Cornell box: 5 walls, the light and two blocks of 5 faces
+    assert rep["faces"] == 16 and rep["patches_solved"] == rep["solved"] > 50
+    assert rep["output_vertices"] == sum(v["vertices"] for v in rep["per_object"].values())
+    said = [ln for ln in out.splitlines() if "patches solved" in ln]
+    assert said == [f"radiosity: Radiosity: {rep['patches_solved']:,} patches solved from 16 faces, "
+                    f"{rep['output_vertices']:,} output vertices; " + said[0].split("; ", 1)[1]], out
 
 
 @pytest.mark.parametrize("gather", ["0", "64"])

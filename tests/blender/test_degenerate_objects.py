@@ -128,7 +128,7 @@ def test_broken_occluder_does_not_stop_the_bake(addon, empty_scene):
     assert np.all(np.isfinite(job.result.solution.B))
 
 
-def test_cli_bakes_the_rest_and_prints_one_note_per_object(addon, empty_scene, tmp_path):
+def test_cli_bakes_the_rest_and_prints_one_warning_per_object(addon, empty_scene, tmp_path):
     bpy = empty_scene
     lit_floor(bpy)
     broken_objects(bpy)
@@ -138,8 +138,11 @@ def test_cli_bakes_the_rest_and_prints_one_note_per_object(addon, empty_scene, t
     rc = sub(addon, "blender.cli.main").main(["bake", src, "-o", str(tmp_path / "b.json"), *CLI_BAKE],
                                              in_blender=True, out=out, err=err)
     assert rc == 0, err.getvalue()
-    notes = [ln for ln in out.getvalue().splitlines() if "note:" in ln and "left out" in ln]
-    assert sorted(notes) == sorted(f"radiosity: note: {w}" for w in WHY.values()), out.getvalue()
+    said = [ln for ln in out.getvalue().splitlines() if "left out" in ln and ": read: " not in ln]
+    # an object left out changes the result: a warning each, before any note
+    assert sorted(said) == sorted(f"radiosity: warning: {w}" for w in WHY.values()), out.getvalue()
+    lines = out.getvalue().splitlines()
+    assert max(lines.index(s) for s in said) < min(i for i, ln in enumerate(lines) if ": note: " in ln)
     # the read's own line, before the stages
     assert "radiosity: read: 2 object(s) to bake (3 left out), 0 other(s), 2 faces (" in out.getvalue()
     assert (tmp_path / "b.json").exists()

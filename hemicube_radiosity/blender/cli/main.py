@@ -117,8 +117,8 @@ def _bake_and_write(job, args, outputs, out, t_start, after_write=None, **extra)
     if args.report:
         written[args.report] = export(args.report, job, job.report(outputs=list(written.values()), **extra))
     if not args.quiet:
-        for line in job.notes:
-            print(f"radiosity: note: {line}", file=out)
+        for level, line in job.messages().lines():
+            print(f"radiosity: {level}: {line}", file=out)
         for path in written.values():
             print(f"radiosity: wrote {path}", file=out)
         print(f"radiosity: {job.summary()}", file=out)

@@ -43,6 +43,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.light.lamps import AreaLight, PointLight, SpotLight, SunLight
+from ...core.runtime.notes import warning
 from .materials import follow, rgb
 from .visibility import is_render_visible, render_visible_objects, unevaluated_note, world_matrix
 
@@ -79,7 +80,7 @@ def _light_node_factor(data, notes, what):
     if node is None:
         return np.zeros(3)
     if node.type != "EMISSION":
-        notes.append(f"{what}: light nodes other than Emission ('{node.name}'); used strength 1")
+        notes.append(warning(f"light nodes other than Emission ('{node.name}'); used strength 1", what))
         return np.ones(3)
     return (_input_value(node, "Color", notes, what, np.ones(3))
             * _input_value(node, "Strength", notes, what, 1.0))
@@ -105,7 +106,7 @@ def light_from_object(ob, matrix_world, notes):
     color = color * _light_node_factor(data, notes, what)
     energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))   # exposure: 4.5 on
     if energy < 0 or np.any(color < 0):
-        notes.append(f"{what}: negative power is not supported; left out")
+        notes.append(warning("negative power is not supported; left out", what))
         return None
     if energy == 0 or not np.any(color > 0):
         return None
@@ -136,7 +137,7 @@ def light_from_object(ob, matrix_world, notes):
         if not getattr(data, "normalize", True):        # Blender 4.5 on
             light.power_w = energy * light.area          # Cycles: radiance P / pi, not P / (pi A)
         return light
-    notes.append(f"{what}: type {t} not supported; left out")
+    notes.append(warning(f"type {t} not supported; left out", what))
     return None
 
 
@@ -162,13 +163,14 @@ def _world_color(node, notes):
     src, _ = follow(cs)
     if src is not None and src.type == "TEX_ENVIRONMENT" and src.image is not None:
         c = _image_mean(src.image, src.projection)
-        notes.append(f"world: environment texture '{src.image.name}' replaced by its average colour "
-                     f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is modelled")
+        notes.append(warning(f"environment texture '{src.image.name}' replaced by its average colour "
+                             f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is "
+                             "modelled", "world"))
     elif src is not None and src.type not in ("RGB",):
         c = rgb(cs.default_value)
-        notes.append(f"world: colour of '{node.name}' comes from '{src.name}' ({src.type}), which is not "
-                     f"read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) as a "
-                     "constant sky")
+        notes.append(warning(f"colour of '{node.name}' comes from '{src.name}' ({src.type}), which "
+                             f"is not read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, "
+                             f"{c[2]:.3g}) as a constant sky", "world"))
     else:
         c = _input_value(node, "Color", notes, "world", np.zeros(3))
     return np.asarray(c, float) * float(strength)
@@ -190,7 +192,8 @@ def _world_shader(node, notes, depth=0):
             return parts[0] + parts[1]
         fac = float(np.clip(_input_value(node, "Fac", notes, "world", 0.5), 0.0, 1.0))
         return (1 - fac) * parts[0] + fac * parts[1]
-    notes.append(f"world: shader '{node.name}' ({node.type}) is not a Background; it gives no sky light here")
+    notes.append(warning(f"shader '{node.name}' ({node.type}) is not a Background; it gives no sky "
+                         "light here", "world"))
     return np.zeros(3)
 
 

@@ -21,9 +21,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...core.runtime.notes import Note, note, warning
+
 __all__ = ["RHO_MAX", "rgb", "follow", "uses_nodes", "material_rho_emission", "corner_materials"]
 
 RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
+# Cycles' diffuse reflectance this far below a material's colour is worth a note (light its
+# metallic, transmission, specular or coat reflects is not baked); Blender's default Principled
+# BSDF (specular IOR level 0.5, IOR 1.5) keeps 96.3% and says nothing
+UNBAKED_SHARE = 0.10
 DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 
@@ -202,7 +208,8 @@ def material_rho_emission(mat):
                 else:
                     sub = []
                     rho, em = _shader(node, sock, mat, sub)
-                    notes += [f"material '{mat.name}': {s}" for s in sub]
+                    notes += [note(f"material '{mat.name}'", s, warning="viewport colour" in s)
+                              for s in sub]
     rho = np.asarray(rho, float)
     em = np.asarray(em, float)
     where = f" in '{mat.name}'" if mat is not None else ""
@@ -216,10 +223,9 @@ def material_rho_emission(mat):
         notes.append(f"negative emission {tuple(np.round(em, 3))} taken as no light"
                      + (f" in '{mat.name}'" if mat is not None else ""))
         em = np.maximum(em, 0.0)
-    if np.any(rho > RHO_MAX) or np.any(rho < 0):
-        notes.append(f"reflectivity {tuple(np.round(rho, 3))} clipped to [0, {RHO_MAX}]"
-                     + (f" in '{mat.name}'" if mat is not None else ""))
-        rho = np.clip(rho, 0.0, RHO_MAX)
+    if np.any(rho > 1.0 + 1e-6) or np.any(rho < 0):
+        notes.append(_clipped(f"material '{mat.name}'" if mat is not None else None, rho))
+    rho = np.clip(rho, 0.0, RHO_MAX)
     return rho, em, notes
 
 
@@ -251,15 +257,15 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
         elif kind == "constant" and m.original.name_full in shaded.materials:
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
             c_rho, c_em = shaded.materials[m.original.name_full]
-            n += [f"{label}: {w}" for w in why]
-            if np.any(np.abs(c_rho - rho) > 0.005 * np.maximum(rho, 1e-3)):
-                n.append(f"{label}: diffuse reflectance {_fmt(c_rho)} as Cycles evaluates it (its "
-                         f"colour {_fmt(rho)}; the specular layer, metallic or transmission reflect "
-                         "the rest, which is not baked)")
+            n += [_of(label, w) for w in why]
+            if np.any(rho - c_rho > UNBAKED_SHARE * np.maximum(rho, 1e-3)):
+                n.append(note(label, "metallic, transmission or a specular or coat layer reflect "
+                              "light this diffuse bake leaves out (10% of the colour or more; "
+                              "Cycles' diffuse reflectance is baked)"))
             rho, em = _clean(c_rho, c_em, label, n)
         elif kind == "corners" and baked is not None:
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
-            n += [f"{label}: {w}, evaluated by Cycles at the corners" for w in why]
+            n += _textured_notes(label, why)
             r, e = _clean(baked[0][corner_loop[sel]], baked[1][corner_loop[sel]], label, n)
             corner_rho[sel], corner_em[sel] = r, e
             if k in used:
@@ -271,6 +277,31 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
         if k in used:
             notes += [s for s in n if s not in notes]
     return corner_rho, corner_em, notes
+
+
+def _of(label, line):
+    """``line`` said of the material ``label``, unless it has its own subject (an image)."""
+    return line if isinstance(line, Note) and line.subject is not None else note(label, line)
+
+
+def _textured_notes(label, why):
+    """What a material that Cycles evaluates at the corners says: one note of one kind for its
+    textures (so materials group into one line), a warning for an Alpha that is wired (it cuts
+    holes in Cycles; here the surface is opaque), and its other lines as they are."""
+    out, textured = [], []
+    for w in why:
+        if "'Alpha' from" in w:
+            out.append(warning("Alpha is not transparency here: the surface is opaque where "
+                               "Cycles lets light through", label, detail=w))
+        elif " from " in w and not w.startswith("'") and not isinstance(w, Note):
+            textured.append(w)
+        else:
+            out.append(_of(label, w))
+    if textured:
+        out.insert(0, note(label, "colour evaluated by Cycles at each output corner; texture "
+                                  "detail finer than the corners is averaged",
+                           detail="; ".join(textured)))
+    return out
 
 
 def _fmt(c):
@@ -291,7 +322,15 @@ def _clean(rho, em, label, notes):
             notes.append(f"{label}: negative emission (an Emission node of negative strength): Cycles "
                          "subtracts light there, this bake takes it as no light")
         em = np.maximum(em, 0.0)
-    if np.any(rho > RHO_MAX + 1e-6) or np.any(rho < 0):
-        notes[:] = [s for s in notes if not (s.startswith("reflectivity (") and "clipped to" in s)]
-        notes.append(f"{label}: reflectivity up to {float(np.max(rho)):.3g} clipped to [0, {RHO_MAX}]")
+    if np.any(rho > 1.0 + 1e-6) or np.any(rho < 0):
+        notes[:] = [s for s in notes if not (getattr(s, "kind", None) == _CLIPPED)]
+        notes.append(_clipped(label, rho))
     return np.clip(rho, 0.0, RHO_MAX), em
+
+
+# white (1.0) is clipped to RHO_MAX too, a 0.1% change not worth saying; more than white is
+_CLIPPED = f"reflectivity above 1 or below 0 (more light out than in) clipped to [0, {RHO_MAX}]"
+
+
+def _clipped(label, rho):
+    return note(label, _CLIPPED, detail=f"{float(np.min(rho)):.3g} to {float(np.max(rho)):.3g}")

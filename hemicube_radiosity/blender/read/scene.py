@@ -36,6 +36,7 @@ import numpy as np
 
 from ...core.mesh.patches import MeshInput
 from ...core.runtime.errors import RadiosityError
+from ...core.runtime.notes import Note, note, subject_and_kind
 from . import shading
 from .face_emission import face_means
 from .materials import corner_materials
@@ -92,7 +93,20 @@ class SceneInput:
         return [o.mesh for o in self.objects]
 
     def notes(self):
-        return list(self.skipped) + [f"{o.name}: {n}" for o in self.objects for n in o.notes]
+        """The readers' lines as :class:`Note` s: an object left out is a warning; an object's
+        line is said of the object, unless it has its own subject (a material's, said once for
+        every object that uses it)."""
+        out = []
+        for line in self.skipped:
+            subject, kind, _ = subject_and_kind(line)
+            out.append(Note(line, subject, kind, warning=True))
+        for o in self.objects:
+            for n in o.notes:
+                if isinstance(n, Note) and n.subject is not None:
+                    out.append(n)
+                else:
+                    out.append(note(o.name, *((n.kind, n.warning) if isinstance(n, Note) else (n,))))
+        return out
 
 
 # ----------------------------------------------------------------------------- welding

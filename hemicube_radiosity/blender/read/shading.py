@@ -54,6 +54,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ...core.runtime.notes import warning
 from .face_emission import sample_faces
 from .materials import follow, uses_nodes
 from .visibility import world_matrix
@@ -307,11 +308,12 @@ def missing_images(mat):
 
 
 def _missing_note(node):
+    """A warning of its own subject (the image: said once for every material that uses it)."""
     img = node.image
     if img is None:
         return f"'{node.name}' has no image (Cycles renders it magenta): the inputs it feeds use their own values"
-    return (f"image '{img.name}' cannot be read ({img.filepath or 'no file'}; Cycles renders it magenta): "
-            "the inputs it feeds use their own values")
+    return warning("cannot be read (Cycles renders it magenta): the inputs it feeds use their own "
+                   "values", f"image '{img.name}'", detail=img.filepath or "no file")
 
 
 def _stand_in(mat, nodes):

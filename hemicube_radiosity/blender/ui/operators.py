@@ -54,11 +54,13 @@ def worker_state():
             "cancelled": False}
 
 
-def _notes_line(notes, limit=6):
-    if not notes:
-        return ""
-    more = f" (+{len(notes) - limit} more)" if len(notes) > limit else ""
-    return "Approximated: " + "; ".join(notes[:limit]) + more
+def report_lines(job):
+    """[(Blender report type, line)] after a bake: the grouped warnings first (WARNING), then
+    the summary and the grouped notes (INFO), one report each, so the Info editor lists them
+    one per line and the status bar shows the first warning."""
+    m = job.messages()
+    return ([({"WARNING"}, f"Radiosity: {w}") for w in m.warnings] + [({"INFO"}, job.summary())]
+            + [({"INFO"}, f"Radiosity note: {n}") for n in m.notes])
 
 
 class OBJECT_OT_radiosity_bake(bpy.types.Operator):
@@ -85,11 +87,17 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
             self.auto_size = False
         return to_settings(self)
 
-    def _report_done(self, job):
-        line = _notes_line(job.notes)
-        if line:
-            self.report({"WARNING"}, line)
-        self.report({"INFO"}, job.summary())
+    def _report_done(self, job, context=None):
+        lines = report_lines(job)
+        for kind, line in lines:
+            self.report(kind, line)
+        wm = getattr(context, "window_manager", None)
+        # the popup needs a real window: the bpy module has one that is never drawn (and crashes)
+        if not bpy.app.background and wm is not None and getattr(context, "window", None) is not None:
+            def draw(menu, _context):          # the popup: warnings first, then the numbers
+                for kind, line in lines:
+                    menu.layout.label(text=line, icon="ERROR" if "WARNING" in kind else "INFO")
+            wm.popup_menu(draw, title="Radiosity bake", icon="ERROR" if job.messages().warnings else "INFO")
 
     # -- synchronous path
     def execute(self, context):
@@ -104,7 +112,7 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         except Cancelled:
             self.report({"WARNING"}, "Radiosity bake cancelled; the scene is unchanged")
             return {"CANCELLED"}
-        self._report_done(job)
+        self._report_done(job, context)
         return {"FINISHED"}
 
     # -- modal path
@@ -180,7 +188,7 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
         except RadiosityError as ex:
             self.report({"ERROR"}, str(ex))
             return {"CANCELLED"}
-        self._report_done(self._job)
+        self._report_done(self._job, context)
         return {"FINISHED"}
 
     def cancel(self, context):  # window closed / file loaded while running

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.notes import warning
 from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .lamps import direct_irradiance
@@ -329,9 +330,9 @@ def direct_stage(ctx) -> None:
     p, s, u = ctx.patches, ctx.settings, ctx.unknowns
     world = 0.0 if ctx.world is None else float(np.max(np.asarray(ctx.world, dtype=np.float64), initial=0.0))
     if not ctx.lights and not world > 0 and not p.emitting().any():
-        ctx.notes.append("nothing lights the scene: no face emits, and no lamp or world light "
-                         "reaches it (a file with no light, or Lamps and World off): every vertex "
-                         "bakes black")
+        ctx.notes.append(warning("nothing lights the scene: no face emits, and no lamp or world "
+                                 "light reaches it (a file with no light, or Lamps and World "
+                                 "off): every vertex bakes black"))
     ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if ctx.direct is None:
         if s.two_sided_emission and s.direct == "hemicube" and p.emission.max(initial=0) > 0:

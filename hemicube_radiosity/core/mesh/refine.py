@@ -214,5 +214,5 @@ def refine_stage(ctx) -> None:
         return
     if clusters is not None:
         ctx.clusters = clusters
-    ctx.notes.append(f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
+    ctx.say(1.0, f"refined {len(p)} patches into {len(refined)} where the direct light changes abruptly")
     ctx.patches = refined

@@ -143,4 +143,3 @@ def estimate_stage(ctx) -> None:
         method = "detail"
     ctx.error_estimate = ErrorEstimate(float(np.hypot(noise, detail)), float(noise), float(detail), method,
                                        int(mask.sum()), time.perf_counter() - t)
-    ctx.notes.append(ctx.error_estimate.describe())

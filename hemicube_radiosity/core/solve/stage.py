@@ -12,6 +12,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..form_factors.stage import receivers_needed
+from ..runtime.notes import warning
 from ..light.lamps import SpotLight, SunLight, direct_irradiance
 from ..light.points import patch_average
 from .solvers import solve
@@ -31,9 +32,9 @@ def solve_stage(ctx) -> None:
     ctx.say(1.0, f"{sol.iterations} iterations, residual {sol.residual:.2e}, error below {bound:.1e}"
             + ("" if sol.converged else " (NOT converged: raise max iterations)"))
     if not sol.converged:
-        ctx.notes.append(f"solver stopped after {sol.iterations} iterations with a relative error "
-                         f"up to {bound:.1e}, above the tolerance {s.tolerance:g}: raise max "
-                         "iterations")
+        ctx.notes.append(warning(f"solver stopped after {sol.iterations} iterations with a "
+                                 f"relative error up to {bound:.1e}, above the tolerance "
+                                 f"{s.tolerance:g}: raise max iterations"))
     energy = scene_energy(ctx, sol.energy, computed) if sol.energy else sol.energy
     if ctx.direct is not None:
         ctx.reflected = sol.B

@@ -1,0 +1,115 @@
+"""What a bake says besides its result: notes and warnings, and the few lines they make.
+
+Every stage and reader says what it approximated as one short line (a ``str``), most of them
+``"<subject>: <what>"``, the subject an object, a material, a light or the world. A
+:class:`Note` is such a line that also knows its subject, its kind (the line without its
+subject, which repeats across objects) and whether it is a **warning**: something that changes the
+result in a way the user should act on (nothing lights the scene, an object or a light left out,
+a shader that is not modelled). A plain ``str`` is a note whose subject is what comes before its
+first ``": "`` when that looks like a name.
+
+:func:`grouped` turns the lines of a bake into what a person reads: warnings first, then notes,
+one line per kind with the subjects it concerns ("'Chrome', 'Metal' and 'Glass': specular ...").
+The CLI, the panel and the report all show these lines; the report keeps every line as well.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+__all__ = ["Note", "warning", "note", "Grouped", "grouped", "subject_and_kind"]
+
+# a subject before ': ': an object's name, "light 'X'", "material 'X'", "world" (no sentence)
+_SUBJECT = re.compile(r"^((?:light |material |object )?'[^']+'|[\w.\-]+(?: [\w.\-]+){0,2}|world): (.+)$")
+
+
+class Note(str):
+    """A line of text (``str(note)`` is the line, so every check on text works) with its
+    ``subject`` (``None``: the whole bake), its ``kind`` (the line without the subject: lines of
+    one kind are said once with all their subjects) and ``warning`` (it changes the result)."""
+
+    subject: str | None
+    kind: str
+    warning: bool
+
+    def __new__(cls, text, subject=None, kind=None, warning=False):
+        self = super().__new__(cls, text)
+        self.subject, self.kind, self.warning = subject, kind if kind is not None else text, warning
+        return self
+
+
+def note(subject, kind, warning=False, detail="") -> Note:
+    """The line ``"<subject>: <kind> (<detail>)"`` (without the subject when it is None, without
+    the brackets when there is no detail). The detail is in the line, not in the kind: lines that
+    differ only there are said as one grouped line."""
+    text = kind if not detail else f"{kind} ({detail})"
+    return Note(text if subject is None else f"{subject}: {text}", subject, kind, warning)
+
+
+def warning(text, subject=None, detail="") -> Note:
+    """A warning: ``text`` changes the result in a way the user should act on."""
+    return note(subject, text, warning=True, detail=detail)
+
+
+def subject_and_kind(line) -> tuple:
+    """(subject or None, kind, warning) of a note line: a :class:`Note`'s own, else parsed from
+    ``"<subject>: <kind>"`` where the subject is a name (up to three words, or quoted)."""
+    if isinstance(line, Note):
+        return line.subject, line.kind, line.warning
+    m = _SUBJECT.match(line)
+    if m is None or m.group(1) in ("note", "warning"):
+        return None, line, False
+    return m.group(1), m.group(2), False
+
+
+@dataclass(frozen=True)
+class Grouped:
+    """The lines a person reads: ``warnings`` and ``notes``, one line per kind each."""
+
+    warnings: tuple
+    notes: tuple
+
+    def lines(self):
+        """[(level, text)], warnings first: level is 'warning' or 'note'."""
+        return [("warning", w) for w in self.warnings] + [("note", n) for n in self.notes]
+
+
+_KINDS = ("material", "image", "light", "object")
+
+
+def _names(subjects, limit=4):
+    """'A', 'B' and 'C' (the first ``limit``, then how many more); subjects of one kind of thing
+    say it once: "materials 'A' and 'B'"."""
+    word = next((w for w in _KINDS if all(s.startswith(w + " '") for s in subjects)), None)
+    if word is not None and len(subjects) > 1:
+        subjects = [s[len(word) + 1:] for s in subjects]
+    shown = list(subjects[:limit])
+    if len(subjects) > limit:
+        out = ", ".join(shown) + f" and {len(subjects) - limit} more"
+    else:
+        out = shown[0] if len(shown) == 1 else ", ".join(shown[:-1]) + " and " + shown[-1]
+    return out if word is None or len(subjects) == 1 else f"{word}s {out}"
+
+
+def grouped(lines, limit=4) -> Grouped:
+    """Warnings and notes of ``lines``, one line per kind in the order first said, each naming
+    its subjects (the first ``limit`` of them, then how many more); a line said twice is said
+    once. A kind said of one subject keeps its line as it was written."""
+    order, by_kind, first = [], {}, {}
+    for line in lines:
+        subject, kind, warn = subject_and_kind(line)
+        key = (warn, kind)
+        if key not in by_kind:
+            by_kind[key], first[key] = [], str(line)
+            order.append(key)
+        if subject not in by_kind[key]:
+            by_kind[key].append(subject)
+    out = {True: [], False: []}
+    for key in order:
+        subjects = by_kind[key]
+        named = [s for s in subjects if s is not None]
+        if len(subjects) == 1:
+            out[key[0]].append(first[key])          # as written, its detail too
+        else:
+            out[key[0]].append(f"{_names(named, limit)}: {key[1]}" if named else key[1])
+    return Grouped(tuple(out[True]), tuple(out[False]))
