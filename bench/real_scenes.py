@@ -83,6 +83,7 @@ for p in (ROOT, HERE, os.path.join(ROOT, "tools")):
         sys.path.insert(0, p)
 
 import speed_vs_error as sve  # noqa: E402
+from hemicube_radiosity.core.settings import QUALITY  # noqa: E402
 
 SCENES_DIR = os.path.normpath(os.path.join(ROOT, "..", "shared", "scenes"))
 CACHE_DIR = os.path.join(ROOT, "bench", "cache")
@@ -585,7 +586,7 @@ def run_scene(spec, args):
                          wall_seconds=wall, max_rss_mb=rss)
     log(f"cycles: {json.dumps(row['cycles'], default=float)[:400]}")
     have_ref = not failed(row["cycles"]) and os.path.exists(cyc_npz)
-    runs = [("defaults", {})]
+    runs = [("defaults", {})] + [(f"quality_{lv}", {"quality": lv}) for lv in args.levels]
     for label, asked in runs:
         out = base + f"_{label}"
         st, rss, wall = run_child(["--ours-child", spec.folder, cyc_npz if have_ref else "", out + ".npy",
@@ -657,6 +658,27 @@ def _rms(err):
     return _f(err.get(sve.METRIC), "{:.2%}") + ("" if med is None else f" ({_f(med, '{:.2%}')})")
 
 
+def levels_table(res):
+    """Markdown rows of the quality levels: per scene and level, RMS against the reference and
+    seconds, beside Cycles 64 spp (None when no run had levels)."""
+    rows = []
+    for r in res["scenes"]:
+        c = r.get("cycles") or {}
+        for lv in QUALITY:
+            d = r.get("defaults" if lv == "production" else f"quality_{lv}")
+            if not d or (lv != "production" and failed(d)):
+                continue
+            if failed(d):
+                rows.append([f"`{r['name']}`", lv, f"failed: {failed(d)}", "", "", ""])
+                continue
+            rows.append([f"`{r['name']}`", lv, f"{d['patches']:,}", _f(d["seconds"]), _rms(d.get("error")),
+                         _rms(c.get("error")) + f" in {_f((c.get('cand') or {}).get('seconds'))} s"])
+    if not any(r[1] != "production" for r in rows):
+        return None
+    head = ["scene", "quality", "patches", "ours (s)", "RMS ours (median)", f"Cycles {CAND_SPP} spp: RMS (median)"]
+    return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows]
+
+
 def table(res):
     """The Markdown table of a results dict (also what report.py puts in docs/performance.md)."""
     head = ["scene", "triangles", "patches", "ours (s)", "read / form factors / direct / solve / vertices / write (s)",
@@ -698,7 +720,10 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=TIMEOUT, help="seconds a bake of ours may take")
     ap.add_argument("--cycles-timeout", type=float, default=CYCLES_TIMEOUT)
     ap.add_argument("--results", default=None)
+    ap.add_argument("--levels", action="store_true",
+                    help="also bake at every quality level but Production (the defaults)")
     args, _ = ap.parse_known_args(argv)   # make bench passes its own flags through
+    args.levels = [lv for lv in QUALITY if lv != "production"] if args.levels else []
     if not os.path.isdir(SCENES_DIR):
         log(f"real scenes: {SCENES_DIR} not found; skipped")
         return 0

@@ -406,6 +406,12 @@ def real_section(res):
     missing = [s.folder for s in real_scenes.SPECS if s.folder not in done]
     if missing:
         notes.append("- Not in this run: " + ", ".join(f"`{m}`" for m in missing) + ".")
+    levels = real_scenes.levels_table(res)
+    if levels:
+        notes += ["", "### Quality levels", "",
+                  "The same scenes at each level of the Quality setting (`bench/real_scenes.py --levels`):"
+                  " Production is the defaults above; the others set the detailed settings that"
+                  " `core/settings.py` `QUALITY` names. Error against the same reference.", ""] + levels
     return L + notes + [""]
 
 

@@ -225,7 +225,7 @@ class BakeJob:
             "patches": int(len(r.patches)),
             "solved": int(r.unknowns),
             "elements": int(len(r.elements)),
-            "per_object": _per_object(r),
+            "per_object": _with_notes(_per_object(r), self.notes),
             "nonzeros": int(r.form_factors.nnz),
             "iterations": int(r.solution.iterations),
             "residual": float(r.solution.residual),
@@ -268,6 +268,20 @@ def _per_object(r) -> dict:
     return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
                 "vertices": int(v[i]), "patch_size": sizes[i][0], "detail_size": sizes[i][1]}
             for i, n in enumerate(names)}
+
+
+def _with_notes(per_object, notes) -> dict:
+    """``per_object`` with each object's own first warning, else its first note, as ``note``
+    (None: nothing said of it; lines of its materials are said of the material)."""
+    from ..core.runtime.notes import subject_and_kind
+
+    first = {}
+    for n in notes:
+        subject, _, warn = subject_and_kind(n)
+        for name in (subject, (subject or "").strip("'")):
+            if name in per_object and (name not in first or (warn and not first[name][0])):
+                first[name] = (warn, str(n))
+    return {k: {**v, "note": first.get(k, (False, None))[1]} for k, v in per_object.items()}
 
 
 def _jsonable(x):

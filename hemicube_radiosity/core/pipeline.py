@@ -29,7 +29,7 @@ from .runtime.cache import FormFactorCache
 from .runtime.errors import SettingsError
 from .runtime.native import kept_heap, one_blas_thread
 from .runtime.progress import Cancelled
-from .settings import AUTO_PATCHES_PER_DIAGONAL, BakeSettings
+from .settings import BakeSettings
 from .solve.solvers import Solution
 from .solve.stage import solve_stage
 from .util.sparse import CSR
@@ -220,11 +220,11 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     ``world``: (3,) radiance. ``cache``: a :class:`.cache.FormFactorCache`; a hit skips the
     form-factor work. ``patches``: a ready PatchSet (then ``meshes`` is not cut again, nor the
     patches refined: a relight hands back the refined patches of a first bake)."""
-    settings = settings or BakeSettings()
+    settings = (settings or BakeSettings()).with_quality()
     settings.validate()
     if meshes is not None:
         if settings.patch_size:                  # a ground plane around the scene: its own size
-            meshes = with_auto_scales(meshes, AUTO_PATCHES_PER_DIAGONAL,
+            meshes = with_auto_scales(meshes, settings.patches_per_diagonal(),
                                       None if settings.patch_size == "auto" else float(settings.patch_size))
         auto_detail = settings.element_size == "auto"
         settings = settings.resolved(meshes)

@@ -29,7 +29,8 @@ import numpy as np
 
 from .runtime.errors import SettingsError
 
-__all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES",
+__all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES", "QUALITY",
+           "QUALITY_LEVELS",
            "OUTPUT_MODES", "OUTPUT_PASSES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
 
 AUTO_PATCHES_PER_DIAGONAL = 14.0   # 'auto' patch size: the scene's bounding-box diagonal / 14
@@ -57,6 +58,31 @@ OUTPUT_PASSES = (
     ("lighting", "Lighting Only", "Light arriving at the surface, direct and indirect, without "
      "the surface's own colour (Cycles' Diffuse bake without Color): for textures multiplied at "
      "run time. Bounced light keeps the colours of the surfaces it came from"),
+)
+# Quality levels: what each sets of the detailed settings a user leaves at their defaults
+# (:meth:`BakeSettings.with_quality`); 'patches' scales the automatic patch count per diagonal.
+# Production is the defaults themselves. Measured (docs/performance.md, "Quality levels"):
+# bench/real_scenes.py --levels, error against Cycles' 256-spp bake at its own corners.
+QUALITY = {
+    "draft": dict(patches=0.6, resolution=16, refine_levels=1, gather_rays=32, patch_light_points=1,
+                  direct_samples=4, light_samples=4, sky_rays=64),
+    "preview": dict(patches=0.8, resolution=24, refine_levels=2, gather_rays=64, patch_light_points=2,
+                    direct_samples=8, light_samples=8, sky_rays=128),
+    "production": dict(patches=1.0, resolution=32, refine_levels=3, gather_rays=128, patch_light_points=2,
+                       direct_samples=16, light_samples=16, sky_rays=256),
+    "final": dict(patches=1.4, resolution=48, refine_levels=3, gather_rays=256, patch_light_points=3,
+                  direct_samples=32, light_samples=32, sky_rays=512),
+}
+QUALITY_LEVELS = (
+    ("draft", "Draft", "A first look: about half Production's time, its median error against "
+     "Cycles 6-36% higher on the real-scene benchmark"),
+    ("preview", "Preview", "About 0.7x Production's time, its median error up to 11% higher"),
+    ("production", "Production", "The defaults (the speed-against-error frontier of the "
+     "benchmark): 4.3% RMS from Cycles' reference on the Stanford bunny, about 6 s per 10k "
+     "output faces on 2 cores"),
+    ("final", "Final", "1.4x the patches per diagonal, finer hemi-cubes and twice the rays: "
+     "1.3-2.4x Production's time, its median error up to 12% lower (RMS no lower on the "
+     "benchmark: what is left there is systematic)"),
 )
 OUTPUT_MODES = (
     ("copy", "Baked Copy", "New objects in a 'Radiosity' collection carry the result; "
@@ -102,6 +128,9 @@ class BakeSettings:
     """
 
     # -- the top of the panel
+    quality: str = setting("production", "Quality", "How finely the scene is cut and how many "
+                           "rays it takes: each level sets the detailed settings left at their "
+                           "defaults (a changed one overrides it)", "main", choices=QUALITY_LEVELS)
     output_mode: str = setting("copy", "Output", "Where the result goes", "main", choices=OUTPUT_MODES)
     use_lights: bool = setting(True, "Lamps and World", "Light objects and the world's background "
                                "light the scene, in Cycles' units", "main", cli="--no-lights",
@@ -270,12 +299,25 @@ class BakeSettings:
                                 "element vertex)")
 
     # ------------------------------------------------------------------ derived values
+    def with_quality(self) -> "BakeSettings":
+        """A copy with the quality level's values (:data:`QUALITY`) in every setting it names
+        that is still at its default: a setting the user changed overrides the level."""
+        level = QUALITY.get(self.quality, {})
+        defaults = {s.name: s.default for s in schema()}
+        return replace(self, **{k: v for k, v in level.items()
+                                if k in defaults and getattr(self, k) == defaults[k]})
+
+    def patches_per_diagonal(self) -> float:
+        """The 'auto' patch size is the scene's diagonal / this (the quality level's share of
+        :data:`AUTO_PATCHES_PER_DIAGONAL`)."""
+        return AUTO_PATCHES_PER_DIAGONAL * QUALITY.get(self.quality, {}).get("patches", 1.0)
+
     def resolved(self, meshes) -> "BakeSettings":
         """A copy with 'auto' sizes turned into world units for ``meshes`` (core.mesh.patches.MeshInput)."""
         patch, element = self.patch_size, self.element_size
         if patch == "auto":
             from .mesh.sizes import auto_sizes
-            patch = auto_sizes(meshes, AUTO_PATCHES_PER_DIAGONAL)[0]
+            patch = auto_sizes(meshes, self.patches_per_diagonal())[0]
         if element == "auto":
             element = patch / AUTO_ELEMENTS_PER_PATCH if patch else None
         if self.output_mode == "in_place":

@@ -7,6 +7,7 @@ docs/troubleshooting.md lists the messages."""
 from __future__ import annotations
 
 import io
+import json
 
 import numpy as np
 import pytest
@@ -145,4 +146,6 @@ def test_cli_bakes_the_rest_and_prints_one_warning_per_object(addon, empty_scene
     assert max(lines.index(s) for s in said) < min(i for i, ln in enumerate(lines) if ": note: " in ln)
     # the read's own line, before the stages
     assert "radiosity: read: 2 object(s) to bake (3 left out), 0 other(s), 2 faces (" in out.getvalue()
-    assert (tmp_path / "b.json").exists()
+    rep = json.loads((tmp_path / "b.json").read_text())
+    assert len(rep["warnings"]) == 3 and rep["per_object"]["Floor"]["note"] == "Floor: no material; grey 0.8"
+    assert rep["per_object"]["Floor"]["vertices"] > 0

@@ -8,6 +8,7 @@ import io
 import json
 import types
 
+import numpy as np
 import pytest
 
 from hemicube_radiosity.core.runtime.errors import RadiosityError, SettingsError
@@ -181,3 +182,41 @@ def test_report_settings_are_the_settings_as_used(addon, tmp_path):
     text = out.getvalue()
     for name in ("patches:", "form factors:", "direct light:", "solve:", "vertices:", "write:"):
         assert f"radiosity: {name}" in text, name
+
+
+# ----------------------------------------------------------------------------- quality levels
+def test_quality_levels_set_the_settings_left_at_their_defaults():
+    from hemicube_radiosity.core.settings import QUALITY, QUALITY_LEVELS
+
+    assert [v for v, _, _ in QUALITY_LEVELS] == list(QUALITY)
+    # production is the defaults themselves: a default bake is what it was
+    assert BakeSettings().with_quality() == BakeSettings()
+    assert BakeSettings().patches_per_diagonal() == 14.0
+    d = BakeSettings(quality="draft").with_quality()
+    assert (d.resolution, d.gather_rays, d.refine_levels, d.sky_rays) == (16, 32, 1, 64)
+    assert BakeSettings(quality="draft").patches_per_diagonal() == pytest.approx(0.6 * 14)
+    # a setting the user changed overrides the level
+    own = BakeSettings(quality="draft", resolution=64, gather_rays=0).with_quality()
+    assert (own.resolution, own.gather_rays, own.refine_levels) == (64, 0, 1)
+    for level in QUALITY:
+        BakeSettings(quality=level).with_quality().validate()
+    with pytest.raises(SettingsError, match="unknown quality 'best'"):
+        BakeSettings(quality="best").validate()
+
+
+def test_every_quality_level_is_exact_in_the_furnace_and_costs_in_order():
+    """Closed room, E = 1, rho = 0.5 everywhere: B = E / (1 - rho) = 2 at every output vertex at
+    every level (the cheaper levels are coarser, not wrong); each level cuts more than the last."""
+    from hemicube_radiosity.core.builtin_scenes import closed_box, cornell_box
+    from hemicube_radiosity.core.pipeline import bake
+    from hemicube_radiosity.core.settings import QUALITY
+
+    sizes = []
+    for level in QUALITY:
+        r = bake(closed_box(size=(1.0, 1.3, 0.8), rho=(0.5,) * 3, emission=(1.0,) * 3),
+                 BakeSettings(quality=level, tolerance=1e-7, max_iterations=2000))
+        np.testing.assert_allclose(r.vertex_radiosity, 2.0, rtol=2e-3, err_msg=level)
+        assert r.settings.resolution == QUALITY[level]["resolution"]
+        c = bake(cornell_box(), BakeSettings(quality=level))
+        sizes.append((c.unknowns, len(c.elements)))
+    assert all(a[0] < b[0] and a[1] < b[1] for a, b in zip(sizes, sizes[1:])), sizes
