@@ -148,9 +148,12 @@ class BakeJob:
             raise RadiosityError("no mesh object selected (select meshes, text, curves or metaballs)")
         write_notes = read.check_writable(targets, settings)   # refuse now, not after the work
         others = other_meshes(context, targets) if settings.include_others else []
+        # instances take part with the other meshes, or as part of their selected instancer
+        instancers = None if settings.include_others else {_source_of(o).name for o in objects
+                                                           if _source_of(o) is not None}
         depsgraph = context.evaluated_depsgraph_get()
         t = time.perf_counter()
-        scene_input = read.read_scene(depsgraph, targets, others)
+        scene_input = read.read_scene(depsgraph, targets, others, instancers)
         light_notes = []
         if settings.use_lights:
             from .read.lights import read_lights

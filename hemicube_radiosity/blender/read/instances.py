@@ -1,0 +1,163 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Instances as Cycles sees them: collection instances, Geometry Nodes instances, particles.
+
+An instancer (an Empty instancing a collection, a Geometry Nodes object with Instance on Points,
+a particle system) makes objects that are in no collection: a render draws them, so they occlude,
+reflect and emit like any surface, but :func:`.visibility.render_visible_objects` does not list
+them. They are read from ``depsgraph.object_instances`` (only there, while the iterator is on one
+of them, is ``inst.object`` the instanced geometry and ``inst.matrix_world`` its placement).
+
+Instances of one mesh are read once: :func:`gather` groups them by their evaluated mesh (and the
+materials they wear) and copies each distinct mesh once into a TEMPORARY mesh and object, not
+linked to any scene (a Geometry Nodes instance's geometry exists only in the depsgraph, so
+``new_from_object`` cannot give it: the evaluated mesh is copied instead), with the original
+materials of its slots. :mod:`.scene` reads each such prototype like an object at the identity
+and places it by every matrix of its group; :func:`remove` deletes the prototypes again. The
+user's objects, meshes and materials are never written.
+
+Instances are occluders, reflectors and emitters only (``ObjectSource.bake`` False): the writer
+has no object of theirs to write to, which :func:`note` says once, naming the instancers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .visibility import is_render_visible
+
+__all__ = ["Prototype", "gather", "remove", "instancer_names", "note"]
+
+PROTOTYPE = "_hr_instance"
+_GEOMETRY = frozenset({"MESH", "FONT", "CURVE", "SURFACE", "META"})
+
+
+@dataclass
+class Prototype:
+    """One distinct instanced mesh: a temporary object at the identity, and where it is placed."""
+
+    ob: object                                      # temporary object (unlinked), its mesh a copy
+    source: str                                     # the instanced object's name (for messages)
+    matrices: list = field(default_factory=list)    # (4, 4) world matrix of every instance
+    instancers: list = field(default_factory=list)  # the instancer's name for every instance
+
+
+def _instancer(inst):
+    """The original object that made the instance ``inst`` (its top-level instancer)."""
+    parent = inst.parent
+    return parent.original if parent is not None else None
+
+
+def instancer_names(depsgraph):
+    """{name: instance count} of the objects that instance geometry a render draws."""
+    out = {}
+    vl = depsgraph.view_layer
+    for inst in depsgraph.object_instances:
+        if not inst.is_instance or inst.object.type not in _GEOMETRY:
+            continue
+        par = _instancer(inst)
+        if par is not None and is_render_visible(par, vl):
+            out[par.name] = out.get(par.name, 0) + 1
+    return out
+
+
+def _materials(ob):
+    """The original materials an evaluated instance object renders with: its mesh's, where a slot
+    links the object's own material that one (Geometry Nodes sets materials on the mesh; the
+    temporary object of its instances has slots of the instancer's)."""
+    data = list(ob.data.materials) if ob.type == "MESH" else []
+    slots = list(ob.material_slots)
+    n = max(len(data), len(slots))
+    mats = []
+    for k in range(n):
+        s = slots[k] if k < len(slots) else None
+        m = data[k] if k < len(data) else None
+        if s is not None and (s.link == "OBJECT" or m is None):
+            m = s.material if s.material is not None else m
+        mats.append(m)
+    return [m.original if m is not None else None for m in mats]
+
+
+def _copy_mesh(ob, depsgraph):
+    """A temporary mesh with the evaluated geometry of the instance object ``ob`` (all its
+    attributes), or None when it has none."""
+    import bpy
+
+    if ob.type == "MESH":
+        return ob.data.copy()
+    try:
+        return bpy.data.meshes.new_from_object(ob, preserve_all_data_layers=True, depsgraph=depsgraph)
+    except RuntimeError:
+        return None
+
+
+def gather(depsgraph, instancers=None):
+    """[:class:`Prototype`] of the instances a render draws in ``depsgraph``. ``instancers``: the
+    names of the instancers whose instances take part (None: all). The caller must
+    :func:`remove` the result (also when reading it fails)."""
+    import bpy
+
+    vl = depsgraph.view_layer
+    groups, out = {}, []
+    try:
+        for inst in depsgraph.object_instances:
+            if not inst.is_instance:
+                continue
+            ob = inst.object
+            par = _instancer(inst)
+            if ob.type not in _GEOMETRY or par is None:
+                continue
+            if (instancers is not None and par.name not in instancers) or not is_render_visible(par, vl):
+                continue
+            mats = _materials(ob)
+            key = (ob.data.as_pointer() if ob.data is not None else ob.as_pointer(), ob.type,
+                   tuple(m.name_full if m is not None else "" for m in mats))
+            proto = groups.get(key)
+            if proto is None:
+                me = _copy_mesh(ob, depsgraph)
+                if me is None:
+                    groups[key] = False
+                    continue
+                for k, m in enumerate(mats):     # (clear() would reset the material indices)
+                    if k < len(me.materials):
+                        me.materials[k] = m
+                    else:
+                        me.materials.append(m)
+                proto = groups[key] = Prototype(bpy.data.objects.new(PROTOTYPE, me), ob.original.name)
+                out.append(proto)
+            if proto:
+                proto.matrices.append(np.array(inst.matrix_world, dtype=np.float64))
+                proto.instancers.append(par.name)
+    except BaseException:
+        remove(out)
+        raise
+    return out
+
+
+def remove(protos):
+    """Delete the temporary objects and meshes of ``protos``."""
+    import bpy
+
+    for p in protos:
+        me = p.ob.data
+        try:
+            bpy.data.objects.remove(p.ob)
+        except ReferenceError:
+            pass
+        if me is not None:
+            try:
+                bpy.data.meshes.remove(me)
+            except ReferenceError:
+                pass
+
+
+def note(counts, emits=False, shown=3):
+    """The one note for the instances that took part: ``counts`` {instancer name: instances}."""
+    if not counts:
+        return None
+    what = "occluders, reflectors and emitters" if emits else "occluders and reflectors"
+    items = [f"'{k}': {n} instance{'s' if n != 1 else ''}" for k, n in counts.items()]
+    more = len(items) - shown
+    head = ", ".join(items[:shown]) + (f" and {more} more instancers" if more > 0 else "")
+    verb = "takes" if len(items) == 1 and next(iter(counts.values())) == 1 else "take"
+    return f"{head} {verb} part as {what}; their colours are not written"
