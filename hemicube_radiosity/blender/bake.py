@@ -145,6 +145,9 @@ class BakeJob:
                                  "install it or choose Hemi-cube")
         targets = resolve_objects(objects)
         if not targets:
+            makers = [o.name for o in objects if o.instance_type == "COLLECTION" and o.instance_collection]
+            if makers:                   # an Empty instancing a collection, alone
+                raise RadiosityError(read.instancers_only(makers))
             raise RadiosityError("no mesh object selected (select meshes, text, curves or metaballs)")
         write_notes = read.check_writable(targets, settings)   # refuse now, not after the work
         others = other_meshes(context, targets) if settings.include_others else []

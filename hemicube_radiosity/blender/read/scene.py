@@ -44,7 +44,7 @@ from .materials import corner_materials
 from .visibility import render_notes, world_matrix
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
-           "GEOMETRY_TYPES", "check_writable"]
+           "GEOMETRY_TYPES", "check_writable", "instancers_only"]
 
 COPLANAR_COS = float(np.cos(1e-3))
 # a face is of zero area below this fraction of the object's squared size (its bounding box
@@ -340,10 +340,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
                 skipped.append(f"{ex}; left out")
         if objects and not out:
             if not problems:
-                names = ", ".join(f"'{n}'" for n in only_instancing)
-                raise ReadError(f"{names} only make{'s' if len(only_instancing) == 1 else ''} instances, "
-                                "which take part as occluders and reflectors but are not baked: "
-                                "select the meshes to bake as well")
+                raise ReadError(instancers_only(only_instancing))
             raise ReadError(problems[0] if len(problems) == 1 else _none_bakeable(problems))
         for o in others:
             try:
@@ -357,6 +354,13 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
     said = inst_reader.note(counts, emits)
     said = [Note(said, None, said)] if said else []
     return SceneInput(out, skipped=skipped, instanced=said + inst_notes)
+
+
+def instancers_only(names):
+    """The line refusing a selection of nothing but instancers (``names``)."""
+    listed = ", ".join(f"'{n}'" for n in names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return (f"{listed} only make{'s' if len(names) == 1 else ''} instances, which take part as "
+            "occluders and reflectors but are not baked: select the meshes to bake as well")
 
 
 def _faceless(obj, depsgraph):
