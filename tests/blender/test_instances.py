@@ -240,3 +240,20 @@ def test_emitting_instances_light_the_floor_as_in_cycles():
     assert ours.mean() == pytest.approx(cycles.mean(), rel=0.03)
     under = np.linalg.norm(pos[:, :2] - (0.8, 0.0), axis=1) < 0.3
     assert ours[under].mean() == pytest.approx(cycles[under].mean(), rel=0.05)
+
+
+@pytest.mark.parametrize("hide", ["H", "monitor"])
+def test_an_instancer_hidden_in_the_viewport_is_said(hide):
+    """Renders show the instances of an Empty hidden in the viewport, the viewport's depsgraph does
+    not make them: a warning names it (not a silent shadow missing)."""
+    floor, instancer = sun_scene("collection")
+    if hide == "H":
+        instancer.hide_set(True)
+    else:
+        instancer.hide_viewport = True
+    job = BakeJob.prepare(bpy.context, [floor], BakeSettings(**SETTINGS))
+    assert not [o for o in job.scene_input.objects if not o.bake and o.name.startswith("Inst")]
+    assert list(job.messages().warnings) == [
+        "'Inst' is hidden in the viewport, so its instances of collection 'CrateColl' are not read "
+        "(renders show them): show it for an exact bake"]
+    assert not [m for m in job.notes if NOTE in m]

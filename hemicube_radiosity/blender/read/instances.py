@@ -24,9 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .visibility import is_render_visible
+from .visibility import is_render_visible, render_visible_objects
 
-__all__ = ["Prototype", "gather", "remove", "instancer_names", "note"]
+__all__ = ["Prototype", "gather", "remove", "instancer_names", "note", "unread"]
 
 PROTOTYPE = "_hr_instance"
 _GEOMETRY = frozenset({"MESH", "FONT", "CURVE", "SURFACE", "META"})
@@ -149,6 +149,23 @@ def remove(protos):
                 bpy.data.meshes.remove(me)
             except ReferenceError:
                 pass
+
+
+def unread(depsgraph, made, instancers=None):
+    """Notes for the Empties instancing a collection that a render shows but whose instances the
+    viewport's depsgraph does not make (the Empty hidden in the viewport): ``made`` the names
+    :func:`instancer_names` found, ``instancers`` as for :func:`gather`."""
+    out = []
+    for ob in render_visible_objects(depsgraph.view_layer, {"EMPTY"}):
+        if ob.instance_type != "COLLECTION" or ob.instance_collection is None or ob.name in made:
+            continue
+        if instancers is not None and ob.name not in instancers:
+            continue
+        if any(o.type in _GEOMETRY for o in ob.instance_collection.all_objects):
+            out.append(f"'{ob.name}' is hidden in the viewport, so its instances of collection "
+                       f"'{ob.instance_collection.name}' are not read (renders show them): show it "
+                       "for an exact bake")
+    return out
 
 
 def note(counts, emits=False, shown=3):

@@ -353,6 +353,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
         inst_reader.remove(protos)
     said = inst_reader.note(counts, emits)
     said = [Note(said, None, said)] if said else []
+    said += [Note(n, None, n, warning=True) for n in inst_reader.unread(depsgraph, made, instancers)]
     return SceneInput(out, skipped=skipped, instanced=said + inst_notes)
 
 
