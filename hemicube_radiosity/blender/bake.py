@@ -78,9 +78,12 @@ def resolve_objects(objects):
 def other_meshes(context, baked):
     """Meshes a render shows that are not baked (what the render sees is what the bake uses,
     whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
-    partial re-bake still sees the rest of the scene's geometry and materials."""
-    return _mesh_sources(render_visible_objects(context.view_layer, read.GEOMETRY_TYPES),
-                         {o.name for o in baked})
+    partial re-bake still sees the rest of the scene's geometry and materials. A particle
+    emitter whose own mesh renders do not show (Show Emitter off in renders) is left out; its
+    particles' instances are read with the instances (:mod:`.read.instances`)."""
+    shown = [o for o in render_visible_objects(context.view_layer, read.GEOMETRY_TYPES)
+             if not (o.is_instancer and not o.show_instancer_for_render)]
+    return _mesh_sources(shown, {o.name for o in baked})
 
 
 class StagePrinter:

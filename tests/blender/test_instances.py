@@ -3,7 +3,8 @@
 
 A floor under a crate that exists only as an instance: of a collection by an Empty, of a Geometry
 Nodes Mesh Cube through Instance on Points, of an object through Object Info (two instances, one
-of them mirrored, under the floor). A sun at 30 degrees throws the crate's shadow on the floor, a
+of them mirrored, under the floor), of a particle system's one particle (its emitter hidden in
+renders). A sun at 30 degrees throws the crate's shadow on the floor, a
 sunlit wall bounces light into it (as ``cycles_scenes.case_sun``). The floor's corners are baked
 by Cycles (DIFFUSE: rho H / pi, the crate instance seen by Cycles) and by the add-on's
 ``BakeJob`` (one patch per face, the same corners); the shadowed and the lit floor must agree in
@@ -39,13 +40,13 @@ NOTE = "part as occluders and reflectors; their colours are not written"
 
 
 # ----------------------------------------------------------------------------- scenes
-def _crate_object(name="Crate"):
+def _crate_object(name="Crate", z0=0.0):
     """A unit crate at the origin (base at z = 0) in a collection excluded from the view layer:
     only its instances are drawn."""
     sc = bpy.context.scene
     coll = bpy.data.collections.new(name + "Coll")
     sc.collection.children.link(coll)
-    v, f = box_arrays((-0.5, -0.5, 0.0), (0.5, 0.5, 1.0), 4)
+    v, f = box_arrays((-0.5, -0.5, z0), (0.5, 0.5, z0 + 1.0), 4)
     ob = cr.mesh_object(v, f, cr.diffuse_material((RHO,) * 3, name="crate"), name)
     sc.collection.objects.unlink(ob)
     coll.objects.link(ob)
@@ -85,7 +86,8 @@ def _on_points(nodes, links, points, instance, scale=(1.0, 1.0, 1.0)):
 
 
 def make_instancer(kind):
-    """The crate as instances of kind 'collection', 'cube' or 'object'; returns the instancer."""
+    """The crate as instances of kind 'collection', 'cube', 'object' or 'particles'; returns the
+    instancer."""
     if kind == "collection":
         _, coll = _crate_object()
         ob = bpy.data.objects.new("Inst", None)
@@ -105,6 +107,20 @@ def make_instancer(kind):
             links.new(cube.outputs[0], setm.inputs[0])
             return _on_points(nodes, links, _points(nodes, [tuple(CENTER)]), setm.outputs[0])
         return _gn_object("Scatter", build)
+    if kind == "particles":
+        # one particle on a 2 mm emitter inside the crate (the emitter hidden in renders); a
+        # particle turns its instance, so the crate is centred on its origin (a cube either way)
+        crate, _ = _crate_object(z0=-0.5)
+        v, f = cr.grid_arrays(1, 1, CENTER[0] - 1e-3, CENTER[0] + 1e-3, CENTER[1] - 1e-3, CENTER[1] + 1e-3,
+                              CENTER[2])
+        ob = cr.mesh_object(v, f, None, "Emitter")
+        ob.modifiers.new("Particles", "PARTICLE_SYSTEM")
+        ps = ob.particle_systems[0].settings
+        ps.count, ps.frame_start, ps.frame_end, ps.physics_type = 1, 1, 1, "NO"
+        ps.render_type, ps.instance_object, ps.particle_size, ps.size_random = "OBJECT", crate, 1.0, 0.0
+        ob.show_instancer_for_render = False
+        bpy.context.scene.frame_set(1)
+        return ob
     crate, _ = _crate_object()
 
     def build(nodes, links):
@@ -157,7 +173,7 @@ def cycles_floor(floor):
 
 # ----------------------------------------------------------------------------- tests
 @pytest.mark.parametrize("selected", [False, True], ids=["floor", "floor+instancer"])
-@pytest.mark.parametrize("kind", ["collection", "cube", "object"])
+@pytest.mark.parametrize("kind", ["collection", "cube", "object", "particles"])
 def test_instanced_crate_shadows_the_floor_as_in_cycles(kind, selected):
     floor, instancer = sun_scene(kind)
     pos, cycles = cycles_floor(floor)
@@ -169,10 +185,12 @@ def test_instanced_crate_shadows_the_floor_as_in_cycles(kind, selected):
     assert scene_hash(bpy) == before             # the read wrote nothing (its copies are gone)
     assert not [o for o in bpy.data.objects if o.name.startswith("_hr_")]
     job.run()
-    (copy,) = job.write(bpy.context)
+    copy = job.write(bpy.context)[0]        # (a selected particle emitter is baked as well)
+    assert copy.name == "floor.radiosity"
     n = 2 if kind == "object" else 1
     inst = [o for o in job.scene_input.objects if not o.bake and o.name.startswith(instancer.name)]
     assert len(inst) == n
+    assert sorted(o.name for o in job.scene_input.objects if not o.bake and o not in inst) == ["wall"]
     said = [m for m in job.messages().notes + job.messages().warnings if NOTE in m]
     word = "instances take" if n > 1 else "instance takes"
     assert said == [f"'{instancer.name}': {n} {word} part as occluders and reflectors; "
@@ -242,18 +260,37 @@ def test_emitting_instances_light_the_floor_as_in_cycles():
     assert ours[under].mean() == pytest.approx(cycles[under].mean(), rel=0.05)
 
 
-@pytest.mark.parametrize("hide", ["H", "monitor"])
+@pytest.mark.parametrize("hide", ["H", "monitor", "render"])
 def test_an_instancer_hidden_in_the_viewport_is_said(hide):
     """Renders show the instances of an Empty hidden in the viewport, the viewport's depsgraph does
-    not make them: a warning names it (not a silent shadow missing)."""
+    not make them: a warning names it (not a silent shadow missing). Hidden in renders, its
+    instances take no part, as in Cycles, and nothing is said."""
     floor, instancer = sun_scene("collection")
     if hide == "H":
         instancer.hide_set(True)
-    else:
+    elif hide == "monitor":
         instancer.hide_viewport = True
+    else:
+        instancer.hide_render = True
     job = BakeJob.prepare(bpy.context, [floor], BakeSettings(**SETTINGS))
     assert not [o for o in job.scene_input.objects if not o.bake and o.name.startswith("Inst")]
+    if hide == "render":
+        assert not [m for m in job.notes if "Inst" in m]
+        return
     assert list(job.messages().warnings) == [
         "'Inst' is hidden in the viewport, so its instances of collection 'CrateColl' are not read "
         "(renders show them): show it for an exact bake"]
     assert not [m for m in job.notes if NOTE in m]
+
+
+def test_in_place_with_the_instancer_selected_writes_the_floor_only():
+    floor, instancer = sun_scene("cube")
+    pos, cycles = cycles_floor(floor)
+    deep, _ = floor_regions(pos)
+    attrs = sorted(instancer.data.attributes.keys())
+    job, written = bake([floor, instancer], output_mode="in_place")
+    assert [o.name for o in written] == ["floor"]
+    assert sorted(instancer.data.attributes.keys()) == attrs and not instancer.hide_get()
+    ours_pos, ours = corner_data(floor)
+    assert np.abs(ours_pos - pos).max() < 1e-6
+    assert ours.mean(axis=1)[deep].mean() == pytest.approx(cycles[deep].mean(), rel=0.05)
