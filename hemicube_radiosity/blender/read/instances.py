@@ -26,7 +26,7 @@ import numpy as np
 
 from .visibility import is_render_visible, render_visible_objects
 
-__all__ = ["Prototype", "gather", "remove", "instancer_names", "note", "unread"]
+__all__ = ["Prototype", "gather", "remove", "note", "unread"]
 
 PROTOTYPE = "_hr_instance"
 _GEOMETRY = frozenset({"MESH", "FONT", "CURVE", "SURFACE", "META"})
@@ -46,19 +46,6 @@ def _instancer(inst):
     """The original object that made the instance ``inst`` (its top-level instancer)."""
     parent = inst.parent
     return parent.original if parent is not None else None
-
-
-def instancer_names(depsgraph):
-    """{name: instance count} of the objects that instance geometry a render draws."""
-    out = {}
-    vl = depsgraph.view_layer
-    for inst in depsgraph.object_instances:
-        if not inst.is_instance or inst.object.type not in _GEOMETRY:
-            continue
-        par = _instancer(inst)
-        if par is not None and is_render_visible(par, vl):
-            out[par.name] = out.get(par.name, 0) + 1
-    return out
 
 
 def _materials(ob):
@@ -92,13 +79,14 @@ def _copy_mesh(ob, depsgraph):
 
 
 def gather(depsgraph, instancers=None):
-    """[:class:`Prototype`] of the instances a render draws in ``depsgraph``. ``instancers``: the
-    names of the instancers whose instances take part (None: all). The caller must
-    :func:`remove` the result (also when reading it fails)."""
+    """(prototypes, made): [:class:`Prototype`] of the instances a render draws in ``depsgraph``
+    and {instancer name: instance count} of every instancer a render shows. ``instancers``: the
+    names of the instancers whose instances take part (None: all; empty: none, only ``made`` is
+    counted). The caller must :func:`remove` the prototypes (also when reading them fails)."""
     import bpy
 
     vl = depsgraph.view_layer
-    groups, out = {}, []
+    groups, out, made, shown = {}, [], {}, {}
     try:
         for inst in depsgraph.object_instances:
             if not inst.is_instance:
@@ -107,31 +95,45 @@ def gather(depsgraph, instancers=None):
             par = _instancer(inst)
             if ob.type not in _GEOMETRY or par is None:
                 continue
-            if (instancers is not None and par.name not in instancers) or not is_render_visible(par, vl):
+            name = par.name
+            if name not in shown:
+                shown[name] = is_render_visible(par, vl)
+            if not shown[name]:
                 continue
-            mats = _materials(ob)
-            key = (ob.data.as_pointer() if ob.data is not None else ob.as_pointer(), ob.type,
-                   tuple(m.name_full if m is not None else "" for m in mats))
+            made[name] = made.get(name, 0) + 1
+            if instancers is not None and name not in instancers:
+                continue
+            # one mesh and one set of slots (the instanced object's) make one prototype
+            key = (ob.data.as_pointer() if ob.data is not None else 0, ob.original.as_pointer(), ob.type)
             proto = groups.get(key)
             if proto is None:
-                me = _copy_mesh(ob, depsgraph)
-                if me is None:
-                    groups[key] = False
-                    continue
-                for k, m in enumerate(mats):     # (clear() would reset the material indices)
-                    if k < len(me.materials):
-                        me.materials[k] = m
-                    else:
-                        me.materials.append(m)
-                proto = groups[key] = Prototype(bpy.data.objects.new(PROTOTYPE, me), ob.original.name)
-                out.append(proto)
+                proto = groups[key] = _prototype(ob, depsgraph) or False
+                if proto:
+                    out.append(proto)
             if proto:
                 proto.matrices.append(np.array(inst.matrix_world, dtype=np.float64))
-                proto.instancers.append(par.name)
+                proto.instancers.append(name)
     except BaseException:
         remove(out)
         raise
-    return out
+    return out, made
+
+
+def _prototype(ob, depsgraph):
+    """A :class:`Prototype` of the evaluated instance object ``ob``: a temporary object (in no
+    scene) with a copy of its mesh wearing the original materials, or None without geometry."""
+    import bpy
+
+    mats = _materials(ob)
+    me = _copy_mesh(ob, depsgraph)
+    if me is None:
+        return None
+    for k, m in enumerate(mats):     # (clear() would reset the material indices)
+        if k < len(me.materials):
+            me.materials[k] = m
+        else:
+            me.materials.append(m)
+    return Prototype(bpy.data.objects.new(PROTOTYPE, me), ob.original.name)
 
 
 def remove(protos):
@@ -154,7 +156,7 @@ def remove(protos):
 def unread(depsgraph, made, instancers=None):
     """Notes for the Empties instancing a collection that a render shows but whose instances the
     viewport's depsgraph does not make (the Empty hidden in the viewport): ``made`` the names
-    :func:`instancer_names` found, ``instancers`` as for :func:`gather`."""
+    :func:`gather` found, ``instancers`` as for :func:`gather`."""
     out = []
     for ob in render_visible_objects(depsgraph.view_layer, {"EMPTY"}):
         if ob.instance_type != "COLLECTION" or ob.instance_collection is None or ob.name in made:

@@ -323,8 +323,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
     An instancer without faces of its own (an Empty, a Geometry Nodes object that only makes
     instances) is no problem: its instances take part. Only when none of ``objects`` is left is
     the bake refused, with that object's own line (or one line naming them all)."""
-    made = inst_reader.instancer_names(depsgraph)
-    protos = inst_reader.gather(depsgraph, instancers) if instancers is None or instancers else []
+    protos, made = inst_reader.gather(depsgraph, instancers)
     try:
         protos_obs = [p.ob for p in protos]
         shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph)
