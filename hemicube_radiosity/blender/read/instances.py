@@ -7,8 +7,9 @@ reflect and emit like any surface, but :func:`.visibility.render_visible_objects
 them. They are read from ``depsgraph.object_instances`` (only there, while the iterator is on one
 of them, is ``inst.object`` the instanced geometry and ``inst.matrix_world`` its placement).
 
-Instances of one mesh are read once: :func:`gather` groups them by their evaluated mesh (and the
-materials they wear) and copies each distinct mesh once into a TEMPORARY mesh and object, not
+Instances of one mesh are read once: :func:`gather` groups them by their evaluated mesh and the
+object they are of (whose slots give their materials) and copies each distinct mesh once, in one
+pass over the depsgraph, into a TEMPORARY mesh and object, not
 linked to any scene (a Geometry Nodes instance's geometry exists only in the depsgraph, so
 ``new_from_object`` cannot give it: the evaluated mesh is copied instead), with the original
 materials of its slots. :mod:`.scene` reads each such prototype like an object at the identity
@@ -16,7 +17,11 @@ and places it by every matrix of its group; :func:`remove` deletes the prototype
 user's objects, meshes and materials are never written.
 
 Instances are occluders, reflectors and emitters only (``ObjectSource.bake`` False): the writer
-has no object of theirs to write to, which :func:`note` says once, naming the instancers.
+has no object of theirs to write to, which :func:`note` says once, naming the instancers. Only
+the instances the viewport's depsgraph makes can be read: an Empty hidden in the viewport makes
+none there, while renders show them (:func:`unread` says so). A prototype's material is evaluated
+by Cycles on the mesh at the origin, so a texture in object or generated coordinates is that of
+the instanced object where it stands, not where each instance is.
 """
 from __future__ import annotations
 

@@ -18,9 +18,10 @@ borders) is a hard edge: each side gets its own vertex copies and colours do not
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
 seen from the front in world space.
 
-Which objects and where: :mod:`.visibility` (what a render sees). Materials: :mod:`.materials`
-(node values) and :mod:`.shading` (Cycles' own evaluation, per corner or per material, on
-temporary copies). :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission`` for every
+Which objects and where: :mod:`.visibility` (what a render sees); instances (collection,
+Geometry Nodes, particles) from the depsgraph: :mod:`.instances`, placed here
+(:func:`read_scene`). Materials: :mod:`.materials` (node values) and :mod:`.shading` (Cycles' own
+evaluation, per corner or per material, on temporary copies). :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission`` for every
 corner of ``mesh.face_indices``; the mesh's ``face_rho`` / ``face_emission`` are their per-face
 means.
 
