@@ -10,8 +10,9 @@ by Cycles (DIFFUSE: rho H / pi, the crate instance seen by Cycles) and by the ad
 ``BakeJob`` (one patch per face, the same corners); the shadowed and the lit floor must agree in
 the mean, with the instancer selected and not. Without the instances the shadow came out 4x too
 bright (0.47 against Cycles' 0.116). Also: the user's scene is unchanged by the read, one note
-names the instancers, a selection of nothing but an instancer is refused with one line, and an
-emitting instance lights the floor as it does in Cycles.
+names the instancers, a selection of nothing but an instancer is refused with one line, an
+emitting instance lights the floor as it does in Cycles, an instancer hidden in the viewport is
+said, and a textured instance gets Cycles' colours at its corners like its object.
 """
 from __future__ import annotations
 
@@ -294,3 +295,33 @@ def test_in_place_with_the_instancer_selected_writes_the_floor_only():
     ours_pos, ours = corner_data(floor)
     assert np.abs(ours_pos - pos).max() < 1e-6
     assert ours.mean(axis=1)[deep].mean() == pytest.approx(cycles[deep].mean(), rel=0.05)
+
+
+def test_a_textured_instance_is_evaluated_by_cycles_like_its_object():
+    """A crate whose Principled Base Color is a UV checker: its instance's reflectance at every
+    corner is Cycles' evaluation, the same as the crate's own when it is read as an object."""
+    from hemicube_radiosity.blender.read.scene import read_object
+
+    cr.new_empty_scene()
+    floor = floor_object(4, 2.0)
+    crate, coll = _crate_object()
+    m = bpy.data.materials.new("checker")
+    chk = m.node_tree.nodes.new("ShaderNodeTexChecker")
+    chk.inputs["Scale"].default_value = 2.0
+    m.node_tree.links.new(chk.outputs[0], m.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
+    crate.data.materials[0] = m
+    uv = crate.data.uv_layers.new(name="UVMap")
+    co = np.array([crate.data.vertices[l.vertex_index].co for l in crate.data.loops])
+    uv.data.foreach_set("uv", (co[:, :2] + co[:, 1:] + 0.5).ravel())
+    ob = bpy.data.objects.new("Inst", None)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.instance_type, ob.instance_collection = "COLLECTION", coll
+    job = BakeJob.prepare(bpy.context, [floor], BakeSettings(**SETTINGS))
+    (inst,) = [o for o in job.scene_input.objects if not o.bake]
+    assert not [n for n in job.notes if "not evaluated" in n or "could not" in n]
+    bpy.context.view_layer.layer_collection.children[coll.name].exclude = False
+    own = read_object(crate, bpy.context.evaluated_depsgraph_get(), False)
+    lo, hi = own.corner_rho.min(), own.corner_rho.max()
+    assert lo < 0.3 and hi > 0.7                                  # the checker's two colours
+    np.testing.assert_allclose(inst.corner_rho, own.corner_rho, atol=1e-6)
+    np.testing.assert_allclose(inst.mesh.verts, own.mesh.verts, atol=1e-6)
