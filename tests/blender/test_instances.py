@@ -37,6 +37,7 @@ CENTER = (LO + HI) / 2
 ZEN = math.pi / 2 - SUN_ELEVATION
 TO_SUN = np.array([0.0, -math.sin(ZEN), math.cos(ZEN)])
 SAMPLES = 128
+OPERATOR = dict(patch_size=0.25, resolution=32, element_size=0.0)    # the floor's faces are patches
 NOTE = "part as occluders and reflectors; their colours are not written"
 
 
@@ -325,3 +326,22 @@ def test_a_textured_instance_is_evaluated_by_cycles_like_its_object():
     assert lo < 0.3 and hi > 0.7                                  # the checker's two colours
     np.testing.assert_allclose(inst.corner_rho, own.corner_rho, atol=1e-6)
     np.testing.assert_allclose(inst.mesh.verts, own.mesh.verts, atol=1e-6)
+
+
+@pytest.mark.parametrize("kind", ["collection", "cube"])
+def test_the_operator_bakes_with_the_instancer_selected_and_active(addon, kind):
+    from tests.support.addon import select, sub
+
+    floor, instancer = sun_scene(kind)
+    select(bpy, [instancer, floor])
+    assert bpy.ops.object.radiosity_bake(**OPERATOR) == {"FINISHED"}
+    (copy,) = sub(addon, "blender.write").copies_of(["floor"])
+    assert not sub(addon, "blender.write").copies_of([instancer.name])
+    pos, ours = corner_data(copy)
+    deep, lit = floor_regions(pos)
+    assert ours[deep].mean() < 0.35 * ours[lit].mean()       # the instance's shadow
+    select(bpy, [instancer])
+    with pytest.raises(RuntimeError, match=rf"^Error: '{instancer.name}' only makes instances, which take "
+                       r"part as occluders and reflectors but are not baked: select the meshes to bake "
+                       r"as well\n?$"):
+        bpy.ops.object.radiosity_bake(**OPERATOR)
