@@ -35,6 +35,7 @@ __all__ = ["Prototype", "gather", "remove", "note", "unread"]
 
 PROTOTYPE = "_hr_instance"
 _GEOMETRY = frozenset({"MESH", "FONT", "CURVE", "SURFACE", "META"})
+_RAYS = ("visible_diffuse", "visible_shadow")
 
 
 @dataclass
@@ -98,8 +99,8 @@ def gather(depsgraph, instancers=None):
                 continue
             ob = inst.object
             par = _instancer(inst)
-            if ob.type not in _GEOMETRY or par is None:
-                continue
+            if ob.type not in _GEOMETRY or par is None or ob.hide_render:
+                continue              # (an instanced collection's object hidden in renders)
             name = par.name
             if name not in shown:
                 shown[name] = is_render_visible(par, vl)
@@ -138,7 +139,10 @@ def _prototype(ob, depsgraph):
             me.materials[k] = m
         else:
             me.materials.append(m)
-    return Prototype(bpy.data.objects.new(PROTOTYPE, me), ob.original.name)
+    proto = bpy.data.objects.new(PROTOTYPE, me)
+    for k in _RAYS:                  # what Cycles' rays see of it, for the reader's notes
+        setattr(proto, k, getattr(ob, k))
+    return Prototype(proto, ob.original.name)
 
 
 def remove(protos):
