@@ -78,9 +78,12 @@ def resolve_objects(objects):
 def other_meshes(context, baked):
     """Meshes a render shows that are not baked (what the render sees is what the bake uses,
     whatever the viewport hides). A baked copy stands for its source (hidden by the bake), so a
-    partial re-bake still sees the rest of the scene's geometry and materials."""
-    return _mesh_sources(render_visible_objects(context.view_layer, read.GEOMETRY_TYPES),
-                         {o.name for o in baked})
+    partial re-bake still sees the rest of the scene's geometry and materials. A particle
+    emitter whose own mesh renders do not show (Show Emitter off in renders) is left out; its
+    particles' instances are read with the instances (:mod:`.read.instances`)."""
+    shown = [o for o in render_visible_objects(context.view_layer, read.GEOMETRY_TYPES)
+             if not (o.is_instancer and not o.show_instancer_for_render)]
+    return _mesh_sources(shown, {o.name for o in baked})
 
 
 class StagePrinter:
@@ -145,12 +148,18 @@ class BakeJob:
                                  "install it or choose Hemi-cube")
         targets = resolve_objects(objects)
         if not targets:
+            makers = [o.name for o in objects if o.instance_type == "COLLECTION" and o.instance_collection]
+            if makers:                   # an Empty instancing a collection, alone
+                raise RadiosityError(read.instancers_only(makers))
             raise RadiosityError("no mesh object selected (select meshes, text, curves or metaballs)")
         write_notes = read.check_writable(targets, settings)   # refuse now, not after the work
         others = other_meshes(context, targets) if settings.include_others else []
+        # instances take part with the other meshes, or as part of their selected instancer
+        instancers = None if settings.include_others else {_source_of(o).name for o in objects
+                                                           if _source_of(o) is not None}
         depsgraph = context.evaluated_depsgraph_get()
         t = time.perf_counter()
-        scene_input = read.read_scene(depsgraph, targets, others)
+        scene_input = read.read_scene(depsgraph, targets, others, instancers)
         light_notes = []
         if settings.use_lights:
             from .read.lights import read_lights

@@ -18,9 +18,10 @@ borders) is a hard edge: each side gets its own vertex copies and colours do not
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
 seen from the front in world space.
 
-Which objects and where: :mod:`.visibility` (what a render sees). Materials: :mod:`.materials`
-(node values) and :mod:`.shading` (Cycles' own evaluation, per corner or per material, on
-temporary copies). :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission`` for every
+Which objects and where: :mod:`.visibility` (what a render sees); instances (collection,
+Geometry Nodes, particles) from the depsgraph: :mod:`.instances`, placed here
+(:func:`read_scene`). Materials: :mod:`.materials` (node values) and :mod:`.shading` (Cycles' own
+evaluation, per corner or per material, on temporary copies). :class:`ObjectSource` carries ``corner_rho`` / ``corner_emission`` for every
 corner of ``mesh.face_indices``; the mesh's ``face_rho`` / ``face_emission`` are their per-face
 means.
 
@@ -37,13 +38,14 @@ import numpy as np
 from ...core.mesh.patches import MeshInput
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.notes import Note, note, subject_and_kind
+from . import instances as inst_reader
 from . import shading
 from .face_emission import face_means
 from .materials import corner_materials
 from .visibility import render_notes, world_matrix
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
-           "GEOMETRY_TYPES", "check_writable"]
+           "GEOMETRY_TYPES", "check_writable", "instancers_only"]
 
 COPLANAR_COS = float(np.cos(1e-3))
 # a face is of zero area below this fraction of the object's squared size (its bounding box
@@ -87,6 +89,7 @@ class SceneInput:
     lights: tuple = ()        # core.light.lamps objects, filled by blender.read.lights.read_lights
     world: object = None
     skipped: list = field(default_factory=list)   # notes of objects left out ("name: why")
+    instanced: list = field(default_factory=list)  # the note on instances that take part
 
     @property
     def meshes(self):
@@ -95,11 +98,13 @@ class SceneInput:
     def notes(self):
         """The readers' lines as :class:`Note` s: an object left out is a warning; an object's
         line is said of the object, unless it has its own subject (a material's, said once for
-        every object that uses it)."""
+        every object that uses it); then the instances' note, and theirs (:func:`read_scene`)."""
         out = []
         for line in self.skipped:
             subject, kind, _ = subject_and_kind(line)
             out.append(Note(line, subject, kind, warning=True))
+        for line in self.instanced:         # the instances' note (of the whole bake) and theirs
+            out.append(line if isinstance(line, Note) else Note(line, *subject_and_kind(line)[:2]))
         for o in self.objects:
             for n in o.notes:
                 if isinstance(n, Note) and n.subject is not None:
@@ -307,31 +312,112 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
                         corner_rho, corner_em)
 
 
-def read_scene(depsgraph, objects, others=()) -> SceneInput:
-    """``objects`` are baked; ``others`` take part as occluders/emitters only. The materials that
-    Cycles must evaluate are evaluated for all of them in one batch (:func:`.shading.shade`).
+def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
+    """``objects`` are baked; ``others`` take part as occluders/emitters only, and so do the
+    instances (:mod:`.instances`) of the instancers named in ``instancers`` (None: of every
+    instancer the render shows). The materials that Cycles must evaluate are evaluated for all of
+    them in one batch (:func:`.shading.shade`).
 
     An object that cannot be baked (no faces, every face of zero area, positions or transform
     not finite, a zero scale: :func:`read_object`'s :class:`ReadError`) is left out with one note
     naming it and why, and the rest bakes: one broken object must not stop a scene of hundreds.
-    Only when none of ``objects`` is left is the bake refused, with that object's own line (or
-    one line naming them all)."""
-    shaded = shading.shade(list(objects) + list(others), depsgraph)
-    out, skipped, problems = [], [], []
-    for o in objects:
+    An instancer without faces of its own (an Empty, a Geometry Nodes object that only makes
+    instances) is no problem: its instances take part. Only when none of ``objects`` is left is
+    the bake refused, with that object's own line (or one line naming them all)."""
+    protos, made = inst_reader.gather(depsgraph, instancers)
+    try:
+        protos_obs = [p.ob for p in protos]
+        shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph)
+        out, skipped, problems, only_instancing = [], [], [], []
+        for o in objects:
+            try:
+                out.append(read_object(o, depsgraph, True, shaded))
+            except ReadError as ex:
+                if o.name in made and _faceless(o, depsgraph):
+                    only_instancing.append(o.name)
+                    continue
+                problems.append(str(ex))
+                skipped.append(f"{ex}; left out")
+        if objects and not out:
+            if not problems:
+                raise ReadError(instancers_only(only_instancing))
+            raise ReadError(problems[0] if len(problems) == 1 else _none_bakeable(problems))
+        for o in others:
+            try:
+                out.append(read_object(o, depsgraph, False, shaded))
+            except ReadError:
+                continue  # an occluder without faces simply does not occlude
+        placed, counts, emits, inst_notes = _place_instances(protos, depsgraph, shaded)
+        out += placed
+    finally:
+        inst_reader.remove(protos)
+    said = inst_reader.note(counts, emits)
+    said = [Note(said, None, said)] if said else []
+    said += [Note(n, None, n, warning=True) for n in inst_reader.unread(depsgraph, made, instancers)]
+    return SceneInput(out, skipped=skipped, instanced=said + inst_notes)
+
+
+def instancers_only(names):
+    """The line refusing a selection of nothing but instancers (``names``)."""
+    listed = ", ".join(f"'{n}'" for n in names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
+    return (f"{listed} only make{'s' if len(names) == 1 else ''} instances, which take part as "
+            "occluders and reflectors but are not baked: select the meshes to bake as well")
+
+
+def _faceless(obj, depsgraph):
+    """True when the evaluated mesh of ``obj`` has no faces of its own."""
+    if obj.type != "MESH":
+        return False
+    ob_eval = obj.evaluated_get(depsgraph)
+    return ob_eval.data is None or len(ob_eval.data.polygons) == 0
+
+
+def _place_instances(protos, depsgraph, shaded):
+    """(sources, {instancer: instances placed}, any emits, notes) of the instance prototypes: each read
+    once at the identity, then one :class:`ObjectSource` (``bake`` False) per matrix, named after
+    its instancer ("Scatter [instance 3]"). A prototype that cannot be read (no faces) or an
+    instance of zero scale takes no part."""
+    out, counts, emits, notes = [], {}, False, []
+    for p in protos:
         try:
-            out.append(read_object(o, depsgraph, True, shaded))
-        except ReadError as ex:
-            problems.append(str(ex))
-            skipped.append(f"{ex}; left out")
-    if objects and not out:
-        raise ReadError(problems[0] if len(problems) == 1 else _none_bakeable(problems))
-    for o in others:
-        try:
-            out.append(read_object(o, depsgraph, False, shaded))
+            src = read_object(p.ob, depsgraph, False, shaded)
         except ReadError:
-            continue  # an occluder without faces simply does not occlude
-    return SceneInput(out, skipped=skipped)
+            continue
+        emits |= bool(np.any(src.mesh.face_emission > 0))
+        subject = f"instances of '{p.source}'"
+        notes += [n if isinstance(n, Note) and n.subject is not None
+                  else note(subject, *((n.kind, n.warning) if isinstance(n, Note) else (n,)))
+                  for n in src.notes]
+        for M, par in zip(p.matrices, p.instancers):
+            if not np.all(np.isfinite(M)) or abs(float(np.linalg.det(M[:3, :3]))) < 1e-300:
+                continue
+            counts[par] = counts.get(par, 0) + 1
+            out.append(_placed(src, M, f"{par} [instance {counts[par]}]"))
+    return out, counts, emits, notes
+
+
+def _placed(src, M, name):
+    """A copy of ``src`` (read at the identity) placed by the world matrix ``M``; a mirroring
+    matrix reverses every face's ring so faces stay counter-clockwise seen from the front."""
+    m = src.mesh
+    verts = m.verts @ M[:3, :3].T + M[:3, 3]
+    flipped = float(np.linalg.det(M[:3, :3])) < 0
+    L = m.face_indices.size
+    if flipped:
+        counts = np.diff(m.face_offsets)
+        face = np.repeat(np.arange(counts.size), counts)
+        start = m.face_offsets[:-1][face]
+        perm = start + (counts[face] - 1 - (np.arange(L) - start))
+    else:
+        perm = np.arange(L)
+
+    def corners(a):
+        return None if a is None else a[perm]
+
+    mesh = MeshInput(verts, m.face_offsets, m.face_indices[perm], m.face_rho, m.face_emission, name,
+                     corners(m.corner_rho), corners(m.corner_emission), m.face_material)
+    return ObjectSource(name, mesh, src.corner_loop[perm], M, flipped, False, src.eval_counts, [],
+                        corners(src.corner_rho), corners(src.corner_emission))
 
 
 def _none_bakeable(problems, shown=3):
