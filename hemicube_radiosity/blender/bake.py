@@ -10,6 +10,7 @@ problems are :class:`core.runtime.errors.RadiosityError`.
 from __future__ import annotations
 
 import dataclasses
+import re
 import sys
 import time
 
@@ -234,7 +235,8 @@ class BakeJob:
             "patches": int(len(r.patches)),
             "solved": int(r.unknowns),
             "elements": int(len(r.elements)),
-            "per_object": _with_notes(_per_object(r), self.notes),
+            "per_object": {k: v for k, v in _with_notes(_per_object(r), self.notes).items()
+                           if not _INSTANCE.match(k)},
             "nonzeros": int(r.form_factors.nnz),
             "iterations": int(r.solution.iterations),
             "residual": float(r.solution.residual),
@@ -244,7 +246,8 @@ class BakeJob:
             "forecast": None if r.forecast is None else r.forecast.as_dict(),
             "form_factor_source": r.form_factor_source,
             "objects": [o.name for o in self.scene_input.objects if o.bake],
-            "occluders": [o.name for o in self.scene_input.objects if not o.bake],
+            "occluders": [o.name for o in self.scene_input.objects if not o.bake and not _INSTANCE.match(o.name)],
+            "instances": _instances(self.scene_input.objects),
             "written": [o.name for o in self.written],
             **self.counts(),
             "warnings": list(messages.warnings),
@@ -277,6 +280,21 @@ def _per_object(r) -> dict:
     return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
                 "vertices": int(v[i]), "patch_size": sizes[i][0], "detail_size": sizes[i][1]}
             for i, n in enumerate(names)}
+
+
+# an instance's source is named after its instancer: "Scatter [instance 3]" (read/scene.py)
+_INSTANCE = re.compile(r"^(.*) \[instance \d+\]$")
+
+
+def _instances(objects) -> dict:
+    """{instancer: how many of its instances took part} (one entry per instancer, not per
+    instance: a scatter of 20,000 is one line)."""
+    out = {}
+    for o in objects:
+        m = _INSTANCE.match(o.name)
+        if m:
+            out[m.group(1)] = out.get(m.group(1), 0) + 1
+    return out
 
 
 def _with_notes(per_object, notes) -> dict:

@@ -198,6 +198,9 @@ def test_instanced_crate_shadows_the_floor_as_in_cycles(kind, selected):
     assert said == [f"'{instancer.name}': {n} {word} part as occluders and reflectors; "
                     "their colours are not written"]
     assert not any(instancer.name in m and "faces" in m for m in job.notes)   # no "has no faces"
+    rep = job.report()        # an instancer is one entry, however many instances it makes
+    assert rep["instances"] == {instancer.name: n} and rep["occluders"] == ["wall"]
+    assert not [k for k in rep["per_object"] if "[instance" in k]
     # every instance faces outward, the mirrored ones too (their rings were reversed)
     for o in inst:
         m = o.mesh
@@ -364,3 +367,23 @@ def test_an_instance_invisible_to_shadow_rays_is_said():
     assert [m for m in job.notes if "shadow rays" in m] == [
         "instances of 'Crate': not visible to shadow rays in Cycles; here it still reflects and casts "
         "shadows like any surface"]
+
+
+def test_cli_objects_may_name_a_collection_instancer(tmp_path):
+    """``--objects floor <Empty instancing a collection>``: the Empty is not refused as 'not a
+    mesh object'; its instance takes part (one entry in the report) and the floor is baked."""
+    import io
+    import json
+
+    from hemicube_radiosity.blender.cli import main as cli
+
+    floor, instancer = (o.name for o in sun_scene("collection"))   # the CLI loads the file anew
+    src = str(tmp_path / "scene.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=src)
+    out, err = io.StringIO(), io.StringIO()
+    rc = cli.main(["bake", src, "--objects", floor, instancer, "-o", str(tmp_path / "r.json"),
+                   "--patch-size", "0.25", "--element-size", "0", "--resolution", "16"],
+                  in_blender=True, out=out, err=err)
+    assert rc == 0, err.getvalue()
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["instances"] == {instancer: 1} and rep["objects"] == [floor], rep["objects"]

@@ -73,7 +73,8 @@ def _select_objects(names, input_path="the input"):
         o = bpy.data.objects.get(n)
         if o is None:
             raise CLIError(f"no object named {n!r} in the input")
-        if o.type not in GEOMETRY_TYPES:
+        if o.type not in GEOMETRY_TYPES and not (o.type == "EMPTY" and o.instance_type == "COLLECTION"
+                                                and o.instance_collection is not None):
             raise CLIError(f"{n!r} is not a mesh object (it is a {o.type.lower()})")
         out.append(o)
     return out
