@@ -42,7 +42,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.light.lamps import AreaLight, PointLight, SpotLight, SunLight
+from ...core.light.lamps import AreaLight, EnvironmentLight, PointLight, SpotLight, SunLight
 from ...core.runtime.notes import warning
 from .materials import follow, rgb
 from .visibility import is_render_visible, render_visible_objects, unevaluated_note, world_matrix
@@ -156,16 +156,24 @@ def _world_tree(world):
     return nt
 
 
-def _world_color(node, notes):
-    """Constant Color x Strength of a Background (or Emission) node in a world."""
+def _world_color(node, notes, envs=None, scale=1.0):
+    """Constant Color x Strength of a Background (or Emission) node in a world. An
+    equirectangular environment texture gives its mean, and (into ``envs``) an
+    :class:`EnvironmentLight` of its variation, scaled as the node tree scales it (``scale``:
+    the Mix factors above this node)."""
     strength = _input_value(node, "Strength", notes, "world", 1.0)
     cs = node.inputs["Color"]
     src, _ = follow(cs)
     if src is not None and src.type == "TEX_ENVIRONMENT" and src.image is not None:
+        env = _environment(src, notes) if envs is not None and src.projection == "EQUIRECTANGULAR" else None
+        if env is not None:
+            env.pixels = env.pixels * float(strength) * float(scale)
+            envs.append(env)
+            return env.mean() / float(scale) if scale else np.zeros(3)
         c = _image_mean(src.image, src.projection)
         notes.append(warning(f"environment texture '{src.image.name}' replaced by its average colour "
-                             f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only a constant world is "
-                             "modelled", "world"))
+                             f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only an equirectangular map "
+                             "lights by direction", "world"))
     elif src is not None and src.type not in ("RGB",):
         c = rgb(cs.default_value)
         notes.append(warning(f"colour of '{node.name}' comes from '{src.name}' ({src.type}), which "
@@ -176,29 +184,32 @@ def _world_color(node, notes):
     return np.asarray(c, float) * float(strength)
 
 
-def _world_shader(node, notes, depth=0):
-    """(3,) radiance of the world shader ``node`` outputs (Background/Emission, Mix, Add)."""
+def _world_shader(node, notes, depth=0, envs=None, scale=1.0):
+    """(3,) radiance of the world shader ``node`` outputs (Background/Emission, Mix, Add);
+    environment maps into ``envs`` (:func:`_world_color`), ``scale`` the Mix factors above."""
     if node is None or depth > 16:
         return np.zeros(3)
     t = node.type
     if t in ("BACKGROUND", "EMISSION"):
-        return _world_color(node, notes)
+        return _world_color(node, notes, envs, scale)
     if t in ("MIX_SHADER", "ADD_SHADER"):
-        parts = [_world_shader(follow(s)[0], notes, depth + 1)
-                 for s in [s for s in node.inputs if s.type == "SHADER"][:2]]
+        shaders = [s for s in node.inputs if s.type == "SHADER"][:2]
+        fac = 0.5 if t == "ADD_SHADER" else float(np.clip(_input_value(node, "Fac", notes, "world", 0.5), 0.0, 1.0))
+        weights = (1.0, 1.0) if t == "ADD_SHADER" else (1 - fac, fac)
+        parts = [_world_shader(follow(s)[0], notes, depth + 1, envs, scale * w)
+                 for s, w in zip(shaders, weights)]
         while len(parts) < 2:
             parts.append(np.zeros(3))
-        if t == "ADD_SHADER":
-            return parts[0] + parts[1]
-        fac = float(np.clip(_input_value(node, "Fac", notes, "world", 0.5), 0.0, 1.0))
-        return (1 - fac) * parts[0] + fac * parts[1]
+        return weights[0] * parts[0] + weights[1] * parts[1]
     notes.append(warning(f"shader '{node.name}' ({node.type}) is not a Background; it gives no sky "
                          "light here", "world"))
     return np.zeros(3)
 
 
-def world_radiance(world, notes):
-    """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse)."""
+def world_radiance(world, notes, envs=None):
+    """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse);
+    with a list ``envs``, its environment maps are added there as lights of their variation
+    (their means are in the constant)."""
     if world is None:
         return None                  # Cycles renders a scene without a world black, too
     vis = getattr(world, "cycles_visibility", None)   # registered by the Cycles add-on
@@ -216,11 +227,50 @@ def world_radiance(world, notes):
     node, _ = follow(out.inputs.get("Surface"))
     if node is None:
         return None
-    c = _world_shader(node, notes)
+    c = _world_shader(node, notes, envs=envs)
     if np.any(c < 0):
         notes.append(f"world: negative radiance ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) taken as 0")
     c = np.maximum(c, 0.0)
     return c if np.any(c > 0) else None
+
+
+def _environment(tex, notes):
+    """An :class:`EnvironmentLight` of an equirectangular Environment Texture node's image (its
+    pixels at strength 1, rotated as the Mapping node on its Vector input says), or None when it
+    cannot be read (then the mean stands alone, with a warning from the caller)."""
+    img = tex.image
+    w, h = img.size
+    if w == 0 or h == 0 or img.channels < 3:
+        return None
+    px = np.empty(w * h * img.channels, np.float32)
+    img.pixels.foreach_get(px)
+    rotation = _mapping_rotation(tex, notes)
+    return EnvironmentLight(px.reshape(h, w, img.channels)[..., :3], rotation, name=f"world '{img.name}'")
+
+
+def _mapping_rotation(tex, notes):
+    """(3, 3) world -> map rotation of what feeds an Environment Texture's Vector: nothing (the
+    identity) or a Mapping node's Rotation (Euler XYZ; 'TEXTURE' mapping turns the other way)."""
+    sock = tex.inputs.get("Vector")
+    src, _ = follow(sock) if sock is not None else (None, None)
+    if src is None or src.type == "TEX_COORD":
+        return np.eye(3)
+    if src.type != "MAPPING":
+        notes.append(f"world: the environment map's Vector comes from '{src.name}' ({src.type}); "
+                     "used the map unrotated")
+        return np.eye(3)
+    r = src.inputs.get("Rotation")
+    ex, ey, ez = (float(a) for a in (r.default_value if r is not None else (0, 0, 0)))
+    cx, sx, cy, sy, cz, sz = np.cos(ex), np.sin(ex), np.cos(ey), np.sin(ey), np.cos(ez), np.sin(ez)
+    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    R = Rz @ Ry @ Rx                         # Euler XYZ: a point's coordinates, rotated
+    if src.vector_type == "TEXTURE":
+        R = R.T
+    elif src.vector_type not in ("POINT", "VECTOR", "NORMAL"):
+        notes.append(f"world: mapping '{src.name}' of type {src.vector_type}; used its rotation")
+    return R
 
 
 def _image_mean(image, projection="EQUIRECTANGULAR"):
@@ -310,5 +360,8 @@ def read_lights(depsgraph_or_scene):
         if light is not None:
             light.cast_shadows = bool(ob.data.use_shadow)   # Blender's Shadow switch
             lights.append(light)
-    world = world_radiance(scene.world, notes)
-    return lights, world, notes
+    envs = []
+    world = world_radiance(scene.world, notes, envs)
+    if world is None:
+        envs = []                    # a world that gives no light gives no variation either
+    return lights + envs, world, notes

@@ -41,6 +41,8 @@ Cycles turns it into radiance with ``eval_fac`` (``intern/cycles/scene/light.cpp
   form factor (Lambert's contour integral, :func:`.polygon_ff.polygon_form_factor`) of the part of
   the light above the receiver's horizon. Disks and ellipses are regular 64-gons of the same
   area. The *spread* setting is ignored (taken as the default 180 degrees).
+* The world's environment map: its variation about its mean, a light of its own colours
+  (:mod:`.environment`); the mean is the constant world.
 
 Shadows (soft shadows from radius / angle / size)
 -------------------------------------------------
@@ -62,12 +64,13 @@ import numpy as np
 
 from ..util.geometry import DISK_SIDES, disk_polygons, equal_area_scale
 from ..util.sampling import disk_samples, stratified_unit_square
+from .environment import EnvironmentLight, environment_irradiance
 from .polygon_ff import polygon_form_factor
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder
 
-__all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "direct_irradiance",
+__all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "EnvironmentLight", "UNBOUNDED", "direct_irradiance",
            "light_irradiance", "spot_attenuation", "AREA_SHAPES"]
 
 AREA_SHAPES = ("SQUARE", "RECTANGLE", "DISK", "ELLIPSE")
@@ -361,12 +364,17 @@ def _area(light, x, n, rng, samples, occ, eps):
 
 
 # light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps) -> (P,) W/m^2
-KERNELS = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area}
+# ((P, 3) for a light of its own colours: ``bands == 3``, the environment map)
+KERNELS = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area,
+           EnvironmentLight: environment_irradiance}
+# lights without a finite power: counted by what they deliver (the energy balance)
+UNBOUNDED = (SunLight, EnvironmentLight)
 
 
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
                      receivers=None, points=None, normals=None, _occ=None, _index=0):
-    """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``).
+    """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``);
+    (P, 3) for a light with its own colours (``light.bands == 3``: an environment map).
 
     At the patch centres by default, or at ``points`` (P, 3) with unit ``normals`` (P, 3) on the
     patches' surfaces (e.g. the patch vertices); ``receivers`` indexes into those points.
@@ -376,7 +384,7 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
     n_all = patches.normals if points is None else np.asarray(normals, np.float64)
     N = len(x_all)
     recv = np.arange(N) if receivers is None else np.asarray(receivers, np.int64)
-    out = np.zeros(N)
+    out = np.zeros((N, 3) if getattr(light, "bands", 1) == 3 else N)
     scale = float(np.linalg.norm(np.ptp(patches.verts, axis=0))) or 1.0
     eps = 1e-5 * scale
     fn = KERNELS.get(type(light))
@@ -414,6 +422,6 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
         ticker.tick(i, len(lights), force=True)
         E = light_irradiance(patches, light, shadows=shadows, samples=samples, seed=seed,
                              receivers=receivers, points=points, normals=normals, _occ=occ, _index=i)
-        H += E[:, None] * light.color[None, :]
+        H += (E if E.ndim == 2 else E[:, None]) * light.color[None, :]
     ticker.tick(len(lights), len(lights), force=True)
     return H

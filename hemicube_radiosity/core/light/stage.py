@@ -13,7 +13,7 @@ Units: radiance (W m^-2 sr^-1 per unit of colour); ``H`` is irradiance (W m^-2) 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.notes import warning
 from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
+from .environment import EnvironmentLight
 from .lamps import direct_irradiance
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
@@ -97,6 +98,9 @@ class DirectLight:
                 # patches ask for finer shadows), at most 4 x its budget
                 grid = int(np.ceil(np.sqrt(samples))) ** 2
                 samples = max(budget, min(per_face * grid, 4 * budget))
+        # an environment map's directions per point: the bake's Sky Rays, as the constant world's
+        lights = [replace(li, rays=settings.sky_rays) if isinstance(li, EnvironmentLight) else li
+                  for li in lights]
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
                    settings.light_seed, cancelled, cache, groups, settings.two_sided_emission,
                    workers=settings.workers, world=world, sky_rays=settings.sky_rays)

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..form_factors.stage import receivers_needed
 from ..runtime.notes import warning
-from ..light.lamps import SpotLight, SunLight, direct_irradiance
+from ..light.lamps import UNBOUNDED, SpotLight, direct_irradiance
 from ..light.points import patch_average
 from .solvers import solve
 
@@ -49,7 +49,7 @@ def lamp_power(light) -> np.ndarray:
     smoothstep integrates to half the blend band); area: P (one-sided). A point or spot with a
     radius and soft falloff is counted by its far field (the disk model gives a little less
     near it)."""
-    if isinstance(light, SunLight):
+    if isinstance(light, UNBOUNDED):
         return None
     share = 1.0
     if isinstance(light, SpotLight):
@@ -62,9 +62,9 @@ def _suns_at(ctx):
     direct light was (same points, seed and ray streams: the other lamps are kept in the list,
     dark and without shadow rays), or None without a sun."""
     s, p = ctx.settings, ctx.patches
-    if not any(isinstance(li, SunLight) for li in ctx.lights):
+    if not any(isinstance(li, UNBOUNDED) for li in ctx.lights):
         return None
-    only = [li if isinstance(li, SunLight) else replace(li, power_w=0.0, cast_shadows=False)
+    only = [li if isinstance(li, UNBOUNDED) else replace(li, power_w=0.0, cast_shadows=False)
             for li in ctx.lights]
 
     def at(points=None, normals=None, where=""):

@@ -1,0 +1,149 @@
+"""The world's light by direction: an environment map (an HDRI) as a light.
+
+A constant world is exact everywhere already: its radiance times the part of each point's
+hemisphere where rays find no surface (:func:`..rays.sky_fraction`), in the direct light, the
+form factors' sky term and the gather. A map is that constant (its solid-angle mean, which the
+reader hands on as the world) **plus its variation about the mean**, and only the variation is
+this light: the sun spot of an HDRI, the blue above and the dark ground below. So the mean keeps
+every path it had, bounces included, and the variation (which is where the shadows come from)
+arrives directly at every patch point and output vertex like a lamp's light, through shadow
+rays.
+
+The variation's integral over a point's hemisphere, ``E(x) = int dL(w) V(x, w) max(0, n.w) dw``
+(W/m^2, per band), is estimated with directions drawn in proportion to ``|dL| dw`` (the map's
+pixels by their luminance's departure from the mean, times their solid angle): a sun spot gets
+its share of the rays, however small it is. The directions are one fixed, stratified set for
+every point (as the sky's lattice is), so neighbouring points see the same rays and the light is
+smooth over a surface; the estimate is unbiased over the set's random shift.
+
+Map convention (Cycles' equirectangular, Blender's image rows bottom-up): ``u = 0.5 -
+atan2(y, x) / 2 pi``, ``v = 0.5 + asin(z) / pi`` of the direction ``R d`` in the map's frame
+(``rotation``: a Mapping node's, world -> map); +X is the image's centre column, +Z its top row.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["EnvironmentLight", "equirect_uv", "environment_irradiance", "MAX_MAP_WIDTH"]
+
+MAX_MAP_WIDTH = 512      # maps are averaged down to at most this width (a 4k HDRI: 8 x 8 pixels each)
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+
+
+def equirect_uv(d: np.ndarray) -> tuple:
+    """(u, v) in [0, 1) x [0, 1] of unit directions ``d`` (..., 3) on an equirectangular map."""
+    u = (0.5 - np.arctan2(d[..., 1], d[..., 0]) / (2 * np.pi)) % 1.0
+    v = 0.5 + np.arcsin(np.clip(d[..., 2], -1.0, 1.0)) / np.pi
+    return u, v
+
+
+def _downsampled(px: np.ndarray, width: int) -> np.ndarray:
+    """``px`` (H, W, 3) averaged down by a whole factor to at most ``width`` columns (energy and
+    mean kept: each pixel of the result is the mean of its block)."""
+    H, W, _ = px.shape
+    k = max(1, int(np.ceil(W / width)))
+    if k == 1:
+        return px
+    h, w = H // k, W // k
+    if h == 0:
+        return px.mean(axis=(0, 1), keepdims=True)
+    return px[:h * k, :w * k].reshape(h, k, w, k, 3).mean(axis=(1, 3))
+
+
+@dataclass
+class EnvironmentLight:
+    """An equirectangular environment map as a light: its variation about its mean (module
+    docstring). ``pixels`` (H, W, 3) radiance, rows bottom-up as Blender stores them (strength
+    included); ``rotation`` (3, 3) world -> map directions. ``color`` is white (the map has its
+    own colours: :func:`environment_irradiance` gives (P, 3)); ``power_w`` 0 and
+    ``cast_shadows`` as lamps have them."""
+
+    pixels: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    color: np.ndarray = field(default_factory=lambda: np.ones(3))
+    power_w: float = 0.0
+    cast_shadows: bool = True
+    name: str = "world"
+    rays: int = 256                    # directions per point (the bake's Sky Rays)
+    bands: int = 3                     # light_irradiance gives (P, 3), not (P,) x color
+
+    def __post_init__(self):
+        px = np.asarray(self.pixels, dtype=np.float64)
+        if px.ndim != 3 or px.shape[2] < 3 or px.shape[0] < 1 or px.shape[1] < 1:
+            raise ValueError(f"environment pixels must be (H, W, 3), got {px.shape}")
+        px = np.where(np.isfinite(px[..., :3]), np.maximum(px[..., :3], 0.0), 0.0)
+        self.pixels = _downsampled(px, MAX_MAP_WIDTH)
+        self.rotation = np.asarray(self.rotation, dtype=np.float64).reshape(3, 3)
+        H, W, _ = self.pixels.shape
+        lat = (np.arange(H) + 0.5) / H * np.pi - np.pi / 2                  # bottom row first
+        # solid angle of each pixel: (2 pi / W) * (pi / H) * cos(latitude), summing to 4 pi
+        self._omega = np.repeat((2 * np.pi / W) * (np.pi / H) * np.cos(lat)[:, None], W, axis=1)
+        self._omega *= 4 * np.pi / self._omega.sum()
+
+    def mean(self) -> np.ndarray:
+        """(3,) the map's solid-angle mean radiance: the constant world it is the variation of."""
+        return (self.pixels * self._omega[..., None]).sum(axis=(0, 1)) / (4 * np.pi)
+
+    def radiance(self, d: np.ndarray) -> np.ndarray:
+        """(..., 3) the map's radiance towards world directions ``d`` (..., 3) (nearest pixel)."""
+        H, W, _ = self.pixels.shape
+        u, v = equirect_uv(np.asarray(d, float) @ self.rotation.T)
+        i = np.clip((v * H).astype(np.int64), 0, H - 1)
+        j = np.clip((u * W).astype(np.int64), 0, W - 1)
+        return self.pixels[i, j]
+
+    def directions(self, n: int, seed: int = 0) -> tuple:
+        key = (int(n), int(seed))
+        memo = self.__dict__.setdefault("_memo", {})
+        if key not in memo:
+            memo[key] = self._directions(*key)
+        return memo[key]
+
+    def _directions(self, n: int, seed: int = 0) -> tuple:
+        """(dirs (n, 3) world, weight (n, 3)): ``n`` stratified directions drawn in proportion to
+        ``|L - mean| dw`` and each one's share of the variation's integral, so that
+        ``sum_k weight_k f(d_k)`` estimates ``int (L - mean)(w) f(w) dw`` for any ``f``."""
+        dL = self.pixels - self.mean()
+        p = np.abs(dL @ LUMA) * self._omega
+        total = p.sum()
+        if not total > 0:
+            return np.zeros((0, 3)), np.zeros((0, 3))
+        H, W = p.shape
+        cdf = np.cumsum(p.ravel()) / total
+        rng = np.random.default_rng(seed)
+        u = (np.arange(n) + rng.uniform()) / n                              # stratified in the cdf
+        k = np.minimum(np.searchsorted(cdf, u, side="right"), H * W - 1)
+        i, j = np.divmod(k, W)
+        jit = rng.uniform(size=(n, 2))
+        lon = 2 * np.pi * (0.5 - (j + jit[:, 0]) / W)                        # the inverse of equirect_uv
+        lat = np.pi * ((i + jit[:, 1]) / H - 0.5)
+        local = np.stack([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)], -1)
+        dirs = local @ self.rotation                                         # map -> world
+        # estimator weight: dL / (n pdf), pdf = p_k / (total * omega_k) per steradian
+        w = dL[i, j] * (total / (n * np.abs(dL[i, j] @ LUMA)))[:, None]
+        return dirs, w
+
+
+def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps) -> np.ndarray:
+    """(P, 3) W/m^2: the map's variation about its mean arriving at points ``x`` (P, 3) with unit
+    normals ``n`` (P, 3), through shadow rays (``occ``: an occluder or None). ``light.rays``
+    directions per point, one set for all (module docstring); ``rng`` and ``samples`` are the
+    lamps' (unused: the set is fixed by the map, for smooth light)."""
+    d, w = light.directions(light.rays, seed=0)
+    out = np.zeros((len(x), 3))
+    if not len(d):
+        return out
+    cos = n @ d.T                                                            # (P, R)
+    r, s = np.nonzero(cos > 0)
+    if not r.size:
+        return out
+    if occ is None:
+        vis = np.ones(r.size, bool)
+    else:
+        vis = ~np.asarray(occ.occluded(x[r] + eps * n[r], d[s], None), bool)
+    c = np.where(vis, cos[r, s], 0.0)
+    for k in range(3):
+        out[:, k] = np.bincount(r, weights=c * w[s, k], minlength=len(x))
+    return out
