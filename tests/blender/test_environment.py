@@ -5,10 +5,11 @@ The world is an equirectangular float image made here: a blue sky, a dark ground
 bright sun spot 30 degrees up, from -y (as ``cycles_scenes.case_sun``'s sun). Over a floor, a box
 throws the spot's shadow toward +y. Cycles' DIFFUSE-with-colour bake (COMBINED: rho H / pi at
 every floor corner, 1,024 samples) is compared with ours at the same corners: the lit floor,
-the floor in the spot's shadow, and the shadow's place. Measured: lit 0.712 against Cycles' 0.718, in the shadow 0.306
+the floor in the spot's shadow, and the shadow's place. Measured: lit 0.719 against Cycles' 0.718, in the shadow 0.310
 against 0.310. Before, the world was the map's mean: 0.374 in the sun and 0.366 in the shadow
 (no shadow, the lit floor 48% dark). A Mapping node turning the map 90 degrees about Z moves the
-shadow with it.
+shadow with it. A Sky Texture world, which no image holds, is rendered by Cycles into a map
+first: lit 0.378 against 0.378, in the shadow 0.0613 against 0.0606.
 """
 from __future__ import annotations
 
@@ -90,7 +91,7 @@ def test_the_map_is_a_light_and_its_mean_the_world():
     c = case()
     env = [li for li in c.lights if isinstance(li, EnvironmentLight)]
     assert len(env) == 1 and not any("replaced by its average" in n for n in c.notes), c.notes
-    np.testing.assert_allclose(c.world, env[0].mean(), rtol=1e-9)
+    np.testing.assert_allclose(c.world, env[0].base(), rtol=1e-9)   # the constant the map varies about
     # the sun spot is where it was put: the brightest direction of the map read
     np.testing.assert_allclose(env[0].radiance(TO_SUN), SPOT, rtol=1e-6)
 
@@ -117,3 +118,49 @@ def test_a_mapping_rotation_turns_the_shadow_with_the_map():
     assert c.cycles[lit].mean() > 2.0 * c.cycles[deep].mean()      # Cycles agrees on where
     assert c.ours[deep].mean() == pytest.approx(c.cycles[deep].mean(), rel=0.06)
     assert c.ours[lit].mean() == pytest.approx(c.cycles[lit].mean(), rel=0.03)
+
+
+def sky_scene():
+    """The same floor and box under a Sky Texture (its default model, sun disc on) with its sun
+    30 degrees up from -y, at strength 0.02: the world varies with direction, and no
+    Environment Texture holds it."""
+    cr.new_empty_scene()
+    fl = floor_object(16, 2.0)
+    v, f = box_arrays(BOX_LO, BOX_HI, 4)
+    bx = cr.mesh_object(v, f, cr.diffuse_material((RHO,) * 3), "box")
+    w = bpy.data.worlds.new("sky")
+    nt = cr.node_tree(w)
+    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+    sky = nt.nodes.new("ShaderNodeTexSky")
+    sky.sun_elevation, sky.sun_rotation = SUN_ELEVATION, math.pi    # from -y, as TO_SUN
+    nt.links.new(sky.outputs["Color"], bg.inputs["Color"])
+    bg.inputs["Strength"].default_value = 0.02
+    bpy.context.scene.world = w
+    return [fl, bx]
+
+
+def test_a_sky_texture_is_rendered_by_cycles_into_a_map_that_lights():
+    """Cycles renders the world alone into an equirectangular map (blender/read/world_map.py):
+    its sun a third of a pixel, found; the map lights as an HDRI does. Nothing is left behind
+    in the file (no scene, camera, image or Render Result)."""
+    objects = sky_scene()
+
+    def blocks():
+        return [sorted(c.keys()) for c in (bpy.data.scenes, bpy.data.images, bpy.data.cameras,
+                                           bpy.data.objects, bpy.data.worlds)]
+    before = blocks()
+    c = Comparison(objects, samples=1024)
+    assert blocks() == before
+    env = [li for li in c.lights if isinstance(li, EnvironmentLight)]
+    assert len(env) == 1 and not any("not read" in n for n in c.notes), c.notes
+    Y = env[0].pixels @ [0.2126, 0.7152, 0.0722]
+    i, j = np.unravel_index(Y.argmax(), Y.shape)
+    h, w = Y.shape
+    lat, lon = ((i + 0.5) / h - 0.5) * np.pi, 2 * np.pi * (0.5 - (j + 0.5) / w)
+    sun = np.array([np.cos(lat) * np.cos(lon), np.cos(lat) * np.sin(lon), np.sin(lat)])
+    assert sun @ TO_SUN > np.cos(np.radians(2.0))                  # the sun is where it was set
+    lit, deep = regions(c, TO_SUN)
+    assert lit.sum() > 400 and deep.sum() > 15
+    assert c.cycles[lit].mean() > 3.0 * c.cycles[deep].mean()
+    assert c.ours[lit].mean() == pytest.approx(c.cycles[lit].mean(), rel=0.03)
+    assert c.ours[deep].mean() == pytest.approx(c.cycles[deep].mean(), rel=0.05)

@@ -169,7 +169,7 @@ def _world_color(node, notes, envs=None, scale=1.0):
         if env is not None:
             env.pixels = env.pixels * float(strength) * float(scale)
             envs.append(env)
-            return env.mean() / float(scale) if scale else np.zeros(3)
+            return env.base() / float(scale) if scale else np.zeros(3)
         c = _image_mean(src.image, src.projection)
         notes.append(warning(f"environment texture '{src.image.name}' replaced by its average colour "
                              f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only an equirectangular map "
@@ -206,6 +206,10 @@ def _world_shader(node, notes, depth=0, envs=None, scale=1.0):
     return np.zeros(3)
 
 
+# what the node reader says of a world it cannot read as constant (then Cycles renders it)
+_NOT_CONSTANT = ("colour of '", "shader '", "environment texture '")
+
+
 def world_radiance(world, notes, envs=None):
     """(3,) constant radiance of ``world`` or None (no world / black / invisible to diffuse);
     with a list ``envs``, its environment maps are added there as lights of their variation
@@ -227,7 +231,19 @@ def world_radiance(world, notes, envs=None):
     node, _ = follow(out.inputs.get("Surface"))
     if node is None:
         return None
-    c = _world_shader(node, notes, envs=envs)
+    said = []
+    c = _world_shader(node, said, envs=envs)
+    if envs is not None and any(getattr(n, "kind", "").startswith(_NOT_CONSTANT) for n in said):
+        # a Sky Texture, a gradient...: Cycles renders the world by direction, and that map lights
+        from .world_map import render_world_map
+
+        px = render_world_map(world, notes)
+        if px is not None:
+            env = EnvironmentLight(px, name="world")
+            envs[:] = [env]
+            said = [n for n in said if not getattr(n, "warning", False)]   # read as Cycles sees it
+            c = env.base()
+    notes += said
     if np.any(c < 0):
         notes.append(f"world: negative radiance ({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}) taken as 0")
     c = np.maximum(c, 0.0)

@@ -197,7 +197,9 @@ class DirectLight:
                                    cancelled=self.cancelled, samples=min(samples or self.light_samples,
                                                                          self.light_samples),
                                    seed=self.light_seed) / np.pi
-        return D
+        # an environment map's variation about its mean is signed (its estimate, near a point
+        # that sees little of the sky, can dip below what the mean gives): light is not
+        return np.maximum(D, 0.0, out=D)
 
 
 def _unit_owner(light: "DirectLight") -> np.ndarray:
@@ -349,6 +351,7 @@ def direct_stage(ctx) -> None:
         ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
         if ctx.irradiance is not None:
             ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi
+            np.maximum(ctx.source, 0.0, out=ctx.source)   # a map's signed variation: as in at()
         return
     # direct light (emitters and lamps) arrives by the exact path; the solve carries only
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
