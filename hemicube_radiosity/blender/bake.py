@@ -218,7 +218,8 @@ class BakeJob:
     def summary(self):
         r, c = self.result, self.counts()
         estimate = "" if r.error_estimate is None else f", {r.error_estimate.describe()}"
-        return (f"Radiosity: {c['patches_solved']:,} patches solved from {c['faces']:,} faces, "
+        faces = f"{c['faces']:,} face" + ("" if c["faces"] == 1 else "s")
+        return (f"Radiosity: {c['patches_solved']:,} patches solved from {faces}, "
                 f"{c['output_vertices']:,} output vertices{estimate}; {r.solution.iterations} "
                 f"iterations, residual {r.solution.residual:.1e}, {r.timings['total']:.1f} s")
 

@@ -339,6 +339,16 @@ def test_material_reading(addon, empty_scene):
     assert any("viewport colour" in n for n in job.notes)
     # a shader that is not modelled changes the result: a warning, naming the material
     assert any("viewport colour" in w and "material 'G'" in w for w in job.messages().warnings)
+    # what the operator reports after the bake: the warnings first, each a WARNING of its own,
+    # then the summary's numbers (the popup lists the same lines)
+    job.run()
+    lines = sub(addon, "blender.ui.operators").report_lines(job)
+    kinds = [k for k, _ in lines]
+    assert kinds[0] == {"WARNING"} and kinds.count({"INFO"}) >= 1
+    assert kinds == sorted(kinds, key=lambda k: "INFO" in k)           # no warning after the summary
+    assert any("material 'G'" in t and "viewport colour" in t for k, t in lines if "WARNING" in k)
+    summary = next(t for k, t in lines if "INFO" in k)
+    assert summary == job.summary() and "patches solved from 1 face," in summary
 
 
 def test_lamps_light_the_bake_in_cycles_units(addon, empty_scene):
