@@ -18,8 +18,9 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 # Settings whose defaults changed after the references were first written (cfa6419): pinned so
-# that every case keeps meaning what it meant (one-sided emitters, direct light at patch centres).
-PINNED = {"two_sided_emission": False, "patch_light_points": 1}
+# that every case keeps meaning what it meant (one-sided emitters, direct light at patch centres,
+# surfaces that reflect from their front only: no backs for open surfaces).
+PINNED = {"two_sided_emission": False, "patch_light_points": 1, "two_sided_reflection": False}
 
 CASES = {
     # name: (scene, settings dict, lights, world)

@@ -269,18 +269,21 @@ def _per_object(r) -> dict:
     import numpy as np
 
     names = r.patches.object_names
-    p = np.bincount(r.patches.owner, minlength=len(names))
-    e = np.bincount(r.elements.owner, minlength=len(names))
-    k = np.bincount(r.clusters.owner if r.clusters is not None else r.patches.owner, minlength=len(names))
+    front = r.fronts() if len(r.back_of) == len(names) else np.arange(len(names))
+    n = len(names)
+    # an object's back (its open faces turned around: core/mesh/backs.py) counts with the object
+    p = np.bincount(front[r.patches.owner], minlength=n)
+    e = np.bincount(front[r.elements.owner], minlength=n)
+    k = np.bincount(front[r.clusters.owner if r.clusters is not None else r.patches.owner], minlength=n)
     polys = r.elements.polys
     vert_owner = np.full(len(r.elements.verts), -1, np.int64)
     corner = polys >= 0
-    vert_owner[polys[corner]] = np.broadcast_to(r.elements.owner[:, None], polys.shape)[corner]
-    v = np.bincount(vert_owner[vert_owner >= 0], minlength=len(names))
-    sizes = [r.object_sizes(i) for i in range(len(names))]
-    return {n: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
-                "vertices": int(v[i]), "patch_size": sizes[i][0], "detail_size": sizes[i][1]}
-            for i, n in enumerate(names)}
+    vert_owner[polys[corner]] = np.broadcast_to(front[r.elements.owner][:, None], polys.shape)[corner]
+    v = np.bincount(vert_owner[vert_owner >= 0], minlength=n)
+    sizes = [r.object_sizes(i) for i in range(n)]
+    return {name: {"patches": int(p[i]), "elements": int(e[i]), "solved": int(k[i]),
+                   "vertices": int(v[i]), "patch_size": sizes[i][0], "detail_size": sizes[i][1]}
+            for i, name in enumerate(names) if front[i] == i}
 
 
 # an instance's source is named after its instancer: "Scatter [instance 3]" (read/scene.py)

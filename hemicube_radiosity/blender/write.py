@@ -46,11 +46,15 @@ class WriteError(RadiosityError, RuntimeError):
     pass
 
 
-def baked_material(attribute_name: str):
-    """A material that shows colour attribute ``attribute_name`` as emitted light (shared)."""
-    name = f"{MATERIAL_PREFIX} ({attribute_name})"
+def baked_material(attribute_name: str, culled: bool = False):
+    """A material that shows colour attribute ``attribute_name`` as emitted light (shared).
+    ``culled``: for a copy that carries the backs of its open surfaces (core/mesh/backs.py), each
+    side shows its own light: back faces are culled in the viewport and glTF's material is
+    single-sided (Cycles sees the nearer face, which is the one facing it)."""
+    name = f"{MATERIAL_PREFIX} ({attribute_name}{', two-sided' if culled else ''})"
     mat = bpy.data.materials.get(name)
-    if mat is not None and mat.node_tree is not None and mat.get("radiosity_attribute") == attribute_name:
+    if mat is not None and mat.node_tree is not None and mat.get("radiosity_attribute") == attribute_name \
+            and mat.use_backface_culling == culled:
         return mat
     mat = mat or bpy.data.materials.new(name)
     if bpy.app.version < (5, 0, 0) or mat.node_tree is None:
@@ -64,6 +68,7 @@ def baked_material(attribute_name: str):
     col.location = (0, 0)
     nt.links.new(col.outputs["Color"], out.inputs["Surface"])
     mat.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    mat.use_backface_culling = culled
     mat["radiosity_attribute"] = attribute_name
     return mat
 
@@ -102,8 +107,9 @@ def remove_bakes(names, unhide=False):
 
 
 def patch_mesh_arrays(patches, owner, vertex_radiosity, matrix_world, flipped):
-    """Local-space verts, loop vertex ids, loop starts and corner colours of one owner's patches."""
-    sel = np.flatnonzero(patches.owner == owner)
+    """Local-space verts, loop vertex ids, loop starts and corner colours of one owner's patches
+    (``owner``: an index, or several: an object and its back)."""
+    sel = np.flatnonzero(np.isin(patches.owner, np.atleast_1d(owner)))
     polys = patches.polys[sel]
     used = np.unique(polys[polys >= 0])
     remap = np.full(len(patches.verts), -1, np.int64)
@@ -151,17 +157,20 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     baked = [s for s in scene_input.objects if s.bake]
     remove_bakes([s.name for s in baked])
     coll = _collection(scene)
-    mat = baked_material(attribute_name)
     scale = 2.0 ** float(exposure)
     depsgraph = context.evaluated_depsgraph_get()
     out = []
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
             continue
-        me = _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat)
+        owners = result.owners_of(oi) if result.back_of else np.array([oi])
+        mat = baked_material(attribute_name, culled=owners.size > 1)
+        # an object with a back (core/mesh/backs.py) is written as its elements, both sides
+        me = _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat) \
+            if owners.size == 1 else None
         kind = "source" if me is not None else "elements"
         if me is None:
-            me = _element_mesh(result, oi, src, attribute_name, scale, mat)
+            me = _element_mesh(result, owners, src, attribute_name, scale, mat)
         me[SOURCE_KEY] = src.name
         ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
         ob.matrix_world = _matrix(src.matrix_world)
@@ -188,10 +197,11 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     return out
 
 
-def _element_mesh(result, oi, src, attribute_name, scale, mat):
-    """A new mesh of object ``oi``'s output elements (local space), with the attribute."""
+def _element_mesh(result, owners, src, attribute_name, scale, mat):
+    """A new mesh of the output elements of ``owners`` (an object, and its back) in the object's
+    local space, with the attribute."""
     local, loop_vert, starts, colors, _ = patch_mesh_arrays(
-        result.elements, oi, result.vertex_radiosity, src.matrix_world, src.flipped)
+        result.elements, owners, result.vertex_radiosity, src.matrix_world, src.flipped)
     me = bpy.data.meshes.new(f"{src.name}.radiosity")
     me.vertices.add(len(local))
     me.vertices.foreach_set("co", local.astype(np.float32).ravel())
@@ -286,6 +296,9 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
         if np.count_nonzero(P.owner == oi) > n_src:
             notes.append(f"{src.name}: in place keeps one value per face corner; "
                          "the finer patch detail inside faces is averaged away")
+        if result.back_of and result.owners_of(oi).size > 1:
+            notes.append(f"{src.name}: in place keeps the light on the front of its faces; "
+                         "the light on the back of its open surfaces is in baked copies only")
         written.append(ob)
     return written, notes
 

@@ -17,6 +17,7 @@ import numpy as np
 
 from .form_factors.stage import compute_form_factors, form_factor_stage, receivers_needed
 from .light.stage import DirectLight, direct_stage, source_term
+from .mesh.backs import with_backs
 from .mesh.clusters import Clusters
 from .mesh.elements import meshes_key, output_elements, start_elements
 from .mesh.patches import PatchSet
@@ -61,10 +62,20 @@ class BakeResult:
     error_estimate: object = None             # core.output.estimate.ErrorEstimate with settings.estimate_error
     forecast: object = None                   # core.runtime.forecast.Forecast: the time expected (None: F was cached)
     size_scales: tuple = ()                   # per object: its sizes are the settings' times this (core.mesh.sizes)
+    back_of: tuple = ()                       # per object: -1, or the object whose back it is (core.mesh.backs)
 
     def __post_init__(self):
         if self.elements is None:
             self.elements = self.patches
+
+    def owners_of(self, i) -> np.ndarray:
+        """(k,) int64 the owners (``patches.owner``, ``elements.owner``) that hold object ``i``'s
+        light: itself and its back, where open surfaces got one (:mod:`.mesh.backs`)."""
+        return np.array([i] + [j for j, b in enumerate(self.back_of) if b == i], dtype=np.int64)
+
+    def fronts(self) -> np.ndarray:
+        """(M,) int64 for every owner the object it belongs to (a back: its front's index)."""
+        return np.array([j if b < 0 else b for j, b in enumerate(self.back_of)], dtype=np.int64)
 
     @property
     def unknowns(self) -> int:
@@ -168,7 +179,8 @@ class BakeContext:
         return BakeResult(self.patches, self.form_factors, self.solution, self.vertex_radiosity,
                           self.timings, self.form_factor_source, self.source, self.irradiance,
                           self.notes, self.elements, self.settings, self.clusters, self.error_estimate,
-                          self.forecast, tuple(m.size_scale for m in self.meshes or ()))
+                          self.forecast, tuple(m.size_scale for m in self.meshes or ()),
+                          tuple(getattr(m, "back_of", -1) for m in self.meshes or ()))
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time
@@ -228,6 +240,8 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
                                       None if settings.patch_size == "auto" else float(settings.patch_size))
         auto_detail = settings.element_size == "auto"
         settings = settings.resolved(meshes)
+        if settings.two_sided_reflection:        # open surfaces reflect from both sides
+            meshes = with_backs(meshes, settings.two_sided_emission, lights, world, cache=cache)
         if auto_detail and settings.element_size:   # as fine as the elements' limit allows
             settings = replace(settings, element_size=fitted_detail(
                 meshes, settings.element_size, settings.patch_size, settings.max_elements))

@@ -158,6 +158,12 @@ class BakeSettings:
                                 "patches", cli="--no-group-faces",
                                 off="Keep every face as its own patch, however small (slow on a "
                                 "dense mesh)")
+    two_sided_reflection: bool = setting(True, "Two-Sided Surfaces", "Open surfaces (a single "
+                                         "plane, a lamp panel, a leaf) reflect from both sides, "
+                                         "as every surface does in Cycles; closed meshes pay "
+                                         "nothing for it", "patches", cli="--one-sided-surfaces",
+                                         off="Surfaces reflect from their front only (the "
+                                         "paper's model): the back of a single plane is black")
     group_angle: float = setting(30.0, "Grouping Angle", "Faces whose normals differ by more "
                                  "than this many degrees are not grouped into one patch",
                                  "patches", min=1.0, max=90.0)

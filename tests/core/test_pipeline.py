@@ -2,6 +2,7 @@
 import re
 
 import numpy as np
+from tests.support import fronts
 import pytest
 
 from hemicube_radiosity.core.runtime.cache import FormFactorCache
@@ -353,11 +354,15 @@ def test_corner_colours_reach_the_output_vertices(gather_rays):
     want = np.zeros((len(r.elements.verts), 3))
     # each output vertex: the mean of its corners' reflectance (corners of one vertex agree here
     # unless the vertex lies on a checker edge)
-    p, c = np.nonzero(r.elements.polys >= 0)
+    # the plane's front (its back, lit by the world from below, is the same texture: the
+    # vertices of both sides but a hair apart)
+    front = fronts(r, r.elements.owner)
+    p, c = np.nonzero(r.elements.polys[front] >= 0)
     key = {tuple(x): v for x, v in zip(pos.round(9), corner_rho)}
-    for v in np.unique(r.elements.polys[p, c]):
+    for v in np.unique(r.elements.polys[front][p, c]):
         want[v] = key[tuple(r.elements.verts[v].round(9))]
     inside = np.all((r.elements.verts[:, :2] * 4) % 1 > 1e-6, axis=1)   # off the checker's edges
+    inside &= np.abs(r.elements.verts[:, 2]) < 1e-9
     assert inside.sum() > 50
     np.testing.assert_allclose(r.vertex_radiosity[inside], want[inside], rtol=1e-6 if gather_rays else 0.1)
 
@@ -434,6 +439,7 @@ def test_relight_reads_materials_as_the_patches_and_clusters_do():
     (cache.array_key) is kept per array object and follows its values."""
     from hemicube_radiosity.core.runtime.cache import array_key
     from hemicube_radiosity.core.builtin_scenes import tessellate
+    from hemicube_radiosity.core.mesh.backs import with_backs
 
     meshes = tessellate(cornell_box(), 3)
     r = bake(meshes, BakeSettings(patch_size=0.3, gather_rays=0, resolution=16))
@@ -442,6 +448,8 @@ def test_relight_reads_materials_as_the_patches_and_clusters_do():
     rng = np.random.default_rng(2)
     for m in relit:
         m.face_rho[:] = rng.uniform(0.05, 0.9, np.shape(m.face_rho))
+    relit = with_backs(relit)                            # as bake() reads them: the light's back too
+    assert len(relit) == len(r.patches.object_names)
     want_rho, want_em = np.empty((len(r.patches), 3)), np.empty((len(r.patches), 3))
     for oi, m in enumerate(relit):
         sel = r.patches.owner == oi
@@ -507,7 +515,8 @@ def test_a_mesh_finer_than_the_sizes_builds_its_faces_once_and_forks_nothing_for
     monkeypatch.setattr(background.Ahead, "start", classmethod(lambda cls, fn: started.append(1) or start(fn)))
     r = bake(meshes, s)
     assert built == [None] and started == []
-    assert len(r.elements) == len(r.patches) == sum(len(m.face_offsets) - 1 for m in meshes)
+    assert len(r.elements) == len(r.patches)
+    assert fronts(r, r.patches.owner).sum() == sum(len(m.face_offsets) - 1 for m in meshes)
     # the same bake with the faces measured as too large to keep (build_patches every time)
     everywhere(monkeypatch, subdivide.keeps_faces_whole, lambda *a: False)
     built.clear()

@@ -102,7 +102,7 @@ class DirectLight:
         lights = [replace(li, rays=settings.sky_rays) if isinstance(li, EnvironmentLight) else li
                   for li in lights]
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
-                   settings.light_seed, cancelled, cache, groups, settings.two_sided_emission,
+                   settings.light_seed, cancelled, cache, groups, _turn_emitters(settings),
                    workers=settings.workers, world=world, sky_rays=settings.sky_rays)
 
     def _transport(self, points, normals, samples=None):
@@ -200,6 +200,13 @@ class DirectLight:
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)
+
+
+def _turn_emitters(settings) -> bool:
+    """Whether emitters also shine from their faces turned around (Cycles' two-sided Emission):
+    not when open surfaces have backs of their own (``two_sided_reflection``, :mod:`..mesh.backs`),
+    whose backs of emitting faces emit; a closed emitter's turned-around faces face its inside."""
+    return bool(settings.two_sided_emission and not settings.two_sided_reflection)
 
 
 def _unit_owner(light: "DirectLight") -> np.ndarray:
@@ -341,7 +348,7 @@ def direct_stage(ctx) -> None:
                                  "off): every vertex bakes black"))
     ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if ctx.direct is None:
-        if s.two_sided_emission and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
+        if _turn_emitters(s) and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
             ctx.notes.append("emitters light their front only with the paper's direct light "
                              "('hemicube'); 'exact' lights both sides as Cycles does")
         if ctx.lights:

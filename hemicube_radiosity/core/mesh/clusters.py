@@ -191,29 +191,35 @@ def piece_materials(pieces: PatchSet, meshes) -> np.ndarray:
     A face of a mesh that names its materials (``MeshInput.face_material``) keys on that id and
     its emitted radiance, so a textured reflectance groups (the patch solves with the area mean,
     the output keeps each corner's); a face of a mesh that does not keys on its reflectance and
-    emitted radiance. Emitters group only with equal emission."""
+    emitted radiance. Emitters group only with equal emission. The backs of open surfaces
+    (:mod:`.backs`) group among themselves only: a back may face what no front near it faces
+    (the inside of two pebbles that overlap)."""
     rows = []
     for m in meshes:
         rho, em = np.asarray(m.face_rho, float), np.asarray(m.face_emission, float)
         F = len(rho)
         ids = getattr(m, "face_material", None)
+        side = 2.0 if getattr(m, "back_of", -1) >= 0 else 0.0
         if ids is None:
-            rows.append(np.hstack([np.zeros((F, 1)), rho, em]))
+            rows.append(np.hstack([np.full((F, 1), side), rho, em]))
         else:
             ids = np.asarray(ids, dtype=np.float64).reshape(-1, 1)
-            rows.append(np.hstack([np.ones((F, 1)), ids, np.zeros((F, 2)), em]))
+            rows.append(np.hstack([np.full((F, 1), side + 1.0), ids, np.zeros((F, 2)), em]))
     key = unique_rows(np.concatenate(rows), return_inverse=True)[1].reshape(-1)
     start = np.concatenate([[0], np.cumsum([len(r) for r in rows])]).astype(np.int64)
     return key[start[pieces.owner.astype(np.int64)] + pieces.source_face.astype(np.int64)].astype(np.int64)
 
 
-def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None, scales=None) -> Clusters | None:
+def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=None, scales=None,
+                 backs=None) -> Clusters | None:
     """Group ``pieces`` into clusters of about ``size`` (see the module docstring); None when no
     two pieces would be grouped (every patch is its own piece). ``scales`` (M,): each object's
     factor on ``size`` (``MeshInput.size_scale``; default 1).
 
     ``material``: (P,) int material key per piece (:func:`piece_materials`; default: equal
-    reflectivity and emission)."""
+    reflectivity and emission). ``backs`` (P,) bool or None: pieces of the backs of open
+    surfaces (:mod:`.backs`), which group within their object only, never as clutter: the back
+    of a pebble faces its inside, which the fronts of the pebbles beside it do not see."""
     if not size or len(pieces) == 0:
         return None
     if scales is not None and np.any(np.asarray(scales) != 1.0):
@@ -236,6 +242,8 @@ def group_pieces(pieces: PatchSet, size, max_angle=DEFAULT_MAX_ANGLE, material=N
     # clutter: the pieces of objects smaller than a patch group across objects (owner -1),
     # whether or not they touch: 1,500 pebbles in a cell are a few patches, not 1,500 x 6
     clutter = _clutter(pieces, corners, size) & small
+    if backs is not None:
+        clutter &= ~np.asarray(backs, dtype=bool)
     owner = np.where(clutter, -1, pieces.owner.astype(np.int64))
     parts = np.stack([owner, np.asarray(material, np.int64).reshape(-1),
                       _normal_bins(pieces.normals, max_angle), *cell.T], axis=1)

@@ -196,15 +196,17 @@ def _split(poly, a, m, tol):
     return np.array(pos), np.array(neg)
 
 
-def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_rel=1e-3) -> PatchSet:
+def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_rel=1e-3, cuts=None) -> PatchSet:
     """``elements`` cut along the lines where other surfaces (``faces``: the scene's faces, e.g.
     :func:`.subdivide.build_patches` with no size) stand on or pass through them, with the
     vertices on those lines apart on each side (a seam): no element straddles a wall's foot,
     and a vertex on it is evaluated on its own side (the open side's limit; the side under a
     house sees nothing and is never seen). A piece of more than four corners is fanned into
     triangles; a cut closer than ``tol_rel`` of an element's size to its corner snaps to it.
-    ``eps_rel``: of the scene's size, what counts as touching a plane. Returns ``elements``
-    itself when nothing is cut."""
+    ``eps_rel``: of the scene's size, what counts as touching a plane. ``cuts`` (len(faces),)
+    bool or None (all): the faces that may cut (not the backs of open surfaces, :mod:`.backs`,
+    which stand a hair behind their fronts: their lines would part slivers off the floor beside
+    every single-plane wall). Returns ``elements`` itself when nothing is cut."""
     scale = float(np.ptp(faces.verts, axis=0).max()) or 1.0
     eps = eps_rel * scale
     corners = elements.corners()
@@ -227,6 +229,8 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
     keep = (((h.min(axis=1) < -eps) & (h.max(axis=1) > eps)) | (on >= 2)) & \
         (np.abs(np.einsum("pj,pj->p", faces.normals[ci_all], g_n[gi_all])) < 1 - 1e-6)
+    if cuts is not None:
+        keep &= np.asarray(cuts, dtype=bool)[ci_all]
     gi_all, ci_all = gi_all[keep], ci_all[keep]
     # a face sharing an edge with the group's face (two corners at the same places) meets it at
     # its border: nothing to cut (the faces of a tessellated box along its edges)

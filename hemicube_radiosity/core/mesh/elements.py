@@ -18,6 +18,7 @@ from ..runtime.cache import cache_key, cached, geometry_key
 from ..runtime.errors import RadiosityError
 from ..runtime.background import Ahead
 from ..runtime.parallel import resolve_workers
+from .backs import cutters
 from .contact import cut_along_contacts
 from .patches import PatchSet
 from .subdivide import build_patches, keeps_faces_whole
@@ -103,7 +104,7 @@ def _cut(meshes, elements, faces=None) -> PatchSet:
     """``elements`` cut along the contacts of the meshes' faces (:func:`.contact.cut_along_contacts`;
     ``faces``: ``build_patches(meshes)`` when the caller has it)."""
     faces = build_patches(meshes, None) if faces is None else faces
-    return cut_along_contacts(elements.with_mesh_materials(meshes), faces)
+    return cut_along_contacts(elements.with_mesh_materials(meshes), faces, cuts=cutters(meshes, faces))
 
 
 def cut_elements(ctx) -> PatchSet:

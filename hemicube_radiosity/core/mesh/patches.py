@@ -49,6 +49,9 @@ class MeshInput:
                   None: faces group only where reflectivity and emission are equal.
     size_scale:   this mesh is cut at the patch and detail sizes times this (an object far
                   larger than the rest of the scene: :mod:`.sizes`).
+    back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
+                  around, a hair behind: :mod:`.backs`) ...
+    back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.
     """
 
     verts: np.ndarray
@@ -61,6 +64,8 @@ class MeshInput:
     corner_emission: np.ndarray | None = None
     face_material: np.ndarray | None = None
     size_scale: float = 1.0
+    back_of: int = -1
+    back_faces: np.ndarray | None = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):

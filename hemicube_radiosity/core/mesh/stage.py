@@ -11,6 +11,7 @@ import math
 
 from ..runtime.cache import cache_key, cached
 from .clusters import group_pieces, piece_materials
+from .backs import backs_of_pieces, cutters
 from .contact import cut_along_contacts
 from .elements import mesh_faces
 from .limits import CLUSTER_SPAN, passing_size, patches_about, pieces_at_least
@@ -50,13 +51,14 @@ def cut_patches(meshes, s, faces=None):
         whole = False                         # build_patches says what is wrong, in its order
     pieces = faces() if whole else build_patches(meshes, s.patch_size)
     clusters = group_pieces(pieces, s.patch_size, s.group_angle, piece_materials(pieces, meshes),
-                            [m.size_scale for m in meshes]) if s.group_faces else None
+                            [m.size_scale for m in meshes], backs_of_pieces(meshes, pieces)) \
+        if s.group_faces else None
     if clusters is None:
         # cut along where surfaces stand on others, as the output is (core/mesh/contact.py): a patch
         # across a partition off the patch grid lit the dark side with the lit side's light
         # (0.5% of the lit floor on average, 2.9% at worst; now 0). Faces cut into one patch
         # (the user's own, finer than the patches) stay whole
-        pieces = cut_along_contacts(pieces, faces())
+        pieces = cut_along_contacts(pieces, faces(), cuts=cutters(meshes, faces()))
     return pieces, clusters
 
 

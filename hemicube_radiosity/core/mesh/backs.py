@@ -1,0 +1,412 @@
+"""The backs of open surfaces: what Cycles reflects from the other side of a single plane.
+
+The paper's patches reflect from their front only. In Cycles every surface reflects on both
+sides: a single-plane wall lit from behind sends light back into the room behind it, a lamp
+panel's back and the ceiling 5 mm above it bounce light between them, a floor mirrored by a
+negative scale (its faces turned away from the room) is lit from the room. Here each face of an
+*open* surface gets a back: the same face with its corners in reverse order, moved a hair
+(:func:`offset`) behind the front, so that from either side the nearer of the two is the one
+facing the viewer. The hemi-cube's depth test, Embree's nearest hit and the front-only tests of
+every stage then treat the two sides as two surfaces, with nothing special anywhere else.
+
+An open surface is a connected part of a mesh (faces joined through edges that two faces share
+with opposite orientation, corners welded by position) that has an edge no other face closes: a
+border, an edge of three or more faces, or two faces of opposite orientation. A closed mesh (a
+box, a sphere, a room modelled with thickness) is left as it is: its backs face its inside,
+which no light reaches, so it pays nothing.
+
+The backs are meshes of their own, after the fronts (``MeshInput.back_of``: the index of the
+front), so the object's sizes, materials and grouping carry over and the writer can put a back's
+light on the same object. A back's emission follows ``two_sided_emission``: the back of an
+emitting face emits as its front does (Cycles' Emission shader), or nothing for one-sided
+emitters; emitters then need no second, turned-around transport (:mod:`..light.stage`).
+
+Units: world units; ``offset`` is a distance.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..util.unique import unique_rows
+
+__all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "fronts_of", "cutters", "backs_of_pieces"]
+
+#: A back lies this share of its own mesh's diagonal behind its front ...
+OFFSET_SHARE = 1e-5
+#: ... and at least this many float32 steps (2**-23 of the largest coordinate), so that Embree's
+#: float32 vertices and the hemi-cube's float32 depths always tell the two sides apart.
+OFFSET_ULPS = 64
+#: Rays from each probe point of an open face that look for what its back faces ...
+PROBE_RAYS = 32
+#: ... and from up to this many of the fronts they hit, this many rays, to tell a surface in
+#: the open from one shut in by the backs of others.
+SECOND_HITS = 8
+SECOND_RAYS = 8
+#: Faces larger than this share of the scene's diagonal, squared, are probed at five points.
+LARGE_FACE = 0.05
+
+
+def _corner_next(offsets) -> np.ndarray:
+    """(L,) index of the next corner of each corner's face (the last wraps to the first)."""
+    L = int(offsets[-1])
+    nxt = np.arange(1, L + 1, dtype=np.int64)
+    ends = offsets[1:] - 1
+    nxt[ends] = offsets[:-1]
+    return nxt
+
+
+def _face_of_corner(offsets) -> np.ndarray:
+    counts = np.diff(offsets)
+    return np.repeat(np.arange(len(counts), dtype=np.int64), counts)
+
+
+def open_faces(verts, face_offsets, face_indices, tol) -> np.ndarray:
+    """(F,) bool: the faces whose connected part of the mesh is open (module docstring).
+
+    ``verts`` (V, 3) positions, ``face_offsets`` (F + 1,), ``face_indices`` (L,) as in
+    :class:`.patches.MeshInput`; ``tol``: positions closer than this are one corner."""
+    offsets = np.asarray(face_offsets, dtype=np.int64)
+    F = len(offsets) - 1
+    if F <= 0:
+        return np.zeros(0, bool)
+    v = np.asarray(verts, dtype=np.float64)
+    ids = unique_rows(np.round(v / tol).astype(np.int64), return_inverse=True)[1].reshape(-1)
+    a = ids[np.asarray(face_indices, dtype=np.int64)]
+    b = a[_corner_next(offsets)]
+    face = _face_of_corner(offsets)
+    keep = a != b                               # an edge of no length joins nothing
+    a, b, face = a[keep], b[keep], face[keep]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    edge, inv, count = unique_rows(np.stack([lo, hi], 1), return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    forward = (a < b).astype(np.int64)
+    fwd = np.bincount(inv, weights=forward, minlength=len(edge))
+    # closed: two faces, one along the edge and one against it
+    closed = (count == 2) & (fwd == 1)
+    bad = np.zeros(F, bool)
+    bad[face[~closed[inv]]] = True
+    # faces joined through closed edges: label propagation with pointer jumping
+    order = np.argsort(inv, kind="stable")
+    e_sorted, f_sorted = inv[order], face[order]
+    pair = (e_sorted[1:] == e_sorted[:-1]) & closed[e_sorted[1:]]
+    i, j = f_sorted[:-1][pair], f_sorted[1:][pair]
+    label = np.arange(F)
+    while i.size:
+        m = np.minimum(label[i], label[j])
+        new = label.copy()
+        np.minimum.at(new, i, m)
+        np.minimum.at(new, j, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    return np.isin(label, label[bad])
+
+
+def _vertex_normals(verts, offsets, indices, faces) -> np.ndarray:
+    """(V, 3) unit normals at the vertices of ``faces``: the sum of their area vectors (Newell),
+    or 0 where they cancel or no such face uses the vertex."""
+    v = np.asarray(verts, dtype=np.float64)
+    face = _face_of_corner(offsets)
+    p = v[indices]
+    q = p[_corner_next(offsets)]
+    cross = np.cross(p, q)
+    area = np.zeros((len(offsets) - 1, 3))
+    np.add.at(area, face, cross)
+    area[~faces] = 0.0
+    n = np.zeros_like(v)
+    np.add.at(n, indices, area[face])
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    scale = float(np.abs(v).max(initial=0.0)) or 1.0
+    return np.where(length > 1e-12 * scale * scale, n / np.maximum(length, 1e-300), 0.0)
+
+
+def offset(verts) -> float:
+    """How far a mesh's backs lie behind its fronts: :data:`OFFSET_SHARE` of its diagonal, at
+    least :data:`OFFSET_ULPS` float32 steps of its largest coordinate."""
+    v = np.asarray(verts, dtype=np.float64)
+    if not len(v):
+        return 0.0
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    return max(OFFSET_SHARE * diag, OFFSET_ULPS * 2.0 ** -23 * float(np.abs(v).max()))
+
+
+def _back(mesh, index, faces, emit: bool):
+    """The back of ``faces`` (F,) bool of ``mesh``: a mesh of those faces turned around and
+    moved :func:`offset` behind, ``back_of = index``."""
+    offsets = np.asarray(mesh.face_offsets, dtype=np.int64)
+    indices = np.asarray(mesh.face_indices, dtype=np.int64)
+    counts = np.diff(offsets)
+    sel = np.flatnonzero(faces)
+    # corners of the chosen faces, each face's ring reversed after its first corner
+    start, n = offsets[sel], counts[sel]
+    new_offsets = np.zeros(sel.size + 1, dtype=np.int64)
+    new_offsets[1:] = np.cumsum(n)
+    k = np.arange(int(new_offsets[-1]), dtype=np.int64) - np.repeat(new_offsets[:-1], n)
+    nn = np.repeat(n, n)
+    corner = np.repeat(start, n) + np.where(k == 0, 0, nn - k)
+    normals = _vertex_normals(mesh.verts, offsets, indices, faces)
+    used = np.unique(indices[corner])
+    remap = np.full(len(mesh.verts), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    verts = np.asarray(mesh.verts, dtype=np.float64)[used] - offset(mesh.verts) * normals[used]
+
+    def corners(a):
+        return None if a is None else np.asarray(a)[corner]
+
+    em = np.asarray(mesh.face_emission, dtype=np.float64)[sel]
+    corner_em = corners(mesh.corner_emission)
+    if not emit:
+        em = np.zeros_like(em)
+        corner_em = None if corner_em is None else np.zeros_like(corner_em)
+    material = getattr(mesh, "face_material", None)
+    return replace(mesh, verts=verts, face_offsets=new_offsets, face_indices=remap[indices[corner]],
+                   face_rho=np.asarray(mesh.face_rho, dtype=np.float64)[sel], face_emission=em,
+                   name=f"{mesh.name} (back)", corner_rho=corners(mesh.corner_rho),
+                   corner_emission=corner_em,
+                   face_material=None if material is None else np.asarray(material)[sel],
+                   back_of=index, back_faces=sel)
+
+
+def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_rays=PROBE_RAYS,
+               cache=None) -> list:
+    """``meshes`` followed by a back (a mesh of its own, ``back_of`` its index) for the open
+    faces (:func:`open_faces`) of each mesh whose backs can matter (:func:`backs_that_matter`);
+    closed meshes get none. ``two_sided_emission``: the backs of emitting faces emit as their
+    fronts do, else nothing. ``lights`` (core.light lamps) and ``world`` ((3,) radiance or None)
+    decide which backs may be lit; ``probe_rays`` per point look for what a back faces. Which
+    backs matter depends on geometry and on where the sources are, not on their strength or
+    colour: kept in ``cache`` (a relight casts no ray)."""
+    meshes = list(meshes)
+    boxes = [(np.min(m.verts, axis=0), np.max(m.verts, axis=0)) for m in meshes if len(m.verts)]
+    if not boxes:
+        return meshes
+    lo = np.min([b[0] for b in boxes], axis=0)
+    hi = np.max([b[1] for b in boxes], axis=0)
+    tol = 1e-9 * (float(np.linalg.norm(hi - lo)) or 1.0)
+    opened = {}
+    for i, m in enumerate(meshes):
+        if getattr(m, "back_of", -1) >= 0 or not len(m.verts) or len(m.face_offsets) < 2:
+            continue
+        faces = open_faces(m.verts, m.face_offsets, m.face_indices, tol)
+        if faces.any():
+            opened[i] = faces
+    if not opened:
+        return meshes
+    matter = _cached_backs(meshes, opened, lights, world, probe_rays, cache, two_sided_emission)
+    backs = [_back(meshes[i], i, faces & matter[i], two_sided_emission)
+             for i, faces in opened.items() if (faces & matter[i]).any()]
+    return meshes + backs
+
+
+def _sources_key(lights, world) -> str:
+    """What of the sources decides which backs matter: each lamp's place or direction (an
+    environment map: that there is one), and whether the world is lit."""
+    parts = []
+    for light in lights or ():
+        pos, to = getattr(light, "position", None), getattr(light, "direction", None)
+        parts.append(("p", tuple(np.round(np.asarray(pos, float), 12))) if pos is not None else
+                     ("d", tuple(np.round(np.asarray(to, float), 12))) if to is not None else ("w",))
+    on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
+    return repr((sorted(parts), on))
+
+
+def _cached_backs(meshes, opened, lights, world, probe_rays, cache, emit) -> dict:
+    """:func:`backs_that_matter`, kept in ``cache`` under the geometry and the sources' places."""
+    from ..runtime.cache import cache_key, cached
+    from .elements import meshes_key
+
+    order = sorted(opened)
+    key = cache_key(meshes_key(meshes) + b"".join(np.packbits(opened[i]).tobytes() for i in order),
+                    ("backs", probe_rays, emit, _sources_key(lights, world)))
+    def make():
+        found = backs_that_matter(meshes, opened, lights, world, probe_rays, emit)
+        return np.concatenate([found[i] for i in order])
+    flat = cached(cache, key, make)
+    flat = np.asarray(flat, dtype=bool)
+    ends = np.cumsum([len(opened[i]) for i in order])
+    return dict(zip(order, np.split(flat, ends[:-1])))
+
+
+def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RAYS, emit=True) -> dict:
+    """{mesh index: (F,) bool}: which of the open faces ``opened`` ({index: (F,) bool}) have a
+    back that can take part in the light.
+
+    A back matters where a source can reach it (a lamp behind the face's plane, a sun shining
+    on its back, the world or an environment map where rays from it escape) or where it faces
+    a surface that is not shut in: one from which rays find the front of some surface (or the
+    lit world), not only the backs of others. The rest solve to black and reflect nothing, and
+    are left out, so a scene pays nothing for them: the underside of a floor, the outside of a
+    room built of single planes in a dark world, the inside of a box without a bottom standing
+    on a floor (it faces only its own walls' backs and the floor they shut in). With ``emit``
+    (two-sided emitters) the back of an emitting face matters wherever it faces any surface.
+
+    Probed from each face's centre (and halfway to each corner on faces larger than
+    :data:`LARGE_FACE` of the scene's diagonal squared) with ``probe_rays`` cosine rays against
+    the fronts, and from up to :data:`SECOND_HITS` of the fronts they hit with
+    :data:`SECOND_RAYS` rays each. Without Embree every back is kept."""
+    from ..rays import embree_available
+
+    out = {i: f.copy() for i, f in opened.items()}
+    if not embree_available():
+        return out
+    scene, offsets, centres, normals, areas, corner, corner_face = _fan_scene(meshes)
+    sel = np.concatenate([offsets[i] + np.flatnonzero(f) for i, f in opened.items()])
+    if not sel.size or scene is None:
+        return out
+    eps = 1e-5 * scene.scale
+    c, n = centres[sel], normals[sel]
+    big = np.zeros(len(centres), bool)
+    big[sel] = areas[sel] > (LARGE_FACE * scene.scale) ** 2
+    of_sel = np.full(len(centres), -1, np.int64)
+    of_sel[sel] = np.arange(sel.size)
+    on = big[corner_face]
+    halfway = 0.5 * (corner[on] + centres[corner_face[on]])
+    at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
+    points = np.concatenate([c, halfway])
+    lit = np.zeros(len(sel), bool)
+    world_on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
+    for light in lights or ():
+        pos, to = getattr(light, "position", None), getattr(light, "direction", None)
+        if pos is not None:                     # behind the plane of a probe point
+            np.logical_or.at(lit, at, np.einsum("pj,pj->p", np.asarray(pos, float) - points, n[at]) < 0)
+        elif to is not None:                    # a sun whose light travels towards -n's side
+            lit |= n @ np.asarray(to, float) > 0
+        else:                                   # an environment map: the world, by direction
+            world_on = True
+    hit, x, m, escaped, touched = _probe(scene, normals, points, -n[at], probe_rays, eps)
+    matter = lit.copy()
+    if emit:                                    # an emitter's back shines on whatever it faces
+        shines = np.zeros(len(sel), bool)
+        np.logical_or.at(shines, at, touched)
+        matter |= shines & (_face_emission(meshes, offsets, sel) > 0)
+    if world_on:
+        np.logical_or.at(matter, at, escaped)
+    # a front hit matters if it is not shut in: its own rays find the world or some front
+    ray_face = np.repeat(at, probe_rays)
+    front = np.flatnonzero((hit >= 0) & ~matter[ray_face])
+    if front.size:
+        face = ray_face[front]
+        order = np.argsort(face, kind="stable")
+        front, face = front[order], face[order]
+        first = np.searchsorted(face, face, side="left")
+        keep = (np.arange(face.size) - first) < SECOND_HITS
+        front, face = front[keep], face[keep]
+        h2, _, _, esc2, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
+        open2 = (esc2 & world_on) | (h2 >= 0).reshape(-1, SECOND_RAYS).any(axis=1)
+        np.logical_or.at(matter, face, open2)
+    start = 0
+    for o, f in opened.items():
+        k = int(f.sum())
+        out[o][:] = False
+        out[o][np.flatnonzero(f)] = matter[start:start + k]
+        start += k
+    return out
+
+
+class _Fans:
+    """An Embree scene of the meshes' faces as triangle fans (enough to probe what a face
+    faces; the bake's own scenes are of its patches): ``intersect`` as :class:`.rays.EmbreeScene`
+    answers it, with the face (numbered over all meshes) for the patch."""
+
+    def __init__(self, tris, tri_face, scale):
+        from ..rays import import_embreex
+
+        rtcs, TriangleMesh = import_embreex()
+        self.tri_face, self.scale = tri_face, scale
+        self._scene = rtcs.EmbreeScene()
+        self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris, dtype=np.float32))
+
+    def intersect(self, origins, directions):
+        res = self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
+                              np.ascontiguousarray(directions, dtype=np.float32), output=1)
+        prim = res["primID"].astype(np.int64)
+        return np.where(prim >= 0, self.tri_face[np.maximum(prim, 0)], -1), res["tfar"]
+
+
+def _fan_scene(meshes):
+    """The meshes' faces, numbered over all meshes: (scene, offsets {mesh: its first face},
+    centres (F, 3) (the corners' mean), unit normals (F, 3), areas (F,), and every corner's
+    position (L, 3) with its face (L,))."""
+    tris, tri_face, corner, following, corner_face, offsets, start = [], [], [], [], [], {}, 0
+    for i, m in enumerate(meshes):
+        off = np.asarray(m.face_offsets, dtype=np.int64)
+        idx = np.asarray(m.face_indices, dtype=np.int64)
+        offsets[i] = start
+        if len(off) < 2:
+            continue
+        v = np.asarray(m.verts, dtype=np.float64)
+        counts = np.diff(off)
+        face = _face_of_corner(off)
+        k = np.arange(len(idx)) - np.repeat(off[:-1], counts)
+        c = np.flatnonzero((k >= 1) & (k < np.repeat(counts, counts) - 1))    # fan triangles' middles
+        tris.append(np.stack([v[idx[off[face[c]]]], v[idx[c]], v[idx[c + 1]]], 1))
+        tri_face.append(start + face[c])
+        corner.append(v[idx])
+        following.append(v[idx[_corner_next(off)]])
+        corner_face.append(start + face)
+        start += len(off) - 1
+    if not corner:
+        return None, offsets, np.zeros((0, 3)), np.zeros((0, 3)), np.zeros(0), np.zeros((0, 3)), np.zeros(0, np.int64)
+    tris, corner, following = np.concatenate(tris), np.concatenate(corner), np.concatenate(following)
+    corner_face = np.concatenate(corner_face)
+    F = start
+    area = np.stack([np.bincount(corner_face, weights=0.5 * w, minlength=F)
+                     for w in np.cross(corner, following).T], 1)
+    size = np.linalg.norm(area, axis=1)
+    count = np.bincount(corner_face, minlength=F)
+    centre = np.stack([np.bincount(corner_face, weights=corner[:, k], minlength=F) for k in range(3)], 1) \
+        / np.maximum(count, 1)[:, None]
+    scale = float(np.linalg.norm(corner.max(axis=0) - corner.min(axis=0))) or 1.0
+    scene = _Fans(tris, np.concatenate(tri_face).astype(np.int64), scale) if len(tris) else None
+    return scene, offsets, centre, area / np.maximum(size, 1e-300)[:, None], size, corner, corner_face
+
+
+def fronts_of(meshes) -> np.ndarray:
+    """(M,) int: for each mesh its own index, or for a back the index of its front."""
+    return np.array([i if getattr(m, "back_of", -1) < 0 else m.back_of for i, m in enumerate(meshes)],
+                    dtype=np.int64)
+
+
+def backs_of_pieces(meshes, pieces) -> np.ndarray | None:
+    """(P,) bool: which ``pieces`` (a PatchSet cut from ``meshes``) are of a back; None: none are."""
+    back = np.array([getattr(m, "back_of", -1) >= 0 for m in meshes or ()], dtype=bool)
+    return back[np.asarray(pieces.owner, dtype=np.int64)] if back.any() else None
+
+
+def cutters(meshes, faces):
+    """(len(faces),) bool, which of ``faces`` (a PatchSet of the meshes' faces) may cut along
+    contacts (:func:`.contact.cut_along_contacts`), or None for all (no backs): a back lies a
+    hair behind its front, whose own line already cuts."""
+    back = np.array([getattr(m, "back_of", -1) >= 0 for m in meshes or ()], dtype=bool)
+    if not back.any():
+        return None
+    return ~back[np.asarray(faces.owner, dtype=np.int64)]
+
+
+def _probe(scene, normals, points, directions_about, rays, eps):
+    """``rays`` cosine rays from each of ``points`` (P, 3) about ``directions_about`` (P, 3):
+    (hit (P * rays,) the face whose front a ray hit, or -1; where (P * rays, 3) it hit; that
+    face's normal (P * rays, 3); escaped (P,) bool: some ray found nothing)."""
+    from ..rays import cosine_lattice
+    from ..util.geometry import in_frames, tangent_frames
+
+    local = cosine_lattice(rays, 7)
+    d = in_frames(local, tangent_frames(directions_about)).reshape(-1, 3)
+    o = np.repeat(points + eps * directions_about, rays, axis=0)
+    pid, t = scene.intersect(o, d)
+    escaped = (pid < 0).reshape(-1, rays).any(axis=1)
+    touched = (pid >= 0).reshape(-1, rays).any(axis=1)
+    nrm = normals[np.maximum(pid, 0)]
+    front = (pid >= 0) & (np.einsum("pj,pj->p", nrm, d) < 0)
+    where = o + np.where(front, t, 0.0)[:, None] * d
+    return np.where(front, pid, -1), where, nrm, escaped, touched
+
+
+def _face_emission(meshes, offsets, sel) -> np.ndarray:
+    """(S,) the largest band of each face's emission, of the faces ``sel`` numbered over all meshes."""
+    em = np.concatenate([np.asarray(m.face_emission, dtype=np.float64).reshape(-1, 3).max(axis=1)
+                         if len(m.face_offsets) >= 2 else np.zeros(0) for m in meshes])
+    return em[sel]
