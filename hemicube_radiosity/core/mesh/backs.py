@@ -215,11 +215,17 @@ def _sources_key(lights, world) -> str:
 
 def _cached_backs(meshes, opened, lights, world, probe_rays, cache, emit) -> dict:
     """:func:`backs_that_matter`, kept in ``cache`` under the geometry and the sources' places."""
+    import hashlib
+
     from ..runtime.cache import cache_key, cached
-    from .elements import meshes_key
 
     order = sorted(opened)
-    key = cache_key(meshes_key(meshes) + b"".join(np.packbits(opened[i]).tobytes() for i in order),
+    h = hashlib.sha256()
+    for m in meshes:                            # the geometry (as .elements.meshes_key hashes it)
+        for a in (m.verts, m.face_offsets, m.face_indices):
+            a = np.ascontiguousarray(a)
+            h.update(str(a.shape).encode() + a.tobytes())
+    key = cache_key(h.digest() + b"".join(np.packbits(opened[i]).tobytes() for i in order),
                     ("backs", probe_rays, emit, _sources_key(lights, world)))
     def make():
         found = backs_that_matter(meshes, opened, lights, world, probe_rays, emit)
@@ -378,8 +384,9 @@ def backs_of_pieces(meshes, pieces) -> np.ndarray | None:
 
 def cutters(meshes, faces):
     """(len(faces),) bool, which of ``faces`` (a PatchSet of the meshes' faces) may cut along
-    contacts (:func:`.contact.cut_along_contacts`), or None for all (no backs): a back lies a
-    hair behind its front, whose own line already cuts."""
+    contacts (:func:`.contact.cut_along_contacts`), or None for all (no backs). A back lies a
+    hair behind its front, whose own line already cuts: its line would part a sliver off the
+    floor beside every single-plane wall."""
     back = np.array([getattr(m, "back_of", -1) >= 0 for m in meshes or ()], dtype=bool)
     if not back.any():
         return None

@@ -8,12 +8,11 @@ across the element (in the viewport, in glTF, at a reference's vertices) spreads
 corner over the open half: a dark halo at every wall's foot (the bench yard: 43% RMS error at
 ground vertices within 15 cm of a wall, 96% of the scene's squared error).
 
-Here a buried corner takes, for each element edge that runs to it from an open corner, the
-light at the point where that edge meets the surface standing on it (one ray along the edge,
-a hair above the surface), as lightmap bakers dilate texels into hidden ones. Interpolating
-across the element then goes from the open corner's value to the value at the wall's foot.
-What a buried corner shows is never seen; what matters is what it does to the open side.
-"""
+Here a buried corner takes, for each element edge that runs to it from an open corner, the light
+at the point where that edge meets the surface standing on it (one ray along the edge, a hair
+above the surface), as lightmap bakers dilate texels into hidden ones: interpolating across the
+element goes from the open corner's value to the value at the wall's foot. What a buried corner
+shows is never seen; what matters is what it does to the open side."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -203,10 +202,8 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     and a vertex on it is evaluated on its own side (the open side's limit; the side under a
     house sees nothing and is never seen). A piece of more than four corners is fanned into
     triangles; a cut closer than ``tol_rel`` of an element's size to its corner snaps to it.
-    ``eps_rel``: of the scene's size, what counts as touching a plane. ``cuts`` (len(faces),)
-    bool or None (all): the faces that may cut (not the backs of open surfaces, :mod:`.backs`,
-    which stand a hair behind their fronts: their lines would part slivers off the floor beside
-    every single-plane wall). Returns ``elements`` itself when nothing is cut."""
+    ``eps_rel``: of the scene's size, what counts as touching a plane; ``cuts`` (len(faces),)
+    bool or None: which faces may cut (:func:`.backs.cutters`). Returns ``elements`` if uncut."""
     scale = float(np.ptp(faces.verts, axis=0).max()) or 1.0
     eps = eps_rel * scale
     corners = elements.corners()
@@ -229,8 +226,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
     keep = (((h.min(axis=1) < -eps) & (h.max(axis=1) > eps)) | (on >= 2)) & \
         (np.abs(np.einsum("pj,pj->p", faces.normals[ci_all], g_n[gi_all])) < 1 - 1e-6)
-    if cuts is not None:
-        keep &= np.asarray(cuts, dtype=bool)[ci_all]
+    keep &= True if cuts is None else np.asarray(cuts, dtype=bool)[ci_all]
     gi_all, ci_all = gi_all[keep], ci_all[keep]
     # a face sharing an edge with the group's face (two corners at the same places) meets it at
     # its border: nothing to cut (the faces of a tessellated box along its edges)
