@@ -44,6 +44,10 @@ PROBE_RAYS = 32
 #: the open from one shut in by the backs of others.
 SECOND_HITS = 8
 SECOND_RAYS = 8
+#: A back matters where the lit world or fronts in the open fill this share of its view (its
+#: cosine-weighted probe rays): less, and it exchanges little light with the scene (the inside
+#: of a scanned model, seen through the holes in its base).
+FACING_SHARE = 1.0 / 8.0
 #: Faces larger than this share of the scene's diagonal, squared, are probed at five points.
 LARGE_FACE = 0.05
 
@@ -240,14 +244,16 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     """{mesh index: (F,) bool}: which of the open faces ``opened`` ({index: (F,) bool}) have a
     back that can take part in the light.
 
-    A back matters where a source can reach it (a lamp behind the face's plane, a sun shining
-    on its back, the world or an environment map where rays from it escape) or where it faces
-    a surface that is not shut in: one from which rays find the front of some surface (or the
-    lit world), not only the backs of others. The rest solve to black and reflect nothing, and
-    are left out, so a scene pays nothing for them: the underside of a floor, the outside of a
-    room built of single planes in a dark world, the inside of a box without a bottom standing
-    on a floor (it faces only its own walls' backs and the floor they shut in). With ``emit``
-    (two-sided emitters) the back of an emitting face matters wherever it faces any surface.
+    A back matters where a source reaches it (a lamp behind the face's plane or a sun on its
+    back, by a shadow ray), where the lit world (or an environment map) above the horizon
+    fills at least :data:`FACING_SHARE` of its view (the world below a terrain lights its
+    underside in Cycles too, for no one to see), or where that much of its view is the fronts of surfaces
+    that are not shut in (their own rays find some front, or escape, not only the backs of
+    others). With ``emit`` (two-sided emitters) the back of an emitting face matters
+    wherever it faces any surface. The rest are left out, so a scene pays nothing for them: the
+    underside of a floor, the outside of a room built of single planes in a dark world, the
+    inside of a box without a bottom standing on a floor (it faces only its own walls' backs
+    and the floor they shut in), the inside of a scanned model seen through holes in its base.
 
     Probed from each face's centre (and halfway to each corner on faces larger than
     :data:`LARGE_FACE` of the scene's diagonal squared) with ``probe_rays`` cosine rays against
@@ -272,27 +278,34 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     halfway = 0.5 * (corner[on] + centres[corner_face[on]])
     at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
     points = np.concatenate([c, halfway])
-    lit = np.zeros(len(sel), bool)
+    S, R = len(sel), probe_rays
     world_on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
+    lit = np.zeros(S, bool)
     for light in lights or ():
         pos, to = getattr(light, "position", None), getattr(light, "direction", None)
-        if pos is not None:                     # behind the plane of a probe point
-            np.logical_or.at(lit, at, np.einsum("pj,pj->p", np.asarray(pos, float) - points, n[at]) < 0)
-        elif to is not None:                    # a sun whose light travels towards -n's side
-            lit |= n @ np.asarray(to, float) > 0
-        else:                                   # an environment map: the world, by direction
+        if pos is None and to is None:          # an environment map: the world, by direction
             world_on = True
-    hit, x, m, escaped, touched = _probe(scene, normals, points, -n[at], probe_rays, eps)
+            continue
+        # one shadow ray from each probe point: a lamp behind its plane, or a sun on its back
+        d = np.asarray(pos, float) - points if pos is not None else np.tile(-np.asarray(to, float), (len(points), 1))
+        behind = np.einsum("pj,pj->p", d, n[at]) < 0
+        o = points - eps * n[at]
+        free = ~scene.occluded(o[behind], d[behind], None if pos is None else np.full(behind.sum(), 1 - 1e-6))
+        reached = np.zeros(len(points), bool)
+        reached[np.flatnonzero(behind)[free]] = True
+        np.logical_or.at(lit, at, reached)
+    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, eps)
+    ray_face = np.repeat(at, R)
+    rays = np.bincount(ray_face, minlength=S)
     matter = lit.copy()
     if emit:                                    # an emitter's back shines on whatever it faces
-        shines = np.zeros(len(sel), bool)
-        np.logical_or.at(shines, at, touched)
+        shines = np.bincount(ray_face, weights=(hit >= 0) | touched, minlength=S) > 0
         matter |= shines & (_face_emission(meshes, offsets, sel) > 0)
-    if world_on:
-        np.logical_or.at(matter, at, escaped)
-    # a front hit matters if it is not shut in: its own rays find the world or some front
-    ray_face = np.repeat(at, probe_rays)
+    if world_on:                                # the lit sky over a share of its view
+        matter |= np.bincount(ray_face, weights=escaped & up, minlength=S) >= FACING_SHARE * rays
+    # fronts over a share of its view, not shut in: their own rays find some front, or escape
     front = np.flatnonzero((hit >= 0) & ~matter[ray_face])
+    fronts = np.bincount(ray_face[front], minlength=S)
     if front.size:
         face = ray_face[front]
         order = np.argsort(face, kind="stable")
@@ -300,9 +313,10 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
         first = np.searchsorted(face, face, side="left")
         keep = (np.arange(face.size) - first) < SECOND_HITS
         front, face = front[keep], face[keep]
-        h2, _, _, esc2, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
-        open2 = (esc2 & world_on) | (h2 >= 0).reshape(-1, SECOND_RAYS).any(axis=1)
-        np.logical_or.at(matter, face, open2)
+        h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
+        open2 = (esc2 | (h2 >= 0)).reshape(-1, SECOND_RAYS).any(axis=1)
+        share = np.bincount(face, weights=open2, minlength=S) / np.maximum(np.bincount(face, minlength=S), 1)
+        matter |= fronts * share >= FACING_SHARE * rays
     start = 0
     for o, f in opened.items():
         k = int(f.sum())
@@ -324,6 +338,13 @@ class _Fans:
         self.tri_face, self.scale = tri_face, scale
         self._scene = rtcs.EmbreeScene()
         self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris, dtype=np.float32))
+
+    def occluded(self, origins, directions, tfar=None):
+        """(M,) bool: something lies on the ray before ``tfar`` (None: anywhere)."""
+        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
+        return np.asarray(self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
+                                          np.ascontiguousarray(directions, dtype=np.float32),
+                                          query="OCCLUDED", **kw)) >= 0
 
     def intersect(self, origins, directions):
         res = self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
@@ -396,7 +417,8 @@ def cutters(meshes, faces):
 def _probe(scene, normals, points, directions_about, rays, eps):
     """``rays`` cosine rays from each of ``points`` (P, 3) about ``directions_about`` (P, 3):
     (hit (P * rays,) the face whose front a ray hit, or -1; where (P * rays, 3) it hit; that
-    face's normal (P * rays, 3); escaped (P,) bool: some ray found nothing)."""
+    face's normal (P * rays, 3); escaped, touched and up (P * rays,) bool: the ray found nothing,
+    or a face, front or back; it points above the horizon (+Z, Blender's up))."""
     from ..rays import cosine_lattice
     from ..util.geometry import in_frames, tangent_frames
 
@@ -404,12 +426,12 @@ def _probe(scene, normals, points, directions_about, rays, eps):
     d = in_frames(local, tangent_frames(directions_about)).reshape(-1, 3)
     o = np.repeat(points + eps * directions_about, rays, axis=0)
     pid, t = scene.intersect(o, d)
-    escaped = (pid < 0).reshape(-1, rays).any(axis=1)
-    touched = (pid >= 0).reshape(-1, rays).any(axis=1)
+    escaped = pid < 0
+    touched = pid >= 0
     nrm = normals[np.maximum(pid, 0)]
     front = (pid >= 0) & (np.einsum("pj,pj->p", nrm, d) < 0)
     where = o + np.where(front, t, 0.0)[:, None] * d
-    return np.where(front, pid, -1), where, nrm, escaped, touched
+    return np.where(front, pid, -1), where, nrm, escaped, touched, d[:, 2] > 0
 
 
 def _face_emission(meshes, offsets, sel) -> np.ndarray:
