@@ -210,6 +210,27 @@ def _mesh_arrays(me):
             ps.astype(np.int64), pt.astype(np.int64), mi.astype(np.int64), sm, sh)
 
 
+def corner_normals(me, smooth):
+    """(L, 3) float64 Blender's normal at every corner (loop) of an evaluated mesh, in its local
+    space: what Cycles shades with (smooth faces, custom normals); None where every face is flat
+    and there are no custom normals (the faces' own normals say it all) or this Blender has no
+    ``corner_normals``."""
+    if not (np.any(smooth) or getattr(me, "has_custom_normals", False)) or not hasattr(me, "corner_normals"):
+        return None
+    n = np.empty(len(me.loops) * 3, np.float32)
+    if len(n):
+        me.corner_normals.foreach_get("vector", n)
+    return n.reshape(-1, 3).astype(np.float64)
+
+
+def _normals_in_world(n, M):
+    """Unit normals ``n`` (L, 3) in local space carried to world space by ``M`` (4, 4): the inverse
+    transpose, so they stay on the side of the surface they were on (a mirror included)."""
+    w = np.asarray(n, dtype=np.float64) @ np.linalg.inv(np.asarray(M, dtype=np.float64)[:3, :3])
+    length = np.linalg.norm(w, axis=1, keepdims=True)
+    return np.divide(w, length, out=np.zeros_like(w), where=length > 0)
+
+
 def _newell(verts, corner_vertex, poly_start, poly_total):
     """(unit face normals (F,3), face areas (F,)) from world-space corners. Taken relative to each
     face's first corner (no cancellation far from the origin): for a triangle and a quad the area
@@ -277,6 +298,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     try:
         co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
         counts = (len(me.vertices), len(me.loops), len(me.polygons))
+        cn = corner_normals(me, sm)
         mats = [s.material for s in ob_eval.material_slots] or [None]
     finally:
         ob_eval.to_mesh_clear()
@@ -307,7 +329,8 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     em = face_means(shaded, obj.name, em, corner_loop, offsets, mats, mi)   # emission over the face
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
-                     material_ids(mats)[mi])
+                     material_ids(mats)[mi],
+                     corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop])
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 
@@ -415,7 +438,8 @@ def _placed(src, M, name):
         return None if a is None else a[perm]
 
     mesh = MeshInput(verts, m.face_offsets, m.face_indices[perm], m.face_rho, m.face_emission, name,
-                     corners(m.corner_rho), corners(m.corner_emission), m.face_material)
+                     corners(m.corner_rho), corners(m.corner_emission), m.face_material,
+                     corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
     return ObjectSource(name, mesh, src.corner_loop[perm], M, flipped, False, src.eval_counts, [],
                         corners(src.corner_rho), corners(src.corner_emission))
 

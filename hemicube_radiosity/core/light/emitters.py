@@ -60,6 +60,10 @@ def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     that limit. ``weights`` (N,) >= 0: how much each patch counts in those means (a patch
     buried under a block, 0: a floor vertex on the block's outline takes the open floor's
     limit, not a point inside the block); a vertex whose patches all weigh 0 takes them all.
+    On a convex curve (a smooth cylinder's vertex, shared by faces that meet at an angle) the
+    centres' mean lies inside the solid: the point is then lifted along the normal onto the
+    front of every patch that counts (the sunlit side of a smooth cylinder read no sun: its
+    shadow rays started inside it).
     """
     V = len(patches.verts)
     p, v, w, total = vertex_weights(patches, weights)
@@ -70,6 +74,15 @@ def vertex_frames(patches: PatchSet, inset=1e-2, weights=None):
     n = mean(patches.normals)
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     x = patches.verts + inset * (mean(patches.centers) - patches.verts)
+    # how far behind each counting patch's plane the point lies, along the vertex normal
+    behind = np.einsum("ij,ij->i", patches.centers[p] - x[v], patches.normals[p])
+    facing = np.einsum("ij,ij->i", n[v], patches.normals[p])
+    size = float(np.linalg.norm(np.ptp(patches.verts, axis=0))) if V else 1.0
+    up = (w > 0) & (behind > 1e-12 * size) & (facing > 0.1)
+    if up.any():
+        lift = np.zeros(V)
+        np.maximum.at(lift, v[up], behind[up] / facing[up])
+        x = x + lift[:, None] * n
     return x, n, mean(patches.rho)
 
 

@@ -170,6 +170,8 @@ def _back(mesh, index, faces, emit: bool):
                    face_rho=np.asarray(mesh.face_rho, dtype=np.float64)[sel], face_emission=em,
                    name=f"{mesh.name} (back)", corner_rho=corners(mesh.corner_rho),
                    corner_emission=corner_em,
+                   corner_normal=None if getattr(mesh, "corner_normal", None) is None
+                   else -np.asarray(mesh.corner_normal, dtype=np.float64)[corner],
                    face_material=None if material is None else np.asarray(material)[sel],
                    back_of=index, back_faces=sel)
 

@@ -49,6 +49,9 @@ class MeshInput:
                   None: faces group only where reflectivity and emission are equal.
     size_scale:   this mesh is cut at the patch and detail sizes times this (an object far
                   larger than the rest of the scene: :mod:`.sizes`).
+    corner_normal:(L, 3) or None, the unit shading normal at every face corner (``face_indices``
+                  order): smooth shading and custom normals, as Cycles shades with them at the
+                  output vertices (:mod:`..output.normals`); None: the faces' own normals.
     back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
                   around, a hair behind: :mod:`.backs`) ...
     back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.
@@ -64,6 +67,7 @@ class MeshInput:
     corner_emission: np.ndarray | None = None
     face_material: np.ndarray | None = None
     size_scale: float = 1.0
+    corner_normal: np.ndarray | None = None
     back_of: int = -1
     back_faces: np.ndarray | None = None
 

@@ -25,6 +25,7 @@ from ..mesh.elements import cut_elements
 from ..rays import embree_available
 from ..runtime.cache import array_key
 from .corners import corner_values, vertex_mean
+from .normals import shading_normals
 from .indirect import element_indirect, start_gather
 from .sides import buried_side, open_elements, sided_mesh
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
@@ -80,6 +81,7 @@ def vertex_stage(ctx) -> None:
         elements = cut_elements(ctx)
         ctx.elements = sided if elements is patches else sided_mesh(ctx, elements)
         xv, nv, rho_v = frames(ctx.elements, open_elements(ctx, ctx.elements), ctx.cache)
+        nv = shading_normals(ctx.elements, ctx.meshes, nv)     # as Cycles shades: smooth, custom
         # the gather's rays (geometry only) cast on the workers while this thread finds the
         # direct light, the open side and what shines (else a core idles through them)
         pending = start_gather(ctx, ctx.elements, xv, nv)
@@ -96,6 +98,7 @@ def vertex_stage(ctx) -> None:
     else:
         ctx.elements = sided
         xv, nv, rho_v = frames(sided, open_elements(ctx, sided), ctx.cache)
+        nv = shading_normals(sided, ctx.meshes, nv)
         rest_v = rest_v if in_v is None else in_v
         D_vert = ctx.direct.at(xv, nv, "vertices")
         side = buried_side(ctx, sided, xv, nv)
