@@ -33,11 +33,13 @@ from ..util.unique import unique_rows
 
 __all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "fronts_of", "cutters", "backs_of_pieces"]
 
-#: A back lies this share of its own mesh's diagonal behind its front ...
-OFFSET_SHARE = 1e-5
+#: A back lies this share of its own mesh's diagonal behind its front (a quarter of the rays'
+#: start offset, 1e-5 of the scene's diagonal: a ray leaving a point next to a back must not
+#: start on it) ...
+OFFSET_SHARE = 2.5e-6
 #: ... and at least this many float32 steps (2**-23 of the largest coordinate), so that Embree's
 #: float32 vertices and the hemi-cube's float32 depths always tell the two sides apart.
-OFFSET_ULPS = 64
+OFFSET_ULPS = 16
 #: Rays from each probe point of an open face that look for what its back faces ...
 PROBE_RAYS = 32
 #: ... and from up to this many of the fronts they hit, this many rays, to tell a surface in
