@@ -416,6 +416,7 @@ def ours_child(name, corners_npz, out_npz, settings_json):
                converged=bool(r.solution.converged), nnz=int(r.form_factors.nnz),
                resolved={k: getattr(r.settings, k) for k in ("patch_size", "element_size", "resolution", "method")},
                triangles=int(sum(np.sum(np.diff(m.face_offsets) - 2) for m in job.scene_input.meshes)),
+               forecast=None if r.forecast is None else r.forecast.as_dict(),
                warnings=list(job.messages().warnings), notes=list(job.messages().notes),
                n_notes=len(job.notes))
     if corners_npz and os.path.exists(corners_npz):
@@ -636,6 +637,14 @@ def targets(res):
             out.append((f"`{n}`: error and time next to Cycles {CAND_SPP} spp's",
                         f"ours {100 * oe:.2f}% in {t_ours:.1f} s; Cycles {100 * ce:.2f}% in {c['cand']['seconds']:.1f} s",
                         oe <= ce and t_ours <= c["cand"]["seconds"]))
+        fc = d.get("forecast")
+        if fc:      # what the forecast covers: the form factors and the output stage
+            from hemicube_radiosity.core.runtime.forecast import SPREAD
+
+            took = sum(d.get("stages", {}).get(s, 0.0) for s in ("form_factors", "vertices"))
+            lo, hi = (fc["seconds"] * k for k in SPREAD)
+            out.append((f"`{n}`: the forecast's range holds the form factors and output's time",
+                        f"{took:.1f} s measured, {lo:.1f}-{hi:.1f} s forecast", lo <= took <= hi))
         ke = (k.get("error") or {}).get(sve.METRIC)
         if oe is not None and ke is not None:
             out.append((f"`{n}`: error no worse than at the coarser grouping (patches x2)",
