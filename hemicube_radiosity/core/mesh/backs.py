@@ -29,7 +29,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..util.unique import unique_rows
+from ..util.unique import linked_labels, unique_rows
 
 __all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "fronts_of", "cutters", "backs_of_pieces"]
 
@@ -98,16 +98,7 @@ def open_faces(verts, face_offsets, face_indices, tol) -> np.ndarray:
     e_sorted, f_sorted = inv[order], face[order]
     pair = (e_sorted[1:] == e_sorted[:-1]) & closed[e_sorted[1:]]
     i, j = f_sorted[:-1][pair], f_sorted[1:][pair]
-    label = np.arange(F)
-    while i.size:
-        m = np.minimum(label[i], label[j])
-        new = label.copy()
-        np.minimum.at(new, i, m)
-        np.minimum.at(new, j, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            break
-        label = new
+    label = linked_labels(F, i, j)
     return np.isin(label, label[bad])
 
 

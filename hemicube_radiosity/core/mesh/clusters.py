@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
-from ..util.unique import unique_ints, unique_rows
+from ..util.unique import linked_labels, unique_ints, unique_rows
 
 __all__ = ["Clusters", "group_pieces", "piece_materials", "welded", "DEFAULT_MAX_ANGLE"]
 
@@ -159,17 +159,7 @@ def connected_components(keys, polys):
     order = np.lexsort((p, keys[p], v))
     v, p = v[order], p[order]
     same = (v[1:] == v[:-1]) & (keys[p][1:] == keys[p][:-1])
-    a, b = p[:-1][same], p[1:][same]
-    label = np.arange(len(keys))
-    while True:
-        m = np.minimum(label[a], label[b])
-        new = label.copy()
-        np.minimum.at(new, a, m)
-        np.minimum.at(new, b, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            return label
-        label = new
+    return linked_labels(len(keys), p[:-1][same], p[1:][same])
 
 
 def welded(verts, polys) -> np.ndarray:

@@ -18,7 +18,7 @@ from ..mesh.contact import open_side
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, open_fraction
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from ..util.unique import unique_rows
+from ..util.unique import linked_labels, unique_rows
 
 __all__ = ["open_elements", "sided_mesh", "seen_fraction", "seen_vertices", "buried_side"]
 
@@ -145,16 +145,7 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
     joined = ~parted(sp[i], sp[j], sv[i])
     slot = sp * 4 + sc
     sa, sb = slot[i[joined]], slot[j[joined]]
-    label = np.arange(4 * N)
-    while True:                               # label propagation over the joined corner slots
-        m = np.minimum(label[sa], label[sb])
-        new = label.copy()
-        np.minimum.at(new, sa, m)
-        np.minimum.at(new, sb, m)
-        new = new[new]
-        if np.array_equal(new, label):
-            break
-        label = new
+    label = linked_labels(4 * N, sa, sb)      # label propagation over the joined corner slots
     # a vertex whose seen elements all join up (a floor around a block's corner, whose edge
     # grazes the segment across the corner) is not split: not even its buried corners
     pairs = unique_rows(np.column_stack([sv, label[slot]]))

@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["unique_ints", "unique_rows"]
+__all__ = ["linked_labels", "unique_ints", "unique_rows"]
 
 
 def unique_rows(a, return_inverse=False, return_counts=False):
@@ -122,3 +122,21 @@ def _row_order(a) -> np.ndarray:
                 return packed & ((1 << bits) - 1)
             return np.argsort(key, kind="stable")
     return np.lexsort(a.T[::-1])
+
+
+def linked_labels(n, a, b) -> np.ndarray:
+    """(n,) int: for each of ``n`` items the smallest item of its connected component, the items
+    ``a`` (k,) and ``b`` (k,) being linked pairwise: label propagation with pointer jumping, all
+    links at once."""
+    label = np.arange(n)
+    a, b = np.asarray(a), np.asarray(b)
+    while a.size:
+        m = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, m)
+        np.minimum.at(new, b, m)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    return label
