@@ -363,3 +363,28 @@ if __name__ == "__main__":
     for s in (0.0, -2.0):
         c = emission_case(lambda: principled_emitter(s))
         line(f"Principled emission {s:g}", c, c.owner == 0)
+
+
+# ----------------------------------------------------------------------------- no material
+def test_a_mesh_with_no_material_reflects_as_cycles_default_surface():
+    """A plane with no material, and a plane whose second slot is empty, under a sun of angle 0:
+    Cycles shades a face without a material with its default surface (a Principled BSDF in
+    Blender 5: diffuse albedo 0.770, not a grey 0.8 diffuse: the scanned bunny baked 3.7% too
+    bright), and so do we, at every corner; no note says so (Blender's own default)."""
+    cr.new_empty_scene()
+    v, f = cr.grid_arrays(4, 4, -1.0, 1.0, -1.0, 1.0)
+    bare = cr.mesh_object(v, f, None, "bare")
+    painted = cr.mesh_object(v + (3.0, 0.0, 0.0), f, cr.diffuse_material((0.5, 0.5, 0.5)), "painted")
+    painted.data.materials.append(None)
+    for p in painted.data.polygons[:8]:
+        p.material_index = 1                          # half its faces: the empty slot
+    cr.add_light("SUN", (0, 0, 5), (0.3, 0.0, 0.0), energy=3.0, angle=0.0)
+    c = Comparison([bare, painted], samples=SAMPLES)
+    assert c.error() < 0.005
+    rho = np.array([m.face_rho[:, 0] for m in c.meshes]).ravel()
+    assert np.all((np.abs(rho - 0.5) < 1e-6) | (np.abs(rho - rho.max()) < 1e-6))
+    assert rho.max() == pytest.approx(materials.default_surface_rho(), abs=1e-6)
+    if BLENDER_5:
+        assert rho.max() == pytest.approx(0.770, abs=0.001)
+    read = reader.read_scene(bpy.context.evaluated_depsgraph_get(), [bare, painted])
+    assert not read.notes()

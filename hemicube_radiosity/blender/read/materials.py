@@ -33,6 +33,21 @@ UNBAKED_SHARE = 0.10
 DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 
+def default_surface_rho() -> float:
+    """Cycles' diffuse reflectance of a face with no material: its default surface. Blender 5's
+    is a Principled BSDF (base colour 0.8, specular IOR level 0.5: a diffuse albedo of 0.770092,
+    as a Cycles diffuse-colour bake reads it, tests/blender/test_cycles_parity.py), earlier
+    versions' a grey 0.8 Diffuse BSDF. Read as 0.8, a scanned bunny with no material baked
+    3.7% brighter than Cycles."""
+    import bpy
+
+    return DEFAULT_SURFACE_RHO.get(bpy.app.version[:2], DEFAULT_SURFACE_RHO[None])
+
+
+#: Cycles' default surface's diffuse albedo by Blender version (major, minor); None: any other.
+DEFAULT_SURFACE_RHO = {(5, 0): 0.770092, None: 0.8}
+
+
 def rgb(v):
     """(3,) float64 of a colour value (a socket's default, a light's colour) or of a float."""
     try:
@@ -181,14 +196,14 @@ def material_rho_emission(mat):
 
     Principled BSDF: Base Color; Emission Color x Emission Strength. Diffuse BSDF: Color.
     Emission: Color x Strength. Mix/Add shader: mixed/added. Unlinked inputs only (a linked
-    input contributes its unlinked value, noted). No material: grey 0.8. Material without a node
+    input contributes its unlinked value, noted). No material: Cycles' default surface
+    (:func:`default_surface_rho`). Material without a node
     tree: its viewport colour. Reflectivity is clipped to [0, 0.999] (noted).
     """
     notes = []
     zero = np.zeros(3)
-    if mat is None:
-        notes.append("no material; grey 0.8")
-        rho, em = np.array(DEFAULT_RHO), zero
+    if mat is None:                       # Cycles' default surface: Blender's own, no note
+        rho, em = np.full(3, default_surface_rho()), zero
     else:
         nt = mat.node_tree if uses_nodes(mat) else None
         if nt is None:
