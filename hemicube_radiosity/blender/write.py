@@ -163,7 +163,7 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
             continue
-        owners = result.owners_of(oi) if result.back_of else np.array([oi])
+        owners = result.owners_of(oi)
         mat = baked_material(attribute_name, culled=owners.size > 1)
         # an object with a back (core/mesh/backs.py) is written as its elements, both sides
         me = _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat) \
@@ -296,7 +296,7 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
         if np.count_nonzero(P.owner == oi) > n_src:
             notes.append(f"{src.name}: in place keeps one value per face corner; "
                          "the finer patch detail inside faces is averaged away")
-        if result.back_of and result.owners_of(oi).size > 1:
+        if result.owners_of(oi).size > 1:
             notes.append(f"{src.name}: in place keeps the light on the front of its faces; "
                          "the light on the back of its open surfaces is in baked copies only")
         written.append(ob)

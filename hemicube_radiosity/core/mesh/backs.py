@@ -30,8 +30,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..util.unique import linked_labels, unique_rows
+from .patches import meshes_key
 
-__all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "fronts_of", "cutters", "backs_of_pieces"]
+__all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "cutters", "backs_of_pieces"]
 
 #: A back lies this share of its own mesh's diagonal behind its front (a quarter of the rays'
 #: start offset, 1e-5 of the scene's diagonal: a ray leaving a point next to a back must not
@@ -214,17 +215,10 @@ def _sources_key(lights, world) -> str:
 
 def _cached_backs(meshes, opened, lights, world, probe_rays, cache, emit) -> dict:
     """:func:`backs_that_matter`, kept in ``cache`` under the geometry and the sources' places."""
-    import hashlib
-
     from ..runtime.cache import cache_key, cached
 
     order = sorted(opened)
-    h = hashlib.sha256()
-    for m in meshes:                            # the geometry (as .elements.meshes_key hashes it)
-        for a in (m.verts, m.face_offsets, m.face_indices):
-            a = np.ascontiguousarray(a)
-            h.update(str(a.shape).encode() + a.tobytes())
-    key = cache_key(h.digest() + b"".join(np.packbits(opened[i]).tobytes() for i in order),
+    key = cache_key(meshes_key(meshes) + b"".join(np.packbits(opened[i]).tobytes() for i in order),
                     ("backs", probe_rays, emit, _sources_key(lights, world)))
     def make():
         found = backs_that_matter(meshes, opened, lights, world, probe_rays, emit)
@@ -274,44 +268,20 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
     points = np.concatenate([c, halfway])
     S, R = len(sel), probe_rays
-    world_on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
-    lit = np.zeros(S, bool)
-    for light in lights or ():
-        pos, to = getattr(light, "position", None), getattr(light, "direction", None)
-        if pos is None and to is None:          # an environment map: the world, by direction
-            world_on = True
-            continue
-        # one shadow ray from each probe point: a lamp behind its plane, or a sun on its back
-        d = np.asarray(pos, float) - points if pos is not None else np.tile(-np.asarray(to, float), (len(points), 1))
-        behind = np.einsum("pj,pj->p", d, n[at]) < 0
-        o = points - eps * n[at]
-        free = ~scene.occluded(o[behind], d[behind], None if pos is None else np.full(behind.sum(), 1 - 1e-6))
-        reached = np.zeros(len(points), bool)
-        reached[np.flatnonzero(behind)[free]] = True
-        np.logical_or.at(lit, at, reached)
+    matter, world_on = _lit(scene, lights, world, points, n[at], at, S, eps)
     hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, eps)
     ray_face = np.repeat(at, R)
     rays = np.bincount(ray_face, minlength=S)
-    matter = lit.copy()
     if emit:                                    # an emitter's back shines on whatever it faces
-        shines = np.bincount(ray_face, weights=(hit >= 0) | touched, minlength=S) > 0
+        shines = np.bincount(ray_face, weights=touched, minlength=S) > 0
         matter |= shines & (_face_emission(meshes, offsets, sel) > 0)
     if world_on:                                # the lit sky over a share of its view
         matter |= np.bincount(ray_face, weights=escaped & up, minlength=S) >= FACING_SHARE * rays
     # fronts over a share of its view, not shut in: their own rays find some front, or escape
     front = np.flatnonzero((hit >= 0) & ~matter[ray_face])
-    fronts = np.bincount(ray_face[front], minlength=S)
     if front.size:
-        face = ray_face[front]
-        order = np.argsort(face, kind="stable")
-        front, face = front[order], face[order]
-        first = np.searchsorted(face, face, side="left")
-        keep = (np.arange(face.size) - first) < SECOND_HITS
-        front, face = front[keep], face[keep]
-        h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
-        open2 = (esc2 | (h2 >= 0)).reshape(-1, SECOND_RAYS).any(axis=1)
-        share = np.bincount(face, weights=open2, minlength=S) / np.maximum(np.bincount(face, minlength=S), 1)
-        matter |= fronts * share >= FACING_SHARE * rays
+        fronts = np.bincount(ray_face[front], minlength=S)
+        matter |= fronts * _open_share(scene, normals, x, m, front, ray_face[front], S, eps) >= FACING_SHARE * rays
     start = 0
     for o, f in opened.items():
         k = int(f.sum())
@@ -321,41 +291,65 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     return out
 
 
-class _Fans:
-    """An Embree scene of the meshes' faces as triangle fans (enough to probe what a face
-    faces; the bake's own scenes are of its patches): ``intersect`` as :class:`.rays.EmbreeScene`
-    answers it, with the face (numbered over all meshes) for the patch."""
+def _lit(scene, lights, world, points, normals, at, S, eps):
+    """((S,) bool the faces a lamp or a sun reaches on their back, by one shadow ray from each
+    probe point ``points`` (P, 3) of face ``at`` (P,) behind its ``normals`` (P, 3); whether
+    the world is lit: by ``world`` (3,) or an environment map among ``lights``)."""
+    world_on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
+    lit = np.zeros(S, bool)
+    for light in lights or ():
+        pos, to = getattr(light, "position", None), getattr(light, "direction", None)
+        if pos is None and to is None:          # an environment map: the world, by direction
+            world_on = True
+            continue
+        d = np.asarray(pos, float) - points if pos is not None else np.tile(-np.asarray(to, float), (len(points), 1))
+        behind = np.einsum("pj,pj->p", d, normals) < 0
+        free = ~scene.occluded((points - eps * normals)[behind], d[behind],
+                               None if pos is None else np.full(behind.sum(), 1 - 1e-6))
+        reached = np.zeros(len(points), bool)
+        reached[np.flatnonzero(behind)[free]] = True
+        np.logical_or.at(lit, at, reached)
+    return lit, world_on
 
-    def __init__(self, tris, tri_face, scale):
-        from ..rays import import_embreex
 
-        rtcs, TriangleMesh = import_embreex()
-        self.tri_face, self.scale = tri_face, scale
-        self._scene = rtcs.EmbreeScene()
-        self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris, dtype=np.float32))
+def _open_share(scene, normals, x, m, front, face, S, eps) -> np.ndarray:
+    """(S,) per face, the share of its front hits (rays ``front`` hit ``x`` (R, 3) with normal
+    ``m`` (R, 3), of face ``face`` (k,)) that are not shut in: of up to :data:`SECOND_HITS` of
+    them, how many cast :data:`SECOND_RAYS` rays of which one escapes or finds a front."""
+    order = np.argsort(face, kind="stable")
+    front, face = front[order], face[order]
+    first = np.searchsorted(face, face, side="left")
+    keep = (np.arange(face.size) - first) < SECOND_HITS
+    front, face = front[keep], face[keep]
+    h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
+    open2 = (esc2 | (h2 >= 0)).reshape(-1, SECOND_RAYS).any(axis=1)
+    return np.bincount(face, weights=open2, minlength=S) / np.maximum(np.bincount(face, minlength=S), 1)
 
-    def occluded(self, origins, directions, tfar=None):
-        """(M,) bool: something lies on the ray before ``tfar`` (None: anywhere)."""
-        kw = {} if tfar is None else {"dists": np.ascontiguousarray(tfar, dtype=np.float32)}
-        return np.asarray(self._scene.run(np.ascontiguousarray(origins, dtype=np.float32),
-                                          np.ascontiguousarray(directions, dtype=np.float32),
-                                          query="OCCLUDED", **kw)) >= 0
 
-    def intersect(self, origins, directions):
-        """(face hit or -1, distance) per ray, in chunks on every core (Embree lets go of the GIL)."""
-        from ..runtime.parallel import ordered_map, resolve_workers
+def _fans(tris, tri_face, scale):
+    """An Embree scene of the meshes' faces as triangle fans (enough to probe what a face faces;
+    the bake's own scenes are of its patches), answering as :class:`.rays.EmbreeScene` does with
+    the face (numbered over all meshes) for the patch; its nearest hits on every core (Embree
+    lets go of the GIL)."""
+    from ..rays import EmbreeScene, import_embreex
+    from ..runtime.parallel import ordered_map, resolve_workers
 
-        n = len(origins)
-        step = max(1 << 16, -(-n // (4 * resolve_workers(0))))
+    class Fans(EmbreeScene):
+        def __init__(self):                     # (not from a PatchSet)
+            rtcs, TriangleMesh = import_embreex()
+            self.tri_patch, self.scale, self.n_patches = tri_face, scale, int(tri_face.max(initial=-1)) + 1
+            self._scene = rtcs.EmbreeScene()
+            self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(tris, dtype=np.float32))
 
-        def run(s):
-            res = self._scene.run(np.ascontiguousarray(origins[s:s + step], dtype=np.float32),
-                                  np.ascontiguousarray(directions[s:s + step], dtype=np.float32), output=1)
-            return res["primID"].astype(np.int64), res["tfar"]
-        parts = list(ordered_map(run, range(0, n, step), resolve_workers(0))) or [(np.zeros(0, np.int64), np.zeros(0))]
-        prim = np.concatenate([p for p, _ in parts])
-        t = np.concatenate([t for _, t in parts])
-        return np.where(prim >= 0, self.tri_face[np.maximum(prim, 0)], -1), t
+        def intersect(self, origins, directions, tfar=None):
+            n = len(origins)
+            step = max(1 << 16, -(-n // (4 * resolve_workers(0))))
+            parts = list(ordered_map(lambda s: EmbreeScene.intersect(self, origins[s:s + step], directions[s:s + step]),
+                                     range(0, n, step), resolve_workers(0)))
+            if not parts:
+                return np.zeros(0, np.int64), np.zeros(0, np.float32)
+            return np.concatenate([p for p, _ in parts]), np.concatenate([t for _, t in parts])
+    return Fans()
 
 
 def _fan_scene(meshes):
@@ -392,14 +386,8 @@ def _fan_scene(meshes):
     centre = np.stack([np.bincount(corner_face, weights=corner[:, k], minlength=F) for k in range(3)], 1) \
         / np.maximum(count, 1)[:, None]
     scale = float(np.linalg.norm(corner.max(axis=0) - corner.min(axis=0))) or 1.0
-    scene = _Fans(tris, np.concatenate(tri_face).astype(np.int64), scale) if len(tris) else None
+    scene = _fans(tris, np.concatenate(tri_face).astype(np.int64), scale) if len(tris) else None
     return scene, offsets, centre, area / np.maximum(size, 1e-300)[:, None], size, corner, corner_face
-
-
-def fronts_of(meshes) -> np.ndarray:
-    """(M,) int: for each mesh its own index, or for a back the index of its front."""
-    return np.array([i if getattr(m, "back_of", -1) < 0 else m.back_of for i, m in enumerate(meshes)],
-                    dtype=np.int64)
 
 
 def backs_of_pieces(meshes, pieces) -> np.ndarray | None:
@@ -413,10 +401,9 @@ def cutters(meshes, faces):
     contacts (:func:`.contact.cut_along_contacts`), or None for all (no backs). A back lies a
     hair behind its front, whose own line already cuts: its line would part a sliver off the
     floor beside every single-plane wall."""
-    back = np.array([getattr(m, "back_of", -1) >= 0 for m in meshes or ()], dtype=bool)
-    if not back.any():
-        return None
-    return ~back[np.asarray(faces.owner, dtype=np.int64)]
+    back = backs_of_pieces(meshes, faces)
+    return None if back is None else ~back
+
 
 
 def _probe(scene, normals, points, directions_about, rays, eps):

@@ -10,8 +10,6 @@ counts :func:`output_vertices_ahead`, the bake starts the cut at its start
 """
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 
 from ..runtime.cache import cache_key, cached, geometry_key
@@ -20,23 +18,11 @@ from ..runtime.background import Ahead
 from ..runtime.parallel import resolve_workers
 from .backs import cutters
 from .contact import cut_along_contacts
-from .patches import PatchSet
+from .patches import PatchSet, meshes_key
 from .subdivide import build_patches, keeps_faces_whole
 
 __all__ = ["meshes_key", "mesh_faces", "output_elements", "output_vertices_ahead", "cut_elements",
            "start_elements"]
-
-
-def meshes_key(meshes) -> bytes:
-    """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
-    h = hashlib.sha256()
-    for m in meshes:
-        for a in (m.verts, m.face_offsets, m.face_indices):
-            a = np.ascontiguousarray(a)
-            h.update(str(a.shape).encode() + a.tobytes())
-        if getattr(m, "size_scale", 1.0) != 1.0:
-            h.update(repr(float(m.size_scale)).encode())
-    return h.digest()
 
 
 def _meshes_key(ctx):

@@ -17,13 +17,14 @@ Radiosity quantities (``emission``) are in Blender's radiance units: an emission
 """
 from __future__ import annotations
 
+import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
 from ..runtime.cache import Memo
 from ..runtime.errors import RadiosityError
 
-__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces"]
+__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key"]
 
 
 class PatchError(RadiosityError, ValueError):
@@ -82,6 +83,18 @@ class MeshInput:
         rho = np.broadcast_to(np.asarray(rho, float), (F, 3)).copy()
         emission = np.broadcast_to(np.asarray(emission, float), (F, 3)).copy()
         return cls(np.asarray(verts, float), offsets, idx, rho, emission, name)
+
+
+def meshes_key(meshes) -> bytes:
+    """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
+    h = hashlib.sha256()
+    for m in meshes:
+        for a in (m.verts, m.face_offsets, m.face_indices):
+            a = np.ascontiguousarray(a)
+            h.update(str(a.shape).encode() + a.tobytes())
+        if getattr(m, "size_scale", 1.0) != 1.0:
+            h.update(repr(float(m.size_scale)).encode())
+    return h.digest()
 
 
 @dataclass
