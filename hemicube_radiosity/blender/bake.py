@@ -193,7 +193,7 @@ class BakeJob:
             self.notes += notes
         else:
             self.written = write.write_copies(context, self.scene_input, self.result,
-                                              s.attribute_name, s.exposure)
+                                              s.attribute_name, s.exposure, s.keep_textures)
         self.timings["write"] = time.perf_counter() - t
         if progress:
             progress("write", 1.0, f"{len(self.written)} object(s), attribute '{s.attribute_name}'")

@@ -2,7 +2,8 @@
 """Core result -> Blender data: baked copies, or the attribute written in place.
 
 Copy mode (default, non-destructive): one new object per baked object (same world matrix), a
-FLOAT_COLOR corner attribute (set as active and render colour) with the vertex radiosities, and a
+FLOAT_COLOR corner attribute (set as active and render colour) with the output at every face
+corner (``BakeResult.corner_values``: a textured face's corners each with their own colour), and a
 material that shows that attribute (the colour wired straight into the output: Cycles/EEVEE render
 it as emission, the glTF exporter writes KHR_materials_unlit). Its mesh is either
 
@@ -19,8 +20,8 @@ Copies live in the "Radiosity" collection; each remembers its source in
 ``obj["radiosity_source"]``. The originals are hidden (viewport and render), never deleted or
 edited. Re-baking an object removes its previous copy first.
 
-In-place mode: the attribute goes on the original mesh, one value per face corner: the vertex
-radiosity at that corner (where patches are finer than faces, the detail inside a face is lost;
+In-place mode: the attribute goes on the original mesh, one value per face corner: the output at
+that corner (where patches are finer than faces, the detail inside a face is lost;
 a bake report line says so). Needs modifiers that keep the topology. A mesh shared by several
 baked objects (linked duplicates) is made single-user first so each object keeps its own result.
 
@@ -32,6 +33,7 @@ from __future__ import annotations
 import bpy
 import numpy as np
 from ..core.runtime.errors import RadiosityError
+from . import textures
 
 __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
            "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays"]
@@ -106,11 +108,13 @@ def remove_bakes(names, unhide=False):
                     pass
 
 
-def patch_mesh_arrays(patches, owner, vertex_radiosity, matrix_world, flipped):
+def patch_mesh_arrays(patches, owner, corner_values, matrix_world, flipped):
     """Local-space verts, loop vertex ids, loop starts and corner colours of one owner's patches
-    (``owner``: an index, or several: an object and its back)."""
+    (``owner``: an index, or several: an object and its back); ``corner_values`` (N, 4, 3) per
+    patch corner (``BakeResult.corner_values``)."""
     sel = np.flatnonzero(np.isin(patches.owner, np.atleast_1d(owner)))
     polys = patches.polys[sel]
+    values = np.asarray(corner_values)[sel]
     used = np.unique(polys[polys >= 0])
     remap = np.full(len(patches.verts), -1, np.int64)
     remap[used] = np.arange(used.size)
@@ -119,16 +123,15 @@ def patch_mesh_arrays(patches, owner, vertex_radiosity, matrix_world, flipped):
     local = patches.verts[used] @ Minv[:3, :3].T + Minv[:3, 3]
     nside = np.where(polys[:, 3] < 0, 3, 4)
     if flipped:  # the reader reversed the rings to keep world-space fronts; undo for local space
-        rev = polys.copy()
-        rev[nside == 4] = polys[nside == 4][:, ::-1]
-        rev[nside == 3, :3] = polys[nside == 3][:, 2::-1]
-        polys = rev
+        order = np.tile(np.arange(4), (len(polys), 1))
+        order[nside == 4] = [3, 2, 1, 0]
+        order[nside == 3] = [2, 1, 0, 3]
+        polys = np.take_along_axis(polys, order, axis=1)
+        values = np.take_along_axis(values, order[:, :, None], axis=1)
     mask = np.arange(4)[None, :] < nside[:, None]
-    loop_global = polys[mask]                       # row-major: face by face
-    loop_vert = remap[loop_global]
+    loop_vert = remap[polys[mask]]                  # row-major: face by face
     starts = np.concatenate([[0], np.cumsum(nside)[:-1]])
-    colors = vertex_radiosity[loop_global]
-    return local, loop_vert, starts, colors, sel
+    return local, loop_vert, starts, values[mask], sel
 
 
 def _set_color_attribute(me, name, rgb):
@@ -151,14 +154,19 @@ def _set_color_attribute(me, name, rgb):
     return attr
 
 
-def write_copies(context, scene_input, result, attribute_name="Radiosity", exposure=0.0):
-    """Create the baked copies; returns them (one per baked object, in order)."""
+def write_copies(context, scene_input, result, attribute_name="Radiosity", exposure=0.0, keep_textures=True):
+    """Create the baked copies; returns them (one per baked object, in order). ``keep_textures``:
+    a textured object's copy shows its texture times the light (:mod:`.textures`)."""
     scene = context.scene
     baked = [s for s in scene_input.objects if s.bake]
     remove_bakes([s.name for s in baked])
     coll = _collection(scene)
     scale = 2.0 ** float(exposure)
     depsgraph = context.evaluated_depsgraph_get()
+    corners = result.corner_values()
+    lighting = result.corner_lighting() if keep_textures else None
+    textured = {} if lighting is None else _textured_objects(scene_input, result, depsgraph)
+    scales = textures.albedo_scales(list({m.name_full: m for ms in textured.values() for m in ms}.values()))
     out = []
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
@@ -166,11 +174,14 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
         owners = result.owners_of(oi)
         mat = baked_material(attribute_name, culled=owners.size > 1)
         # an object with a back (core/mesh/backs.py) is written as its elements, both sides
-        me = _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat) \
+        me = _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat) \
             if owners.size == 1 else None
         kind = "source" if me is not None else "elements"
         if me is None:
-            me = _element_mesh(result, owners, src, attribute_name, scale, mat)
+            me = _element_mesh(result, corners, owners, src, attribute_name, scale, mat, depsgraph)
+        if oi in textured:
+            _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name,
+                           scale, scales)
         me[SOURCE_KEY] = src.name
         ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
         ob.matrix_world = _matrix(src.matrix_world)
@@ -197,11 +208,86 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     return out
 
 
-def _element_mesh(result, owners, src, attribute_name, scale, mat):
+def _textured_objects(scene_input, result, depsgraph):
+    """{object index: its textured materials} of the baked objects whose copy shows its texture
+    times the light (:mod:`.textures`): textured and emitting nothing."""
+    out = {}
+    for oi, src in enumerate(scene_input.objects):
+        obj = bpy.data.objects.get(src.name)
+        if not src.bake or src.corner_rho is None or obj is None:
+            continue
+        if np.any(src.mesh.face_emission > 0) or (src.corner_emission is not None and np.any(src.corner_emission > 0)):
+            continue
+        mats = textures.textured_materials([s.material for s in obj.evaluated_get(depsgraph).material_slots])
+        if mats:
+            out[oi] = mats
+    return out
+
+
+class _UserMesh:
+    """The user's evaluated mesh of ``src`` (read only, freed on exit) and its material slots."""
+
+    def __init__(self, src, depsgraph):
+        self.ob_eval = bpy.data.objects[src.name].evaluated_get(depsgraph)
+
+    def __enter__(self):
+        self.mesh = self.ob_eval.to_mesh()
+        self.mats = [s.material for s in self.ob_eval.material_slots] or [None]
+        slot = np.zeros(len(self.mesh.polygons), np.int64)
+        self.mesh.polygons.foreach_get("material_index", slot)
+        self.slot = np.clip(slot, 0, len(self.mats) - 1)
+        return self
+
+    def __exit__(self, *exc):
+        self.ob_eval.to_mesh_clear()
+
+
+def _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name, scale,
+                   scales):
+    """Give copy mesh ``me`` the light attribute (active: glTF's COLOR_0) and per slot a material
+    of its colour times that light (:mod:`.textures`); an element mesh has the user's UVs."""
+    light_name = attribute_name + textures.LIGHT_SUFFIX
+    with _UserMesh(src, depsgraph) as user:
+        if kind == "source":
+            slots = _corner_slots(result.elements, oi, src)
+            light, rad = (np.zeros((len(me.loops), 3)) for _ in range(2))
+            light[src.corner_loop] = lighting.reshape(-1, 3)[slots]
+            rad[src.corner_loop] = corners.reshape(-1, 3)[slots]
+            total = np.empty(len(me.polygons), np.int64)
+            me.polygons.foreach_get("loop_total", total)
+            face = np.repeat(np.arange(total.size), total)
+        else:
+            local, loop_vert, starts, light, sel = patch_mesh_arrays(
+                result.elements, owners, lighting, src.matrix_world, src.flipped)
+            rad = patch_mesh_arrays(result.elements, owners, corners, src.matrix_world, src.flipped)[3]
+            faces = _element_faces(result, sel)
+            me.polygons.foreach_set("material_index", user.slot[faces].astype(np.int32))
+            face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
+        values = textures.light_values(light, rad, face, user.slot, user.mats, scales)
+        mats = user.mats
+    _set_color_attribute(me, light_name, values * scale)
+    plain = baked_material(light_name, culled=owners.size > 1)
+    me.materials.clear()
+    for m in textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1):
+        me.materials.append(m)
+
+
+def _element_faces(result, sel):
+    """(n,) the user's face (evaluated polygon) each of the elements ``sel`` lies on or behind."""
+    E = result.elements
+    faces = E.source_face[sel].astype(np.int64)
+    own = E.owner[sel]
+    for o in np.unique(own):
+        at = own == o
+        faces[at] = result.front_faces(int(o), faces[at])
+    return faces
+
+
+def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, depsgraph=None):
     """A new mesh of the output elements of ``owners`` (an object, and its back) in the object's
-    local space, with the attribute."""
-    local, loop_vert, starts, colors, _ = patch_mesh_arrays(
-        result.elements, owners, result.vertex_radiosity, src.matrix_world, src.flipped)
+    local space, with the attribute, and the user's UV maps at its corners (:func:`.textures.element_uvs`)."""
+    local, loop_vert, starts, colors, sel = patch_mesh_arrays(
+        result.elements, owners, corners, src.matrix_world, src.flipped)
     me = bpy.data.meshes.new(f"{src.name}.radiosity")
     me.vertices.add(len(local))
     me.vertices.foreach_set("co", local.astype(np.float32).ravel())
@@ -212,6 +298,12 @@ def _element_mesh(result, owners, src, attribute_name, scale, mat):
     me.update(calc_edges=True)
     _set_color_attribute(me, attribute_name, colors * scale)
     me.materials.append(mat)
+    if depsgraph is not None and bpy.data.objects.get(src.name) is not None:
+        with _UserMesh(src, depsgraph) as user:
+            if len(user.mesh.uv_layers) and len(user.mesh.polygons) == src.eval_counts[2]:
+                loop_face = np.repeat(_element_faces(result, sel), np.diff(np.append(starts, len(loop_vert))))
+                for name, uv in textures.element_uvs(user.mesh, local[loop_vert], loop_face).items():
+                    me.uv_layers.new(name=name).data.foreach_set("uv", uv.ravel())
     return me
 
 
@@ -223,14 +315,14 @@ def faces_uncut(P, oi, src):
     return per_face.size == sizes.size and bool(np.all(per_face <= np.maximum(1, sizes - 2)))
 
 
-def _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat):
+def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat):
     """A copy of the user's evaluated mesh carrying the attribute, or None where the bake cut the
     object's faces finer (or the evaluated mesh is no longer the one that was read)."""
     P = result.elements
     if not faces_uncut(P, oi, src):
         return None
-    vids = _corner_vertices(P, oi, src)
-    if np.any(vids < 0):
+    slots = _corner_slots(P, oi, src)
+    if np.any(slots < 0):
         return None
     obj = bpy.data.objects.get(src.name)
     if obj is None or obj.type != "MESH":
@@ -246,7 +338,7 @@ def _source_topology_copy(depsgraph, result, oi, src, attribute_name, scale, mat
         return None
     me.name = f"{src.name}.radiosity"
     loop_rgb = np.zeros((len(me.loops), 3))
-    loop_rgb[src.corner_loop] = result.vertex_radiosity[vids]
+    loop_rgb[src.corner_loop] = corners.reshape(-1, 3)[slots]
     try:
         _set_color_attribute(me, attribute_name, loop_rgb * scale)
     except WriteError:                        # a non-colour attribute of that name: keep it
@@ -272,6 +364,7 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
     notes = []
     written = []
     P = result.elements
+    corners = result.corner_values()
     # an earlier baked copy of these objects is replaced by the in-place result
     remove_bakes([s.name for s in scene_input.objects if s.bake], unhide=True)
     for oi, src in enumerate(scene_input.objects):
@@ -283,7 +376,7 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
                 len(me.loops) != src.corner_loop.size:
             raise WriteError(f"'{src.name}': its modifiers change the topology, so the result "
                              "cannot be written in place; use the baked-copy output")
-        values = _corner_values(P, oi, src, result.vertex_radiosity)
+        values = _corner_values(P, oi, src, corners)
         if me.users > 1:
             ob.data = me.copy()
             notes.append(f"{src.name}: mesh '{me.name}' was shared; gave it its own copy "
@@ -303,15 +396,17 @@ def write_in_place(context, scene_input, result, attribute_name="Radiosity", exp
     return written, notes
 
 
-def _corner_vertices(P, oi, src):
-    """Element vertex at every source-face corner (order of src.mesh.face_indices): the vertex of
-    one of that face's elements at exactly the corner's position; -1 where there is none."""
+def _corner_slots(P, oi, src):
+    """Element corner at every source-face corner (order of src.mesh.face_indices), as an index
+    into the (N * 4) flattened corners: a corner of one of that face's elements at exactly the
+    corner's position; -1 where there is none."""
     sel = np.flatnonzero(P.owner == oi)
     polys = P.polys[sel]
     faces = np.repeat(P.source_face[sel].astype(np.int64), 4)
     vids = polys.reshape(-1).astype(np.int64)
+    slot = (sel[:, None] * 4 + np.arange(4)).reshape(-1)
     ok = vids >= 0
-    faces, vids = faces[ok], vids[ok]
+    faces, vids, slot = faces[ok], vids[ok], slot[ok]
     m = src.mesh
     sizes = np.diff(m.face_offsets)
     cf = np.repeat(np.arange(sizes.size), sizes)
@@ -320,7 +415,7 @@ def _corner_vertices(P, oi, src):
     _, label = np.unique(keys, return_inverse=True)
     label = label.reshape(-1)
     table = np.full(label.max() + 1 if label.size else 0, -1, np.int64)
-    table[label[:vids.size]] = vids
+    table[label[:vids.size]] = slot
     return table[label[vids.size:]]
 
 
@@ -332,11 +427,11 @@ def _face_position_keys(faces, pos):
     return np.ascontiguousarray(a).view(np.dtype((np.void, 32))).reshape(-1)
 
 
-def _corner_values(P, oi, src, vertex_radiosity):
-    """Vertex radiosity at every source-face corner (order of src.mesh.face_indices); 0 where no
-    element vertex is at the corner."""
-    vids = _corner_vertices(P, oi, src)
-    out = np.zeros((vids.size, 3))
-    found = vids >= 0
-    out[found] = vertex_radiosity[vids[found]]
+def _corner_values(P, oi, src, corner_values):
+    """The output at every source-face corner (order of src.mesh.face_indices), from the
+    elements' (N, 4, 3) ``corner_values``; 0 where no element corner is at the corner."""
+    slots = _corner_slots(P, oi, src)
+    out = np.zeros((slots.size, 3))
+    found = slots >= 0
+    out[found] = np.asarray(corner_values).reshape(-1, 3)[slots[found]]
     return out

@@ -63,10 +63,38 @@ class BakeResult:
     forecast: object = None                   # core.runtime.forecast.Forecast: the time expected (None: F was cached)
     size_scales: tuple = ()                   # per object: its sizes are the settings' times this (core.mesh.sizes)
     back_of: tuple = ()                       # per object: -1, or the object whose back it is (core.mesh.backs)
+    back_faces: tuple = ()                    # per object: None, or (a back) the face of its front behind each face
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours vary by corner
+    vertex_lighting: np.ndarray | None = None    # (V, 3) the light arriving, where colours vary by corner
 
     def __post_init__(self):
         if self.elements is None:
             self.elements = self.patches
+
+    def corner_values(self) -> np.ndarray:
+        """(N, 4, 3) the output at every corner of ``elements`` (a triangle's fourth corner is its
+        third): each corner's own value where the meshes' colours vary by corner (a texture:
+        ``corner_radiosity``), else its vertex's ``vertex_radiosity``."""
+        if self.corner_radiosity is not None:
+            return self.corner_radiosity
+        polys = self.elements.polys
+        return self.vertex_radiosity[np.where(polys < 0, polys[:, 2:3], polys)]
+
+    def corner_lighting(self) -> np.ndarray | None:
+        """(N, 4, 3) the light arriving at every corner of ``elements`` (radiance: irradiance / pi,
+        without the surface's colour or emission), or None: kept only where the meshes' colours
+        vary by corner (a texture), for a baked copy that multiplies its texture by it."""
+        if self.vertex_lighting is None:
+            return None
+        polys = self.elements.polys
+        return self.vertex_lighting[np.where(polys < 0, polys[:, 2:3], polys)]
+
+    def front_faces(self, owner, faces) -> np.ndarray:
+        """(n,) int64 the faces of the object ``owner`` is (or is the back of) that ``faces`` (n,)
+        of owner ``owner``'s mesh are, or lie behind."""
+        faces = np.asarray(faces, dtype=np.int64)
+        back = self.back_faces[owner] if owner < len(self.back_faces) else None
+        return faces if back is None else np.asarray(back, dtype=np.int64)[faces]
 
     def owners_of(self, i) -> np.ndarray:
         """(k,) int64 the owners (``patches.owner``, ``elements.owner``) that hold object ``i``'s
@@ -125,6 +153,8 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured corners (output stage)
+    vertex_lighting: np.ndarray | None = None    # (V, 3): the light arriving there (output stage)
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
@@ -180,7 +210,9 @@ class BakeContext:
                           self.timings, self.form_factor_source, self.source, self.irradiance,
                           self.notes, self.elements, self.settings, self.clusters, self.error_estimate,
                           self.forecast, tuple(m.size_scale for m in self.meshes or ()),
-                          tuple(getattr(m, "back_of", -1) for m in self.meshes or ()))
+                          tuple(getattr(m, "back_of", -1) for m in self.meshes or ()),
+                          tuple(getattr(m, "back_faces", None) for m in self.meshes or ()),
+                          self.corner_radiosity, self.vertex_lighting)
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time

@@ -240,6 +240,12 @@ class BakeSettings:
                                    "more time)", "output")
     output_pass: str = setting("radiosity", "Pass", "What the colour attribute holds", "output",
                                choices=OUTPUT_PASSES)
+    keep_textures: bool = setting(True, "Keep Textures", "Baked copies of textured objects show "
+                                  "their texture times the light arriving (a second attribute, "
+                                  "'<Attribute> Light'), so a tiled floor keeps its pattern; the "
+                                  "radiosity attribute is written too", "output",
+                                  cli="--no-textures", off="Baked copies show the radiosity "
+                                  "attribute only: a texture is its colour at each output corner")
     attribute_name: str = setting("Radiosity", "Attribute", "Name of the FLOAT_COLOR corner "
                                   "attribute", "output", cli="--attribute", maxlen=63)
     exposure: float = setting(0.0, "Exposure", "Stops: written values are radiance x 2^exposure "

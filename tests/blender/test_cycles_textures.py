@@ -9,9 +9,10 @@ Cycles and by us, and compared at Cycles' own corners with the harness of
 tests/support/cycles_scenes.py. Limit: 2% mean relative error (deterministic light).
 
 The reader asks Cycles for the diffuse albedo (DIFFUSE pass, COLOR only) and the emission (EMIT)
-at every corner of a temporary copy; the bake still uses one colour per face (the mean of its
-corners) until the core takes colours per corner, so the floors are cut fine enough (the texture
-varies little across a face). ``test_user_file_is_unchanged`` proves the copies leave nothing
+at every corner of a temporary copy; the solve uses one colour per face (the mean of its corners),
+the output each corner's own colour times the light there (``BakeResult.corner_values``): a tiled
+floor whose every corner shows another tile (:func:`case_tiled_texture`) is exact at its corners,
+in the result and in the baked copy. ``test_user_file_is_unchanged`` proves the copies leave nothing
 behind. Run ``python -m tests.blender.test_cycles_textures`` for the errors per case, the errors the
 reader made before (unlinked values, Base Color as the albedo) and the cost of the Cycles bakes.
 """
@@ -192,7 +193,28 @@ def case_framed_emitter():
     return Comparison([fl, tv], samples=1024), 5.0 * mean
 
 
-CASES = {"image texture": case_image_texture, "procedural (noise, mix)": case_procedural,
+def case_tiled_texture(n=4, tiles=6):
+    """A coarse n x n floor under a Closest-filtered image of ``tiles`` x ``tiles`` colours, each
+    face corner's UV on a tile of its own (seeded): the corners that meet at a vertex show
+    different colours, as at a UV seam or where a tiled texture repeats across faces."""
+    cr.new_empty_scene()
+    rng = np.random.default_rng(7)
+    img = bpy.data.images.new("tiles", tiles, tiles, float_buffer=True)
+    px = np.concatenate([rng.uniform(0.05, 0.95, (tiles, tiles, 3)), np.ones((tiles, tiles, 1))], -1)
+    img.pixels.foreach_set(px.astype(np.float32).ravel())
+    img.pack()
+    m, nt, p = material("Tiles")
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation = img, "Closest"
+    nt.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    ob = floor(n, m)
+    uv = ob.data.uv_layers["UVMap"]
+    cells = (rng.integers(0, tiles, (len(ob.data.loops), 2)) + 0.5) / tiles
+    uv.data.foreach_set("uv", cells.astype(np.float32).ravel())
+    return lit_by_world([ob])
+
+
+CASES = {"image texture": case_image_texture, "tiled texture (a tile per corner)": case_tiled_texture, "procedural (noise, mix)": case_procedural,
          "vertex colours": case_vertex_colours, "Principled parts": case_principled_parts,
          "emission texture": case_emission_texture}
 
@@ -213,6 +235,27 @@ def test_image_texture_through_uvs():
     # the faces carry the mean of their corners
     off = src.mesh.face_offsets
     np.testing.assert_allclose(src.mesh.face_rho[5], src.corner_rho[off[5]:off[6]].mean(axis=0))
+
+
+def test_each_corner_shows_its_own_tile():
+    """Per corner, not per vertex: the corners that meet at a vertex keep their own tiles in the
+    result and in the baked copy, as Cycles bakes them (a vertex's mean would be far off)."""
+    from hemicube_radiosity.blender.write import write_copies
+
+    c = case_tiled_texture()
+    assert c.error() < 0.005
+    P, res = c.result.patches, c.result
+    mine = np.flatnonzero(P.owner == 0)
+    by_vertex = res.vertex_radiosity[P.polys[mine]].reshape(-1, 3)       # the mean of a vertex's corners
+    assert float(np.mean(np.abs(by_vertex.mean(1) - c.cycles.mean(1)) / c.cycles.mean(1))) > 0.1
+    ob = bpy.data.objects["floor"]
+    s = reader.read_scene(bpy.context.evaluated_depsgraph_get(), [ob])
+    copy, = write_copies(bpy.context, s, res)
+    assert copy["radiosity_mesh"] == "source"                               # the user's own topology
+    rgba = np.empty(len(copy.data.loops) * 4, np.float32)
+    copy.data.color_attributes["Radiosity"].data.foreach_get("color", rgba)
+    written = rgba.reshape(-1, 4)[c.loop, :3]
+    np.testing.assert_allclose(written, c.cycles, rtol=0.01, atol=1e-4)
 
 
 def test_procedural_texture_and_mix():

@@ -210,3 +210,57 @@ def test_three_js_shows_what_cycles_shows(viewer_tools, demo_out, demo_camera, s
     for region in ((0.05, 0.3, 0.05, 0.5), (1.2, 1.5, 0.2, 0.4), (0.6, 0.9, 0.05, 0.15)):
         np.testing.assert_allclose(floor_region(three, demo_camera, *region),
                                    floor_region(cycles, demo_camera, *region), atol=2.0)
+
+
+def test_three_js_multiplies_the_texture_by_the_baked_light(viewer_tools, demo_out, server, addon):
+    """A textured floor's copy (``blender/textures.py``): the .glb has the texture as an unlit
+    baseColorTexture and the light as COLOR_0, passes the validator, and three.js draws what Cycles
+    draws of the copy: the texture's stripes between the floor's corners, within a few levels."""
+    import bpy
+
+    from tests.support.cycles_scenes import textured_floor
+    from tests.support.gltf import read_gltf
+
+    bake = importlib.import_module(f"{addon.__name__}.blender.bake")
+    gltf = importlib.import_module(f"{addon.__name__}.blender.gltf")
+    demo = importlib.import_module(f"{addon.__name__}.blender.demo")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    floor = textured_floor(2)
+    job = bake.BakeJob.prepare(bpy.context, [floor], bake.BakeSettings(patch_size=1.0, element_size=None,
+                                                                       resolution=32))
+    job.run()
+    copy, = job.write(bpy.context)
+    path = demo_out / "floor.glb"
+    gltf.export_gltf(path, [copy])
+    doc, _ = read_gltf(path)
+    mat, = doc["materials"]
+    assert "KHR_materials_unlit" in mat["extensions"] and "baseColorTexture" in mat["pbrMetallicRoughness"]
+    assert {"COLOR_0", "TEXCOORD_0"} <= set(doc["meshes"][0]["primitives"][0]["attributes"])
+    node, _ = viewer_tools
+    r = _run([node, "validate.mjs", str(path)], 120, cwd=VIEWER)
+    assert r.returncode == 0, r.stderr[-2000:]
+    issues = json.loads(r.stdout)["issues"]
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+    # straight down onto the floor from 3 m, the floor filling the middle of the picture
+    cam_data = bpy.data.cameras.new("Top")
+    cam_data.angle = math.radians(40.0)
+    cam = bpy.data.objects.new("Top", cam_data)
+    cam.location = (0.0, 0.0, 3.0)
+    bpy.context.scene.collection.objects.link(cam)
+    bpy.context.scene.camera = cam
+    bpy.context.view_layer.update()
+    camera = (np.array(cam.matrix_world), cam_data.angle)
+    demo.render_preview(bpy.context, str(demo_out / "floor.png"), resolution=SIZE, samples=16)
+    render_three(viewer_tools, server, camera, demo_out / "floor_three.png", model="floor.glb")
+    three, cycles = load_png(demo_out / "floor_three.png"), load_png(demo_out / "floor.png")
+    region = project(camera, np.array([[-0.9, -0.9, 0.0], [0.9, 0.9, 0.0]]))
+    (c0, r1), (c1, r0) = np.round(region).astype(int)
+    a, b = three[r0:r1, c0:c1], cycles[r0:r1, c0:c1]
+    assert (c1 - c0) > 0.5 * SIZE
+    # the green stripes run along the floor's y (picture rows): three rise and fall between the
+    # floor's corners, in both pictures
+    rows = b[:, :, 1].mean(axis=1)
+    assert rows.max() - rows.min() > 60, (rows.min(), rows.max())
+    diff = np.abs(a - b)
+    assert diff.mean() < 2.0 and np.percentile(diff, 99) <= 8, (diff.mean(), np.percentile(diff, 99))

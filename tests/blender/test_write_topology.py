@@ -213,7 +213,17 @@ def test_originals_untouched(addon, baked):
 def test_coarse_mesh_keeps_the_element_copy(addon, baked):
     ob = copy_of(addon, "Coarse")
     assert ob["radiosity_mesh"] == "elements"
-    assert len(ob.data.polygons) == 64 and len(ob.data.uv_layers) == 0   # 2 m cut at 0.25 m
+    assert len(ob.data.polygons) == 64                      # 2 m cut at 0.25 m
+    # the plane's own UV map, at every element corner: u = (x + 1) / 2, v = (y + 1) / 2
+    assert [u.name for u in ob.data.uv_layers] == ["UVMap"]
+    me = ob.data
+    uv = np.empty(len(me.loops) * 2, np.float32)
+    me.uv_layers["UVMap"].data.foreach_get("uv", uv)
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    lv = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", lv)
+    np.testing.assert_allclose(uv.reshape(-1, 2), (co.reshape(-1, 3)[lv, :2] + 1.0) / 2.0, atol=1e-6)
 
 
 def test_glb_has_texcoords_and_color(addon, baked, tmp_path):
@@ -224,10 +234,12 @@ def test_glb_has_texcoords_and_color(addon, baked, tmp_path):
     for ob in copies:
         prims = doc["meshes"][by_name[ob.name]["mesh"]]["primitives"]
         has_uv = ob["radiosity_mesh"] == "source"
+        maps = len(ob.data.uv_layers)               # an element copy has the user's UVs as well
+        assert maps == (2 if ob.name != "Coarse.radiosity" else 1)
         for prim in prims:
             assert {"POSITION", "COLOR_0", "_RADIANCE"} <= set(prim["attributes"])
-            assert ("TEXCOORD_0" in prim["attributes"]) == has_uv
-            assert ("TEXCOORD_1" in prim["attributes"]) == has_uv
+            assert "TEXCOORD_0" in prim["attributes"]
+            assert ("TEXCOORD_1" in prim["attributes"]) == (maps == 2)
         if has_uv:
             # the UVs written are the copy's (glTF flips v)
             uv = np.concatenate([accessor(p["attributes"]["TEXCOORD_0"]) for p in prims])

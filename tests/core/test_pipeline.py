@@ -365,6 +365,17 @@ def test_corner_colours_reach_the_output_vertices(gather_rays):
     inside &= np.abs(r.elements.verts[:, 2]) < 1e-9
     assert inside.sum() > 50
     np.testing.assert_allclose(r.vertex_radiosity[inside], want[inside], rtol=1e-6 if gather_rays else 0.1)
+    # every corner, on the checker's edges too: its own face's colour (what the writer writes)
+    own = {(f, *x): v for f, x, v in zip(face, pos.round(9), corner_rho)}
+    E = r.elements
+    got, exp = [], []
+    for n in np.flatnonzero(front):
+        for k in range(4):
+            got.append(r.corner_values()[n, k])
+            exp.append(own[(E.source_face[n], *E.verts[E.polys[n, k]].round(9))])
+    got, exp = np.array(got), np.array(exp)
+    assert len(np.unique(exp.round(6), axis=0)) == 2                 # both colours at corners
+    np.testing.assert_allclose(got, exp, rtol=1e-6 if gather_rays else 0.1)
 
 
 def test_relight_of_a_lamp_under_a_ceiling_casts_no_ray_and_equals_a_cold_bake(monkeypatch):

@@ -23,6 +23,50 @@ SETTINGS = dict(patch_size=None, resolution=64, method="hemicube", element_size=
                 light_samples=64, light_seed=1)
 
 
+# ----------------------------------------------------------------------------- a textured floor
+FLOOR_SUN, FLOOR_SKY = 2.0, (0.3, 0.35, 0.4)
+
+
+def _pattern():
+    """An 8-bit sRGB image, as a texture file is (Cycles reads it as linear colour, the glTF
+    exporter writes its bytes): red along u, green in stripes along v, blue a bump (a shifted UV
+    shows; the stripes are detail between the floor's corners)."""
+    n = 64
+    img = bpy.data.images.new("pattern", n, n)
+    y, x = (np.mgrid[0:n, 0:n] + 0.5) / n
+    px = np.stack([0.1 + 0.8 * x, 0.1 + 0.8 * np.sin(3 * np.pi * y) ** 2,
+                   0.2 + 0.6 * np.exp(-8 * ((x - 0.4) ** 2 + (y - 0.6) ** 2)), np.ones_like(x)], -1)
+    img.pixels.foreach_set(px.astype(np.float32).ravel())
+    img.pack()
+    return img
+
+
+def textured_floor(cuts=1):
+    """A 2 x 2 m floor (``cuts`` x ``cuts`` quads, UVs over [0, 1]^2) whose default Principled
+    BSDF takes its Base Color from an image through its UVs, under a sun of angle 0 (2 W/m^2) and
+    a uniform world: deterministic light (``tests/blender/test_textured_copies.py``,
+    ``test_viewer.py``)."""
+    cr.new_empty_scene()
+    m = bpy.data.materials.new("Floor")
+    nt, out = cr.bare_node_tree(m)
+    p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    nt.links.new(p.outputs[0], out.inputs["Surface"])
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.extension = _pattern(), "EXTEND"
+    nt.links.new(tex.outputs["Color"], p.inputs["Base Color"])
+    v, f = cr.grid_arrays(cuts, cuts, -1.0, 1.0, -1.0, 1.0)
+    ob = cr.mesh_object(v, f, m, "floor")
+    me = ob.data
+    lv = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", lv)
+    uv = me.uv_layers.get("UVMap") or me.uv_layers.new(name="UVMap")
+    uv.data.foreach_set("uv", ((v[lv, :2] + 1.0) / 2.0).astype(np.float32).ravel())
+    cr.add_light("SUN", (0, 0, 3), (0.4, 0.2, 0.0), energy=FLOOR_SUN, angle=0.0)
+    cr.set_world(FLOOR_SKY, 1.0)
+    return ob
+
+
+
 # ----------------------------------------------------------------------------- harness
 class Comparison:
     """Cycles and our radiance at every face corner of the baked objects."""
@@ -42,6 +86,9 @@ class Comparison:
         self.our_seconds = time.perf_counter() - t
         self.result = res
         P = res.patches
+        E = res.elements          # the patches, or the same faces with each side its own vertices
+        assert len(E) == len(P) and np.array_equal(E.source_face, P.source_face) and \
+            np.array_equal(E.owner, P.owner), "cases bake one patch per face, output at its corners"
         ours, theirs, pos, nrm, owner, loop_ids = [], [], [], [], [], []
         for k, ob in enumerate(objects):
             me = ob.data
@@ -66,7 +113,7 @@ class Comparison:
             j = d.argmin(axis=2)
             assert np.all(d.min(axis=2) < 1e-5), "patch corners are the mesh corners"
             loops = np.take_along_axis(face_loops, j, axis=1)
-            ours.append(res.vertex_radiosity[P.polys[mine]].reshape(-1, 3))
+            ours.append(res.corner_values()[mine].reshape(-1, 3))   # what the writer writes there
             theirs.append(ref.corner[ob.name][loops.reshape(-1)])
             pos.append(patch_pos.reshape(-1, 3))
             nrm.append(np.repeat(P.normals[mine], 4, axis=0))

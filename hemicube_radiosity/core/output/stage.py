@@ -36,7 +36,9 @@ __all__ = ["vertex_stage"]
 def vertex_stage(ctx) -> None:
     """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts:
     radiosity, or with ``output_pass='lighting'`` the light arriving (direct + indirect, as
-    radiance: irradiance / pi) without the surface's own colour or emission."""
+    radiance: irradiance / pi) without the surface's own colour or emission; and where the
+    meshes have corner colours (a texture), ``ctx.corner_radiosity`` (N, 4, 3): each element
+    corner's own colour times the light at its vertex (:func:`_with_corner_colours`)."""
     patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
     # F's and the geometry's only: kept on F, the same array every relight (the fits, frames and
@@ -50,6 +52,7 @@ def vertex_stage(ctx) -> None:
         return w
     weights = F.memo(key, make)
     ctx.elements = patches
+    ctx.corner_radiosity = ctx.vertex_lighting = None
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
         if lighting or textured:
@@ -136,12 +139,31 @@ def _incoming(reflected, rho):
 def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v):
     """E_v + rho_v * light_v + reflected_v, with the source meshes' corner colours (a texture)
     where they have them: emission and reflectivity per vertex, and the light reflected more
-    than once (``reflected_v``, made with the faces' reflectivity ``rho_v``) rescaled to it."""
+    than once (``reflected_v``, made with the faces' reflectivity ``rho_v``) rescaled to it.
+
+    With corner colours, also ``ctx.corner_radiosity`` (N, 4, 3): the same sum at every element
+    corner with that corner's own colour (E_c + rho_c * light_v + reflected_v * rho_c / rho_v, a
+    triangle's fourth corner its third), and ``ctx.vertex_lighting`` (V, 3): the light arriving
+    at each vertex (light_v + reflected_v / rho_v), which the writer multiplies by a texture. A vertex's value is the mean of its corners'; the corners
+    keep what the mean loses where faces meet with different colours at one vertex (a UV seam, a
+    texture's tiles): what Cycles shows at each face corner, and what the writer writes."""
     rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
-    if rho_c is not None:
-        textured = vertex_mean(ctx.elements, rho_c)
-        reflected_v = reflected_v * np.where(rho_v > 0, textured / np.where(rho_v > 0, rho_v, 1.0), 1.0)
-        rho_v = textured
+    if rho_c is None and em_c is None:
+        return E_v + rho_v * light_v + reflected_v
+    polys = ctx.elements.polys
+    cv = np.where(polys < 0, polys[:, 2:3], polys)                  # (N, 4) vertex of each corner
+    R = np.broadcast_to(np.asarray(reflected_v, dtype=np.float64), np.shape(light_v))
+    E_c = E_v[cv] if em_c is None else em_c
+    if rho_c is None:
+        ctx.corner_radiosity = E_c + (rho_v * light_v + R)[cv]
+        return vertex_mean(ctx.elements, em_c) + rho_v * light_v + reflected_v
+    pos = rho_v > 0
+    per_rho = np.where(pos, R / np.where(pos, rho_v, 1.0), 0.0)     # light reflected again, per rho
+    ctx.corner_radiosity = E_c + rho_c * light_v[cv] + np.where(pos[cv], rho_c * per_rho[cv], R[cv])
+    ctx.vertex_lighting = light_v + per_rho
+    textured = vertex_mean(ctx.elements, rho_c)
+    reflected_v = reflected_v * np.where(rho_v > 0, textured / np.where(rho_v > 0, rho_v, 1.0), 1.0)
+    rho_v = textured
     if em_c is not None:
         E_v = vertex_mean(ctx.elements, em_c)
     return E_v + rho_v * light_v + reflected_v

@@ -1,0 +1,84 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""A textured floor seen through its baked copy (``blender/textures.py``), against Cycles.
+
+A 2 x 2 m floor whose default Principled BSDF takes its Base Color from an image through UVs, under
+a sun of angle 0 and a uniform world (deterministic light: Cycles' bake has no noise). Cycles bakes
+the original to an image through its UV map (DIFFUSE: direct, indirect and colour); then we bake
+and write the copy, and Cycles bakes the copy's own look (EMIT: the copy's material is its light)
+to an image of the same size. Texel by texel the two agree where the copy shows the texture times
+the light (``keep_textures``, default), whether the copy keeps the user's quad or is an element
+mesh that got the user's UVs; the radiosity attribute alone (the texture at the corners only)
+is far off between the corners.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from tools import cycles_reference as cr  # noqa: E402
+from hemicube_radiosity.blender import bake  # noqa: E402
+from hemicube_radiosity.blender.textures import LIGHT_SUFFIX  # noqa: E402
+from tests.support.cycles_scenes import textured_floor as scene  # noqa: E402
+
+pytestmark = [pytest.mark.blender, pytest.mark.cycles]
+
+SIZE = 32                      # texels along a side of the baked images
+
+
+def bake_image(ob, kind):
+    """(SIZE, SIZE, 3) Cycles' bake of ``ob`` through its UV map: 'DIFFUSE' (direct + indirect +
+    colour: what a render shows of the surface) or 'EMIT' (a baked copy's own look)."""
+    img = bpy.data.images.new(f"{ob.name}.{kind}", SIZE, SIZE, float_buffer=True)
+    for slot in ob.material_slots:
+        nt = slot.material.node_tree
+        node = nt.nodes.new("ShaderNodeTexImage")
+        node.image = img
+        nt.nodes.active = node
+    sc = bpy.context.scene
+    cr.configure_cycles(sc, samples=4)
+    sc.render.bake.target = "IMAGE_TEXTURES"
+    sc.render.bake.margin = 0
+    vl = bpy.context.view_layer
+    for o in vl.objects:
+        o.select_set(o == ob)
+    vl.objects.active = ob
+    kw = dict(pass_filter={"DIRECT", "INDIRECT", "COLOR"}) if kind == "DIFFUSE" else {}
+    with bpy.context.temp_override(scene=sc, view_layer=vl, active_object=ob, object=ob,
+                                   selected_objects=[ob], selected_editable_objects=[ob]):
+        bpy.ops.object.bake(type=kind, target="IMAGE_TEXTURES", margin=0, use_clear=True, **kw)
+    px = np.empty(SIZE * SIZE * 4, np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(SIZE, SIZE, 4)[..., :3].astype(np.float64)
+
+
+def error(a, b):
+    """Mean relative error of the bands' mean, over every texel."""
+    return float(np.mean(np.abs(a.mean(-1) - b.mean(-1)) / b.mean(-1)))
+
+
+@pytest.mark.parametrize("cuts, patch_size, element_size, kind",
+                         [(2, 1.0, None, "source"), (1, 1.0, 0.4, "elements")])
+def test_copy_shows_the_texture_times_the_light(cuts, patch_size, element_size, kind):
+    ob = scene(cuts)
+    ref = bake_image(ob, "DIFFUSE")
+    s = dict(element_size=element_size, patch_size=patch_size, resolution=32, gather_rays=64)
+    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(**s))
+    job.run()
+    copy, = job.write(bpy.context)
+    assert copy["radiosity_mesh"] == kind
+    me = copy.data
+    light = "Radiosity" + LIGHT_SUFFIX
+    assert me.color_attributes.active_color.name == light and "Radiosity" in me.color_attributes
+    assert [m.name for m in me.materials] == [f"Radiosity Bake ({light} x Floor)"]
+    assert "UVMap" in me.uv_layers
+    ours = bake_image(copy, "EMIT")
+    assert error(ours, ref) < 0.01
+    # the radiosity attribute alone: the texture at the corners only
+    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(**s, keep_textures=False))
+    job.run()
+    plain, = job.write(bpy.context)
+    assert [m.name for m in plain.data.materials] == ["Radiosity Bake (Radiosity)"] * len(plain.data.materials)
+    assert "UVMap" in plain.data.uv_layers           # an element mesh gets the user's UVs too
+    assert error(bake_image(plain, "EMIT"), ref) > 0.1
