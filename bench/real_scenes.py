@@ -48,8 +48,9 @@ are published). Without that folder this prints one line and exits 0. Smallest f
    the whole process's from ``wait4``.
 
 **Error.** At every Cycles face corner (its world position and its face's normal) our result is read
-with ``core.output.interpolate.interpolate_at`` on the object of the same name (matched by
-position and normal). Left out: corners of zero-area faces (a point-domain Cycles bake would average
+where ``core.output.interpolate.locate`` finds it on the object of the same name (matched by
+position and normal): the element's corner values (what the writer writes at its corners, a
+textured face's corners each their own colour) interpolated bilinearly. Left out: corners of zero-area faces (a point-domain Cycles bake would average
 their black corners in), of emitters (EMIT bake > 0), corners the reference never lights (its
 luminance <= 1e-4 x the median) and those of objects we did not bake. ``errors`` of
 ``speed_vs_error.py``: RMS of the luminance-weighted difference / the reference's mean luminance.
@@ -292,9 +293,10 @@ def prepare(spec):
 def corner_geometry(objects):
     """Per face corner of ``objects`` (world space): positions (L, 3), their face's centroid and
     normal (L, 3) each,
-    the face's area (L,), the object's index (L,); and the triangle count. Corner order is each
+    the face's area (L,), the object's index (L,), the face's index in its mesh (L,); and the
+    triangle count. Corner order is each
     mesh's loop order, objects one after the other: the order of CyclesBake.corner."""
-    pos, mid, nrm, area, own, tris = [], [], [], [], [], 0
+    pos, mid, nrm, area, own, fid, tris = [], [], [], [], [], [], 0
     for oi, ob in enumerate(objects):
         me = ob.data
         M = np.array(ob.matrix_world)
@@ -320,9 +322,10 @@ def corner_geometry(objects):
         nrm.append(fn[face])
         area.append(a[face])
         own.append(np.full(len(lv), oi))
+        fid.append(face)
         tris += int(np.sum(tot - 2))
     cat = (lambda x: np.concatenate(x) if x else np.zeros((0, 3)))
-    return cat(pos), cat(mid), cat(nrm), np.concatenate(area), np.concatenate(own), tris
+    return cat(pos), cat(mid), cat(nrm), np.concatenate(area), np.concatenate(own), np.concatenate(fid), tris
 
 
 def own_evaluated_meshes(objects):
@@ -366,7 +369,7 @@ def cycles_child(name, out_npz, ref_spp, cand_spp):
     spec = SPEC[name]
     load_s, light = prepare(spec)
     objs = own_evaluated_meshes(render_visible_objects(bpy.context.view_layer, GEOMETRY_TYPES))
-    pos, mid, nrm, area, own, tris = corner_geometry(objs)
+    pos, mid, nrm, area, own, face, tris = corner_geometry(objs)
     log(f"{name}: {len(objs)} objects, {tris:,} triangles, {len(pos):,} corners; light: {light}")
     cr.PASS_FILTERS.setdefault("EMIT", {"EMIT"})     # emitters: a 1-sample EMIT bake
     rec = {"objects": len(objs), "triangles": tris, "corners": int(len(pos)), "light": light, "load_seconds": load_s}
@@ -380,7 +383,7 @@ def cycles_child(name, out_npz, ref_spp, cand_spp):
         rec[key] = {"seconds": b.seconds, "cached": b.cached, **b.settings}
         log(f"{name}: {key} {b.settings['samples']} spp {'cached' if b.cached else 'baked'}: {b.seconds:.1f} s"
             f" ({time.perf_counter() - t:.1f} s here)")
-    np.savez(out_npz, pos=pos, centroid=mid, normal=nrm, area=area, owner=own, names=np.array([o.name for o in objs]), **arrays)
+    np.savez(out_npz, pos=pos, centroid=mid, normal=nrm, area=area, owner=own, face=face, names=np.array([o.name for o in objs]), **arrays)
     return rec
 
 
@@ -397,7 +400,6 @@ def ours_child(name, corners_npz, out_npz, settings_json):
     from hemicube_radiosity.blender.bake import BakeJob
     from hemicube_radiosity.blender.read.scene import GEOMETRY_TYPES
     from hemicube_radiosity.blender.read.visibility import render_visible_objects
-    from hemicube_radiosity.core.output.interpolate import interpolate_at
     from hemicube_radiosity.core.settings import BakeSettings
 
     spec = SPEC[name]
@@ -426,8 +428,8 @@ def ours_child(name, corners_npz, out_npz, settings_json):
             index = {n: i for i, n in enumerate(r.elements.object_names)}
             owner = np.array([index.get(names[o], -1) for o in z["owner"]])
             ok = owner >= 0
-            vals, matched = values_at_corners(r.elements, r.vertex_radiosity, z["pos"], z["centroid"], z["normal"],
-                                              owner)
+            vals, matched = values_at_corners(r.elements, r.corner_values(), z["pos"], z["centroid"], z["normal"],
+                                              owner, z["face"] if "face" in z.files else None)
         np.save(out_npz, np.where(matched[:, None], vals, np.inf))   # inf: not matched, NaN: ours is NaN
         rec["evaluate_seconds"] = time.perf_counter() - t
         rec["corners_unmatched"] = int((~matched).sum())
@@ -437,16 +439,24 @@ def ours_child(name, corners_npz, out_npz, settings_json):
     return rec
 
 
-def values_at_corners(elements, vertex_values, pos, centroid, normal, owner, nudge=1e-3, min_facing=0.9):
+def values_at_corners(elements, corner_values, pos, centroid, normal, owner, face=None, nudge=1e-3,
+                      min_facing=0.9):
     """Our values at Cycles' corners, matched by position and normal: (values (L, 3), matched (L,)).
+    ``corner_values`` (N, 4, 3): what we write at every element corner (``BakeResult.corner_values``:
+    a textured face's corners each with their own colour), interpolated bilinearly in the element.
 
     Each corner is moved ``nudge`` of the way to its face's centroid, so it lies inside its own face
     and not on the edge it shares with the next face (where the two would tie), then located with
     ``interpolate_at``'s ``locate`` among the elements of the object of its name (``owner``, -1:
-    none), rejecting elements facing another way. A corner counts as matched when the element found
-    faces within acos(``min_facing``) of the corner's face and passes within ``nudge`` x the
-    corner-centroid distance (+1e-6 of the scene) of the point; the others are left out."""
-    from hemicube_radiosity.core.output.interpolate import interpolate_located, locate
+    none), rejecting elements facing another way. ``face`` (L,): each corner's face in the object's
+    evaluated mesh (the bake's ``source_face``); a corner found on an element of another face (a
+    face folded over or lying on its neighbour) is located again among its own face's elements. A
+    corner counts as matched when the element found faces within acos(``min_facing``) of the
+    corner's face and passes within ``nudge`` x the corner-centroid distance (+1e-6 of the scene)
+    of the point; the others are left out."""
+    from dataclasses import replace
+
+    from hemicube_radiosity.core.output.interpolate import locate
     from hemicube_radiosity.core.util.geometry import bilinear
 
     p = pos + nudge * (centroid - pos)
@@ -456,7 +466,9 @@ def values_at_corners(elements, vertex_values, pos, centroid, normal, owner, nud
     if not ok.any():
         return vals, matched
     idx, uv = locate(elements, p[ok], owner[ok], normal[ok])
-    vals[ok] = interpolate_located(elements, vertex_values, idx, uv)
+    if face is not None:
+        idx, uv = _on_own_face(elements, p[ok], owner[ok], normal[ok], np.asarray(face)[ok], idx, uv, locate, replace)
+    vals[ok] = bilinear(np.asarray(corner_values)[idx], uv[:, :1], uv[:, 1:])
     c = elements.corners()[idx]
     on = bilinear(c, uv[:, :1], uv[:, 1:])
     diag = float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
@@ -464,6 +476,30 @@ def values_at_corners(elements, vertex_values, pos, centroid, normal, owner, nud
     facing = np.einsum("ij,ij->i", elements.normals[idx], normal[ok])
     matched[ok] = (facing >= min_facing) & (np.linalg.norm(on - p[ok], axis=1) <= tol)
     return vals, matched
+
+
+def _on_own_face(elements, p, owner, normal, face, idx, uv, locate, replace):
+    """``idx``, ``uv`` with the points found on an element of another face than their own
+    (``face``) located again among the elements of their own face, where it has any."""
+    key_e = elements.owner.astype(np.int64) * (int(elements.source_face.max()) + 2) + elements.source_face
+    key_p = owner.astype(np.int64) * (int(elements.source_face.max()) + 2) + face
+    wrong = np.flatnonzero(key_e[idx] != key_p)
+    if wrong.size == 0:
+        return idx, uv
+    groups, group_of = np.unique(key_p[wrong], return_inverse=True)
+    cand = np.flatnonzero(np.isin(key_e, groups))
+    if cand.size == 0:
+        return idx, uv
+    sub = replace(elements, polys=elements.polys[cand], centers=elements.centers[cand],
+                  normals=elements.normals[cand], areas=elements.areas[cand], rho=elements.rho[cand],
+                  emission=elements.emission[cand], owner=np.searchsorted(groups, key_e[cand]),
+                  source_face=elements.source_face[cand])
+    has = np.isin(group_of, np.unique(sub.owner))
+    w = wrong[has]
+    j, uv2 = locate(sub, p[w], group_of[has], normal[w])
+    idx, uv = idx.copy(), uv.copy()
+    idx[w], uv[w] = cand[j], uv2
+    return idx, uv
 
 
 # ----------------------------------------------------------------------------- parent side

@@ -1,0 +1,41 @@
+"""bench/real_scenes.py reads our result at Cycles' corners: a corner is read on its own face's
+element even where another face lies on top of it (a face folded over its neighbour, a face
+modelled on a wall), where the nearest element belongs to the other face."""
+import os
+import sys
+
+import numpy as np
+
+from hemicube_radiosity.core.mesh.patches import PatchSet
+from tests.support import ROOT
+
+sys.path.insert(0, os.path.join(ROOT, "bench"))
+sys.path.insert(0, os.path.join(ROOT, "tools"))
+import real_scenes  # noqa: E402
+
+
+def two_faces_on_each_other():
+    """Face 0: the unit square; face 1: [0.5, 1.5] x [0, 1], both at z = 0 facing up."""
+    verts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
+                      [0.5, 0, 0], [1.5, 0, 0], [1.5, 1, 0], [0.5, 1, 0]], float)
+    polys = np.array([[0, 1, 2, 3], [4, 5, 6, 7]])
+    c = verts[polys].mean(axis=1)
+    n = np.tile([0.0, 0.0, 1.0], (2, 1))
+    return PatchSet(verts, polys, c, n, np.ones(2), np.full((2, 3), 0.5), np.zeros((2, 3)),
+                    np.zeros(2, np.int32), np.array([0, 1], np.int32), ["obj"])
+
+
+def test_a_corner_is_read_on_its_own_face():
+    E = two_faces_on_each_other()
+    values = np.stack([np.full((4, 3), 1.0), np.full((4, 3), 2.0)])       # face 0 reads 1, face 1 reads 2
+    # a corner of face 1 at (0.6, 0.5): inside both faces, nearer face 0's centre
+    pos, centroid = np.array([[0.6, 0.5, 0.0]]), np.array([[1.0, 0.5, 0.0]])
+    normal, owner = np.array([[0.0, 0.0, 1.0]]), np.array([0])
+    found, ok = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner)
+    assert ok[0] and found[0, 0] == 1.0                        # by position alone: the other face's
+    found, ok = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner, face=np.array([1]))
+    assert ok[0] and found[0, 0] == 2.0
+    # a corner of face 0 stays on face 0
+    found, ok = real_scenes.values_at_corners(E, values, np.array([[0.9, 0.5, 0.0]]), np.array([[0.5, 0.5, 0.0]]),
+                                              normal, owner, face=np.array([0]))
+    assert ok[0] and found[0, 0] == 1.0
