@@ -16,7 +16,8 @@ material and either
 Everything else (flat-shaded corners of a box, sharp edges between smooth faces, material
 borders) is a hard edge: each side gets its own vertex copies and colours do not bleed across.
 Faces of an object with a negative-determinant matrix are reversed so they stay counter-clockwise
-seen from the front in world space.
+seen from the front in world space. N-gons that are not planar carry Blender's own loop
+triangles (:mod:`.ngon_triangles`), the surface Cycles renders.
 
 Which objects and where: :mod:`.visibility` (what a render sees); instances (collection,
 Geometry Nodes, particles) from the depsgraph: :mod:`.instances`, placed here
@@ -42,6 +43,7 @@ from . import instances as inst_reader
 from . import shading
 from .face_emission import face_means
 from .materials import corner_materials
+from .ngon_triangles import bent_ngon_triangles, reversed_rings
 from .visibility import render_notes, world_matrix
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
@@ -299,6 +301,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
         counts = (len(me.vertices), len(me.loops), len(me.polygons))
         cn = corner_normals(me, sm)
+        tris = bent_ngon_triangles(me, co, lv, ps, pt)
         mats = [s.material for s in ob_eval.material_slots] or [None]
     finally:
         ob_eval.to_mesh_clear()
@@ -330,7 +333,8 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi],
-                     corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop])
+                     corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],
+                     face_triangles=reversed_rings(tris, pt) if flipped else tris)
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 
@@ -439,7 +443,9 @@ def _placed(src, M, name):
 
     mesh = MeshInput(verts, m.face_offsets, m.face_indices[perm], m.face_rho, m.face_emission, name,
                      corners(m.corner_rho), corners(m.corner_emission), m.face_material,
-                     corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
+                     corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M),
+                     face_triangles=reversed_rings(m.face_triangles, np.diff(m.face_offsets)) if flipped
+                     else m.face_triangles)
     return ObjectSource(name, mesh, src.corner_loop[perm], M, flipped, False, src.eval_counts, [],
                         corners(src.corner_rho), corners(src.corner_emission))
 

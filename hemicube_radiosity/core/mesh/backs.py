@@ -167,7 +167,25 @@ def _back(mesh, index, faces, emit: bool):
                    corner_normal=None if getattr(mesh, "corner_normal", None) is None
                    else -np.asarray(mesh.corner_normal, dtype=np.float64)[corner],
                    face_material=None if material is None else np.asarray(material)[sel],
+                   face_triangles=_back_triangles(getattr(mesh, "face_triangles", None), sel, counts),
                    back_of=index, back_faces=sel)
+
+
+def _back_triangles(rows, sel, counts):
+    """``MeshInput.face_triangles`` ``rows`` (T, 4) of a mesh whose faces ``sel`` (S,) become
+    its back (:func:`_back`: each ring reversed after its first corner, ``counts`` (F,) corners
+    a face): the same triangles turned around, on the back's faces; None when none is left."""
+    if rows is None or len(rows) == 0:
+        return None
+    rows = np.asarray(rows, dtype=np.int64).reshape(-1, 4)
+    new_face = np.full(len(counts), -1, dtype=np.int64)
+    new_face[sel] = np.arange(sel.size)
+    rows = rows[new_face[rows[:, 0]] >= 0]
+    if not len(rows):
+        return None
+    n = counts[rows[:, 0]][:, None]
+    local = np.where(rows[:, 1:] == 0, 0, n - rows[:, 1:])   # corner j of the front is n - j
+    return np.column_stack([new_face[rows[:, 0]], local[:, ::-1]])
 
 
 def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_rays=PROBE_RAYS,

@@ -53,6 +53,11 @@ class MeshInput:
     corner_normal:(L, 3) or None, the unit shading normal at every face corner (``face_indices``
                   order): smooth shading and custom normals, as Cycles shades with them at the
                   output vertices (:mod:`..output.normals`); None: the faces' own normals.
+    face_triangles:(T, 4) int or None, rows (face, i, j, k): these faces are split into exactly
+                  these triangles, ``i, j, k`` positions in the face's ring (0 .. corners - 1),
+                  counter-clockwise seen from the front (:mod:`.ngons`). What a non-planar n-gon
+                  needs to be the surface Cycles renders (Blender's own loop triangles); faces
+                  not listed are split by :mod:`.ngons`' own rule; None: no face is listed.
     back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
                   around, a hair behind: :mod:`.backs`) ...
     back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.
@@ -71,6 +76,7 @@ class MeshInput:
     corner_normal: np.ndarray | None = None
     back_of: int = -1
     back_faces: np.ndarray | None = None
+    face_triangles: np.ndarray | None = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):
@@ -94,6 +100,10 @@ def meshes_key(meshes) -> bytes:
             h.update(str(a.shape).encode() + a.tobytes())
         if getattr(m, "size_scale", 1.0) != 1.0:
             h.update(repr(float(m.size_scale)).encode())
+        tris = getattr(m, "face_triangles", None)
+        if tris is not None:                  # faces split along given triangles
+            a = np.ascontiguousarray(tris, dtype=np.int64)
+            h.update(b"triangles" + str(a.shape).encode() + a.tobytes())
     return h.digest()
 
 
