@@ -21,7 +21,7 @@ def bent_ngon_triangles(me, co, loop_vertex, poly_start, poly_total):
     evaluated mesh ``me``, ``i, j, k`` the triangle's corners as positions in its face's loops
     (counter-clockwise, as the face), or None when no n-gon is bent. ``co`` (V, 3) local
     positions, ``loop_vertex`` (L,), ``poly_start`` (F,), ``poly_total`` (F,) the mesh's arrays."""
-    if not np.any(poly_total > 4):
+    if not np.any(poly_total >= 4):
         return None
     offsets = np.concatenate([poly_start, [loop_vertex.size]]).astype(np.int64)
     bent = bent_faces(co, offsets, loop_vertex)

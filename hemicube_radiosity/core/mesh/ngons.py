@@ -34,6 +34,12 @@ __all__ = ["ear_clip", "to_tris_and_quads", "bent_faces", "BENT"]
 #: tenth of a millimetre a metre, where a bench scene's errors are percents. The bench's living room has 49
 #: n-gons: 31 planar to 1e-7 of their size, 18 bent by more than 1e-3 (11 by more than 1e-2).
 BENT = 1e-4
+#: A quad is cut along Blender's triangles only when it is warped by more than this (of its size):
+#: the core's bilinear quad and Blender's two triangles part by up to half the warp, so a quad of a
+#: smooth curved surface (a subdivided mesh: warps of 1e-3 and less) stays one bilinear piece, and
+#: a strongly warped one (a bevel's twisted corner: millimetres on a few centimetres) is cut as
+#: Cycles renders it.
+WARPED = 1e-2
 
 
 def _is_convex(p: np.ndarray) -> bool:
@@ -85,15 +91,16 @@ def ear_clip(p: np.ndarray) -> list:
     return tris
 
 
-def bent_faces(verts, face_offsets, face_indices, tol=BENT) -> np.ndarray:
+def bent_faces(verts, face_offsets, face_indices, tol=BENT, quad_tol=WARPED) -> np.ndarray:
     """(F,) bool: the faces of more than four corners that are not planar, a corner farther than
-    ``tol`` times the face's size off its mean plane (:data:`BENT`). ``verts`` (V, 3),
-    ``face_offsets`` (F + 1,), ``face_indices`` (L,) as in :class:`MeshInput`."""
+    ``tol`` times the face's size off its mean plane (:data:`BENT`), and the quads warped by more
+    than ``quad_tol`` of their size (:data:`WARPED`). ``verts`` (V, 3), ``face_offsets``
+    (F + 1,), ``face_indices`` (L,) as in :class:`MeshInput`."""
     off = np.asarray(face_offsets, dtype=np.int64)
     idx = np.asarray(face_indices, dtype=np.int64)
     sizes = np.diff(off)
     out = np.zeros(len(sizes), bool)
-    big = np.flatnonzero(sizes > 4)
+    big = np.flatnonzero(sizes >= 4)
     if big.size == 0:
         return out
     v = np.asarray(verts, dtype=np.float64)
@@ -110,7 +117,7 @@ def bent_faces(verts, face_offsets, face_indices, tol=BENT) -> np.ndarray:
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     off_plane = np.maximum.reduceat(np.abs(np.einsum("lj,lj->l", a, n[face])), start)
     size = np.linalg.norm(np.maximum.reduceat(p, start, axis=0) - np.minimum.reduceat(p, start, axis=0), axis=1)
-    out[big] = off_plane > tol * size
+    out[big] = off_plane > np.where(k == 4, quad_tol, tol) * size
     return out
 
 

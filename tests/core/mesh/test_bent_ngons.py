@@ -6,7 +6,7 @@ from collections import Counter
 import numpy as np
 
 from hemicube_radiosity.core.mesh.backs import with_backs
-from hemicube_radiosity.core.mesh.ngons import BENT, bent_faces
+from hemicube_radiosity.core.mesh.ngons import BENT, WARPED, bent_faces
 from hemicube_radiosity.core.mesh.patches import MeshInput, meshes_key
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 
@@ -63,7 +63,7 @@ def test_only_folded_ngons_are_bent_and_planar_ones_keep_their_cut():
     """bent_faces: the folded octagon (corners 0.09 off its mean plane, 0.045 of its size) is
     bent; the flat one, turned and moved 1000 units away in float32, is not (float rounding
     is 1e-7 of the size, a thousandth of BENT); a face of 0.5 x BENT is not, 2 x BENT is;
-    triangles and quads never are."""
+    triangles never are, nor a planar quad."""
     rng = np.random.default_rng(4)
     q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
     flat = (_octagon(0.0) @ q.T + 1000.0).astype(np.float32).astype(np.float64)
@@ -90,6 +90,24 @@ def test_only_folded_ngons_are_bent_and_planar_ones_keep_their_cut():
     mine = both.source_face == 0
     np.testing.assert_array_equal(both.verts[both.polys[mine]], alone.verts[alone.polys])
     assert (both.source_face == 1).sum() == 6
+
+
+def test_a_warped_quad_is_cut_as_blender_triangulates_it():
+    """A quad counts as bent only when warped by more than WARPED of its size (a curved surface's
+    quads stay bilinear pieces); given its triangles it is cut into exactly those two."""
+    size = np.sqrt(2.0)                                   # the unit square's diagonal
+    quads = []
+    for share in (0.5, 2.0):
+        h = share * WARPED * size * 4                     # corner 2 up h: the corners lie h / 4 off
+        quads.append(np.array([[0, 0, 0], [1, 0, 0], [1, 1, h], [0, 1, 0]], float))
+    verts = np.concatenate(quads)
+    off, idx = np.array([0, 4, 8]), np.arange(8)
+    assert bent_faces(verts, off, idx).tolist() == [False, True]
+    m = MeshInput.from_faces(quads[1], [range(4)])
+    m.face_triangles = np.array([[0, 0, 1, 3], [0, 1, 2, 3]])
+    ps = build_patches(m, None)
+    assert len(ps) == 2 and np.all(ps.polys[:, 3] == -1) and len(ps.verts) == 4
+    np.testing.assert_allclose(np.sort(ps.areas), np.sort([0.5, _tri_area(quads[1][[1, 2, 3]])]), rtol=1e-12)
 
 
 def test_a_neighbour_s_fan_leaves_no_t_junction_on_the_given_triangles():
