@@ -406,6 +406,8 @@ def real_section(res):
     missing = [s.folder for s in real_scenes.SPECS if s.folder not in done]
     if missing:
         notes.append("- Not in this run: " + ", ".join(f"`{m}`" for m in missing) + ".")
+    notes.append("- Each scene from a camera, Cycles' render beside a render of our baked copies:"
+                 " [gallery.md](gallery.md) (`bench/gallery.py`).")
     levels = real_scenes.levels_table(res)
     if levels:
         notes += ["", "### Quality levels", "",

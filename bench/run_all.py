@@ -10,8 +10,10 @@ The benchmarks: form-factor speed (``bench_formfactors.py``), the batch speed-up
 (``bench_dense.py``), a dense room's relight (``bench_relight_dense.py``), Suzanne subdivided in the
 Cornell box (``bench_curved.py``), then speed against error (``speed_vs_error.py``, which gets the
 other arguments; ``--quick`` goes to every script), then the real scenes of ../shared/scenes
-(``real_scenes.py``: skipped with one line where that folder is absent; ``--quick``: two small ones). Exits non-zero when a script fails; targets
-that do not hold are printed, not failed (they are measurements, not tests).
+(``real_scenes.py``: skipped with one line where that folder is absent; ``--quick``: two small ones) and their
+pictures beside Cycles' (``gallery.py``: docs/gallery.md, ~14 min, ``--quick`` ~2; skipped likewise).
+Exits non-zero when a script fails; targets that do not hold are printed, not failed (they are
+measurements, not tests).
 """
 from __future__ import annotations
 
@@ -43,6 +45,7 @@ def main(argv):
         rc |= run(os.path.join(HERE, name), quick)
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
     rc |= run(os.path.join(HERE, "real_scenes.py"), quick)
+    rc |= run(os.path.join(HERE, "gallery.py"), quick)
     rc |= run(os.path.join(HERE, "report.py"), quick)
     print(f"\nmake bench: {time.perf_counter() - t:.0f} s", flush=True)
     return 1 if rc else 0
