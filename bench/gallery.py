@@ -303,7 +303,7 @@ def credits(scenes_dir=rs.SCENES_DIR):
     return out
 
 
-def write_doc(results, commit, doc=DOC):
+def write_doc(results, doc=DOC):
     cred = credits()
     L = ["# Gallery", "",
          "Each real scene of `../shared/scenes` (made by others; credits below each scene) from one camera: on the left"
@@ -318,8 +318,8 @@ def write_doc(results, commit, doc=DOC):
          " no camera of its own is seen from the camera its Godot demo uses, or from a view framing it (the module"
          " docstring of `bench/gallery.py` says which).", "",
          "Regenerate: `.venv/bin/python bench/gallery.py` (`--scenes a,b`, `--all`; `make gallery`; also part of"
-         f" `make bench`). Rendered on {commit}; times on a 2-core machine shared with other jobs (the load average"
-         " around each scene is given).", ""]
+         f" `make bench`). Times on a 2-core machine shared with other jobs (the load average around each"
+         " scene is given), each scene rendered on the commit it names.", ""]
     for spec in rs.SPECS:
         rec = results.get(spec.folder)
         if rec is None:
@@ -331,6 +331,7 @@ def write_doc(results, commit, doc=DOC):
             L += [f"| Cycles ({rec['cycles_spp']} spp) | hemicube_radiosity, baked copy |", "|---|---|",
                   f"| ![Cycles](gallery/{spec.folder}_cycles.jpg) | ![baked copy](gallery/{spec.folder}_baked.jpg) |",
                   "",
+                  f"Rendered on {rec.get('commit', 'an unknown commit')}: "
                   f"{rec['triangles']:,} triangles, {rec['patches']:,} patches; bake (read + bake + write) "
                   f"{rec['bake_seconds']:.1f} s; Cycles render {rec['cycles_seconds']:.1f} s, baked copies' render"
                   f" {rec['baked_seconds']:.1f} s ({rec['baked_spp']} spp)"
@@ -366,9 +367,11 @@ def main(argv=None):
         with open(RESULTS) as f:
             results = json.load(f)
     t = time.perf_counter()
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
+                            text=True).stdout.strip() or "an unknown commit"
     for spec in specs:
         log(f"gallery: {spec.folder} ...")
-        rec = run_child(spec.folder, args.timeout, args.no_bake)
+        rec = dict(run_child(spec.folder, args.timeout, args.no_bake), commit=commit)
         log(f"gallery: {spec.folder}: " + (rec.get("failure") or f"Cycles {rec['cycles_seconds']:.1f} s"
             + ("" if args.no_bake else f", bake {rec['bake_seconds']:.1f} s, baked render {rec['baked_seconds']:.1f} s")
             + f" ({rec['wall_seconds']:.0f} s in all)"))
@@ -379,9 +382,7 @@ def main(argv=None):
     os.makedirs(rs.OUT_DIR, exist_ok=True)
     with open(RESULTS, "w") as f:
         json.dump(results, f, indent=1, default=float)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True,
-                            text=True).stdout.strip() or "an unknown commit"
-    write_doc(results, commit)
+    write_doc(results)
     log(f"gallery: {len(specs)} scene(s) in {time.perf_counter() - t:.0f} s; wrote {os.path.relpath(DOC, ROOT)}")
     return 0
 
