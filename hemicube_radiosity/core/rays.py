@@ -16,6 +16,12 @@ the nearest hit. Any triangle blocks, front or back; what a back hit means is th
 * :class:`NumpyOccluder`: a median-split BVH traversed breadth-first for a batch of rays, in
   float64 (slower, same answers up to float32 ties at edges).
 * :func:`occluder`: the shadow-ray back-end by name ('auto', 'embree', 'numpy', 'none').
+
+A ray from a point on a surface starts a hair off it along the normal (:func:`ray_offsets`):
+four times its object's back offset (:func:`.mesh.backs.offset`), so 1e-5 of that object's own
+diagonal and at least 64 float32 steps of its largest coordinate. Of the object's, not the
+scene's: a 2 km ground plane made every ray start 3 cm off its surface, above the ground for
+grass a few millimetres under it, which then read the full sun.
 """
 from __future__ import annotations
 
@@ -28,7 +34,8 @@ from .util.sampling import cosine_directions, jittered_grid
 from .runtime.parallel import ordered_map, resolve_workers
 from .mesh.patches import PatchSet
 
-__all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "EmbreeUnavailable", "embree_available",
+__all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "mesh_offsets", "ray_offsets",
+           "EmbreeUnavailable", "embree_available",
            "import_embreex", "EmbreeScene",
            "embree_scene", "clear_ray_cache", "NumpyOccluder", "occluder", "patch_triangles"]
 
@@ -134,6 +141,69 @@ def clear_ray_cache() -> None:
     """Forget every cached ray scene (frees Embree's memory once no caller holds a scene)."""
     _SCENE_CACHE.clear()
     _OCCLUDING_CACHE.clear()
+
+
+# --------------------------------------------------------------------------------------------
+# Ray start offsets
+
+#: A ray starts this share of its object's diagonal off its surface ...
+START_SHARE = 1e-5
+#: ... and at least this many float32 steps (2**-23 of the object's largest coordinate) ...
+START_ULPS = 64
+#: ... which is this many times as far as the object's back lies behind it (:mod:`.mesh.backs`).
+START_BACKS = 4
+_OFFSETS = Memo(4)
+
+
+def mesh_offsets(patches: PatchSet) -> np.ndarray:
+    """(M,) per object (``patches.owner``): how far a ray from its surface starts off it,
+    :data:`START_SHARE` of the diagonal of its patches' corners, at least :data:`START_ULPS`
+    float32 steps of their largest coordinate (:data:`START_BACKS` times its back's
+    :func:`.mesh.backs.offset`; 0 for an object without patches). Kept per patch set (by
+    identity of its arrays)."""
+    def make():
+        owner = np.asarray(patches.owner, dtype=np.int64)
+        M = int(owner.max(initial=-1)) + 1
+        out = np.zeros(M)
+        if not len(owner):
+            return out
+        c = patches.corners()
+        order = np.argsort(owner, kind="stable")
+        first = np.flatnonzero(np.r_[True, owner[order][1:] != owner[order][:-1]])
+        lo = np.minimum.reduceat(c.min(axis=1)[order], first, axis=0)
+        hi = np.maximum.reduceat(c.max(axis=1)[order], first, axis=0)
+        big = np.maximum.reduceat(np.abs(c).max(axis=(1, 2))[order], first)
+        out[owner[order][first]] = np.maximum(START_SHARE * np.linalg.norm(hi - lo, axis=1),
+                                              START_ULPS * 2.0 ** -23 * big)
+        return out
+    return _OFFSETS.of((patches.verts, patches.polys, patches.owner), make)
+
+
+def ray_offsets(patches: PatchSet, points=None, normals=None, owner=None, scene=None) -> np.ndarray:
+    """(P,) how far a ray from each point (P, 3) with unit ``normals`` on the surfaces of
+    ``patches`` starts off it: its object's :func:`mesh_offsets`. The object is ``owner`` (P,)
+    when known (``points`` None: the patch centres); else the one whose surface a probe ray
+    finds first within a hair either side of the point (64 float32 steps of its coordinates,
+    at least the smallest object's offset), down its normal, and facing the way it does (not
+    its back); ``scene``: the Embree scene of ``patches``, made when not given. Where the probe
+    finds none (no Embree, a point off every surface), the largest object's offset."""
+    off = mesh_offsets(patches)
+    if owner is None and points is None:
+        owner = patches.owner
+    if owner is not None:
+        return off[np.asarray(owner, dtype=np.int64)]
+    x = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.full(len(x), off.max(initial=0.0))
+    if not len(x) or not embree_available():
+        return out
+    n = np.asarray(normals, dtype=np.float64).reshape(-1, 3)
+    a = np.maximum(64 * 2.0 ** -23 * np.abs(x).max(axis=1), off[off > 0].min(initial=0.0))
+    scene = embree_scene(patches) if scene is None else scene
+    pid = np.asarray(scene.intersect(x + a[:, None] * n, -n, 2 * a)[0])
+    hit = np.flatnonzero(pid >= 0)
+    hit = hit[np.einsum("ij,ij->i", patches.normals[pid[hit]], n[hit]) > 0]
+    out[hit] = off[patches.owner[pid[hit]]]
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -286,7 +356,7 @@ def _occluding(patches: PatchSet) -> PatchSet:
 
 
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
-                  chunk_rays: int = 1 << 20, workers: int = 1) -> np.ndarray:
+                  chunk_rays: int = 1 << 20, workers: int = 1, eps=None) -> np.ndarray:
     """(P,) fraction of ``rays`` cosine rays from each point (P, 3) with unit ``normals`` that
     leave it into the open: neither hitting a surface closer than ``reach`` (world units) nor
     the back of one at any distance. A point a few millimetres above a lamp's back, or on a
@@ -294,13 +364,14 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     half. ``scene``: :func:`.rays.embree_scene` of ``patches``. One jittered pattern (seeded)
     for every point, in its normal's frame. Geometry only. ``workers`` (0 = every core):
     threads casting a few chunks of points each (Embree lets go of the GIL while it casts); each point's
-    value does not depend on the chunks, so the result is the same for any count."""
+    value does not depend on the chunks, so the result is the same for any count. ``eps`` (P,):
+    the rays' start offsets (default :func:`ray_offsets` of the points)."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
     local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
     R = len(local)
-    eps = 1e-5 * scene.scale
+    eps = (ray_offsets(patches, points, normals, scene=scene) if eps is None else np.asarray(eps, np.float64))[:, None]
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
     workers = resolve_workers(workers)
@@ -312,7 +383,7 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        pid, t = scene.intersect(np.repeat(x + eps * n, R, axis=0), d)
+        pid, t = scene.intersect(np.repeat(x + eps[s:s + step] * n, R, axis=0), d)
         pid = np.asarray(pid)
         hit = pid >= 0
         back = np.zeros_like(hit)
@@ -344,22 +415,24 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
     return cosine_directions(np.stack([u, v], -1))
 
 
-def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20) -> np.ndarray:
+def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20, *,
+                 eps) -> np.ndarray:
     """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
     surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
-    anything with ``occluded(origins, directions)`` (:func:`occluder`). One pattern of ``rays``
+    anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
+    start offsets (:func:`ray_offsets` of the points on the scene's patches). One pattern of ``rays``
     (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
     cast parallel rays, so the estimate varies smoothly over a surface."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     local = cosine_lattice(rays, seed)                                             # (R, 3)
     R = len(local)
-    eps = 1e-5 * getattr(scene, "scale", 1.0)
+    eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(points),))[:, None]
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
     for s in range(0, len(points), step):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        hit = np.asarray(scene.occluded(np.repeat(x + eps * n, R, axis=0), d))
+        hit = np.asarray(scene.occluded(np.repeat(x + eps[s:s + step] * n, R, axis=0), d))
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     return out

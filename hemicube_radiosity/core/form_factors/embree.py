@@ -33,7 +33,7 @@ from .pixels import pixel_directions, pixel_weights, receiver_frames
 from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..runtime.progress import Ticker
-from ..rays import embree_scene, import_embreex
+from ..rays import embree_scene, import_embreex, ray_offsets
 from ..util.sparse import CSR
 from ..util.unique import unique_ints
 
@@ -85,7 +85,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
     bench/bench_parallel.py, docs/performance.md 'Both cores')."""
     scene = embree_scene(patches)
     n, centres, normals, column = _receivers(patches, clusters)
-    eps = 1e-5 * scene.scale
+    eps = ray_offsets(patches, owner=patches.owner if clusters is None else clusters.owner)[:, None]
     per_batch = max(1, RAYS_PER_BATCH // max(1, rays_per_receiver))
     ticker = Ticker(progress, cancelled)
     sky = np.zeros(n, dtype=np.float64)
@@ -97,7 +97,7 @@ def _cast_rows(patches, recv, local_dirs_fn, rays_per_receiver, progress, cancel
         B = len(batch)
         dirs, w = local_dirs_fn(batch)                                   # (B,K,3), (B,K)
         K = dirs.shape[1]
-        origin = centres[batch] + eps * normals[batch]
+        origin = centres[batch] + eps[batch] * normals[batch]
         o = np.repeat(origin, K, axis=0)
         pid, _ = scene.intersect(o, dirs.reshape(-1, 3))
         w = w.reshape(-1)

@@ -1,8 +1,9 @@
 """Form factors by the hemi-cube (Cohen & Greenberg 1985), rasterised in NumPy: the driver.
 
 For every receiver patch i a hemi-cube is put at the patch centre, moved a tiny distance along
-the normal (``EYE_OFFSET`` times the scene's bounding-box diagonal) so that the patch and its
-coplanar neighbours lie below the horizon. The scene's vertices are transformed into the
+the normal (as far as a ray from it starts, :func:`.rays.ray_offsets`: its object's, at least 64
+float32 steps of the centred coordinates drawn) so that the patch and its coplanar neighbours lie
+below the horizon. The scene's vertices are transformed into the
 receiver frame (:mod:`.pixels`, normal = +Z) once per receiver, put on the faces, culled and
 clipped (:mod:`.frustum`) and drawn into the receiver's item buffer (:mod:`.raster`). Each
 fragment carries the reciprocal depth ``1/w`` of the patch plane at that pixel (exact for planar
@@ -36,12 +37,11 @@ from .raster import ID_MASK, can_cover, empty_key, rasterise
 from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..runtime.progress import Ticker
+from ..rays import ray_offsets
 from ..util.sparse import CSR
 
 __all__ = ["hemicube_form_factors", "receiver_ids"]
 
-#: Eye offset along the receiver normal, as a fraction of the scene's bounding-box diagonal.
-EYE_OFFSET = 1e-5
 #: Near-plane distance, as a fraction of the scene's bounding-box diagonal.
 NEAR = 1e-7
 #: Draw a planar cluster of pieces as its outline (:mod:`.drawn`): the same pixels, drawn at a
@@ -91,7 +91,9 @@ class _Scene:
         self.normals = np.asarray(drawn.normals, dtype=np.float64)
         self.plane = np.einsum("ij,ij->i", self.normals, drawn.centers - origin)
         rc, rn = (patches.centers, patches.normals) if clusters is None else (clusters.centers, clusters.normals)
-        self.eyes = rc - origin + EYE_OFFSET * scale * np.asarray(rn, dtype=np.float64)
+        lift = ray_offsets(patches, owner=patches.owner if clusters is None else clusters.owner)
+        lift = np.maximum(lift, 64 * 2.0 ** -23 * np.abs(rc - origin).max(axis=1, initial=0.0))
+        self.eyes = rc - origin + lift[:, None] * np.asarray(rn, dtype=np.float64)
         self.near = np.float32(NEAR * scale)
         self.weights = pixel_weights(resolution)
 

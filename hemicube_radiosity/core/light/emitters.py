@@ -29,6 +29,7 @@ from .polygon_ff import GROUP_LOOP, group_form_factors, polygon_form_factors
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..mesh.patches import PatchSet
 from ..util.spatial import morton_order
+from ..rays import ray_offsets
 
 #: Shadow rays (points x emitter units x samples) from which a transport with several workers
 #: runs on forked processes: below, forking costs more than it saves.
@@ -154,18 +155,21 @@ def _sample_drawer(patches, em, corners, groups, units, eps):
     spread over each group by area), from the random stream ``rng``, and (units, count, 3) the
     unit normals of the patches they lie on (a curved group's targets face their own ways).
 
-    The points are lifted ``eps`` (scene units) off the emitter along its normal (a group's
-    area-weighted mean normal): a shadow ray that ends exactly on a surface would graze it at
-    float32 precision (a wall lighting the floor at their shared edge)."""
+    The points are lifted off the emitter along its normal (a group's area-weighted mean
+    normal) by ``eps`` (M,) of each emitter patch (a group: its largest): a shadow ray that
+    ends exactly on a surface would graze it at float32 precision (a wall lighting the floor at
+    their shared edge)."""
     normals = patches.normals[em]
     if groups is None:
         def draw(count, rng):
-            y = _emitter_samples(corners, count, rng) + eps * normals[:, None, :]
+            y = _emitter_samples(corners, count, rng) + eps[:, None, None] * normals[:, None, :]
             return y, np.broadcast_to(normals[:, None, :], y.shape)
         return draw
     lift = np.zeros((units, 3))
     np.add.at(lift, groups, patches.normals[em] * patches.areas[em, None])
-    lift *= eps / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
+    size = np.zeros(units)
+    np.maximum.at(size, groups, eps)
+    lift *= size[:, None] / np.maximum(np.linalg.norm(lift, axis=1, keepdims=True), 1e-300)
 
     def draw(count, rng):
         y, k = _group_samples(corners, patches.areas[em], groups, count, rng)
@@ -199,8 +203,8 @@ class _Transport:
     """The work of one :func:`emitter_transport` call, in chunks of ``step`` points.
 
     ``points``, ``normals`` (P, 3) float64; ``corners`` (M, 4, 3) and ``em_normals`` (M, 3) of
-    the emitter patches; ``groups`` (M,) int64 or None; ``eps`` the lift off the surfaces
-    (scene units); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
+    the emitter patches; ``groups`` (M,) int64 or None; ``eps`` (P,) the points' rays' start
+    offsets off their surfaces (:func:`.rays.ray_offsets`); ``draw`` from :func:`_sample_drawer`; ``ys`` (units, S, 3) the first
     ``samples`` targets per emitter unit (from ``seed``) and ``extra`` the penumbra's ``refine``
     times as many more (their own stream), ``yn`` and ``extra_n`` their patches' normals, all
     shared by every point: T is the same for any chunk
@@ -239,7 +243,7 @@ class _Transport:
             return s, F, None, None, None, None, None
         pi, mi = np.nonzero(F > 0)
         # rows by ``take``: indexing a 2-D array with an index array is several times slower
-        o = x.take(pi, axis=0) + self.eps * nx.take(pi, axis=0)          # (r, 3)
+        o = x.take(pi, axis=0) + self.eps[s:s + self.step].take(pi)[:, None] * nx.take(pi, axis=0)  # (r, 3)
         if not pi.size:
             return s, F, pi, mi, o, (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3))), None
         n = nx.take(pi, axis=0)
@@ -307,7 +311,7 @@ CHUNKS_PER_WORKER = 4
 
 def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=None, samples=16,
                       seed=0, refine=3, chunk_rays=1 << 18, ticker=None, groups=None,
-                      workers=1) -> np.ndarray:
+                      workers=1, eps=None) -> np.ndarray:
     """(P, M) float32 ``T[p, m] = F(x_p -> e_m) * V(x_p, e_m)``: how much of emitter patch m's
     radiance arrives at point p. Geometry only, so a change of emission strength or colour is
     ``T @ L`` and needs no rays.
@@ -325,7 +329,8 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     count. ``ticker`` is polled after every chunk. ``chunk_rays``: first-pass rays a chunk casts
     at most (at most 4,096 points a chunk): the chunks are independent, so T is the same for any
     size. A quarter million keeps a chunk's temporaries in the heap's kept pages: a million (a dense
-    mesh's lamp groups) faulted many fresh pages in.
+    mesh's lamp groups) faulted many fresh pages in. ``eps`` (P,): how far the points' shadow
+    rays start off their surfaces (default :func:`.rays.ray_offsets`).
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -337,8 +342,8 @@ def emitter_transport(patches: PatchSet, points, normals, emitters, *, scene=Non
     if groups is not None:
         groups = np.asarray(groups, dtype=np.int64)
     corners = patches.corners(em)
-    eps = 1e-5 * (float(np.linalg.norm(patches.verts.max(0) - patches.verts.min(0))) or 1.0)
-    draw = _sample_drawer(patches, em, corners, groups, units, eps)
+    eps = ray_offsets(patches, points, normals) if eps is None else np.asarray(eps, dtype=np.float64)
+    draw = _sample_drawer(patches, em, corners, groups, units, ray_offsets(patches, owner=patches.owner[em]))
     work = _Transport(points, normals, corners, patches.normals[em], groups, scene, refine, eps, draw,
                       samples, chunk_rays, seed)
     work.run(T, resolve_workers(workers), ticker)

@@ -156,7 +156,8 @@ class EnvironmentLight:
 
 def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps) -> np.ndarray:
     """(P, 3) W/m^2: the map's variation about its base arriving at points ``x`` (P, 3) with unit
-    normals ``n`` (P, 3), through shadow rays (``occ``: an occluder or None). ``light.rays``
+    normals ``n`` (P, 3), through shadow rays (``occ``: an occluder or None) starting ``eps``
+    (P,) off the surface. ``light.rays``
     directions per point, one set for all (module docstring); ``rng`` and ``samples`` are the
     lamps' (unused: the set is fixed by the map, for smooth light)."""
     d, w = light.directions(light.rays, seed=0)
@@ -170,7 +171,7 @@ def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps
     if occ is None:
         vis = np.ones(r.size, bool)
     else:
-        vis = ~np.asarray(occ.occluded(x[r] + eps * n[r], d[s], None), bool)
+        vis = ~np.asarray(occ.occluded(x[r] + eps[r, None] * n[r], d[s], None), bool)
     c = np.where(vis, cos[r, s], 0.0)
     for k in range(3):
         out[:, k] = np.bincount(r, weights=c * w[s, k], minlength=len(x))

@@ -68,7 +68,7 @@ from .environment import EnvironmentLight, environment_irradiance
 from .polygon_ff import polygon_form_factor
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
-from ..rays import occluder
+from ..rays import occluder, ray_offsets
 
 __all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "EnvironmentLight", "UNBOUNDED", "direct_irradiance",
            "light_irradiance", "spot_attenuation", "AREA_SHAPES"]
@@ -265,7 +265,7 @@ def _shade(x, n, E0, pts, w, atten, occ, eps, infinite=False):
         r, s = np.nonzero(need)
         v = np.zeros((N, S))
         if r.size:
-            org = x[r] + eps * n[r]
+            org = x[r] + eps[r, None] * n[r]
             if infinite:
                 vis = ~occ.occluded(org, pts[r, s], None)
             else:
@@ -363,7 +363,7 @@ def _area(light, x, n, rng, samples, occ, eps):
     return _shade(x, n, E0, pts, w, None, occ, eps)
 
 
-# light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps) -> (P,) W/m^2
+# light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps (P,)) -> (P,) W/m^2
 # ((P, 3) for a light of its own colours: ``bands == 3``, the environment map)
 KERNELS = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area,
            EnvironmentLight: environment_irradiance}
@@ -372,12 +372,13 @@ UNBOUNDED = (SunLight, EnvironmentLight)
 
 
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
-                     receivers=None, points=None, normals=None, _occ=None, _index=0):
+                     receivers=None, points=None, normals=None, eps=None, _occ=None, _index=0):
     """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``);
     (P, 3) for a light with its own colours (``light.bands == 3``: an environment map).
 
     At the patch centres by default, or at ``points`` (P, 3) with unit ``normals`` (P, 3) on the
     patches' surfaces (e.g. the patch vertices); ``receivers`` indexes into those points.
+    ``eps`` (P,): the shadow rays' start offsets (default :func:`.rays.ray_offsets`).
     """
     occ = occluder(patches, shadows) if _occ is None else _occ
     x_all = patches.centers if points is None else np.asarray(points, np.float64)
@@ -385,8 +386,7 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
     N = len(x_all)
     recv = np.arange(N) if receivers is None else np.asarray(receivers, np.int64)
     out = np.zeros((N, 3) if getattr(light, "bands", 1) == 3 else N)
-    scale = float(np.linalg.norm(np.ptp(patches.verts, axis=0))) or 1.0
-    eps = 1e-5 * scale
+    eps = ray_offsets(patches, points, normals) if eps is None else np.asarray(eps, np.float64)
     fn = KERNELS.get(type(light))
     if fn is None:
         raise TypeError(f"unknown light type {type(light).__name__}")
@@ -397,12 +397,12 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         rng = np.random.default_rng([seed, _index, s])
         # a light with Blender's 'Shadow' switch off shines through everything
         out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples,
-                      occ if light.cast_shadows else None, eps)
+                      occ if light.cast_shadows else None, eps[ids])
     return out
 
 
 def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, seed=0,
-                      receivers=None, points=None, normals=None, progress=None,
+                      receivers=None, points=None, normals=None, eps=None, progress=None,
                       cancelled=None) -> np.ndarray:
     """Incident irradiance H_direct (N, 3) in W/m^2 from ``lights`` at every patch centre
     (or at ``points`` with ``normals``, see :func:`light_irradiance`).
@@ -410,18 +410,21 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     The radiosity source term is ``emission + rho * H_direct / pi`` (radiance units).
     ``shadows``: 'auto' | 'embree' | 'numpy' | 'none'. ``samples``: shadow samples per light per
     patch for lights with a size (radius, angle, area); zero-size lights use one ray.
-    ``receivers``: patch ids to compute (others 0). ``progress(f)``/``cancelled()`` as elsewhere.
+    ``receivers``: patch ids to compute (others 0); ``eps`` (P,) the shadow rays' start offsets
+    (default :func:`.rays.ray_offsets`). ``progress(f)``/``cancelled()`` as elsewhere.
     """
     lights = list(lights)
     H = np.zeros((len(patches) if points is None else len(points), 3))
     if not lights:
         return H
     occ = occluder(patches, shadows)
+    eps = ray_offsets(patches, points, normals) if eps is None else eps
     ticker = Ticker(progress, cancelled)
     for i, light in enumerate(lights):
         ticker.tick(i, len(lights), force=True)
         E = light_irradiance(patches, light, shadows=shadows, samples=samples, seed=seed,
-                             receivers=receivers, points=points, normals=normals, _occ=occ, _index=i)
+                             receivers=receivers, points=points, normals=normals, eps=eps, _occ=occ,
+                             _index=i)
         H += (E if E.ndim == 2 else E[:, None]) * light.color[None, :]
     ticker.tick(len(lights), len(lights), force=True)
     return H

@@ -26,12 +26,15 @@ from .lamps import direct_irradiance
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
-from ..rays import embree_available, embree_scene, occluder, open_fraction, sky_fraction
+from ..rays import embree_available, embree_scene, occluder, open_fraction, ray_offsets, sky_fraction
+from ..runtime.cache import Memo
 from ..util.unique import unique_ints
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
 
 __all__ = ["DirectLight", "direct_stage", "source_term"]
+
+_OFFSETS = Memo(4)          # rays' start offsets per point array (:meth:`DirectLight.offsets`)
 
 
 @dataclass
@@ -105,14 +108,21 @@ class DirectLight:
                    settings.light_seed, cancelled, cache, groups, _turn_emitters(settings),
                    workers=settings.workers, world=world, sky_rays=settings.sky_rays)
 
+    def offsets(self, points, normals) -> np.ndarray:
+        """(P,) how far rays from ``points`` start off their surfaces (:func:`.rays.ray_offsets`:
+        their own objects', found by a probe ray), made once per point array."""
+        return _OFFSETS.of((self.patches.verts, points, normals), lambda: ray_offsets(self.patches, points, normals))
+
     def _transport(self, points, normals, samples=None):
         """The emitters' transport to ``points``: their fronts, plus their backs when two-sided
         (the same faces turned around, so the front-only tests and shadow-ray offsets apply)."""
+        eps = self.offsets(points, normals)
+
         def transport(patches):
             return emitter_transport(patches, points, normals, self.emitters, scene=self.scene(),
                                      samples=samples or self.samples, ticker=Ticker(None, self.cancelled),
                                      refine=3 if samples is None else 0,
-                                     groups=self.groups, workers=self.workers)
+                                     groups=self.groups, workers=self.workers, eps=eps)
         T = transport(self.patches)
         return T + transport(turned_around(self.patches)) if self.two_sided else T
 
@@ -152,7 +162,7 @@ class DirectLight:
         ``sky_rays`` per point; geometry only, cached)."""
         key = cache_key(geometry_key(self.patches) + array_key(points), ("sky", where, self.sky_rays))
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
-                                                         normals, self.sky_rays))
+                                                         normals, self.sky_rays, eps=self.offsets(points, normals)))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
@@ -168,6 +178,7 @@ class DirectLight:
             cols += [T[:, owner == o].astype(np.float64) @ Y[owner == o] for o in np.unique(owner)]
         for lamp in self.lights:
             cols.append(direct_irradiance(self.patches, [lamp], points=points, normals=normals,
+                                          eps=self.offsets(points, normals),
                                           cancelled=self.cancelled, samples=self.light_samples,
                                           seed=self.light_seed) @ LUMA)
         if self.world is not None:
@@ -194,8 +205,8 @@ class DirectLight:
             D += self.world_at(points, normals, where)
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
-                                   cancelled=self.cancelled, samples=min(samples or self.light_samples,
-                                                                         self.light_samples),
+                                   eps=self.offsets(points, normals), cancelled=self.cancelled,
+                                   samples=min(samples or self.light_samples, self.light_samples),
                                    seed=self.light_seed) / np.pi
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not

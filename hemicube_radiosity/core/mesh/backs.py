@@ -31,16 +31,17 @@ import numpy as np
 
 from ..util.unique import linked_labels, unique_rows
 from .patches import meshes_key
+from ..rays import START_BACKS, START_SHARE, START_ULPS
 
 __all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "cutters", "backs_of_pieces"]
 
-#: A back lies this share of its own mesh's diagonal behind its front (a quarter of the rays'
-#: start offset, 1e-5 of the scene's diagonal: a ray leaving a point next to a back must not
+#: A back lies this share of its own mesh's diagonal behind its front (2.5e-6: a quarter of the
+#: rays' start offset, :func:`.rays.ray_offsets`: a ray leaving a point next to a back must not
 #: start on it) ...
-OFFSET_SHARE = 2.5e-6
-#: ... and at least this many float32 steps (2**-23 of the largest coordinate), so that Embree's
-#: float32 vertices and the hemi-cube's float32 depths always tell the two sides apart.
-OFFSET_ULPS = 16
+OFFSET_SHARE = START_SHARE / START_BACKS
+#: ... and at least this many float32 steps (16, of 2**-23 of the largest coordinate), so that
+#: Embree's float32 vertices and the hemi-cube's float32 depths always tell the two sides apart.
+OFFSET_ULPS = START_ULPS // START_BACKS
 #: Rays from each probe point of an open face that look for what its back faces ...
 PROBE_RAYS = 32
 #: ... and from up to this many of the fronts they hit, this many rays, to tell a surface in
@@ -275,7 +276,8 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     sel = np.concatenate([offsets[i] + np.flatnonzero(f) for i, f in opened.items()])
     if not sel.size or scene is None:
         return out
-    eps = 1e-5 * scene.scale
+    # rays start as the bake's do (:func:`.rays.ray_offsets`): off each face by its mesh's offset
+    eps = np.concatenate([np.full(max(len(m.face_offsets) - 1, 0), START_BACKS * offset(m.verts)) for m in meshes])
     c, n = centres[sel], normals[sel]
     big = np.zeros(len(centres), bool)
     big[sel] = areas[sel] > (LARGE_FACE * scene.scale) ** 2
@@ -286,8 +288,8 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
     points = np.concatenate([c, halfway])
     S, R = len(sel), probe_rays
-    matter, world_on = _lit(scene, lights, world, points, n[at], at, S, eps)
-    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, eps)
+    matter, world_on = _lit(scene, lights, world, points, n[at], at, S, eps[sel][at])
+    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, eps[sel][at])
     ray_face = np.repeat(at, R)
     rays = np.bincount(ray_face, minlength=S)
     if emit:                                    # an emitter's back shines on whatever it faces
@@ -299,7 +301,7 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     front = np.flatnonzero((hit >= 0) & ~matter[ray_face])
     if front.size:
         fronts = np.bincount(ray_face[front], minlength=S)
-        matter |= fronts * _open_share(scene, normals, x, m, front, ray_face[front], S, eps) >= FACING_SHARE * rays
+        matter |= fronts * _open_share(scene, normals, x, m, front, ray_face[front], S, eps[hit]) >= FACING_SHARE * rays
     start = 0
     for o, f in opened.items():
         k = int(f.sum())
@@ -311,7 +313,8 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
 
 def _lit(scene, lights, world, points, normals, at, S, eps):
     """((S,) bool the faces a lamp or a sun reaches on their back, by one shadow ray from each
-    probe point ``points`` (P, 3) of face ``at`` (P,) behind its ``normals`` (P, 3); whether
+    probe point ``points`` (P, 3) of face ``at`` (P,) behind its ``normals`` (P, 3), starting
+    ``eps`` (P,) off it; whether
     the world is lit: by ``world`` (3,) or an environment map among ``lights``)."""
     world_on = world is not None and bool(np.any(np.asarray(world, dtype=np.float64) > 0))
     lit = np.zeros(S, bool)
@@ -322,7 +325,7 @@ def _lit(scene, lights, world, points, normals, at, S, eps):
             continue
         d = np.asarray(pos, float) - points if pos is not None else np.tile(-np.asarray(to, float), (len(points), 1))
         behind = np.einsum("pj,pj->p", d, normals) < 0
-        free = ~scene.occluded((points - eps * normals)[behind], d[behind],
+        free = ~scene.occluded((points - eps[:, None] * normals)[behind], d[behind],
                                None if pos is None else np.full(behind.sum(), 1 - 1e-6))
         reached = np.zeros(len(points), bool)
         reached[np.flatnonzero(behind)[free]] = True
@@ -333,13 +336,14 @@ def _lit(scene, lights, world, points, normals, at, S, eps):
 def _open_share(scene, normals, x, m, front, face, S, eps) -> np.ndarray:
     """(S,) per face, the share of its front hits (rays ``front`` hit ``x`` (R, 3) with normal
     ``m`` (R, 3), of face ``face`` (k,)) that are not shut in: of up to :data:`SECOND_HITS` of
-    them, how many cast :data:`SECOND_RAYS` rays of which one escapes or finds a front."""
+    them, how many cast :data:`SECOND_RAYS` rays (starting ``eps`` (R,) off) of which one escapes
+    or finds a front."""
     order = np.argsort(face, kind="stable")
     front, face = front[order], face[order]
     first = np.searchsorted(face, face, side="left")
     keep = (np.arange(face.size) - first) < SECOND_HITS
     front, face = front[keep], face[keep]
-    h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps)
+    h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps[front])
     open2 = (esc2 | (h2 >= 0)).reshape(-1, SECOND_RAYS).any(axis=1)
     return np.bincount(face, weights=open2, minlength=S) / np.maximum(np.bincount(face, minlength=S), 1)
 
@@ -425,7 +429,8 @@ def cutters(meshes, faces):
 
 
 def _probe(scene, normals, points, directions_about, rays, eps):
-    """``rays`` cosine rays from each of ``points`` (P, 3) about ``directions_about`` (P, 3):
+    """``rays`` cosine rays from each of ``points`` (P, 3) about ``directions_about`` (P, 3),
+    starting ``eps`` (P,) off along it:
     (hit (P * rays,) the face whose front a ray hit, or -1; where (P * rays, 3) it hit; that
     face's normal (P * rays, 3); escaped, touched and up (P * rays,) bool: the ray found nothing,
     or a face, front or back; it points above the horizon (+Z, Blender's up))."""
@@ -434,7 +439,7 @@ def _probe(scene, normals, points, directions_about, rays, eps):
 
     local = cosine_lattice(rays, 7)
     d = in_frames(local, tangent_frames(directions_about)).reshape(-1, 3)
-    o = np.repeat(points + eps * directions_about, rays, axis=0)
+    o = np.repeat(points + eps[:, None] * directions_about, rays, axis=0)
     pid, t = scene.intersect(o, d)
     escaped = pid < 0
     touched = pid >= 0

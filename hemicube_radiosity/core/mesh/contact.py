@@ -21,6 +21,7 @@ import numpy as np
 
 from .patches import PatchSet, poly_geometry
 from ..util.unique import unique_ints, unique_rows
+from ..rays import ray_offsets
 
 __all__ = ["OpenSide", "open_side"]
 
@@ -80,7 +81,7 @@ def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
     they are ever seen and interpolated across (a floor wholly under a block stays dark).
 
     An edge counts when it runs along a seen element from an open vertex to a buried one and a ray along it, lifted
-    a hair (1e-5 of the scene) above the element, hits a surface before its end: a wall standing
+    a hair (:func:`.rays.ray_offsets` of the element) above it, hits a surface before its end: a wall standing
     on the floor between them. A buried vertex with no such edge (the ceiling behind a lamp's
     back, a face hidden in a fold) is left alone. Geometry only."""
     buried = np.asarray(buried, bool)
@@ -99,8 +100,7 @@ def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
     d = end - start
     length = np.linalg.norm(d, axis=1)
     d = d / np.maximum(length, 1e-300)[:, None]
-    lift = 1e-5 * float(scene.scale)
-    pid, t = scene.intersect(start + lift * n, d)
+    pid, t = scene.intersect(start + ray_offsets(elements, owner=elements.owner[e])[:, None] * n, d)
     pid, t = np.asarray(pid), np.asarray(t, dtype=np.float64)
     met = (pid >= 0) & (t < length * (1 - 1e-3))
     if not met.any():

@@ -21,7 +21,7 @@ from ..runtime.background import Background
 from ..runtime.forked import release_tail, shared_array
 from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
-from ..rays import cosine_lattice
+from ..rays import cosine_lattice, ray_offsets
 from ..util.sparse import CSR
 from ..util.unique import unique_ints
 
@@ -139,7 +139,8 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     # forked workers write their rows and hits into shared memory, each chunk of points at its
     # own place (at most 4 entries and one hit per ray), and send back only how many
     out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches))) if forked else None
-    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, local, step, hits, out)
+    eps = ray_offsets(patches, points, normals, scene=scene)[:, None]    # the rays' start offsets
+    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step, hits, out)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
     starts = range(0, P, step)
@@ -228,16 +229,16 @@ class _SharedRows:
         return self.cols[:e_at], self.vals[:e_at], self.hits[:h_at] if self.hits.size else None
 
 
-def _cast(patches, params, scene, points, normals, local, step, hits, out, s):
-    """The gather rays ``local`` (R, 3) of the points ``s:s + step``: (s, m, sky (m,), the
-    chunk's rows of G as entries per row (m,), columns (e,) int32 and values (e,) float32, its
-    hits (h, 5) or None); with ``out`` (a :class:`_SharedRows`), the columns, values and hits
+def _cast(patches, params, scene, points, normals, eps, local, step, hits, out, s):
+    """The gather rays ``local`` (R, 3) of the points ``s:s + step``, starting ``eps`` (P, 1) off
+    their surfaces: (s, m, sky (m,), the chunk's rows of G as entries per row (m,), columns (e,)
+    int32 and values (e,) float32, its hits (h, 5) or None); with ``out`` (a :class:`_SharedRows`), the columns, values and hits
     go there and their counts come back in their place."""
     R = len(local)
     x, n = points[s:s + step], normals[s:s + step]
     m = len(x)
     d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-    lifted = x + 1e-5 * scene.scale * n
+    lifted = x + eps[s:s + step] * n
     pid, tfar = scene.intersect(np.repeat(lifted, R, axis=0), d)
     pid = np.asarray(pid)
     hit = pid >= 0

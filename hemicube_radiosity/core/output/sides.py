@@ -16,7 +16,7 @@ import numpy as np
 from ..light.emitters import vertex_frames
 from ..mesh.contact import open_side
 from ..mesh.patches import PatchSet
-from ..rays import embree_available, embree_scene, open_fraction
+from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.unique import linked_labels, unique_rows
 
@@ -35,7 +35,7 @@ def open_elements(ctx, elements):
     key = cache_key(geometry_key(elements), ("open-centres", reach))
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach,
-                                                     workers=ctx.settings.workers))
+                                                     workers=ctx.settings.workers, eps=ray_offsets(elements)))
 
     def weights():
         w = (f > 0.05).astype(np.float64)
@@ -120,7 +120,8 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         if k.size:
             x2 = np.concatenate([x[k] + d1[k], x[k] + d2[k]])
             n2 = np.concatenate([mesh.normals[e1[k]], mesh.normals[e2[k]]])
-            f = open_fraction(mesh, x2, n2, scene, reach, workers=ctx.settings.workers).reshape(2, -1)
+            f = open_fraction(mesh, x2, n2, scene, reach, workers=ctx.settings.workers,
+                              eps=ray_offsets(mesh, owner=mesh.owner[np.concatenate([e1[k], e2[k]])])).reshape(2, -1)
             out[k] = (f > 0.05).all(axis=0)
         return out
 
