@@ -37,7 +37,7 @@ import numpy as np
 from .read import shading
 from .read.materials import follow
 
-__all__ = ["LIGHT_SUFFIX", "colour_input", "textured_materials", "albedo_scales", "lit_materials",
+__all__ = ["LIGHT_SUFFIX", "colour_input", "see_through", "textured_materials", "albedo_scales", "lit_materials",
            "light_values", "element_uvs"]
 
 LIGHT_SUFFIX = " Light"
@@ -53,6 +53,26 @@ def colour_input(mat):
     node, _ = follow(out.inputs["Surface"])
     name = _COLOUR_INPUTS.get(getattr(node, "type", None))
     return None if name is None else node.inputs[name]
+
+
+_SEE_THROUGH = {"BSDF_GLASS", "BSDF_REFRACTION", "BSDF_TRANSPARENT"}
+
+
+def see_through(mat) -> bool:
+    """True for a material that light passes through rather than reflects diffusely: a Glass,
+    Refraction or Transparent BSDF, or a Principled BSDF of Transmission Weight 0.5 or more,
+    wired straight into the Surface (its baked colour, near black, would make a window an
+    opaque slab: a copy keeps the user's own material on such faces)."""
+    out = shading._output_node(mat) if mat is not None else None
+    if out is None:
+        return False
+    node, _ = follow(out.inputs["Surface"])
+    if node is None:
+        return False
+    if node.type in _SEE_THROUGH:
+        return True
+    sock = node.inputs.get("Transmission Weight") if node.type == "BSDF_PRINCIPLED" else None
+    return sock is not None and not sock.is_linked and sock.default_value >= 0.5
 
 
 def textured_materials(mats) -> list:

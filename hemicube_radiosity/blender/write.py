@@ -182,6 +182,7 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
         if oi in textured:
             _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name,
                            scale, scales)
+        _keep_see_through(me, kind, result, owners, src, depsgraph)
         me[SOURCE_KEY] = src.name
         ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
         ob.matrix_world = _matrix(src.matrix_world)
@@ -218,10 +219,15 @@ def _textured_objects(scene_input, result, depsgraph):
             continue
         if np.any(src.mesh.face_emission > 0) or (src.corner_emission is not None and np.any(src.corner_emission > 0)):
             continue
-        mats = textures.textured_materials([s.material for s in obj.evaluated_get(depsgraph).material_slots])
+        mats = textures.textured_materials([_original(s.material) for s in obj.evaluated_get(depsgraph).material_slots])
         if mats:
             out[oi] = mats
     return out
+
+
+def _original(mat):
+    """The user's material behind a depsgraph's evaluated copy (None stays None)."""
+    return getattr(mat, "original", mat)
 
 
 class _UserMesh:
@@ -232,7 +238,7 @@ class _UserMesh:
 
     def __enter__(self):
         self.mesh = self.ob_eval.to_mesh()
-        self.mats = [s.material for s in self.ob_eval.material_slots] or [None]
+        self.mats = [_original(s.material) for s in self.ob_eval.material_slots] or [None]
         slot = np.zeros(len(self.mesh.polygons), np.int64)
         self.mesh.polygons.foreach_get("material_index", slot)
         self.slot = np.clip(slot, 0, len(self.mats) - 1)
@@ -261,15 +267,43 @@ def _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgra
                 result.elements, owners, lighting, src.matrix_world, src.flipped)
             rad = patch_mesh_arrays(result.elements, owners, corners, src.matrix_world, src.flipped)[3]
             faces = _element_faces(result, sel)
-            me.polygons.foreach_set("material_index", user.slot[faces].astype(np.int32))
             face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
         values = textures.light_values(light, rad, face, user.slot, user.mats, scales)
-        mats = user.mats
+        mats, slot = user.mats, (None if kind == "source" else user.slot[faces])
     _set_color_attribute(me, light_name, values * scale)
     plain = baked_material(light_name, culled=owners.size > 1)
+    _set_materials(me, textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1), slot)
+
+
+def _keep_see_through(me, kind, result, owners, src, depsgraph):
+    """On the slots whose user material light passes through (glass, :func:`.textures.see_through`)
+    the copy keeps that material (shared, not changed): a window stays a window. An element
+    mesh gets the user's slots for that (each element the slot of its face)."""
+    obj = bpy.data.objects.get(src.name)
+    if obj is None or not any(textures.see_through(s.material) for s in obj.evaluated_get(depsgraph).material_slots):
+        return
+    with _UserMesh(src, depsgraph) as user:
+        mats, slot = user.mats, None
+        if kind != "source" and len(me.materials) != len(mats):
+            slot = user.slot[_element_faces(result, np.flatnonzero(np.isin(result.elements.owner, owners)))]
+    shown = [me.materials[min(i, len(me.materials) - 1)] for i in range(len(mats))]
+    _set_materials(me, [own if textures.see_through(own) else m for m, own in zip(shown, mats)], slot)
+
+
+def _set_materials(me, mats, slot=None):
+    """``mats`` as the material slots of mesh ``me``; ``slot`` (polygons,): each polygon's slot
+    (set after the slots: clearing them resets the polygons' indices), None: kept."""
+    had = "material_index" in me.attributes         # absent: every polygon on slot 0
+    if slot is None:
+        slot = np.zeros(len(me.polygons), np.int32)
+        if had:
+            me.polygons.foreach_get("material_index", slot)
+    slot = np.asarray(slot, dtype=np.int32)
     me.materials.clear()
-    for m in textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1):
+    for m in mats:
         me.materials.append(m)
+    if had or slot.any():                           # (writing zeros would add the attribute)
+        me.polygons.foreach_set("material_index", slot)
 
 
 def _element_faces(result, sel):
@@ -345,10 +379,7 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
         bpy.data.meshes.remove(me)
         return None
     # every slot shows the bake (material indices, hence the user's slot layout, are kept)
-    slots = max(1, len(me.materials))
-    me.materials.clear()
-    for _ in range(slots):
-        me.materials.append(mat)
+    _set_materials(me, [mat] * max(1, len(me.materials)))
     return me
 
 

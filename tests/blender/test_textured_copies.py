@@ -82,3 +82,39 @@ def test_copy_shows_the_texture_times_the_light(cuts, patch_size, element_size, 
     assert [m.name for m in plain.data.materials] == ["Radiosity Bake (Radiosity)"] * len(plain.data.materials)
     assert "UVMap" in plain.data.uv_layers           # an element mesh gets the user's UVs too
     assert error(bake_image(plain, "EMIT"), ref) > 0.1
+
+
+@pytest.mark.parametrize("settings, kind", [
+    (dict(element_size=0.4, patch_size=1.0), "elements"),        # the window's back too: both sides
+    (dict(element_size=None, patch_size=3.0, two_sided_reflection=False), "source")])
+def test_glass_keeps_its_own_material_in_the_copy(settings, kind):
+    """A window (Principled, Transmission 1) beside a floor in one object: the copy shows the bake
+    on the floor and keeps the user's glass material (shared, unchanged) on the window, so it stays
+    see-through, where the bake's own colour there (near black) would be an opaque slab."""
+    cr.new_empty_scene()
+    floor_mat = cr.diffuse_material((0.6, 0.6, 0.6), name="FloorMat")
+    glass = bpy.data.materials.new("Glass")
+    nt, out = cr.bare_node_tree(glass)
+    p = nt.nodes.new("ShaderNodeBsdfPrincipled")
+    p.inputs["Transmission Weight"].default_value = 1.0
+    nt.links.new(p.outputs[0], out.inputs["Surface"])
+    v = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0],
+                  [-1, 0, 0.1], [1, 0, 0.1], [1, 0, 1.1], [-1, 0, 1.1]], float)
+    ob = cr.mesh_object(v, np.array([[0, 1, 2, 3], [4, 5, 6, 7]]), floor_mat, "room")
+    ob.data.materials.append(glass)
+    ob.data.polygons[1].material_index = 1
+    cr.add_light("SUN", (0, 0, 3), (0.4, 0.2, 0.0), energy=2.0, angle=0.0)
+    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(**settings, resolution=16, gather_rays=16))
+    job.run()
+    copy, = job.write(bpy.context)
+    assert copy["radiosity_mesh"] == kind
+    me = copy.data
+    slot = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("material_index", slot)
+    centre = np.array([list(f.center) for f in me.polygons])
+    upright = centre[:, 2] > 0.05
+    assert upright.any() and (~upright).any()
+    assert {me.materials[i].name for i in slot[upright]} == {"Glass"}
+    assert {me.materials[i].name for i in slot[~upright]} == {
+        "Radiosity Bake (Radiosity" + (", two-sided)" if kind == "elements" else ")")}
+    assert me.materials[int(slot[upright][0])] is glass and glass.node_tree.nodes.get("Principled BSDF") is not None
