@@ -134,6 +134,7 @@ class BakeJob:
         self.cache = None
         self.result = None
         self.written = []
+        self.lightmaps = []          # one record per lightmap written (target 'lightmap')
         self.notes = list(scene_input.notes())
         self.timings = {}
 
@@ -191,12 +192,19 @@ class BakeJob:
             self.written, notes = write.write_in_place(context, self.scene_input, self.result,
                                                        s.attribute_name, s.exposure)
             self.notes += notes
+        elif s.target == "lightmap":
+            from .lightmap import write_lightmaps
+
+            self.written, self.lightmaps, notes = write_lightmaps(context, self.scene_input, self.result, s)
+            self.notes += notes
         else:
             self.written = write.write_copies(context, self.scene_input, self.result,
                                               s.attribute_name, s.exposure, s.keep_textures)
         self.timings["write"] = time.perf_counter() - t
         if progress:
-            progress("write", 1.0, f"{len(self.written)} object(s), attribute '{s.attribute_name}'")
+            what = (f"{len(self.lightmaps)} lightmap(s)" if s.target == "lightmap"
+                    else f"attribute '{s.attribute_name}'")
+            progress("write", 1.0, f"{len(self.written)} object(s), {what}")
             if hasattr(progress, "finish"):
                 progress.finish()
         return self.written
@@ -250,6 +258,7 @@ class BakeJob:
             "occluders": [o.name for o in self.scene_input.objects if not o.bake and not _INSTANCE.match(o.name)],
             "instances": _instances(self.scene_input.objects),
             "written": [o.name for o in self.written],
+            "lightmaps": list(self.lightmaps),
             **self.counts(),
             "warnings": list(messages.warnings),
             "notes": list(messages.notes),

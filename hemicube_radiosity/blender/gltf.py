@@ -19,6 +19,12 @@
 * UVs: ``export_texcoords`` is None ('auto') by default: TEXCOORD_n are written when an exported
   mesh has UV maps (a baked copy that keeps the user's topology keeps their UVs, so a pipeline can
   multiply a texture by the baked light at run time), and left out otherwise.
+* Lightmapped copies (``blender/lightmap.py``): their material (UV Map -> Image Texture ->
+  output) exports as ``KHR_materials_unlit`` with the image as baseColorTexture through the
+  TEXCOORD_n of the lightmap's UV map. The material shows the HDR .exr in Blender; while the
+  exporter runs, its image is the tone-mapped .png instead (glTF holds PNG or JPEG only), so the
+  file carries exactly that PNG. Such a copy keeps the user's colour attributes; it is exported
+  through a stand-in without them, as a COLOR_0 would multiply the lightmap.
 Options missing from an older exporter are skipped.
 """
 from __future__ import annotations
@@ -48,8 +54,20 @@ EXPORT_OPTIONS = dict(
 )
 
 
+LIGHTMAP_KEY = "radiosity_lightmap_png"    # blender/lightmap.py MATERIAL_KEY
+
+
+def _lightmapped(ob):
+    """True when every material of ``ob`` is a lightmap material (``blender/lightmap.py``)."""
+    mats = [s.material for s in ob.material_slots]
+    return bool(mats) and all(m is not None and LIGHTMAP_KEY in m for m in mats)
+
+
 def _shows_bake(ob):
-    """True when every material of ``ob`` is the bake material for its render colour attribute."""
+    """True when every material of ``ob`` is the bake material for its render colour attribute,
+    or a lightmap material on a mesh without colour attributes."""
+    if _lightmapped(ob):
+        return len(ob.data.color_attributes) == 0
     ca = ob.data.color_attributes
     if ca.render_color_index < 0:
         return True  # nothing baked here; exported as it is
@@ -63,12 +81,33 @@ def _stand_in(ob):
 
     ca = ob.data.color_attributes
     me = ob.data.copy()
-    me.materials.clear()
-    me.materials.append(baked_material(ca[ca.render_color_index].name))
+    if _lightmapped(ob):                      # the lightmap's material, no colour attribute
+        for attr in list(me.color_attributes):
+            me.color_attributes.remove(attr)
+    else:
+        me.materials.clear()
+        me.materials.append(baked_material(ca[ca.render_color_index].name))
     tmp = bpy.data.objects.new(ob.name + ".gltf", me)
     tmp.matrix_world = ob.matrix_world.copy()
     bpy.context.scene.collection.objects.link(tmp)
     return tmp
+
+
+def _png_for_exr(objects):
+    """Set every lightmap material's image node of ``objects`` to its PNG; returns [(node, the
+    image it had)] to put back."""
+    swapped = []
+    for o in objects:
+        for slot in getattr(o, "material_slots", ()):
+            m = slot.material
+            png = bpy.data.images.get(m[LIGHTMAP_KEY]) if m is not None and LIGHTMAP_KEY in m else None
+            if png is None:
+                continue
+            for node in m.node_tree.nodes:
+                if node.type == "TEX_IMAGE" and node.image is not None and node.image != png:
+                    swapped.append((node, node.image))
+                    node.image = png
+    return swapped
 
 
 def export_gltf(filepath, objects, view_transform="standard", **overrides):
@@ -87,6 +126,7 @@ def export_gltf(filepath, objects, view_transform="standard", **overrides):
     before = [o for o in view_layer.objects if o.select_get()]
     active = view_layer.objects.active
     swaps = []   # (original, stand-in, original name)
+    images = _png_for_exr(objects)   # [(image node, its own image)]: the lightmaps' PNG while exporting
     try:
         export = []
         for o in objects:
@@ -105,6 +145,8 @@ def export_gltf(filepath, objects, view_transform="standard", **overrides):
             o.select_set(True)
         bpy.ops.export_scene.gltf(filepath=filepath, export_format=fmt, **opts)
     finally:
+        for node, image in images:
+            node.image = image
         for o, tmp, name in swaps:
             me = tmp.data
             bpy.data.objects.remove(tmp, do_unlink=True)

@@ -36,7 +36,8 @@ from ..core.runtime.errors import RadiosityError
 from . import textures
 
 __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
-           "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays"]
+           "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays", "copies_collection",
+           "place_copy", "select_copies", "source_mesh_copy", "set_materials"]
 
 COLLECTION_NAME = "Radiosity"
 SOURCE_KEY = "radiosity_source"
@@ -75,7 +76,8 @@ def baked_material(attribute_name: str, culled: bool = False):
     return mat
 
 
-def _collection(scene):
+def copies_collection(scene):
+    """The 'Radiosity' collection of baked copies, made and linked to ``scene`` if need be."""
     coll = bpy.data.collections.get(COLLECTION_NAME)
     if coll is None:
         coll = bpy.data.collections.new(COLLECTION_NAME)
@@ -160,7 +162,7 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     scene = context.scene
     baked = [s for s in scene_input.objects if s.bake]
     remove_bakes([s.name for s in baked])
-    coll = _collection(scene)
+    coll = copies_collection(scene)
     scale = 2.0 ** float(exposure)
     depsgraph = context.evaluated_depsgraph_get()
     corners = result.corner_values()
@@ -183,21 +185,33 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
             _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name,
                            scale, scales)
         _keep_see_through(me, kind, result, owners, src, depsgraph)
-        me[SOURCE_KEY] = src.name
-        ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
-        ob.matrix_world = _matrix(src.matrix_world)
-        ob[SOURCE_KEY] = src.name
-        ob[MESH_KIND_KEY] = kind
-        coll.objects.link(ob)
-        orig = bpy.data.objects.get(src.name)
-        if orig is not None:
-            orig.hide_render = True
-            try:
-                orig.hide_set(True)
-            except RuntimeError:  # not in the current view layer
-                pass
-        out.append(ob)
-    # the copies take over the selection, so a re-bake of the selection re-bakes their sources
+        out.append(place_copy(coll, src, me, kind))
+    select_copies(context, out)
+    return out
+
+
+def place_copy(coll, src, me, kind):
+    """A new object of mesh ``me`` standing for ``src`` (same world matrix) in collection
+    ``coll``, marked as its baked copy of mesh kind ``kind``; the original is hidden."""
+    me[SOURCE_KEY] = src.name
+    ob = bpy.data.objects.new(f"{src.name}.radiosity", me)
+    ob.matrix_world = _matrix(src.matrix_world)
+    ob[SOURCE_KEY] = src.name
+    ob[MESH_KIND_KEY] = kind
+    coll.objects.link(ob)
+    orig = bpy.data.objects.get(src.name)
+    if orig is not None:
+        orig.hide_render = True
+        try:
+            orig.hide_set(True)
+        except RuntimeError:  # not in the current view layer
+            pass
+    return ob
+
+
+def select_copies(context, out):
+    """The copies ``out`` take over the selection (and the active object, the copy of the active
+    source), so a re-bake of the selection re-bakes their sources."""
     vl = context.view_layer
     for ob in out:
         if vl.objects.get(ob.name) is not None:
@@ -206,7 +220,6 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
         active = vl.objects.active
         src_active = active.name if active is not None else None
         vl.objects.active = next((o for o in out if o[SOURCE_KEY] == src_active), out[0])
-    return out
 
 
 def _textured_objects(scene_input, result, depsgraph):
@@ -272,7 +285,7 @@ def _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgra
         mats, slot = user.mats, (None if kind == "source" else user.slot[faces])
     _set_color_attribute(me, light_name, values * scale)
     plain = baked_material(light_name, culled=owners.size > 1)
-    _set_materials(me, textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1), slot)
+    set_materials(me, textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1), slot)
 
 
 def _keep_see_through(me, kind, result, owners, src, depsgraph):
@@ -287,10 +300,10 @@ def _keep_see_through(me, kind, result, owners, src, depsgraph):
         if kind != "source" and len(me.materials) != len(mats):
             slot = user.slot[_element_faces(result, np.flatnonzero(np.isin(result.elements.owner, owners)))]
     shown = [me.materials[min(i, len(me.materials) - 1)] for i in range(len(mats))]
-    _set_materials(me, [own if textures.see_through(own) else m for m, own in zip(shown, mats)], slot)
+    set_materials(me, [own if textures.see_through(own) else m for m, own in zip(shown, mats)], slot)
 
 
-def _set_materials(me, mats, slot=None):
+def set_materials(me, mats, slot=None):
     """``mats`` as the material slots of mesh ``me``; ``slot`` (polygons,): each polygon's slot
     (set after the slots: clearing them resets the polygons' indices), None: kept."""
     had = "material_index" in me.attributes         # absent: every polygon on slot 0
@@ -358,6 +371,25 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
     slots = _corner_slots(P, oi, src)
     if np.any(slots < 0):
         return None
+    me = source_mesh_copy(depsgraph, src)
+    if me is None:
+        return None
+    loop_rgb = np.zeros((len(me.loops), 3))
+    loop_rgb[src.corner_loop] = corners.reshape(-1, 3)[slots]
+    try:
+        _set_color_attribute(me, attribute_name, loop_rgb * scale)
+    except WriteError:                        # a non-colour attribute of that name: keep it
+        bpy.data.meshes.remove(me)
+        return None
+    # every slot shows the bake (material indices, hence the user's slot layout, are kept)
+    set_materials(me, [mat] * max(1, len(me.materials)))
+    return me
+
+
+def source_mesh_copy(depsgraph, src):
+    """A new mesh ``<name>.radiosity``: the user's evaluated mesh of ``src`` (modifiers applied,
+    every data layer kept: UV maps, attributes, custom normals), or None where it is not a mesh or
+    no longer the mesh that was read (the scene changed since)."""
     obj = bpy.data.objects.get(src.name)
     if obj is None or obj.type != "MESH":
         return None
@@ -371,15 +403,6 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
         bpy.data.meshes.remove(me)            # the scene changed since it was read
         return None
     me.name = f"{src.name}.radiosity"
-    loop_rgb = np.zeros((len(me.loops), 3))
-    loop_rgb[src.corner_loop] = corners.reshape(-1, 3)[slots]
-    try:
-        _set_color_attribute(me, attribute_name, loop_rgb * scale)
-    except WriteError:                        # a non-colour attribute of that name: keep it
-        bpy.data.meshes.remove(me)
-        return None
-    # every slot shows the bake (material indices, hence the user's slot layout, are kept)
-    _set_materials(me, [mat] * max(1, len(me.materials)))
     return me
 
 

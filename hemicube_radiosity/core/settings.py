@@ -31,7 +31,7 @@ from .runtime.errors import SettingsError
 
 __all__ = ["BakeSettings", "Setting", "schema", "setting", "METHODS", "SOLVERS", "DIRECT_MODES", "QUALITY",
            "QUALITY_LEVELS",
-           "OUTPUT_MODES", "OUTPUT_PASSES", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
+           "OUTPUT_MODES", "OUTPUT_PASSES", "TARGETS", "AUTO_PATCHES_PER_DIAGONAL", "AUTO_ELEMENTS_PER_PATCH", "AUTO_SWITCH"]
 
 AUTO_PATCHES_PER_DIAGONAL = 14.0   # 'auto' patch size: the scene's bounding-box diagonal / 14
 AUTO_ELEMENTS_PER_PATCH = 3.0      # 'auto' detail size: a third of the patch size
@@ -83,6 +83,12 @@ QUALITY_LEVELS = (
     ("final", "Final", "1.4x the patches per diagonal, finer hemi-cubes and twice the rays: "
      "1.3-2.4x Production's time, its median error up to 12% lower (RMS no lower on the "
      "benchmark: what is left there is systematic)"),
+)
+TARGETS = (
+    ("vertex_colours", "Vertex Colours", "A colour attribute at every face corner of the baked "
+     "mesh (cut finer than the user's faces where the detail size asks)"),
+    ("lightmap", "Lightmap", "An image through a lightmap UV map of the baked copy, which keeps "
+     "the user's topology: OpenEXR (HDR) and a tone-mapped PNG; the copy shows it unlit"),
 )
 OUTPUT_MODES = (
     ("copy", "Baked Copy", "New objects in a 'Radiosity' collection carry the result; "
@@ -261,6 +267,24 @@ class BakeSettings:
             ("agx", "AgX", "An AgX-like curve (the fit three.js and Filament use); close to "
              "Blender's AgX view, not identical")))
 
+    target: str = setting("vertex_colours", "Target", "What the bake writes: vertex colours, or "
+                          "a lightmap image through a UV map (the user's topology kept)", "output",
+                          choices=TARGETS)
+    lightmap_density: float = setting(32.0, "Lightmap Density", "Texels per world unit: a "
+                                      "lightmap's side is this times the square root of its "
+                                      "object's surface area (clamped to the maximum size)",
+                                      "output", min=0.01, soft_max=1024.0)
+    lightmap_max_size: int = setting(1024, "Lightmap Max Size", "Largest side of a lightmap, in "
+                                     "texels", "output", min=8, max=16384)
+    lightmap_uv: str = setting("", "Lightmap UV Map", "UV map the lightmap is read through; "
+                               "empty: the mesh's second UV map, or one made on the baked copy "
+                               "with Lightmap Pack (the user's mesh is never changed)", "output",
+                               maxlen=63)
+    lightmap_dir: str = setting("", "Lightmap Folder", "Where the lightmaps' .exr and .png go; "
+                                "empty: a 'lightmaps' folder beside the saved .blend (the "
+                                "command line: beside its first output)", "output",
+                                subtype="DIR_PATH")
+
     # ------------------------------------------------------------------ construction
     @classmethod
     def from_mapping(cls, mapping) -> "BakeSettings":
@@ -306,6 +330,9 @@ class BakeSettings:
                 raise SettingsError(f"{s.label.lower()} must be in [{lo}, {hi}], got {v!r}")
         if self.method != "embree_stochastic" and self.resolution % 2:
             raise SettingsError(f"hemi-cube resolution must be an even number >= 2, got {self.resolution}")
+        if self.target == "lightmap" and self.output_mode == "in_place":
+            raise SettingsError("a lightmap is written on baked copies: choose the baked-copy "
+                                "output, not in place")
         if self.uses_elements() and self.direct != "exact":
             raise SettingsError("finer output elements need direct='exact' (direct light at every "
                                 "element vertex)")

@@ -20,6 +20,7 @@ a bad argument prints the command's usage line before its ``... error: ...`` lin
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import os
 import sys
 import time
@@ -138,6 +139,9 @@ def cmd_bake(args, out):
     for p in (*outputs, args.report):
         if p and os.path.realpath(p) == source:
             raise CLIError(f"the output {p} would overwrite the input: write to another file", 2)
+    if settings.target == "lightmap" and not settings.lightmap_dir:   # lightmaps beside the outputs
+        settings = dataclasses.replace(settings, lightmap_dir=os.path.dirname(os.path.abspath(
+            (outputs or [args.report])[0])))
     load_input(args.input)
     t_loaded = time.perf_counter()
     objects = _select_objects(args.objects, os.path.abspath(args.input))
@@ -157,6 +161,8 @@ def cmd_demo(args, out):
     d = os.path.abspath(args.output_dir)
     args.report = args.report or os.path.join(d, "cornell_report.json")
     outputs = _outputs(args, os.path.join(d, "cornell.glb"))
+    if settings.target == "lightmap" and not settings.lightmap_dir:
+        settings = dataclasses.replace(settings, lightmap_dir=d)
     bpy.ops.wm.read_homefile(use_empty=True)
     objects = demo.build_cornell_box(bpy.context)
     job = BakeJob.prepare(bpy.context, objects, settings, cache=_cache(settings))

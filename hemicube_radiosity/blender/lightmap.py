@@ -1,0 +1,244 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The lightmap target: the bake read into an image through a UV map of the baked copy.
+
+For each baked object (``settings.target == 'lightmap'``, baked copies only):
+
+* **The copy** is the user's evaluated mesh (:func:`.write.source_mesh_copy`: modifiers applied,
+  topology, UV maps and attributes as they are), never the element mesh: the topology stays the
+  artist's. The user's own mesh is never touched.
+* **UVs**: the UV map named by ``lightmap_uv`` if the mesh has it; with no name, the mesh's second
+  UV map. Otherwise one is made on the copy (named ``lightmap_uv``, or ``Lightmap``) by Blender's
+  *Lightmap Pack* (``bpy.ops.uv.lightmap_pack``, a Python operator that runs headless under
+  ``temp_override``: every face its own box, all packed in one square, a margin of two texels
+  of the image size around each, but at most 1% of the square: the operator's limit, so below
+  about 100 texels islands lie closer than 4 texels apart and filtering may blend neighbours).
+  The copy's active UV map stays the user's.
+* **Size**: ``lightmap_density`` x sqrt(the object's world-space area), clamped to
+  ``lightmap_max_size`` (square; a power of two is not required). Packing wastes some of it,
+  so the density reached on the surface is lower than asked.
+* **Texels** (:mod:`..core.output.lightmap`): the bake's output read at every texel centre of
+  the copy's triangles in that UV map (Blender's loop triangles, as Cycles and glTF interpolate
+  UVs), from the same solution and output elements as the vertex colours, then dilated 8 texels.
+  Values are radiance times ``2**exposure``.
+* **Files** in ``lightmap_dir`` (empty: ``lightmaps/`` beside the saved .blend; unsaved: Blender's
+  temporary folder, said in a note): ``<object>.lightmap.exr`` (RGBA 32-bit float, the HDR
+  radiance) and ``<object>.lightmap.png`` (8-bit sRGB, Blender's Standard view: clamped to 0..1,
+  sRGB-encoded). Both are loaded as images ``<object>.lightmap.exr`` / ``.png``.
+* **Material** ``Radiosity Lightmap (<object>)`` on every slot: a UV Map node (the lightmap UV
+  map) -> Image Texture (the EXR) -> Material Output, so Cycles and EEVEE show it as emission
+  and the viewport shows it. glTF export (:mod:`.gltf`) swaps the EXR for the PNG while it
+  writes: an unlit material whose baseColorTexture is the PNG through the TEXCOORD_n of that UV
+  map.
+
+Not done: the lighting-only pass as a second texture for engines that multiply a lightmap at run
+time (``output_pass='lighting'`` writes the light arriving into the same image instead); one atlas
+for the selection (one image per object); a relight rewrites the image by a whole bake (its form
+factors cached), not by a re-solve alone. Objects that are not meshes (text, curves) and objects
+whose evaluated mesh changed since it was read are left out with a warning.
+"""
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import tempfile
+
+import bpy
+import numpy as np
+
+from ..core.output import lightmap as core_lightmap
+from . import write
+
+__all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "lightmap_folder", "tone_map_standard"]
+
+LIGHTMAP_UV = "Lightmap"
+MATERIAL_KEY = "radiosity_lightmap_png"   # on a lightmap material: the PNG image glTF exports
+MARGIN_TEXELS = 2.0                       # Lightmap Pack's margin around each face, in texels
+
+
+def lightmap_folder(settings):
+    """(absolute folder, note or None): ``settings.lightmap_dir``, else ``lightmaps`` beside the
+    saved .blend, else a folder in Blender's temporary directory (with a note saying so)."""
+    if settings.lightmap_dir:
+        return os.path.abspath(bpy.path.abspath(settings.lightmap_dir)), None
+    if bpy.data.filepath:
+        return os.path.join(os.path.dirname(bpy.data.filepath), "lightmaps"), None
+    folder = os.path.join(bpy.app.tempdir or tempfile.gettempdir(), "lightmaps")
+    return folder, (f"lightmaps were written to the temporary folder {folder}: save the .blend or "
+                    "set a Lightmap Folder to keep them")
+
+
+def tone_map_standard(rgb):
+    """(..., 3) 8-bit-ready sRGB-encoded values in 0..1 of linear ``rgb``: Blender's Standard
+    view (clamp, then the sRGB transfer function)."""
+    x = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+
+
+def _uv_layer(me, wanted):
+    """(name, made): the UV map of copy mesh ``me`` the lightmap uses, or the name of one to make."""
+    if wanted:
+        return wanted, wanted not in me.uv_layers
+    if len(me.uv_layers) >= 2:
+        return me.uv_layers[1].name, False
+    name = LIGHTMAP_UV
+    while name in me.uv_layers:
+        name += "_"
+    return name, True
+
+
+def _world_triangles(me, matrix, uv_name):
+    """(uv (T, 3, 2), world (T, 3, 3)) of mesh ``me``'s loop triangles in UV map ``uv_name`` and
+    in world space (``matrix`` 4x4)."""
+    me.calc_loop_triangles()
+    T = len(me.loop_triangles)
+    tl = np.empty(T * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tl)
+    lv = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", lv)
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    M = np.asarray(matrix, dtype=np.float64)
+    world = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    uv = np.empty(len(me.loops) * 2)
+    me.uv_layers[uv_name].data.foreach_get("uv", uv)
+    return uv.reshape(-1, 2)[tl].reshape(T, 3, 2), world[lv[tl]].reshape(T, 3, 3)
+
+
+def _triangle_area(world):
+    return float(0.5 * np.linalg.norm(np.cross(world[:, 1] - world[:, 0], world[:, 2] - world[:, 0]),
+                                      axis=1).sum())
+
+
+def _pack(ob, uv_name, size):
+    """Make UV map ``uv_name`` on copy ``ob`` with Lightmap Pack (one box per face, a margin of
+    :data:`MARGIN_TEXELS` at ``size`` texels, at most 1% of the square: the operator's limit);
+    the active UV map stays as it was."""
+    me = ob.data
+    before = me.uv_layers.active.name if me.uv_layers.active is not None else None
+    layer = me.uv_layers.new(name=uv_name)
+    me.uv_layers.active = layer
+    margin = float(np.clip(100.0 * MARGIN_TEXELS / size, 0.001, 1.0))   # percent of the UV square
+    with bpy.context.temp_override(active_object=ob, object=ob, selected_objects=[ob],
+                                   selected_editable_objects=[ob], edit_object=None), \
+            contextlib.redirect_stdout(io.StringIO()):              # its progress lines
+        bpy.ops.uv.lightmap_pack(PREF_CONTEXT="ALL_FACES", PREF_PACK_IN_ONE=True,
+                                 PREF_NEW_UVLAYER=False, PREF_MARGIN_DIV=margin)
+    if before is not None:
+        me.uv_layers.active = me.uv_layers[before]
+
+
+def _save_image(name, path, pixels, file_format):
+    """Write ``pixels`` (H, W, 3) to ``path`` (``file_format``: 'OPEN_EXR' float, or 'PNG' 8-bit
+    of values already in 0..1) and load it back as image ``name`` (an older one of that name is
+    replaced)."""
+    old = bpy.data.images.get(name)
+    if old is not None:
+        bpy.data.images.remove(old)
+    h, w = pixels.shape[:2]
+    img = bpy.data.images.new(name + ".tmp", w, h, alpha=False, float_buffer=file_format == "OPEN_EXR")
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :3] = pixels
+    img.pixels.foreach_set(rgba.ravel())
+    img.filepath_raw = path
+    img.file_format = file_format
+    if file_format == "OPEN_EXR" and hasattr(img, "use_half_precision"):
+        img.use_half_precision = False
+    try:
+        img.save()
+    except RuntimeError as ex:
+        raise write.WriteError(f"could not write the lightmap {path}: {ex}") from None
+    finally:
+        bpy.data.images.remove(img)
+    loaded = bpy.data.images.load(path, check_existing=False)
+    loaded.name = name
+    return loaded
+
+
+def _material(name, uv_name, exr, png):
+    """A material showing image ``exr`` through UV map ``uv_name`` as emitted light (unlit);
+    glTF exports ``png`` in its place (:data:`MATERIAL_KEY`)."""
+    mat = bpy.data.materials.get(name)
+    if mat is None:
+        mat = bpy.data.materials.new(name)
+    if bpy.app.version < (5, 0, 0) or mat.node_tree is None:
+        mat.use_nodes = True
+    nt = mat.node_tree
+    nt.nodes.clear()
+    out = nt.nodes.new("ShaderNodeOutputMaterial")
+    out.location = (300, 0)
+    tex = nt.nodes.new("ShaderNodeTexImage")
+    tex.image, tex.interpolation, tex.extension = exr, "Linear", "EXTEND"
+    tex.location = (0, 0)
+    uv = nt.nodes.new("ShaderNodeUVMap")
+    uv.uv_map = uv_name
+    uv.location = (-250, 0)
+    nt.links.new(uv.outputs["UV"], tex.inputs["Vector"])
+    nt.links.new(tex.outputs["Color"], out.inputs["Surface"])
+    nt.nodes.active = tex
+    mat.diffuse_color = (1.0, 1.0, 1.0, 1.0)
+    mat[MATERIAL_KEY] = png.name
+    return mat
+
+
+def write_lightmaps(context, scene_input, result, settings):
+    """Baked copies with lightmaps (see the module docstring). Returns (copies, records, notes):
+    records one dict per lightmap (object, uv_map, made_uvs, size, exr, png, covered, filled,
+    unset texels), notes plain lines."""
+    baked = [s for s in scene_input.objects if s.bake]
+    write.remove_bakes([s.name for s in baked])
+    coll = write.copies_collection(context.scene)
+    depsgraph = context.evaluated_depsgraph_get()
+    folder, note = lightmap_folder(settings)
+    notes = [note] if note else []
+    try:
+        os.makedirs(folder, exist_ok=True)
+    except OSError as ex:
+        raise write.WriteError(f"could not make the lightmap folder {folder}: {ex.strerror}") from None
+    corners = result.corner_values() * 2.0 ** float(settings.exposure)
+    out, records = [], []
+    for oi, src in enumerate(scene_input.objects):
+        if not src.bake:
+            continue
+        me = write.source_mesh_copy(depsgraph, src)
+        if me is None:
+            notes.append(f"'{src.name}': no lightmap (not a mesh, or changed since it was read): "
+                         "bake it with the vertex-colour target")
+            continue
+        if result.owners_of(oi).size > 1:
+            notes.append(f"'{src.name}': its lightmap shows the front of its open faces only")
+        ob = write.place_copy(coll, src, me, "source")
+        uv_name, make = _uv_layer(me, settings.lightmap_uv)
+        M = np.asarray(src.matrix_world, dtype=np.float64)
+        if make:
+            co = np.empty(len(me.vertices) * 3)
+            me.vertices.foreach_get("co", co)
+            me.calc_loop_triangles()
+            tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+            me.loop_triangles.foreach_get("vertices", tl)
+            w = (co.reshape(-1, 3) @ M[:3, :3].T)[tl].reshape(-1, 3, 3)
+            area = _triangle_area(w)
+            _pack(ob, uv_name, core_lightmap.image_size(area, settings.lightmap_density,
+                                                        settings.lightmap_max_size))
+        uv, world = _world_triangles(me, M, uv_name)
+        size = core_lightmap.image_size(_triangle_area(world), settings.lightmap_density,
+                                        settings.lightmap_max_size)
+        lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
+                                         flip=bool(np.linalg.det(M[:3, :3]) < 0))
+        stem = bpy.path.clean_name(src.name)
+        exr = _save_image(f"{src.name}.lightmap.exr", os.path.join(folder, stem + ".lightmap.exr"),
+                          lm.image, "OPEN_EXR")
+        png = _save_image(f"{src.name}.lightmap.png", os.path.join(folder, stem + ".lightmap.png"),
+                          tone_map_standard(lm.image), "PNG")
+        mat = _material(f"Radiosity Lightmap ({src.name})", uv_name, exr, png)
+        write.set_materials(me, [mat] * max(1, len(me.materials)))
+        ob["radiosity_lightmap_uv"] = uv_name
+        if lm.unset:
+            notes.append(f"'{src.name}': {lm.unset} texels of its lightmap's islands hold no value")
+        out.append(ob)
+        records.append({"object": src.name, "uv_map": uv_name, "made_uvs": bool(make),
+                        "size": list(lm.size), "exr": bpy.path.abspath(exr.filepath),
+                        "png": bpy.path.abspath(png.filepath), "covered": int(lm.covered.sum()),
+                        "filled": int(lm.filled.sum()), "unset": int(lm.unset)})
+    write.select_copies(context, out)
+    return out, records, notes

@@ -1,0 +1,227 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""Lightmaps: the bake's output read at the texel centres of an image through a UV map.
+
+The same solution as the vertex colours (no new light is computed here): a texel takes the value
+the baked copy would show at the surface point under its centre, the bilinear interpolation of
+``BakeResult.corner_values()`` over the output element that holds the point (the paper's
+rendering step, :mod:`.interpolate`). So a texel is exactly as good as the output elements'
+corners around it: a shadow's edge is as sharp as the detail size cuts it, not as the texel size
+(direct light exact at texel centres is not done).
+
+Steps, all NumPy:
+
+1. :func:`rasterize`: every texel whose centre lies in a UV triangle, or within ``reach`` texels of
+   one (conservative: a sliver triangle thinner than a texel still gets its texels), gets that
+   triangle and the barycentric coordinates of its centre (clamped onto the triangle when the
+   centre is outside it). Where triangles share a texel, the one the centre lies deepest in wins.
+2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
+3. :func:`evaluate`: :func:`.interpolate.locate` among one object's output elements (with the
+   normals, so the two sides of a thin wall are told apart), then bilinear in the element found.
+4. :func:`dilate`: texels outside every island are filled from their filled neighbours (the mean
+   of the filled ones among their 8), ``margin`` passes: bilinear filtering and mip-maps read no
+   black across an island's border.
+
+Image convention: arrays are (H, W, ...), row 0 at v = 0 (Blender's ``Image.pixels`` order, bottom
+row first), texel (r, c) centred at uv ((c + 0.5) / W, (r + 0.5) / H). Values are whatever
+``corner_values`` holds (radiance, an emission strength of 1 in white is 1.0).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..util.geometry import bilinear
+from .interpolate import locate
+
+__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "dilate", "bake_lightmap",
+           "REACH", "MARGIN"]
+
+REACH = 0.75       # texels: a centre this close to a triangle (outside it) still takes its value
+MARGIN = 8         # texels of dilation around every island
+_CHUNK = 4_000_000  # candidate texels rasterized at once
+
+
+@dataclass
+class Lightmap:
+    """One object's lightmap.
+
+    ``image`` (H, W, 3) float32: the value at every texel, 0 where neither an island nor its
+    dilation reached. ``covered`` (H, W) bool: texels of a UV island (centre within ``REACH``
+    texels of a triangle). ``filled`` (H, W) bool: texels holding a value (islands and margin).
+    ``unset`` int: island texels left without a finite value (0 when the bake is whole).
+    ``inside`` (H, W) bool: texels whose centre lies inside a triangle (not clamped onto one)."""
+
+    image: np.ndarray
+    covered: np.ndarray
+    filled: np.ndarray
+    inside: np.ndarray
+    unset: int
+
+    @property
+    def size(self) -> tuple:
+        """(width, height) in texels."""
+        return self.image.shape[1], self.image.shape[0]
+
+
+def image_size(area, density, max_size, min_size=8) -> int:
+    """Texels along a side of a square lightmap: ``density`` (texels per world unit) times the
+    square root of the surface ``area`` (world units squared), clamped to [min_size, max_size]."""
+    n = int(np.ceil(float(density) * np.sqrt(max(float(area), 0.0))))
+    return int(np.clip(n, min_size, max(int(max_size), min_size)))
+
+
+def _edge_distances(uvp, a, b, c):
+    """(n, 3) signed distances of points ``uvp`` (n, 2) to the three edges of triangles a, b, c
+    (n, 2) each, positive inside, in the units of the coordinates (texels); and (n, 3) the
+    barycentric coordinates of the points (NaN for a degenerate triangle)."""
+    def cross(p, q, r):
+        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    area = cross(a, b, c)
+    sign = np.where(area < 0, -1.0, 1.0)
+    w = np.stack([cross(b, c, uvp), cross(c, a, uvp), cross(a, b, uvp)], 1) * sign[:, None]
+    lengths = np.stack([np.linalg.norm(c - b, axis=1), np.linalg.norm(a - c, axis=1),
+                        np.linalg.norm(b - a, axis=1)], 1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dist = w / lengths
+        bary = w / np.abs(area)[:, None]
+    return dist, bary
+
+
+def rasterize(uv, width, height, reach=REACH):
+    """Which triangle each texel centre lies in.
+
+    ``uv`` (T, 3, 2) the UV triangles (0..1 covers the image; outside it is left out, no
+    wrapping). Returns ``tri`` (H, W) int64 (-1: no triangle within ``reach`` texels), ``bary``
+    (H, W, 3) float64 barycentric coordinates of the texel centre in ``tri`` (clamped onto it when
+    the centre lies outside: what the nearest point of the triangle reads), and ``inside``
+    (H, W) bool (the centre lies inside ``tri``). Degenerate UV triangles (no area) are skipped."""
+    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
+    px = uv * np.array([width, height], float)            # texel units; centres at k + 0.5
+    T = len(px)
+    lo = np.ceil(px.min(axis=1) - reach - 0.5).astype(np.int64)    # first centre k + 0.5 >= min - reach
+    hi = np.floor(px.max(axis=1) + reach - 0.5).astype(np.int64)   # last centre <= max + reach
+    lo = np.maximum(lo, 0)
+    hi = np.minimum(hi, [width - 1, height - 1])
+    area2 = np.abs((px[:, 1, 0] - px[:, 0, 0]) * (px[:, 2, 1] - px[:, 0, 1])
+                   - (px[:, 1, 1] - px[:, 0, 1]) * (px[:, 2, 0] - px[:, 0, 0]))
+    nx = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
+    ny = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
+    count = np.where(area2 > 1e-12, nx * ny, 0)
+    best = np.full(width * height, -np.inf)
+    tri = np.full(width * height, -1, np.int64)
+    bary = np.zeros((width * height, 3))
+    start = 0
+    while start < T:                                       # chunks of triangles, ~_CHUNK candidates each
+        cum = np.cumsum(count[start:])
+        stop = start + max(1, int(np.searchsorted(cum, _CHUNK, side="right")))
+        ids = np.arange(start, min(stop, T))
+        start = ids[-1] + 1
+        n = count[ids]
+        if n.sum() == 0:
+            continue
+        t = np.repeat(ids, n)
+        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        col = lo[t, 0] + k % nx[t]
+        row = lo[t, 1] + k // nx[t]
+        centre = np.stack([col + 0.5, row + 0.5], 1)
+        dist, b = _edge_distances(centre, px[t, 0], px[t, 1], px[t, 2])
+        score = dist.min(axis=1)
+        ok = score >= -reach
+        t, col, row, score, b = t[ok], col[ok], row[ok], score[ok], b[ok]
+        texel = row * width + col
+        # the deepest triangle per texel (against the chunks before too)
+        order = np.lexsort((score, texel))
+        last = np.ones(order.size, bool)
+        last[:-1] = texel[order][1:] != texel[order][:-1]
+        pick = order[last]
+        better = score[pick] > best[texel[pick]]
+        pick = pick[better]
+        best[texel[pick]] = score[pick]
+        tri[texel[pick]] = t[pick]
+        bary[texel[pick]] = b[pick]
+    inside = best >= 0
+    clamped = np.clip(bary, 0.0, None)
+    clamped /= np.where(clamped.sum(1) > 0, clamped.sum(1), 1.0)[:, None]
+    bary = np.where(inside[:, None], bary, clamped)
+    return tri.reshape(height, width), bary.reshape(height, width, 3), inside.reshape(height, width)
+
+
+def texel_points(world, tri, bary, flip=False):
+    """World points (n, 3) and unit normals (n, 3) of the n texels with a triangle.
+
+    ``world`` (T, 3, 3) each UV triangle's corners in world space (same order as the UVs);
+    ``tri`` (n,) and ``bary`` (n, 3) from :func:`rasterize` (rows with tri >= 0). The normal is
+    the triangle's (right-handed in its corner order), turned around with ``flip`` (a mirrored
+    object: its world-space winding is reversed)."""
+    world = np.asarray(world, dtype=np.float64)
+    c = world[tri]                                          # (n, 3, 3)
+    points = np.einsum("nk,nkj->nj", bary, c)
+    normal = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
+    return points, -normal if flip else normal
+
+
+def evaluate(elements, corner_values, points, normals, owner):
+    """(n, 3) the output at world ``points`` (n, 3) with face ``normals`` (n, 3) on the output
+    elements of object ``owner`` (an ``elements.owner`` value): located with
+    :func:`.interpolate.locate`, then bilinear in that element's ``corner_values`` (N, 4, 3)."""
+    if len(points) == 0:
+        return np.zeros((0, 3))
+    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    return bilinear(np.asarray(corner_values, dtype=np.float64)[idx], uv[:, :1], uv[:, 1:])
+
+
+def dilate(image, known, passes=MARGIN):
+    """``image`` (H, W, C) with the texels not ``known`` (H, W) bool filled from their known
+    neighbours, ``passes`` times: each pass gives every unknown texel with a known one among its
+    8 neighbours the mean of those. Returns (image, known) as new arrays."""
+    img = np.where(known[..., None], image, 0.0).astype(np.float64)
+    known = known.copy()
+    H, W = known.shape
+    for _ in range(int(passes)):
+        if known.all():
+            break
+        pk = np.pad(known, 1).astype(np.float64)
+        pv = np.pad(img, ((1, 1), (1, 1), (0, 0)))
+        total = np.zeros_like(img)
+        count = np.zeros((H, W))
+        for dr in (-1, 0, 1):
+            for dc in (-1, 0, 1):
+                if dr == 0 and dc == 0:
+                    continue
+                k = pk[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
+                total += pv[1 + dr:1 + dr + H, 1 + dc:1 + dc + W] * k[..., None]
+                count += k
+        new = ~known & (count > 0)
+        if not new.any():
+            break
+        img[new] = total[new] / count[new][:, None]
+        known = known | new
+    return img, known
+
+
+def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
+                  margin=MARGIN, reach=REACH) -> Lightmap:
+    """One object's lightmap from the bake's output elements.
+
+    ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
+    (``BakeResult.corner_values()``, times any exposure), ``owner`` the object's owner index in
+    ``elements.owner``; ``uv`` (T, 3, 2) and ``world`` (T, 3, 3) the object's triangles in the
+    lightmap's UV map and in world space; ``width`` x ``height`` texels (square by default).
+    ``flip``: the object's world matrix mirrors (negative determinant). Texels of no island are
+    dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
+    dilated over too and, if still unset, counted in ``Lightmap.unset``."""
+    height = int(width if height is None else height)
+    width = int(width)
+    tri, bary, inside = rasterize(uv, width, height, reach)
+    covered = tri >= 0
+    image = np.zeros((height, width, 3))
+    pts, nrm = texel_points(world, tri[covered], bary[covered], flip)
+    image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+    good = covered & np.all(np.isfinite(image), axis=-1)
+    image, filled = dilate(np.nan_to_num(image), good, margin)
+    # an island texel that had no finite value takes its neighbours' (counted if none reached it)
+    unset = int(np.count_nonzero(covered & ~filled))
+    return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset)

@@ -1,0 +1,99 @@
+"""Lightmap texels from the output elements (``core/output/lightmap.py``), in plain NumPy.
+
+A value linear in position is exact under bilinear interpolation on flat parallelograms, so a
+lightmap of two walls meeting at a corner (one quad each, cut into a grid of elements) must read
+it at every texel centre; texels around the islands are dilated; nothing an island covers is left
+unset; the rasteriser covers a sliver thinner than a texel.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.mesh.subdivide import build_patches
+from hemicube_radiosity.core.output import lightmap as lm
+
+
+def f(p):
+    """A value linear in position, three bands, > 0 on the walls."""
+    return np.stack([1 + p[..., 0] + 0.5 * p[..., 2], 2 + 0.3 * p[..., 1], 1.5 + 0.2 * p[..., 2]], -1)
+
+
+def walls():
+    """Two 2 x 1 m walls in one object: floor-like z = 0 (x, y in [0, 2] x [0, 1]) and x = 0
+    standing on it; their UV triangles in two islands side by side, and their world triangles."""
+    floor = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 1, 0]], float)
+    wall = np.array([[0, 0, 0], [0, 1, 0], [0, 1, 1], [0, 0, 1]], float)
+    verts = np.vstack([floor, wall])
+    mesh = MeshInput.from_faces(verts, [[0, 1, 2, 3], [4, 5, 6, 7]], name="walls")
+    elements = build_patches([mesh], 0.1)
+    uv_floor = np.array([[0.02, 0.02], [0.62, 0.02], [0.62, 0.32], [0.02, 0.32]])
+    uv_wall = np.array([[0.70, 0.02], [0.98, 0.02], [0.98, 0.30], [0.70, 0.30]])
+    tris = [(0, 1, 2), (0, 2, 3)]
+    uv = np.array([[u[i] for i in t] for u in (uv_floor, uv_wall) for t in tris])
+    world = np.array([[w[i] for i in t] for w in (floor, wall) for t in tris])
+    return elements, uv, world
+
+
+def corner_values(elements):
+    c = elements.corners()                       # (N, 4, 3), a triangle's 4th corner its 3rd
+    return f(c)
+
+
+def test_texels_read_the_elements_exactly():
+    elements, uv, world = walls()
+    L = lm.bake_lightmap(elements, corner_values(elements), 0, uv, world, 64)
+    assert L.size == (64, 64) and L.unset == 0
+    tri, bary, inside = lm.rasterize(uv, 64, 64)
+    pts, _ = lm.texel_points(world, tri[tri >= 0], bary[tri >= 0])
+    want = np.zeros((64, 64, 3))
+    want[tri >= 0] = f(pts)
+    err = np.abs(L.image[tri >= 0] - want[tri >= 0]).max()
+    assert err < 1e-5, err
+    # every texel of an island and its margin holds a finite value > 0
+    assert np.all(np.isfinite(L.image)) and np.all(L.image[L.filled] > 0)
+    assert L.filled[L.covered].all()
+    # the margin: 8 texels of dilation around each island, nothing further
+    rows, cols = np.nonzero(L.covered)
+    assert L.filled[:, :].sum() > L.covered.sum()
+    far = np.ones((64, 64), bool)
+    far[max(rows.min() - 9, 0):rows.max() + 10, :] = False
+    assert not L.filled[far].any()
+    assert L.filled[min(rows.max() + 8, 63), cols.min()]
+
+
+def test_texel_centres_and_orientation():
+    # texel (r, c) is centred at ((c + 0.5) / W, (r + 0.5) / H): a triangle covering the lower
+    # left half of a 4 x 4 image holds the centres with c + r < 3 (and the diagonal, ties)
+    uv = np.array([[[0, 0], [1, 0], [0, 1]]], float)
+    tri, bary, inside = lm.rasterize(uv, 4, 4, reach=0.0)
+    r, c = np.mgrid[0:4, 0:4]
+    assert np.array_equal(inside, (r + c) <= 3)
+    np.testing.assert_allclose(bary.sum(-1)[tri >= 0], 1.0)
+    # barycentric: the centre (0.5, 0.5) texels -> uv (0.125, 0.125)
+    np.testing.assert_allclose(bary[0, 0], [0.75, 0.125, 0.125])
+
+
+def test_sliver_thinner_than_a_texel_is_covered():
+    uv = np.array([[[0.1, 0.5], [0.9, 0.5], [0.9, 0.51]]], float)    # 0.32 texels tall at 32
+    tri, bary, inside = lm.rasterize(uv, 32, 32)
+    assert (tri >= 0).sum() >= 20 and not inside.any()
+    # clamped onto the triangle: barycentric coordinates in [0, 1]
+    b = bary[tri >= 0]
+    assert b.min() >= 0 and np.allclose(b.sum(1), 1)
+
+
+def test_dilation_fills_from_neighbours():
+    img = np.zeros((5, 5, 1))
+    known = np.zeros((5, 5), bool)
+    img[2, 2], known[2, 2] = 3.0, True
+    out, k = lm.dilate(img, known, passes=1)
+    assert k.sum() == 9 and np.all(out[k] == 3.0)
+    out, k = lm.dilate(img, known, passes=2)
+    assert k.all()
+
+
+def test_image_size():
+    assert lm.image_size(4.0, 32, 1024) == 64
+    assert lm.image_size(1e6, 32, 1024) == 1024
+    assert lm.image_size(0.0, 32, 1024) == 8
