@@ -201,6 +201,44 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     return CyclesBake(point, corner, seconds, settings)
 
 
+def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2):
+    """((size, size, 3) float64, seconds): Cycles' bake of mesh object ``ob`` into an image
+    through UV map ``uv_layer`` ('' the active one): 'DIFFUSE' (direct + indirect + colour:
+    what a render shows of a diffuse surface) or 'EMIT' (a baked copy's own look). An image
+    node is added to each of its materials for the bake and removed again; rows bottom-up."""
+    import bpy
+
+    img = bpy.data.images.new(f"{ob.name}.{kind}{samples}", size, size, float_buffer=True)
+    added = []
+    for slot in ob.material_slots:
+        nt = slot.material.node_tree
+        node = nt.nodes.new("ShaderNodeTexImage")
+        node.image = img
+        nt.nodes.active = node
+        added.append((nt, node))
+    sc = bpy.context.scene
+    configure_cycles(sc, samples=samples, threads=threads)
+    sc.render.bake.target = "IMAGE_TEXTURES"
+    sc.render.bake.margin = 0
+    vl = bpy.context.view_layer
+    for o in vl.objects:
+        o.select_set(o == ob)
+    vl.objects.active = ob
+    kw = dict(pass_filter={"DIRECT", "INDIRECT", "COLOR"}) if kind == "DIFFUSE" else {}
+    t = time.perf_counter()
+    with bpy.context.temp_override(scene=sc, view_layer=vl, active_object=ob, object=ob,
+                                   selected_objects=[ob], selected_editable_objects=[ob]):
+        bpy.ops.object.bake(type=kind, target="IMAGE_TEXTURES", margin=0, use_clear=True,
+                            uv_layer=uv_layer, **kw)
+    seconds = time.perf_counter() - t
+    for nt, node in added:
+        nt.nodes.remove(node)
+    px = np.empty(size * size * 4, np.float32)
+    img.pixels.foreach_get(px)
+    bpy.data.images.remove(img)
+    return px.reshape(size, size, 4)[..., :3].astype(np.float64), seconds
+
+
 def bake_seconds(objects, **kw) -> float:
     """Run :func:`bake_vertex_radiance` and return only the time the bake call took (s)."""
     return bake_vertex_radiance(objects, **kw).seconds

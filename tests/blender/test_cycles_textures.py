@@ -30,6 +30,7 @@ bpy = pytest.importorskip("bpy")
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
 from hemicube_radiosity.blender.read import shading  # noqa: E402
+from tests.support.fingerprint import hash_mesh  # noqa: E402
 from tests.support.cycles_scenes import Comparison  # noqa: E402
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
@@ -335,12 +336,7 @@ def _fingerprint():
     the scene's state, as one hash."""
     h = hashlib.sha256()
     for me in sorted(bpy.data.meshes, key=lambda m: m.name):
-        h.update(me.name.encode())
-        for coll, prop, n in ((me.vertices, "co", 3), (me.loops, "vertex_index", 1),
-                              (me.polygons, "loop_start", 1), (me.polygons, "material_index", 1)):
-            a = np.empty(len(coll) * n, np.float64)
-            coll.foreach_get(prop, a)
-            h.update(a.tobytes())
+        hash_mesh(h, me)
         for at in sorted(me.attributes, key=lambda a: a.name):
             h.update(f"{at.name} {at.domain} {at.data_type}".encode())
             key = "color" if at.data_type in ("FLOAT_COLOR", "BYTE_COLOR") else (

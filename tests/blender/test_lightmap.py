@@ -41,6 +41,7 @@ from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender import bake, gltf, write  # noqa: E402
 from hemicube_radiosity.core.output import lightmap as core_lightmap  # noqa: E402
 from tests.support import ROOT  # noqa: E402
+from tests.support.fingerprint import hash_mesh  # noqa: E402
 from tests.support.gltf import read_gltf  # noqa: E402
 from tests.support.lightmap_scenes import room  # noqa: E402
 
@@ -53,34 +54,7 @@ VIEWER = os.path.join(ROOT, "tests", "support", "viewer")
 def cycles_bake(ob, uv_layer, size, samples):
     """((size, size, 3) Cycles' DIFFUSE bake (direct + indirect + colour) of ``ob`` through UV map
     ``uv_layer``, seconds)."""
-    img = bpy.data.images.new(f"{ob.name}.cycles{samples}", size, size, float_buffer=True)
-    added = []
-    for slot in ob.material_slots:
-        nt = slot.material.node_tree
-        node = nt.nodes.new("ShaderNodeTexImage")
-        node.image = img
-        nt.nodes.active = node
-        added.append((nt, node))
-    sc = bpy.context.scene
-    cr.configure_cycles(sc, samples=samples)
-    sc.render.bake.target = "IMAGE_TEXTURES"
-    sc.render.bake.margin = 0
-    vl = bpy.context.view_layer
-    for o in vl.objects:
-        o.select_set(o == ob)
-    vl.objects.active = ob
-    t = time.perf_counter()
-    with bpy.context.temp_override(scene=sc, view_layer=vl, active_object=ob, object=ob,
-                                   selected_objects=[ob], selected_editable_objects=[ob]):
-        bpy.ops.object.bake(type="DIFFUSE", pass_filter={"DIRECT", "INDIRECT", "COLOR"},
-                            target="IMAGE_TEXTURES", margin=0, use_clear=True, uv_layer=uv_layer)
-    seconds = time.perf_counter() - t
-    for nt, node in added:
-        nt.nodes.remove(node)
-    px = np.empty(size * size * 4, np.float32)
-    img.pixels.foreach_get(px)
-    bpy.data.images.remove(img)
-    return px.reshape(size, size, 4)[..., :3].astype(np.float64), seconds
+    return cr.bake_image(ob, size, samples=samples, uv_layer=uv_layer)
 
 
 def image_rgb(name):
@@ -115,12 +89,7 @@ def fingerprint():
     for me in sorted(bpy.data.meshes, key=lambda m: m.name):
         if me.get(write.SOURCE_KEY):
             continue                                  # a baked copy's mesh
-        h.update(me.name.encode())
-        for coll, prop, n in ((me.vertices, "co", 3), (me.loops, "vertex_index", 1),
-                              (me.polygons, "loop_start", 1), (me.polygons, "material_index", 1)):
-            a = np.empty(len(coll) * n, np.float64)
-            coll.foreach_get(prop, a)
-            h.update(a.tobytes())
+        hash_mesh(h, me)
         for layer in me.uv_layers:
             a = np.empty(len(me.loops) * 2, np.float64)
             layer.data.foreach_get("uv", a)

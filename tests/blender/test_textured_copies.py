@@ -28,29 +28,9 @@ SIZE = 32                      # texels along a side of the baked images
 
 
 def bake_image(ob, kind):
-    """(SIZE, SIZE, 3) Cycles' bake of ``ob`` through its UV map: 'DIFFUSE' (direct + indirect +
-    colour: what a render shows of the surface) or 'EMIT' (a baked copy's own look)."""
-    img = bpy.data.images.new(f"{ob.name}.{kind}", SIZE, SIZE, float_buffer=True)
-    for slot in ob.material_slots:
-        nt = slot.material.node_tree
-        node = nt.nodes.new("ShaderNodeTexImage")
-        node.image = img
-        nt.nodes.active = node
-    sc = bpy.context.scene
-    cr.configure_cycles(sc, samples=4)
-    sc.render.bake.target = "IMAGE_TEXTURES"
-    sc.render.bake.margin = 0
-    vl = bpy.context.view_layer
-    for o in vl.objects:
-        o.select_set(o == ob)
-    vl.objects.active = ob
-    kw = dict(pass_filter={"DIRECT", "INDIRECT", "COLOR"}) if kind == "DIFFUSE" else {}
-    with bpy.context.temp_override(scene=sc, view_layer=vl, active_object=ob, object=ob,
-                                   selected_objects=[ob], selected_editable_objects=[ob]):
-        bpy.ops.object.bake(type=kind, target="IMAGE_TEXTURES", margin=0, use_clear=True, **kw)
-    px = np.empty(SIZE * SIZE * 4, np.float32)
-    img.pixels.foreach_get(px)
-    return px.reshape(SIZE, SIZE, 4)[..., :3].astype(np.float64)
+    """(SIZE, SIZE, 3) Cycles' bake of ``ob`` through its UV map: 'DIFFUSE' (what a render shows
+    of the surface) or 'EMIT' (a baked copy's own look)."""
+    return cr.bake_image(ob, SIZE, kind=kind)[0]
 
 
 def error(a, b):
