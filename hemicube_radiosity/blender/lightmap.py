@@ -142,8 +142,14 @@ def _save_image(name, path, pixels, file_format):
     img.pixels.foreach_set(rgba.ravel())
     img.filepath_raw = path
     img.file_format = file_format
-    if file_format == "OPEN_EXR" and hasattr(img, "use_half_precision"):
-        img.use_half_precision = False
+    if file_format == "OPEN_EXR":
+        # radiance as it is: Blender 4.2 / 4.5 write a generated float image's EXR through the
+        # sRGB curve unless its colours are data (7.0 came back as 2.318); 5.0 writes it as it
+        # is, and zeros when told the colours are data (both measured)
+        if bpy.app.version < (5, 0, 0):
+            img.colorspace_settings.is_data = True
+        if hasattr(img, "use_half_precision"):
+            img.use_half_precision = False
     try:
         img.save()
     except RuntimeError as ex:
