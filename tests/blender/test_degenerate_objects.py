@@ -35,6 +35,8 @@ def lit_floor(bpy):
     floor = mesh_object(bpy, "Floor", QUAD, [(0, 1, 2, 3)])
     lamp = mesh_object(bpy, "Lamp", [(0, 0, 1), (0, 1, 1), (1, 1, 1), (1, 0, 1)], [(0, 1, 2, 3)])
     m = bpy.data.materials.new("Glow")
+    if m.node_tree is None:
+        m.use_nodes = True                  # Blender < 5: a new material has no nodes yet
     m.node_tree.nodes["Principled BSDF"].inputs["Emission Color"].default_value = (1, 1, 1, 1)
     m.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 5.0
     lamp.data.materials.append(m)

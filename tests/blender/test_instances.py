@@ -310,6 +310,8 @@ def test_a_textured_instance_is_evaluated_by_cycles_like_its_object():
     floor = floor_object(4, 2.0)
     crate, coll = _crate_object()
     m = bpy.data.materials.new("checker")
+    if m.node_tree is None:
+        m.use_nodes = True                  # Blender < 5: a new material has no nodes yet
     chk = m.node_tree.nodes.new("ShaderNodeTexChecker")
     chk.inputs["Scale"].default_value = 2.0
     m.node_tree.links.new(chk.outputs[0], m.node_tree.nodes["Principled BSDF"].inputs["Base Color"])
