@@ -42,7 +42,13 @@ def read(addon, rel):
     path = os.path.join(SCENES, rel)
     if not os.path.isfile(path):
         pytest.skip(f"{rel} is not in {SCENES}")
-    sub(addon, "blender.cli.main").load_input(path)
+    try:
+        sub(addon, "blender.cli.main").load_input(path)
+    except sub(addon, "blender.cli.parser").CLIError as ex:
+        # the Bitterli scenes were saved by Blender 5, whose file format 4.2 does not read
+        if bpy.app.version < (5, 0, 0) and "not a blend file" in str(ex):
+            pytest.skip(f"{rel}: Blender {bpy.app.version_string} cannot read it (saved by a newer Blender)")
+        raise
     scene = sub(addon, "blender.read.scene")
     objs = sub(addon, "blender.read.visibility").render_visible_objects(bpy.context.view_layer,
                                                                        scene.GEOMETRY_TYPES)
