@@ -6,28 +6,29 @@ a floor of tiles modelled as one quad loses its pattern. Where an object's mater
 (what feeds the Base Color of the Principled BSDF, or the Color of the Diffuse BSDF, wired to the
 output comes from nodes) and none of its faces emits, its copy (``settings.keep_textures``) gets:
 
-* a second corner attribute, ``<attribute> Light``: the light arriving at each corner (radiance:
-  irradiance / pi; ``BakeResult.corner_lighting``), made the active and render colour (glTF's
-  COLOR_0); the radiosity attribute is written as well (the untextured, game-ready output);
-* per material slot a material that shows ``colour x k x light``: a copy of the user's material
-  (``Radiosity Bake (<attribute> x <material>)``) whose Base Color chain is multiplied (Mix,
-  Multiply) by the attribute, then by the constant ``k``, and wired into the output, an unlit
-  material (glTF: baseColorTexture, baseColorFactor = k and COLOR_0 under KHR_materials_unlit).
-  ``k`` is Cycles' diffuse albedo of the material with its Base Color white (the specular layer's
-  darkening: 0.963 for Blender's default Principled BSDF), asked of Cycles once for all the
-  materials (:func:`.read.shading.evaluate`). A plain slot of such an object shows its Cycles
-  albedo times the attribute;
-* UVs: a copy of the user's topology keeps them; an element mesh (the bake cut the faces finer)
-  gets every UV map of the user's mesh at its corners (:func:`element_uvs`), barycentric in the
-  triangle of Blender's triangulation of the source face that holds the corner, as Cycles
-  interpolates them.
+* a second corner attribute, ``<attribute> Light``, made the active and render colour (glTF's
+  COLOR_0): on the faces of a textured material the light arriving at each corner (radiance:
+  irradiance / pi; ``BakeResult.corner_lighting``) times ``k``, Cycles' diffuse albedo of that
+  material with a white Base Color (the specular layer's darkening: 0.963 for Blender's default
+  Principled BSDF; asked of Cycles once for all the materials, :func:`albedo_scales`); on the
+  other faces the radiosity (:func:`light_values`). The radiosity attribute is written as well
+  (the untextured, game-ready output);
+* per textured slot a material that shows ``colour x attribute``: a copy of the user's material
+  (``Radiosity Bake (<attribute> Light x <material>)``) whose Base Color chain is multiplied (Mix,
+  Multiply) by the attribute and wired into the output, an unlit material (glTF: baseColorTexture
+  and COLOR_0 under KHR_materials_unlit); a plain slot shows the attribute as it is (the bake's
+  own material);
+* UVs: a copy of the user's topology keeps them; an element mesh (the bake cut the faces finer,
+  or the object has a back) gets every UV map of the user's mesh at its corners
+  (:func:`element_uvs`), barycentric in the triangle of Blender's triangulation of the source face
+  that holds the corner, as Cycles interpolates them.
 
-Not done here (the radiosity attribute alone is written): objects that emit, objects with a back
-(``core/mesh/backs.py``: their copy is both sides of their elements), other shaders than a
-Principled or Diffuse BSDF at the output, and in-place output (the user's materials are never
-changed). The texture shows the colour Cycles renders only for a texture on Base Color alone: a
-textured roughness or metallic changes ``k`` across the surface, and the copy uses its value for
-their unlinked inputs.
+A slot whose material light passes through (:func:`see_through`: glass) keeps the user's own
+material in any copy. Not done here (the radiosity attribute alone is shown): objects that emit,
+other shaders than a Principled or Diffuse BSDF at the output, and in-place output (the user's
+materials are never changed). The texture shows the colour Cycles renders only for a texture on
+Base Color alone: a textured roughness or metallic changes ``k`` across the surface, and the copy
+uses its value for their unlinked inputs.
 """
 from __future__ import annotations
 
@@ -44,13 +45,16 @@ LIGHT_SUFFIX = " Light"
 _COLOUR_INPUTS = {"BSDF_PRINCIPLED": "Base Color", "BSDF_DIFFUSE": "Color"}
 
 
+def _surface_node(mat):
+    """The node wired straight into ``mat``'s Surface (reroutes skipped), or None."""
+    out = shading.output_node(mat) if mat is not None else None
+    return None if out is None else follow(out.inputs["Surface"])[0]
+
+
 def colour_input(mat):
     """The colour input socket of the BSDF wired straight into ``mat``'s Surface (Principled:
     Base Color, Diffuse: Color), or None."""
-    out = shading._output_node(mat) if mat is not None else None
-    if out is None:
-        return None
-    node, _ = follow(out.inputs["Surface"])
+    node = _surface_node(mat)
     name = _COLOUR_INPUTS.get(getattr(node, "type", None))
     return None if name is None else node.inputs[name]
 
@@ -63,10 +67,7 @@ def see_through(mat) -> bool:
     Refraction or Transparent BSDF, or a Principled BSDF of Transmission Weight 0.5 or more,
     wired straight into the Surface (its baked colour, near black, would make a window an
     opaque slab: a copy keeps the user's own material on such faces)."""
-    out = shading._output_node(mat) if mat is not None else None
-    if out is None:
-        return False
-    node, _ = follow(out.inputs["Surface"])
+    node = _surface_node(mat)
     if node is None:
         return False
     if node.type in _SEE_THROUGH:
@@ -120,7 +121,7 @@ def _lit_material(name, attribute, source, culled=False):
     mat.name = name
     nt = mat.node_tree
     chain = follow(colour_input(mat))[1]
-    out = shading._output_node(mat)
+    out = shading.output_node(mat)
     x, y = out.location
     attr = nt.nodes.new("ShaderNodeVertexColor")
     attr.layer_name, attr.location = attribute, (x - 400, y - 200)

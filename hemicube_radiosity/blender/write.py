@@ -30,13 +30,16 @@ clamping or tone mapping.
 """
 from __future__ import annotations
 
+import functools
+from dataclasses import dataclass
+
 import bpy
 import numpy as np
 from ..core.runtime.errors import RadiosityError
 from . import textures
 
 __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
-           "baked_material", "remove_bakes", "copies_of", "patch_mesh_arrays", "copies_collection",
+           "baked_material", "remove_bakes", "copies_of", "copies_collection",
            "place_copy", "select_copies", "source_mesh_copy", "set_materials"]
 
 COLLECTION_NAME = "Radiosity"
@@ -110,13 +113,12 @@ def remove_bakes(names, unhide=False):
                     pass
 
 
-def patch_mesh_arrays(patches, owner, corner_values, matrix_world, flipped):
-    """Local-space verts, loop vertex ids, loop starts and corner colours of one owner's patches
-    (``owner``: an index, or several: an object and its back); ``corner_values`` (N, 4, 3) per
-    patch corner (``BakeResult.corner_values``)."""
+def _element_layout(patches, owner, matrix_world, flipped):
+    """One owner's patches as a mesh: local-space verts (V', 3), loop vertex ids (L,), loop starts
+    (F,), each loop's patch corner as an index into the (N * 4) flattened corners (L,), and the
+    patches (F,) (``owner``: an index, or several: an object and its back)."""
     sel = np.flatnonzero(np.isin(patches.owner, np.atleast_1d(owner)))
     polys = patches.polys[sel]
-    values = np.asarray(corner_values)[sel]
     used = np.unique(polys[polys >= 0])
     remap = np.full(len(patches.verts), -1, np.int64)
     remap[used] = np.arange(used.size)
@@ -124,16 +126,15 @@ def patch_mesh_arrays(patches, owner, corner_values, matrix_world, flipped):
     Minv = np.linalg.inv(M)
     local = patches.verts[used] @ Minv[:3, :3].T + Minv[:3, 3]
     nside = np.where(polys[:, 3] < 0, 3, 4)
+    order = np.tile(np.arange(4), (len(polys), 1))
     if flipped:  # the reader reversed the rings to keep world-space fronts; undo for local space
-        order = np.tile(np.arange(4), (len(polys), 1))
         order[nside == 4] = [3, 2, 1, 0]
         order[nside == 3] = [2, 1, 0, 3]
         polys = np.take_along_axis(polys, order, axis=1)
-        values = np.take_along_axis(values, order[:, :, None], axis=1)
     mask = np.arange(4)[None, :] < nside[:, None]
     loop_vert = remap[polys[mask]]                  # row-major: face by face
     starts = np.concatenate([[0], np.cumsum(nside)[:-1]])
-    return local, loop_vert, starts, values[mask], sel
+    return local, loop_vert, starts, (sel[:, None] * 4 + order)[mask], sel
 
 
 def _set_color_attribute(me, name, rgb):
@@ -175,17 +176,16 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
             continue
         owners = result.owners_of(oi)
         mat = baked_material(attribute_name, culled=owners.size > 1)
-        # an object with a back (core/mesh/backs.py) is written as its elements, both sides
-        me = _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat) \
-            if owners.size == 1 else None
-        kind = "source" if me is not None else "elements"
-        if me is None:
-            me = _element_mesh(result, corners, owners, src, attribute_name, scale, mat, depsgraph)
-        if oi in textured:
-            _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name,
-                           scale, scales)
-        _keep_see_through(me, kind, result, owners, src, depsgraph)
-        out.append(place_copy(coll, src, me, kind))
+        with _UserMesh(src, depsgraph) as user:
+            # an object with a back (core/mesh/backs.py) is written as its elements, both sides
+            copy = _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat) \
+                if owners.size == 1 else None
+            if copy is None:
+                copy = _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user)
+            if oi in textured:
+                _show_textures(copy, user, corners, lighting, attribute_name, scale, scales, owners.size > 1)
+            _keep_see_through(copy, user)
+        out.append(place_copy(coll, src, copy.me, copy.kind))
     select_copies(context, out)
     return out
 
@@ -227,12 +227,11 @@ def _textured_objects(scene_input, result, depsgraph):
     times the light (:mod:`.textures`): textured and emitting nothing."""
     out = {}
     for oi, src in enumerate(scene_input.objects):
-        obj = bpy.data.objects.get(src.name)
-        if not src.bake or src.corner_rho is None or obj is None:
+        if not src.bake or src.corner_rho is None or bpy.data.objects.get(src.name) is None:
             continue
         if np.any(src.mesh.face_emission > 0) or (src.corner_emission is not None and np.any(src.corner_emission > 0)):
             continue
-        mats = textures.textured_materials([_original(s.material) for s in obj.evaluated_get(depsgraph).material_slots])
+        mats = textures.textured_materials(_UserMesh(src, depsgraph).mats)
         if mats:
             out[oi] = mats
     return out
@@ -244,61 +243,81 @@ def _original(mat):
 
 
 class _UserMesh:
-    """The user's evaluated mesh of ``src`` (read only, freed on exit) and its material slots."""
+    """The user's evaluated object behind a copy: its materials (the originals), each polygon's
+    slot and its mesh (read only), each read on first use and once; the mesh is freed on exit."""
 
     def __init__(self, src, depsgraph):
-        self.ob_eval = bpy.data.objects[src.name].evaluated_get(depsgraph)
+        obj = bpy.data.objects.get(src.name)
+        self.ob_eval = None if obj is None else obj.evaluated_get(depsgraph)
+        self._mesh = None
 
     def __enter__(self):
-        self.mesh = self.ob_eval.to_mesh()
-        self.mats = [_original(s.material) for s in self.ob_eval.material_slots] or [None]
-        slot = np.zeros(len(self.mesh.polygons), np.int64)
-        self.mesh.polygons.foreach_get("material_index", slot)
-        self.slot = np.clip(slot, 0, len(self.mats) - 1)
         return self
 
     def __exit__(self, *exc):
-        self.ob_eval.to_mesh_clear()
+        if self._mesh is not None:
+            self.ob_eval.to_mesh_clear()
+            self._mesh = None
+
+    @property
+    def mesh(self):
+        if self._mesh is None:
+            self._mesh = self.ob_eval.to_mesh()
+        return self._mesh
+
+    @functools.cached_property
+    def mats(self) -> list:
+        slots = [] if self.ob_eval is None else self.ob_eval.material_slots
+        return [_original(s.material) for s in slots] or [None]
+
+    @functools.cached_property
+    def slot(self) -> np.ndarray:
+        """(polygons,) int64 each polygon's material slot, clipped to the slots there are."""
+        slot = np.zeros(len(self.mesh.polygons), np.int64)
+        self.mesh.polygons.foreach_get("material_index", slot)
+        return np.clip(slot, 0, len(self.mats) - 1)
 
 
-def _show_textures(me, kind, result, corners, lighting, owners, oi, src, depsgraph, attribute_name, scale,
-                   scales):
-    """Give copy mesh ``me`` the light attribute (active: glTF's COLOR_0) and per slot a material
-    of its colour times that light (:mod:`.textures`); an element mesh has the user's UVs."""
+@dataclass
+class _Copy:
+    """A baked copy's mesh ``me`` and how its loops map to the bake: ``kind`` 'source' (the
+    user's topology) or 'elements'; ``loop_corner`` (loops,) each loop's element corner, an index
+    into the (N * 4) flattened corners; ``loop_face`` (loops,) the user's face (evaluated polygon)
+    it lies on or behind; ``poly_face`` (polygons,) the same per polygon of an element mesh (None:
+    the polygons are the user's own)."""
+
+    me: object
+    kind: str
+    loop_corner: np.ndarray
+    loop_face: np.ndarray
+    poly_face: np.ndarray | None = None
+
+    def slots(self, user) -> np.ndarray | None:
+        """(polygons,) each polygon's slot in the user's material slots (None: the mesh's own)."""
+        return None if self.poly_face is None else user.slot[self.poly_face]
+
+
+def _show_textures(copy, user, corners, lighting, attribute_name, scale, scales, culled):
+    """Give ``copy`` the light attribute (active: glTF's COLOR_0) and per slot a material of its
+    colour times that light (:mod:`.textures`); ``culled``: it carries backs (two-sided)."""
     light_name = attribute_name + textures.LIGHT_SUFFIX
-    with _UserMesh(src, depsgraph) as user:
-        if kind == "source":
-            slots = _corner_slots(result.elements, oi, src)
-            light, rad = (np.zeros((len(me.loops), 3)) for _ in range(2))
-            light[src.corner_loop] = lighting.reshape(-1, 3)[slots]
-            rad[src.corner_loop] = corners.reshape(-1, 3)[slots]
-            total = np.empty(len(me.polygons), np.int64)
-            me.polygons.foreach_get("loop_total", total)
-            face = np.repeat(np.arange(total.size), total)
-        else:
-            local, loop_vert, starts, light, sel = patch_mesh_arrays(
-                result.elements, owners, lighting, src.matrix_world, src.flipped)
-            rad = patch_mesh_arrays(result.elements, owners, corners, src.matrix_world, src.flipped)[3]
-            faces = _element_faces(result, sel)
-            face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
-        values = textures.light_values(light, rad, face, user.slot, user.mats, scales)
-        mats, slot = user.mats, (None if kind == "source" else user.slot[faces])
-    _set_color_attribute(me, light_name, values * scale)
-    plain = baked_material(light_name, culled=owners.size > 1)
-    set_materials(me, textures.lit_materials(mats, scales, light_name, plain, culled=owners.size > 1), slot)
+    light, rad = (a.reshape(-1, 3)[copy.loop_corner] for a in (lighting, corners))
+    values = textures.light_values(light, rad, copy.loop_face, user.slot, user.mats, scales)
+    _set_color_attribute(copy.me, light_name, values * scale)
+    plain = baked_material(light_name, culled=culled)
+    set_materials(copy.me, textures.lit_materials(user.mats, scales, light_name, plain, culled=culled),
+                  copy.slots(user))
 
 
-def _keep_see_through(me, kind, result, owners, src, depsgraph):
+def _keep_see_through(copy, user):
     """On the slots whose user material light passes through (glass, :func:`.textures.see_through`)
     the copy keeps that material (shared, not changed): a window stays a window. An element
     mesh gets the user's slots for that (each element the slot of its face)."""
-    obj = bpy.data.objects.get(src.name)
-    if obj is None or not any(textures.see_through(s.material) for s in obj.evaluated_get(depsgraph).material_slots):
+    mats = user.mats
+    if not any(textures.see_through(m) for m in mats):
         return
-    with _UserMesh(src, depsgraph) as user:
-        mats, slot = user.mats, None
-        if kind != "source" and len(me.materials) != len(mats):
-            slot = user.slot[_element_faces(result, np.flatnonzero(np.isin(result.elements.owner, owners)))]
+    me = copy.me
+    slot = None if len(me.materials) == len(mats) else copy.slots(user)
     shown = [me.materials[min(i, len(me.materials) - 1)] for i in range(len(mats))]
     set_materials(me, [own if textures.see_through(own) else m for m, own in zip(shown, mats)], slot)
 
@@ -330,11 +349,11 @@ def _element_faces(result, sel):
     return faces
 
 
-def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, depsgraph=None):
+def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user) -> _Copy:
     """A new mesh of the output elements of ``owners`` (an object, and its back) in the object's
-    local space, with the attribute, and the user's UV maps at its corners (:func:`.textures.element_uvs`)."""
-    local, loop_vert, starts, colors, sel = patch_mesh_arrays(
-        result.elements, owners, corners, src.matrix_world, src.flipped)
+    local space, with the attribute, and the user's UV maps at its corners
+    (:func:`.textures.element_uvs`; ``user``: the :class:`_UserMesh`)."""
+    local, loop_vert, starts, take, sel = _element_layout(result.elements, owners, src.matrix_world, src.flipped)
     me = bpy.data.meshes.new(f"{src.name}.radiosity")
     me.vertices.add(len(local))
     me.vertices.foreach_set("co", local.astype(np.float32).ravel())
@@ -343,15 +362,14 @@ def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, deps
     me.polygons.add(len(starts))
     me.polygons.foreach_set("loop_start", starts.astype(np.int32))
     me.update(calc_edges=True)
-    _set_color_attribute(me, attribute_name, colors * scale)
+    _set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[take] * scale)
     me.materials.append(mat)
-    if depsgraph is not None and bpy.data.objects.get(src.name) is not None:
-        with _UserMesh(src, depsgraph) as user:
-            if len(user.mesh.uv_layers) and len(user.mesh.polygons) == src.eval_counts[2]:
-                loop_face = np.repeat(_element_faces(result, sel), np.diff(np.append(starts, len(loop_vert))))
-                for name, uv in textures.element_uvs(user.mesh, local[loop_vert], loop_face).items():
-                    me.uv_layers.new(name=name).data.foreach_set("uv", uv.ravel())
-    return me
+    faces = _element_faces(result, sel)
+    loop_face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
+    if user.ob_eval is not None and len(user.mesh.uv_layers) and len(user.mesh.polygons) == src.eval_counts[2]:
+        for name, uv in textures.element_uvs(user.mesh, local[loop_vert], loop_face).items():
+            me.uv_layers.new(name=name).data.foreach_set("uv", uv.ravel())
+    return _Copy(me, "elements", take, loop_face, faces)
 
 
 def faces_uncut(P, oi, src):
@@ -363,8 +381,9 @@ def faces_uncut(P, oi, src):
 
 
 def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat):
-    """A copy of the user's evaluated mesh carrying the attribute, or None where the bake cut the
-    object's faces finer (or the evaluated mesh is no longer the one that was read)."""
+    """A copy of the user's evaluated mesh carrying the attribute (a :class:`_Copy`), or None
+    where the bake cut the object's faces finer (or the evaluated mesh is no longer the one that
+    was read)."""
     P = result.elements
     if not faces_uncut(P, oi, src):
         return None
@@ -374,16 +393,19 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
     me = source_mesh_copy(depsgraph, src)
     if me is None:
         return None
-    loop_rgb = np.zeros((len(me.loops), 3))
-    loop_rgb[src.corner_loop] = corners.reshape(-1, 3)[slots]
+    loop_corner = np.zeros(len(me.loops), np.int64)
+    loop_corner[src.corner_loop] = slots
     try:
-        _set_color_attribute(me, attribute_name, loop_rgb * scale)
+        _set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[loop_corner] * scale)
     except WriteError:                        # a non-colour attribute of that name: keep it
         bpy.data.meshes.remove(me)
         return None
     # every slot shows the bake (material indices, hence the user's slot layout, are kept)
     set_materials(me, [mat] * max(1, len(me.materials)))
-    return me
+    loop_face = np.zeros(len(me.loops), np.int64)
+    loop_face[src.corner_loop] = np.repeat(np.arange(len(src.mesh.face_offsets) - 1),
+                                           np.diff(src.mesh.face_offsets))
+    return _Copy(me, "source", loop_corner, loop_face)
 
 
 def source_mesh_copy(depsgraph, src):

@@ -60,7 +60,7 @@ from .materials import follow, uses_nodes
 from .visibility import world_matrix
 
 __all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate", "object_independent",
-           "missing_images"]
+           "missing_images", "output_node"]
 
 ATTRIBUTE = "_hr_shading"
 SCENE = "_hr_shading"
@@ -95,7 +95,9 @@ class Shaded:
 
 
 # ----------------------------------------------------------------------------- which materials
-def _output_node(mat):
+def output_node(mat):
+    """The material output Cycles renders ``mat`` through (the active one of target All or
+    Cycles), or None (no nodes, no such output)."""
     if not uses_nodes(mat):
         return None
     nt = mat.node_tree
@@ -145,7 +147,7 @@ def classify(mat):
     evaluate it (module docstring). ``notes`` say what is read from Cycles and why."""
     if mat is None:
         return "plain", []
-    out = _output_node(mat)
+    out = output_node(mat)
     if out is None:
         if not uses_nodes(mat):
             # Blender < 5 without nodes: Cycles renders a Principled BSDF of the viewport colour
@@ -191,7 +193,7 @@ def classify(mat):
 def may_emit(mat):
     """False when no shader of ``mat`` can emit (no Emission node, Principled Emission Strength
     0 and unlinked, no node group, no colour wired into the output): its EMIT bake is all zero."""
-    out = _output_node(mat) if mat is not None else None
+    out = output_node(mat) if mat is not None else None
     if out is None:
         return False
     for node, sock in _shader_nodes(out):
