@@ -454,9 +454,7 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     corner counts as matched when the element found faces within acos(``min_facing``) of the
     corner's face and passes within ``nudge`` x the corner-centroid distance (+1e-6 of the scene)
     of the point; the others are left out."""
-    from dataclasses import replace
-
-    from hemicube_radiosity.core.output.interpolate import locate
+    from hemicube_radiosity.core.output.interpolate import interpolate_corner_values, locate
     from hemicube_radiosity.core.util.geometry import bilinear
 
     p = pos + nudge * (centroid - pos)
@@ -467,8 +465,8 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
         return vals, matched
     idx, uv = locate(elements, p[ok], owner[ok], normal[ok])
     if face is not None:
-        idx, uv = _on_own_face(elements, p[ok], owner[ok], normal[ok], np.asarray(face)[ok], idx, uv, locate, replace)
-    vals[ok] = bilinear(np.asarray(corner_values)[idx], uv[:, :1], uv[:, 1:])
+        idx, uv = _on_own_face(elements, p[ok], owner[ok], normal[ok], np.asarray(face)[ok], idx, uv)
+    vals[ok] = interpolate_corner_values(corner_values, idx, uv)
     c = elements.corners()[idx]
     on = bilinear(c, uv[:, :1], uv[:, 1:])
     diag = float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
@@ -478,11 +476,16 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     return vals, matched
 
 
-def _on_own_face(elements, p, owner, normal, face, idx, uv, locate, replace):
+def _on_own_face(elements, p, owner, normal, face, idx, uv):
     """``idx``, ``uv`` with the points found on an element of another face than their own
     (``face``) located again among the elements of their own face, where it has any."""
-    key_e = elements.owner.astype(np.int64) * (int(elements.source_face.max()) + 2) + elements.source_face
-    key_p = owner.astype(np.int64) * (int(elements.source_face.max()) + 2) + face
+    from dataclasses import replace
+
+    from hemicube_radiosity.core.output.interpolate import locate
+
+    stride = int(elements.source_face.max()) + 2          # one key per (object, face)
+    key_e = elements.owner.astype(np.int64) * stride + elements.source_face
+    key_p = owner.astype(np.int64) * stride + face
     wrong = np.flatnonzero(key_e[idx] != key_p)
     if wrong.size == 0:
         return idx, uv

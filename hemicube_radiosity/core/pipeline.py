@@ -77,8 +77,7 @@ class BakeResult:
         ``corner_radiosity``), else its vertex's ``vertex_radiosity``."""
         if self.corner_radiosity is not None:
             return self.corner_radiosity
-        polys = self.elements.polys
-        return self.vertex_radiosity[np.where(polys < 0, polys[:, 2:3], polys)]
+        return self.vertex_radiosity[self.elements.corner_ids()]
 
     def corner_lighting(self) -> np.ndarray | None:
         """(N, 4, 3) the light arriving at every corner of ``elements`` (radiance: irradiance / pi,
@@ -86,8 +85,7 @@ class BakeResult:
         vary by corner (a texture), for a baked copy that multiplies its texture by it."""
         if self.vertex_lighting is None:
             return None
-        polys = self.elements.polys
-        return self.vertex_lighting[np.where(polys < 0, polys[:, 2:3], polys)]
+        return self.vertex_lighting[self.elements.corner_ids()]
 
     def front_faces(self, owner, faces) -> np.ndarray:
         """(n,) int64 the faces of the object ``owner`` is (or is the back of) that ``faces`` (n,)

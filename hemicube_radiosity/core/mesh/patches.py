@@ -154,6 +154,11 @@ class PatchSet:
         """(N,) 3 or 4."""
         return np.where(self.polys[:, 3] < 0, 3, 4)
 
+    def corner_ids(self) -> np.ndarray:
+        """(N, 4) int64 each patch's corner vertices, a triangle's fourth its third (the corners
+        a (N, 4, ...) per-corner array is laid out by, as :meth:`corners`)."""
+        return np.where(self.polys < 0, self.polys[:, 2:3], self.polys)
+
     def corners(self, ids=None) -> np.ndarray:
         """(N, 4, 3) corner positions; a triangle repeats its last corner (a degenerate quad).
         ``ids`` (n,): only those patches' (n, 4, 3), as ``corners()[ids]`` without making every

@@ -34,9 +34,8 @@ def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
         keys.append(np.column_stack([np.full(face.size, oi), face, pos]))
         vals.append(v)
     keys, vals = np.concatenate(keys), np.concatenate(vals)
-    polys = np.where(elements.polys < 0, elements.polys[:, 2:3], elements.polys)
     ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
-                         elements.verts[polys.reshape(-1)]], axis=1)
+                         elements.verts[elements.corner_ids().reshape(-1)]], axis=1)
     _, inv = unique_rows(np.concatenate([keys, ek]), return_inverse=True)
     inv = inv.reshape(-1)
     slot = np.full(inv.max() + 1, -1)

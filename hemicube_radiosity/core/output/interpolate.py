@@ -13,7 +13,8 @@ from ..mesh.patches import PatchSet
 from ..util.geometry import bilinear
 from ..util.spatial import MAX_PAIRS, Grid, sq_dist
 
-__all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners", "interpolate_corners"]
+__all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners", "interpolate_corners",
+           "interpolate_corner_values"]
 
 _CELL = 2.0     # locate's grid cells, in patch sizes: the 8 nearest centres mostly in the 27 cells around
 _BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
@@ -167,6 +168,12 @@ def interpolate_located(patches: PatchSet, vertex_values, idx, uv) -> np.ndarray
     """(P, k) per-vertex values (V, k) at points already located (``idx``, ``uv`` of
     :func:`locate`: geometry only, so a relight can keep them)."""
     return interpolate_corners(vertex_values, located_corners(patches, idx, uv))
+
+
+def interpolate_corner_values(corner_values, idx, uv) -> np.ndarray:
+    """(P, k) per-corner values (N, 4, k) (``BakeResult.corner_values``: each element corner its
+    own) at points already located (``idx``, ``uv`` of :func:`locate`), bilinear in the element."""
+    return bilinear(np.asarray(corner_values, dtype=np.float64)[idx], uv[:, :1], uv[:, 1:])
 
 
 def located_corners(patches: PatchSet, idx, uv):

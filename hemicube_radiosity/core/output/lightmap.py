@@ -31,8 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..util.geometry import bilinear
-from .interpolate import locate
+from .interpolate import interpolate_corner_values, locate
 
 __all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "dilate", "bake_lightmap",
            "REACH", "MARGIN"]
@@ -170,7 +169,7 @@ def evaluate(elements, corner_values, points, normals, owner):
     if len(points) == 0:
         return np.zeros((0, 3))
     idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
-    return bilinear(np.asarray(corner_values, dtype=np.float64)[idx], uv[:, :1], uv[:, 1:])
+    return interpolate_corner_values(corner_values, idx, uv)
 
 
 def dilate(image, known, passes=MARGIN):

@@ -144,14 +144,14 @@ def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v):
     With corner colours, also ``ctx.corner_radiosity`` (N, 4, 3): the same sum at every element
     corner with that corner's own colour (E_c + rho_c * light_v + reflected_v * rho_c / rho_v, a
     triangle's fourth corner its third), and ``ctx.vertex_lighting`` (V, 3): the light arriving
-    at each vertex (light_v + reflected_v / rho_v), which the writer multiplies by a texture. A vertex's value is the mean of its corners'; the corners
-    keep what the mean loses where faces meet with different colours at one vertex (a UV seam, a
-    texture's tiles): what Cycles shows at each face corner, and what the writer writes."""
+    at each vertex (light_v + reflected_v / rho_v), which the writer multiplies by a texture.
+    A vertex's value is the mean of its corners'; the corners keep what the mean loses where
+    faces meet with different colours at one vertex (a UV seam, a texture's tiles): what Cycles
+    shows at each face corner, and what the writer writes."""
     rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
     if rho_c is None and em_c is None:
         return E_v + rho_v * light_v + reflected_v
-    polys = ctx.elements.polys
-    cv = np.where(polys < 0, polys[:, 2:3], polys)                  # (N, 4) vertex of each corner
+    cv = ctx.elements.corner_ids()                                  # (N, 4) vertex of each corner
     R = np.broadcast_to(np.asarray(reflected_v, dtype=np.float64), np.shape(light_v))
     E_c = E_v[cv] if em_c is None else em_c
     if rho_c is None:
