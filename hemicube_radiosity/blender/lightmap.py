@@ -46,10 +46,11 @@ import tempfile
 import bpy
 import numpy as np
 
+from ..core.formats.gltf import srgb_encode
 from ..core.output import lightmap as core_lightmap
 from . import write
 
-__all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "lightmap_folder", "tone_map_standard"]
+__all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "lightmap_folder"]
 
 LIGHTMAP_UV = "Lightmap"
 MATERIAL_KEY = "radiosity_lightmap_png"   # on a lightmap material: the PNG image glTF exports
@@ -68,13 +69,6 @@ def lightmap_folder(settings):
                     "set a Lightmap Folder to keep them")
 
 
-def tone_map_standard(rgb):
-    """(..., 3) 8-bit-ready sRGB-encoded values in 0..1 of linear ``rgb``: Blender's Standard
-    view (clamp, then the sRGB transfer function)."""
-    x = np.clip(np.asarray(rgb, dtype=np.float64), 0.0, 1.0)
-    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
-
-
 def _uv_layer(me, wanted):
     """(name, made): the UV map of copy mesh ``me`` the lightmap uses, or the name of one to make."""
     if wanted:
@@ -87,12 +81,10 @@ def _uv_layer(me, wanted):
     return name, True
 
 
-def _world_triangles(me, matrix, uv_name):
-    """(uv (T, 3, 2), world (T, 3, 3)) of mesh ``me``'s loop triangles in UV map ``uv_name`` and
-    in world space (``matrix`` 4x4)."""
+def _world_triangles(me, matrix):
+    """(T, 3, 3) mesh ``me``'s loop triangles in world space (``matrix`` 4x4)."""
     me.calc_loop_triangles()
-    T = len(me.loop_triangles)
-    tl = np.empty(T * 3, np.int64)
+    tl = np.empty(len(me.loop_triangles) * 3, np.int64)
     me.loop_triangles.foreach_get("loops", tl)
     lv = np.empty(len(me.loops), np.int64)
     me.loops.foreach_get("vertex_index", lv)
@@ -100,9 +92,17 @@ def _world_triangles(me, matrix, uv_name):
     me.vertices.foreach_get("co", co)
     M = np.asarray(matrix, dtype=np.float64)
     world = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
+    return world[lv[tl]].reshape(-1, 3, 3)
+
+
+def _triangle_uvs(me, uv_name):
+    """(T, 3, 2) mesh ``me``'s loop triangles (as :func:`_world_triangles` made them) in UV map
+    ``uv_name``."""
+    tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tl)
     uv = np.empty(len(me.loops) * 2)
     me.uv_layers[uv_name].data.foreach_get("uv", uv)
-    return uv.reshape(-1, 2)[tl].reshape(T, 3, 2), world[lv[tl]].reshape(T, 3, 3)
+    return uv.reshape(-1, 2)[tl].reshape(-1, 3, 2)
 
 
 def _triangle_area(world):
@@ -216,26 +216,19 @@ def write_lightmaps(context, scene_input, result, settings):
         ob = write.place_copy(coll, src, me, "source")
         uv_name, make = _uv_layer(me, settings.lightmap_uv)
         M = np.asarray(src.matrix_world, dtype=np.float64)
-        if make:
-            co = np.empty(len(me.vertices) * 3)
-            me.vertices.foreach_get("co", co)
-            me.calc_loop_triangles()
-            tl = np.empty(len(me.loop_triangles) * 3, np.int64)
-            me.loop_triangles.foreach_get("vertices", tl)
-            w = (co.reshape(-1, 3) @ M[:3, :3].T)[tl].reshape(-1, 3, 3)
-            area = _triangle_area(w)
-            _pack(ob, uv_name, core_lightmap.image_size(area, settings.lightmap_density,
-                                                        settings.lightmap_max_size))
-        uv, world = _world_triangles(me, M, uv_name)
+        world = _world_triangles(me, M)
         size = core_lightmap.image_size(_triangle_area(world), settings.lightmap_density,
                                         settings.lightmap_max_size)
+        if make:
+            _pack(ob, uv_name, size)
+        uv = _triangle_uvs(me, uv_name)
         lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
                                          flip=bool(np.linalg.det(M[:3, :3]) < 0))
         stem = bpy.path.clean_name(src.name)
         exr = _save_image(f"{src.name}.lightmap.exr", os.path.join(folder, stem + ".lightmap.exr"),
                           lm.image, "OPEN_EXR")
         png = _save_image(f"{src.name}.lightmap.png", os.path.join(folder, stem + ".lightmap.png"),
-                          tone_map_standard(lm.image), "PNG")
+                          srgb_encode(lm.image), "PNG")
         mat = _material(f"Radiosity Lightmap ({src.name})", uv_name, exr, png)
         write.set_materials(me, [mat] * max(1, len(me.materials)))
         ob["radiosity_lightmap_uv"] = uv_name
