@@ -33,7 +33,9 @@ are published). Without that folder this prints one line and exits 0. Smallest f
 
 3. **Cycles** (one child process, ``--cycles-child``): every render-visible mesh made single-user
    and its modifiers applied (a vertex-colour bake writes to the mesh itself), then COMBINED vertex
-   bakes (``tools/cycles_reference.py``, 32 bounces, 2 threads, no denoising): the reference at
+   bakes (``tools/cycles_reference.py``, 32 bounces, ``GLOSSY`` = 4 glossy bounces with reflective
+   caustics as a user's render has them, so light off metal and glossy layers reaches the walls;
+   ``--glossy 0`` for none; 2 threads, no denoising): the reference at
    ``REF_SPP`` = 256 samples (not the 4,096 of ``speed_vs_error.py``: a 270k-triangle scene takes
    minutes per 64 samples on this 2-core machine) and the candidate at 64 samples with another
    seed, both cached in ``bench/cache`` (key: every mesh, material, light and the world, plus the
@@ -91,6 +93,7 @@ CACHE_DIR = os.path.join(ROOT, "bench", "cache")
 OUT_DIR = os.path.join(ROOT, "bench", "out")
 WORK_DIR = os.path.join(OUT_DIR, "real")
 REF_SPP = 256
+GLOSSY = 4           # the references' glossy bounces (with reflective caustics): a user's render
 CAND_SPP = 64
 MEMORY_TARGET_MB = 4096
 TIMEOUT = 20 * 60          # a bake of ours
@@ -360,7 +363,7 @@ def own_evaluated_meshes(objects):
     return out
 
 
-def cycles_child(name, out_npz, ref_spp, cand_spp):
+def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY)):
     import bpy
     import cycles_reference as cr
     from hemicube_radiosity.blender.read.scene import GEOMETRY_TYPES
@@ -378,7 +381,7 @@ def cycles_child(name, out_npz, ref_spp, cand_spp):
                                                                                      seed=sve.CAND_SEED)),
                     ("emit", dict(samples=1, seed=0, mode="EMIT"))):
         t = time.perf_counter()
-        b = cr.cached_bake(objs, CACHE_DIR, bounces=sve.BOUNCES, threads=2, **kw)
+        b = cr.cached_bake(objs, CACHE_DIR, bounces=sve.BOUNCES, threads=2, glossy=int(glossy), **kw)
         arrays[key] = np.concatenate([b.corner[o.name] for o in objs])
         rec[key] = {"seconds": b.seconds, "cached": b.cached, **b.settings}
         log(f"{name}: {key} {b.settings['samples']} spp {'cached' if b.cached else 'baked'}: {b.seconds:.1f} s"
@@ -621,12 +624,13 @@ def run_scene(spec, args):
     if os.path.exists(cyc_npz):
         os.remove(cyc_npz)
     st, rss, wall = run_child(["--cycles-child", spec.folder, cyc_npz, str(args.ref_spp), str(CAND_SPP),
-                               base + "_cycles.json"], base + "_cycles.log", args.cycles_timeout)
+                               str(args.glossy), base + "_cycles.json"], base + "_cycles.log", args.cycles_timeout)
     row["cycles"] = dict(_child_result(st, base + "_cycles.log", base + "_cycles.json", args.cycles_timeout),
                          wall_seconds=wall, max_rss_mb=rss)
     log(f"cycles: {json.dumps(row['cycles'], default=float)[:400]}")
     have_ref = not failed(row["cycles"]) and os.path.exists(cyc_npz)
-    runs = [("defaults", {})] + [(f"quality_{lv}", {"quality": lv}) for lv in args.levels]
+    given = json.loads(args.set)
+    runs = [("defaults", given)] + [(f"quality_{lv}", {**given, "quality": lv}) for lv in args.levels]
     for label, asked in runs:
         out = base + f"_{label}"
         st, rss, wall = run_child(["--ours-child", spec.folder, cyc_npz if have_ref else "", out + ".npy",
@@ -643,7 +647,7 @@ def run_scene(spec, args):
         if label == "defaults":
             coarser = coarser_settings(rec, cyc_npz if have_ref else None)
             if coarser:
-                runs.append(("coarser", coarser))
+                runs.append(("coarser", {**given, **coarser}))
     if have_ref and row["cycles"].get("error") is None:   # Cycles' own error, when no bake of ours ran
         _, c, n = compare(cyc_npz, None)
         row["cycles"].update(error=c, compared=n)
@@ -768,6 +772,10 @@ def main(argv=None):
     ap.add_argument("--timeout", type=float, default=TIMEOUT, help="seconds a bake of ours may take")
     ap.add_argument("--cycles-timeout", type=float, default=CYCLES_TIMEOUT)
     ap.add_argument("--results", default=None)
+    ap.add_argument("--glossy", type=int, default=GLOSSY,
+                    help="the Cycles references' glossy bounces (0: none, and no caustics)")
+    ap.add_argument("--set", default="{}", help="settings of ours as JSON, e.g. "
+                    "'{\"specular_bounce\": false}' (default: the defaults)")
     ap.add_argument("--levels", action="store_true",
                     help="also bake at every quality level but Production (the defaults)")
     args, _ = ap.parse_known_args(argv)   # make bench passes its own flags through
@@ -781,7 +789,7 @@ def main(argv=None):
         ap.error(str(exc))
     path = args.results or os.path.join(OUT_DIR, "real_scenes_quick.json" if args.quick else "real_scenes.json")
     res = {"quick": args.quick, "machine": sve.machine_info(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-           "ref_spp": args.ref_spp, "cand_spp": CAND_SPP, "command": " ".join(["bench/real_scenes.py", *argv]),
+           "ref_spp": args.ref_spp, "cand_spp": CAND_SPP, "glossy": args.glossy, "command": " ".join(["bench/real_scenes.py", *argv]),
            "scenes": []}
     if args.scenes and os.path.exists(path):   # a subset: keep the other scenes' rows of the last run
         with open(path) as f:

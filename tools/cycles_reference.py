@@ -97,8 +97,11 @@ class CyclesBake:
     cached: bool = False
 
 
-def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2):
-    """Cycles on CPU, fixed samples and seed, no denoising/adaptivity/clamping/light threshold."""
+def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2, glossy=0):
+    """Cycles on CPU, fixed samples and seed, no denoising/adaptivity/clamping/light threshold.
+    ``glossy`` 0: no glossy bounces and no caustics (light reaches a surface only off diffuse
+    ones: the paper's model); n > 0: n glossy bounces and reflective caustics, as a user's render
+    has them (Blender's defaults: 4, on), so light off metal and glossy layers reaches the walls."""
     scene.render.engine = "CYCLES"
     cy = scene.cycles
     cy.device = "CPU"
@@ -112,12 +115,12 @@ def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2):
     cy.light_sampling_threshold = 0.0
     cy.max_bounces = int(bounces)
     cy.diffuse_bounces = int(bounces)
-    cy.glossy_bounces = 0
+    cy.glossy_bounces = int(glossy)
     cy.transmission_bounces = 0
     cy.volume_bounces = 0
     cy.transparent_max_bounces = 8
     cy.min_light_bounces = 0
-    cy.caustics_reflective = False
+    cy.caustics_reflective = glossy > 0
     cy.caustics_refractive = False
     if threads:
         scene.render.threads_mode = "FIXED"
@@ -142,7 +145,7 @@ def _point_from_corner(me, corner):
 
 
 def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounces=32, threads=2,
-                         scene=None) -> CyclesBake:
+                         scene=None, glossy=0) -> CyclesBake:
     """Bake Cycles radiance at the corners/vertices of mesh ``objects`` (all in one bake call).
 
     Objects must be mesh objects linked to ``scene`` (default: the context scene). Their meshes
@@ -155,7 +158,7 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     if mode not in PASS_FILTERS:
         raise ValueError(f"mode must be one of {sorted(PASS_FILTERS)}")
     scene = scene or bpy.context.scene
-    configure_cycles(scene, samples, seed, bounces, threads)
+    configure_cycles(scene, samples, seed, bounces, threads, glossy)
     objects = list(objects)
     if not objects:
         raise ValueError("no objects to bake")
@@ -198,6 +201,8 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
         if old is not None and old in me.color_attributes:
             me.color_attributes.active_color = me.color_attributes[old]
     settings = dict(samples=int(samples), seed=int(seed), mode=mode, bounces=int(bounces))
+    if glossy:                  # keys of the references baked without glossy bounces unchanged
+        settings["glossy"] = int(glossy)
     return CyclesBake(point, corner, seconds, settings)
 
 
@@ -342,7 +347,7 @@ def cache_key(objects, settings: dict, scene=None) -> str:
 
 
 def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bounces=32, threads=2,
-                scene=None) -> CyclesBake:
+                scene=None, glossy=0) -> CyclesBake:
     """:func:`bake_vertex_radiance` through an npz cache in ``cache_dir`` (created if missing).
 
     A hit returns the stored arrays and the stored bake time with ``cached=True``.
@@ -357,7 +362,7 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
             corner = {n: z[f"corner_{i}"] for i, n in enumerate(names)}
             return CyclesBake(point, corner, float(z["seconds"]), settings, cached=True)
     res = bake_vertex_radiance(objects, samples=samples, seed=seed, mode=mode, bounces=bounces,
-                               threads=threads, scene=scene)
+                               threads=threads, scene=scene, glossy=glossy)
     os.makedirs(os.fspath(cache_dir), exist_ok=True)
     names = list(res.point)
     arrays = {"names": np.array(names), "seconds": np.array(res.seconds)}

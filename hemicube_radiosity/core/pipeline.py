@@ -23,6 +23,7 @@ from .mesh.elements import meshes_key, output_elements, start_elements
 from .mesh.patches import PatchSet
 from .mesh.refine import refine_stage
 from .mesh.sizes import fitted_detail, with_auto_scales
+from .mesh.specular import with_specular_bounce
 from .mesh.stage import check_before_cutting, patch_stage
 from .output.estimate import estimate_stage
 from .output.stage import vertex_stage
@@ -265,6 +266,8 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     settings = (settings or BakeSettings()).with_quality()
     settings.validate()
     if meshes is not None:
+        if settings.specular_bounce:             # light off metal reaches the rest, as diffuse
+            meshes = with_specular_bounce(meshes)
         if settings.patch_size:                  # a ground plane around the scene: its own size
             meshes = with_auto_scales(meshes, settings.patches_per_diagonal(),
                                       None if settings.patch_size == "auto" else float(settings.patch_size))

@@ -71,9 +71,9 @@ def textured_floor(cuts=1):
 class Comparison:
     """Cycles and our radiance at every face corner of the baked objects."""
 
-    def __init__(self, objects, samples, bounces=32, mode="COMBINED"):
+    def __init__(self, objects, samples, bounces=32, mode="COMBINED", glossy=0, settings=None):
         self.objects = objects
-        ref = cr.bake_vertex_radiance(objects, samples=samples, bounces=bounces, mode=mode)
+        ref = cr.bake_vertex_radiance(objects, samples=samples, bounces=bounces, mode=mode, glossy=glossy)
         self.cycles_seconds = ref.seconds
         dg = bpy.context.evaluated_depsgraph_get()
         scene_input = reader.read_scene(dg, objects)
@@ -82,7 +82,8 @@ class Comparison:
         self.meshes = scene_input.meshes
         t = time.perf_counter()
         output = {"COMBINED": "radiosity", "LIGHTING": "lighting"}[mode]
-        res = bake(scene_input.meshes, BakeSettings(**SETTINGS, output_pass=output), lights=lights, world=world)
+        res = bake(scene_input.meshes, BakeSettings(**{**SETTINGS, **(settings or {})}, output_pass=output),
+                   lights=lights, world=world)
         self.our_seconds = time.perf_counter() - t
         self.result = res
         P = res.patches

@@ -30,6 +30,11 @@ RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
 # metallic, transmission, specular or coat reflects is not baked); Blender's default Principled
 # BSDF (specular IOR level 0.5, IOR 1.5) keeps 96.3% and says nothing
 UNBAKED_SHARE = 0.10
+# a specular or metallic layer reflecting more than this is light the solve spreads as diffuse
+# light (core/mesh/specular.py): worth a note; the default material's 0.037 is not
+SPREAD_SHARE = 0.10
+SPREAD_NOTE = ("its specular or metallic layer's light reaches other surfaces spread as diffuse "
+               "light (its energy, not its direction: no mirror image, no caustic)")
 DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 
@@ -250,13 +255,15 @@ _FIXED_BY_CYCLES = ("is linked (texture/nodes)", "by the viewport colour", "igno
 
 
 def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
-    """(corner_rho (L,3), corner_emission (L,3), notes) in the order of ``corner_loop``.
+    """(corner_rho (L,3), corner_emission (L,3), corner_glossy (L,3), notes) in the order of
+    ``corner_loop``.
 
-    Plain materials give their :func:`material_rho_emission` value at every corner; a material
-    that :func:`.shading.classify` sends to Cycles gives Cycles' value: one per material
-    ('constant'), or the object's baked corners ('corners')."""
+    Plain materials give their :func:`material_rho_emission` value at every corner (and no
+    glossy layer); a material that :func:`.shading.classify` sends to Cycles gives Cycles' value:
+    one per material ('constant'), or the object's baked corners ('corners'). ``corner_glossy``
+    is the albedo of the specular and metallic layers, clipped to [0, ``RHO_MAX``]."""
     L = corner_loop.size
-    corner_rho, corner_em = np.empty((L, 3)), np.empty((L, 3))
+    corner_rho, corner_em, corner_glossy = np.empty((L, 3)), np.empty((L, 3)), np.zeros((L, 3))
     baked = shaded.corners.get(name)
     notes = []
     if baked is not None and baked[0].shape[0] != L:
@@ -271,18 +278,24 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
             n.append(f"{label}: {shaded.failed}; its unlinked values used")
         elif kind == "constant" and m.original.name_full in shaded.materials:
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
-            c_rho, c_em = shaded.materials[m.original.name_full]
+            c_rho, c_em, c_glossy = shaded.materials[m.original.name_full]
             n += [_of(label, w) for w in why]
-            if np.any(rho - c_rho > UNBAKED_SHARE * np.maximum(rho, 1e-3)):
-                n.append(note(label, "metallic, transmission or a specular or coat layer reflect "
-                              "light this diffuse bake leaves out (10% of the colour or more; "
-                              "Cycles' diffuse reflectance is baked)"))
+            if np.any(rho - c_rho - c_glossy > UNBAKED_SHARE * np.maximum(rho, 1e-3)):
+                n.append(note(label, "transmission or a layer other than diffuse and specular "
+                              "takes light this bake leaves out (10% of the colour or more; "
+                              "Cycles' diffuse and glossy reflectance are baked)"))
+            if np.any(c_glossy > SPREAD_SHARE):
+                n.append(note(label, SPREAD_NOTE))
             rho, em = _clean(c_rho, c_em, label, n)
+            corner_glossy[sel] = _glossy(c_glossy)
         elif kind == "corners" and baked is not None:
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
             n += _textured_notes(label, why)
             r, e = _clean(baked[0][corner_loop[sel]], baked[1][corner_loop[sel]], label, n)
             corner_rho[sel], corner_em[sel] = r, e
+            corner_glossy[sel] = _glossy(baked[2][corner_loop[sel]])
+            if np.any(corner_glossy[sel] > SPREAD_SHARE):
+                n.append(note(label, SPREAD_NOTE))
             if k in used:
                 notes += [s for s in n if s not in notes]
             continue
@@ -291,7 +304,13 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
         corner_rho[sel], corner_em[sel] = rho, em
         if k in used:
             notes += [s for s in n if s not in notes]
-    return corner_rho, corner_em, notes
+    return corner_rho, corner_em, corner_glossy, notes
+
+
+def _glossy(g):
+    """Cycles' glossy albedo made what the solve needs: finite, in [0, ``RHO_MAX``]."""
+    g = np.asarray(g, float)
+    return np.clip(np.where(np.isfinite(g), g, 0.0), 0.0, RHO_MAX)
 
 
 def _of(label, line):

@@ -324,17 +324,19 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     if shaded is None:
         shaded = shading.shade([obj], depsgraph)
     notes = render_notes(obj, ob_eval)
-    corner_rho, corner_em, mat_notes = corner_materials(obj.name, mats, mi[loop_face], corner_loop,
-                                                         shaded, set(np.unique(mi).tolist()))
+    corner_rho, corner_em, corner_glossy, mat_notes = corner_materials(
+        obj.name, mats, mi[loop_face], corner_loop, shaded, set(np.unique(mi).tolist()))
     notes += [s for s in mat_notes if s not in notes]
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
     em = face_means(shaded, obj.name, em, corner_loop, offsets, mats, mi)   # emission over the face
+    glossy = np.add.reduceat(corner_glossy, offsets[:-1], axis=0) / pt[:, None]
     mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi],
                      corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],
-                     face_triangles=reversed_rings(tris, pt) if flipped else tris)
+                     face_triangles=reversed_rings(tris, pt) if flipped else tris,
+                     face_glossy=glossy if np.any(glossy > 0) else None)
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 
@@ -445,7 +447,7 @@ def _placed(src, M, name):
                      corners(m.corner_rho), corners(m.corner_emission), m.face_material,
                      corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M),
                      face_triangles=reversed_rings(m.face_triangles, np.diff(m.face_offsets)) if flipped
-                     else m.face_triangles)
+                     else m.face_triangles, face_glossy=m.face_glossy)
     return ObjectSource(name, mesh, src.corner_loop[perm], M, flipped, False, src.eval_counts, [],
                         corners(src.corner_rho), corners(src.corner_emission))
 

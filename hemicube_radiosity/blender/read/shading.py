@@ -14,10 +14,12 @@ that is not what Cycles renders, Cycles is asked instead:
 * **plain**: Diffuse BSDF, Emission, Mix / Add of them with plain values: the reader's own
   values are exact, Cycles is not asked.
 
-How: two vertex-colour bakes (``bpy.ops.object.bake(target='VERTEX_COLORS')``) into a FLOAT_COLOR
-CORNER attribute: type DIFFUSE with only the COLOR filter (Cycles' diffuse albedo: the weight of
-its diffuse closures, specular layering, metallic, transmission and alpha included) and type
-EMIT. Albedo and emission do not depend on light, so one sample is exact (measured: 1 and 4
+How: three vertex-colour bakes (``bpy.ops.object.bake(target='VERTEX_COLORS')``) into a
+FLOAT_COLOR CORNER attribute: type DIFFUSE with only the COLOR filter (Cycles' diffuse albedo: the
+weight of its diffuse closures, specular layering, metallic, transmission and alpha included),
+type GLOSSY with only the COLOR filter (the albedo of the specular and metallic layers: 0.037 for
+Blender's default material, 0.80 for a metal of Base Color 0.8 and roughness 0.3; the solve
+bounces it, :mod:`core.mesh.specular`) and type EMIT. Albedo and emission do not depend on light, so one sample is exact (measured: 1 and 4
 samples give identical bits) and the scene needs no world or lamps. The bake runs on TEMPORARY
 copies in a temporary scene: each object's evaluated mesh is copied with all its attributes
 (``bpy.data.meshes.new_from_object``, UVs and colour attributes kept), placed at the object's
@@ -75,8 +77,10 @@ class Shaded:
     """One batch of Cycles evaluations.
 
     kinds:     material name_full -> ('plain' | 'constant' | 'corners', [note, ...])
-    materials: material name_full -> (rho (3,), emission (3,)) for 'constant' materials
-    corners:   object name -> (rho (nloops, 3), emission (nloops, 3)) in evaluated-mesh loop order
+    materials: material name_full -> (rho (3,), emission (3,), glossy (3,)) for 'constant'
+               materials
+    corners:   object name -> (rho (nloops, 3), emission (nloops, 3), glossy (nloops, 3)) in
+               evaluated-mesh loop order; glossy: the albedo of the specular and metallic layers
     failed:    why Cycles could not be asked (the reader's own values are used), or None
     seconds:   time of the Cycles bake calls
     face_emission: object name -> (nloops, 3) the mean emission over the face of each loop's
@@ -492,23 +496,26 @@ def _join_batches(scene, copies, made_obs, made_meshes):
     return runs
 
 
-def _split_results(runs, rho, em, constants):
-    """The baked corner values by owner: ({object name: (rho, em)}, {material name_full: (rho,
-    em)}); a joined run's corners go back to each object's loops by their ids, a material's
-    values are the mean over the four corners of its quad."""
+def _split_results(runs, kinds, constants):
+    """The baked corner values by owner: ({object name: (one array per kind)}, {material
+    name_full: (one (3,) per kind)}) for ``kinds``, a list of per-run bakes (rho, emission, ...);
+    a joined run's corners go back to each object's loops by their ids, a material's values are
+    the mean over the four corners of its quad."""
     corners, materials = {}, {}
-    for run, r, e in zip(runs, rho, em):
+    for i, run in enumerate(runs):
+        values = [kind[i] for kind in kinds]
         if not run.names:
             for k, m in enumerate(constants):
-                materials[m.name_full] = (r[4 * k:4 * k + 4].mean(axis=0), e[4 * k:4 * k + 4].mean(axis=0))
+                materials[m.name_full] = tuple(v[4 * k:4 * k + 4].mean(axis=0) for v in values)
         elif run.ids is None:
-            corners[run.names[0]] = (r, e)
+            corners[run.names[0]] = tuple(values)
         else:
-            full_r, full_e = np.empty_like(r), np.empty_like(e)
-            full_r[run.ids], full_e[run.ids] = r, e
+            full = [np.empty_like(v) for v in values]
+            for f, v in zip(full, values):
+                f[run.ids] = v
             starts = np.concatenate([[0], np.cumsum(run.counts)])
             for name, a, b in zip(run.names, starts[:-1], starts[1:]):
-                corners[name] = (full_r[a:b], full_e[a:b])
+                corners[name] = tuple(f[a:b] for f in full)
     return corners, materials
 
 
@@ -537,7 +544,8 @@ def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sample
     (as baked: stand-ins by their own name) whose objects also get their faces' mean emission
     (:func:`.face_emission.sample_faces`).
 
-    Returns ({object name: (rho (L,3), emission (L,3))}, {material name_full: (rho, em)}, seconds,
+    Returns ({object name: (rho (L,3), emission (L,3), glossy (L,3))}, {material name_full: (rho,
+    em, glossy)}, seconds,
     {object name: (L, 3) each loop's face mean emission}).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
     """
@@ -565,13 +573,14 @@ def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sample
         _prepare_bake(scene, obs)
         t = time.perf_counter()
         rho = _bake(scene, obs, "DIFFUSE", {"COLOR"})
+        glossy = _bake(scene, obs, "GLOSSY", {"COLOR"})
         em = _bake(scene, obs, "EMIT", set()) if emit else [np.zeros_like(r) for r in rho]
         means = sample_faces(scene, runs, set(sampled), _bake, _prepare_bake, made_obs, made_meshes,
                              ATTRIBUTE) if emit and sampled else {}
         seconds = time.perf_counter() - t
         loops = [_per_loop(runs[i].ob.data, m) for i, m in means.items()]
-        face_em = _split_results([runs[i] for i in means], loops, loops, [])[0]
-        return (*_split_results(runs, rho, em, constants), seconds,
+        face_em = _split_results([runs[i] for i in means], [loops], [])[0]
+        return (*_split_results(runs, [rho, em, glossy], constants), seconds,
                 {name: v[0] for name, v in face_em.items()})
     finally:
         _remove(scene, made_obs, made_meshes)

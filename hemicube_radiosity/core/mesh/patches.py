@@ -58,6 +58,11 @@ class MeshInput:
                   counter-clockwise seen from the front (:mod:`.ngons`). What a non-planar n-gon
                   needs to be the surface Cycles renders (Blender's own loop triangles); faces
                   not listed are split by :mod:`.ngons`' own rule; None: no face is listed.
+    face_glossy:  (F, 3) or None, the reflectance of the faces' specular and metallic layers
+                  (Cycles' glossy albedo at normal incidence), in [0, 1): with
+                  ``specular_bounce`` it is added to what the solve bounces, spread as diffuse
+                  light (:func:`.specular.with_specular_bounce`); ``face_rho`` stays the diffuse
+                  colour the output shows. None: no such layer.
     back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
                   around, a hair behind: :mod:`.backs`) ...
     back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.
@@ -77,6 +82,7 @@ class MeshInput:
     back_of: int = -1
     back_faces: np.ndarray | None = None
     face_triangles: np.ndarray | None = None
+    face_glossy: np.ndarray | None = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):

@@ -20,19 +20,29 @@ __all__ = ["corner_values", "vertex_mean", "corner_columns", "corner_sum"]
 def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
     """(N, 4, 3) ``which`` ('rho' or 'emission') at every corner of the output ``elements``: the
     source mesh's corner value (``MeshInput.corner_<which>``) where an element corner is a corner
-    of its source face, the element's own (per-face) value elsewhere; None when no mesh has
-    corner values."""
+    of its source face, elsewhere the mean of its source face's corner values (the face's own
+    value where the mesh has none); None when no mesh has corner values. (The mean, not the
+    element's own value: with a specular bounce (:mod:`..mesh.specular`) the faces' values are
+    what the solve bounces, the corners' what the surface shows.)"""
     if meshes is None or all(getattr(m, "corner_" + which) is None for m in meshes):
         return None
-    keys, vals = [], []
+    keys, vals, means = [], [], []
     for oi, m in enumerate(meshes):
         sizes = np.diff(m.face_offsets)
         face = np.repeat(np.arange(sizes.size), sizes)
         v = getattr(m, "corner_" + which)
-        v = np.asarray(getattr(m, "face_" + which), float)[face] if v is None else np.asarray(v, float)
+        per_face = np.asarray(getattr(m, "face_" + which), float)
+        if v is None:
+            v = per_face[face]
+        else:
+            v = np.asarray(v, float)
+            per_face = np.add.reduceat(v, m.face_offsets[:-1], axis=0) / sizes[:, None]
         pos = np.asarray(m.verts, float)[m.face_indices]
         keys.append(np.column_stack([np.full(face.size, oi), face, pos]))
         vals.append(v)
+        means.append(per_face)
+    first = np.concatenate([[0], np.cumsum([len(a) for a in means])])
+    means = np.concatenate(means)
     keys, vals = np.concatenate(keys), np.concatenate(vals)
     ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
                          elements.verts[elements.corner_ids().reshape(-1)]], axis=1)
@@ -41,7 +51,7 @@ def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
     slot = np.full(inv.max() + 1, -1)
     slot[inv[:len(keys)]] = np.arange(len(keys))
     found = slot[inv[len(keys):]]
-    own = np.repeat(np.asarray(getattr(elements, which), float), 4, axis=0)
+    own = np.repeat(means[first[elements.owner] + elements.source_face], 4, axis=0)
     out = np.where((found >= 0)[:, None], vals[np.maximum(found, 0)], own)
     return out.reshape(len(elements), 4, 3)
 
