@@ -353,6 +353,8 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
     A hit returns the stored arrays and the stored bake time with ``cached=True``.
     """
     settings = dict(samples=int(samples), seed=int(seed), mode=mode, bounces=int(bounces))
+    if glossy:                  # keys of the references baked without glossy bounces unchanged
+        settings["glossy"] = int(glossy)
     key = cache_key(objects, settings, scene)
     path = os.path.join(os.fspath(cache_dir), f"cycles_{key}.npz")
     if os.path.exists(path):
