@@ -85,6 +85,33 @@ class Transmit:
     corner_uv: np.ndarray | None = None
     images: list = field(default_factory=list)
 
+    def opacity(self, face_offsets, samples: int = 8) -> np.ndarray:
+        """(F,) the share of each face light does not pass: 1 - its transmittance, for a face
+        with an image the mean over ``samples`` x ``samples`` points of each triangle of its
+        fan in UV space, weighted by the triangles' UV areas."""
+        out = 1.0 - np.asarray(self.face_transmit, float)
+        if self.face_image is None or not np.any(np.asarray(self.face_image) >= 0):
+            return out
+        off = np.asarray(face_offsets, np.int64)
+        faces = np.flatnonzero(np.asarray(self.face_image) >= 0)
+        n = off[faces + 1] - off[faces]
+        face = np.repeat(faces, n - 2)
+        k = np.arange(face.size) - np.repeat(np.cumsum(n - 2) - (n - 2), n - 2)
+        uv = np.asarray(self.corner_uv, float)[np.stack([off[face], off[face] + k + 1, off[face] + k + 2], 1)]
+        i, j = np.meshgrid(np.arange(samples), np.arange(samples), indexing="ij")
+        a, b = (i.ravel() + 1 / 3) / samples, (j.ravel() + 1 / 3) / samples
+        a, b = np.where(a + b > 1, 1 - a, a), np.where(a + b > 1, 1 - b, b)      # fold into the triangle
+        e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) + 1e-30
+        pts = uv[:, None, 0] + a[None, :, None] * e1[:, None] + b[None, :, None] * e2[:, None]
+        img = np.asarray(self.face_image, np.int64)[face]
+        t = np.empty(pts.shape[:2])
+        for m in np.unique(img):
+            t[img == m] = self.images[m].at(pts[img == m].reshape(-1, 2)).reshape(-1, pts.shape[1])
+        sums = np.bincount(face, weights=area * (1 - t.mean(axis=1)), minlength=len(out))
+        out[faces] = sums[faces] / np.bincount(face, weights=area, minlength=len(out))[faces]
+        return out
+
     def faces(self) -> np.ndarray:
         """(F,) bool: the faces any light passes through."""
         out = np.asarray(self.face_transmit, float) > 0
