@@ -138,17 +138,20 @@ class SeeThrough:
     image: np.ndarray
     images: list
     faces: list
+    _key: bytes | None = field(default=None, repr=False, compare=False)
 
     def key(self) -> bytes:
-        """Bytes that change when what passes changes (faces, values, images)."""
+        """Bytes that change when what passes changes (faces, values, images); made once."""
         import hashlib
 
-        h = hashlib.sha256()
-        for a in [self.tris, self.uv, self.transmit, self.image, *self.faces] + [i.pixels for i in self.images]:
-            a = np.ascontiguousarray(a)
-            h.update(str(a.shape).encode() + a.tobytes())
-        h.update(repr([(i.closest, i.repeat) for i in self.images]).encode())
-        return h.digest()
+        if self._key is None:
+            h = hashlib.sha256()
+            for a in [self.tris, self.uv, self.transmit, self.image, *self.faces] + [i.pixels for i in self.images]:
+                a = np.ascontiguousarray(a)
+                h.update(str(a.shape).encode() + a.tobytes())
+            h.update(repr([(i.closest, i.repeat) for i in self.images]).encode())
+            self._key = h.digest()
+        return self._key
 
     def patch_mask(self, patches) -> np.ndarray:
         """(N,) bool: the patches cut from see-through faces."""

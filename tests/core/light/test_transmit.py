@@ -109,3 +109,20 @@ def test_see_through_data_of_a_back_follows_its_front():
     st = see_through([floor, leaf, back])
     assert [f.tolist() for f in st.faces] == [[False] * 1600, [True], [True]]
     assert len(st.tris) == 2                             # the front only: a ray passes once
+
+
+def test_a_relight_with_a_new_alpha_casts_its_rays_again():
+    """The cache keeps shadow and sky rays by geometry and by what passes: a roof made more
+    transparent on a relight (same geometry, cache shared) lets more of the world through."""
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    cache = FormFactorCache()
+    s = BakeSettings(patch_size=None, element_size=None, method="hemicube", resolution=16, sky_rays=256)
+    floor, roof = _scene(Transmit(np.array([0.2])), leaf_half=10.0)
+    first = bake([floor, roof], s, world=np.ones(3), cache=cache)
+    roof.transmit = Transmit(np.array([0.8]))
+    second = bake([floor, roof], s, world=np.ones(3), cache=cache)
+    fresh = bake([floor, roof], s, world=np.ones(3))
+    on_floor = first.patches.owner == 0
+    assert second.patch_radiosity[on_floor].mean() > 1.5 * first.patch_radiosity[on_floor].mean()
+    np.testing.assert_allclose(second.patch_radiosity, fresh.patch_radiosity, rtol=1e-6)
