@@ -234,6 +234,8 @@ class SeeThroughScene:
         self.opaque, self.st, self.step = opaque, st, 1e-6 * float(scale or 1.0)
         self._scene = rtcore_scene.EmbreeScene()
         self._mesh = TriangleMesh(self._scene, np.ascontiguousarray(st.tris, dtype=np.float32))
+        # built (committed) here, before threads or forked workers share it
+        self._scene.run(np.zeros((1, 3), np.float32), np.array([[0.0, 0.0, 1.0]], np.float32), output=1)
 
     def transmitted(self, origins, directions, tfar=None) -> np.ndarray:
         """(M,) float64 in [0, 1]: the share of light passing along ``origin + t * direction``,
