@@ -33,6 +33,7 @@ from .util.geometry import in_frames, tangent_frames
 from .util.sampling import cosine_directions, jittered_grid
 from .runtime.parallel import ordered_map, resolve_workers
 from .mesh.patches import PatchSet
+from .light.transmit import SeeThroughScene, visibility
 
 __all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "mesh_offsets", "ray_offsets",
            "EmbreeUnavailable", "embree_available",
@@ -337,6 +338,8 @@ def occluder(patches, shadows="auto"):
         raise ValueError(f"shadows must be 'auto', 'embree', 'numpy' or 'none', got {shadows!r}")
     if shadows in ("auto", "embree"):
         if embree_available():
+            if getattr(patches, "see_through", None) is not None:
+                return _see_through_scene(patches)
             return embree_scene(_occluding(patches))
         if shadows == "embree":
             raise EmbreeUnavailable()
@@ -344,6 +347,23 @@ def occluder(patches, shadows="auto"):
 
 
 _OCCLUDING_CACHE = Memo(2)
+
+
+def _see_through_scene(patches: PatchSet):
+    """A :class:`.light.transmit.SeeThroughScene` for ``patches`` whose ``see_through`` is set:
+    the outlines of the other patches block, the see-through faces pass their share. Kept with
+    the geometry and the see-through faces (the last two)."""
+    st = patches.see_through
+    key = patches.geometry_key() + b"see-through" + st.key()
+
+    def make():
+        keep = np.flatnonzero(~st.patch_mask(patches))
+        opaque = PatchSet(patches.verts, patches.polys[keep], patches.centers[keep], patches.normals[keep],
+                          patches.areas[keep], patches.rho[keep], patches.emission[keep], patches.owner[keep],
+                          patches.source_face[keep], list(patches.object_names))
+        lo, hi = patches.verts.min(axis=0), patches.verts.max(axis=0)
+        return SeeThroughScene(embree_scene(_occluding(opaque)), st, float(np.linalg.norm(hi - lo)))
+    return _OCCLUDING_CACHE.get(key, make)
 
 
 def _occluding(patches: PatchSet) -> PatchSet:
@@ -433,6 +453,10 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     for s in range(0, len(points), step):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        hit = np.asarray(scene.occluded(np.repeat(x + eps[s:s + step] * n, R, axis=0), d))
+        o = np.repeat(x + eps[s:s + step] * n, R, axis=0)
+        if getattr(scene, "see_through", False):
+            out[s:s + step] = scene.transmitted(o, d).reshape(len(x), R).mean(axis=1)
+            continue
+        hit = np.asarray(scene.occluded(o, d))
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     return out

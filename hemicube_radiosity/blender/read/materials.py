@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...core.runtime.notes import Note, note, warning
+from ...core.runtime.notes import Note, note
 
 __all__ = ["RHO_MAX", "rgb", "follow", "uses_nodes", "material_rho_emission", "corner_materials"]
 
@@ -144,6 +144,10 @@ def _principled(node, notes):
     return rho, em * strength
 
 
+#: shaders with no diffuse part: Cycles' diffuse bake reads 0 from them
+_NOT_DIFFUSE = {"BSDF_GLASS", "BSDF_REFRACTION", "BSDF_TRANSPARENT"}
+
+
 def _shader(node, out_socket, mat, notes, depth=0):
     """(rho, emission) of the shader that ``node`` outputs."""
     zero = np.zeros(3)
@@ -178,6 +182,10 @@ def _shader(node, out_socket, mat, notes, depth=0):
             return parts[0][0] + parts[1][0], parts[0][1] + parts[1][1]
         fac = float(np.clip(_value(node, notes, "Fac", "Factor", color=False), 0.0, 1.0))
         return ((1 - fac) * parts[0][0] + fac * parts[1][0], (1 - fac) * parts[0][1] + fac * parts[1][1])
+    if t in _NOT_DIFFUSE:
+        # light these pass or refract, none they scatter diffusely (Cycles' diffuse albedo: 0);
+        # what they let through is :mod:`.transparency`'s
+        return zero, zero
     if out_socket is not None and out_socket.type in ("RGBA", "VECTOR", "VALUE") and t in ("RGB", "VALUE"):
         # A colour wired straight into the output renders as emission of that colour.
         v = out_socket.default_value
@@ -320,13 +328,12 @@ def _of(label, line):
 
 def _textured_notes(label, why):
     """What a material that Cycles evaluates at the corners says: one note of one kind for its
-    textures (so materials group into one line), a warning for an Alpha that is wired (it cuts
-    holes in Cycles; here the surface is opaque), and its other lines as they are."""
+    textures (so materials group into one line) and its other lines as they are. A wired Alpha
+    is said by :mod:`.transparency`, which reads it."""
     out, textured = [], []
     for w in why:
         if "'Alpha' from" in w:
-            out.append(warning("Alpha is not transparency here: the surface is opaque where "
-                               "Cycles lets light through", label, detail=w))
+            continue
         elif " from " in w and not w.startswith("'") and not isinstance(w, Note):
             textured.append(w)
         else:

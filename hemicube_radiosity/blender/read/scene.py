@@ -43,6 +43,7 @@ from . import instances as inst_reader
 from . import shading
 from .face_emission import face_means
 from .materials import corner_materials
+from .transparency import material_transmit, mesh_transmit, see_through_note, solve_rho
 from .ngon_triangles import bent_ngon_triangles, reversed_rings
 from .visibility import render_notes, world_matrix
 
@@ -303,6 +304,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         cn = corner_normals(me, sm)
         tris = bent_ngon_triangles(me, co, lv, ps, pt)
         mats = [s.material for s in ob_eval.material_slots] or [None]
+        per_slot, see_notes = material_transmit(mats, me, _caustics(depsgraph))
     finally:
         ob_eval.to_mesh_clear()
     if ps.size == 0:
@@ -326,7 +328,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     notes = render_notes(obj, ob_eval)
     corner_rho, corner_em, corner_glossy, mat_notes = corner_materials(
         obj.name, mats, mi[loop_face], corner_loop, shaded, set(np.unique(mi).tolist()))
-    notes += [s for s in mat_notes if s not in notes]
+    notes += [s for s in mat_notes + see_notes if s not in notes]
     rho = np.add.reduceat(corner_rho, offsets[:-1], axis=0) / pt[:, None]
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
     em = face_means(shaded, obj.name, em, corner_loop, offsets, mats, mi)   # emission over the face
@@ -336,7 +338,11 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
                      material_ids(mats)[mi],
                      corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],
                      face_triangles=reversed_rings(tris, pt) if flipped else tris,
-                     face_glossy=glossy if np.any(glossy > 0) else None)
+                     face_glossy=glossy if np.any(glossy > 0) else None,
+                     transmit=mesh_transmit(per_slot, mi, mi[loop_face], corner_loop))
+    if mesh.transmit is not None:
+        notes.append(see_through_note(obj.name))
+        mesh.face_rho = solve_rho(rho, corner_rho, mesh.transmit, offsets)
     return ObjectSource(obj.name, mesh, corner_loop, M, flipped, bake, counts, notes,
                         corner_rho, corner_em)
 
@@ -447,7 +453,8 @@ def _placed(src, M, name):
                      corners(m.corner_rho), corners(m.corner_emission), m.face_material,
                      corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M),
                      face_triangles=reversed_rings(m.face_triangles, np.diff(m.face_offsets)) if flipped
-                     else m.face_triangles, face_glossy=m.face_glossy)
+                     else m.face_triangles, face_glossy=m.face_glossy,
+                     transmit=_placed_transmit(m.transmit, perm))
     return ObjectSource(name, mesh, src.corner_loop[perm], M, flipped, False, src.eval_counts, [],
                         corners(src.corner_rho), corners(src.corner_emission))
 
@@ -501,3 +508,18 @@ def check_writable(objects, settings):
             notes.append(f"{ob.name}: its colour attribute '{name}' ({attr.data_type} on "
                          f"{attr.domain.lower()}s) is replaced by the bake's (FLOAT_COLOR on corners)")
     return notes
+
+
+def _caustics(depsgraph) -> bool:
+    """Whether the scene's Cycles follows refractive caustics (glass passes light there)."""
+    cy = getattr(depsgraph.scene, "cycles", None)
+    return bool(getattr(cy, "caustics_refractive", False))
+
+
+def _placed_transmit(tr, perm):
+    """An instance's see-through faces: the prototype's, its corners' UVs in ``perm`` order."""
+    if tr is None or tr.corner_uv is None:
+        return tr
+    from dataclasses import replace
+
+    return replace(tr, corner_uv=tr.corner_uv[perm])

@@ -30,6 +30,7 @@ from ..runtime.parallel import ordered_map, resolve_workers
 from ..mesh.patches import PatchSet
 from ..util.spatial import morton_order
 from ..rays import ray_offsets
+from .transmit import visibility
 
 #: Shadow rays (points x emitter units x samples) from which a transport with several workers
 #: runs on forked processes: below, forking costs more than it saves.
@@ -142,12 +143,15 @@ def _visible_fraction(scene, origins, targets, normals, target_normals):
     area."""
     S = targets.shape[1]
     d = targets - origins[:, None, :]
-    blocked = scene.occluded(np.repeat(origins, S, axis=0), d.reshape(-1, 3),
-                             np.full(len(origins) * S, 1 - 1e-4)).reshape(-1, S)
+    seen = visibility(scene, np.repeat(origins, S, axis=0), d.reshape(-1, 3),
+                      np.full(len(origins) * S, 1 - 1e-4)).reshape(-1, S)
     r2 = np.einsum("rsk,rsk->rs", d, d)
     w = np.maximum(np.einsum("rsk,rk->rs", d, normals), 0.0) * np.maximum(-np.einsum("rsk,rsk->rs", d, target_normals), 0.0) \
         / np.maximum(r2 * r2, 1e-300)
-    return np.einsum("rs,rs->r", w, 1.0 - blocked), w.sum(axis=1), ~blocked.any(axis=1), blocked.all(axis=1)
+    if seen.dtype == bool:
+        blocked = ~seen
+        return np.einsum("rs,rs->r", w, 1.0 - blocked), w.sum(axis=1), ~blocked.any(axis=1), blocked.all(axis=1)
+    return np.einsum("rs,rs->r", w, seen), w.sum(axis=1), (seen >= 1).all(axis=1), (seen <= 0).all(axis=1)
 
 
 def _sample_drawer(patches, em, corners, groups, units, eps):

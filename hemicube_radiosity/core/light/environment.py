@@ -26,6 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .transmit import visibility
+
 __all__ = ["EnvironmentLight", "equirect_uv", "environment_irradiance", "MAX_MAP_WIDTH"]
 
 PEAK = 20.0             # a pixel this many times the base's luminance is a peak (a sun)
@@ -171,8 +173,8 @@ def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps
     if occ is None:
         vis = np.ones(r.size, bool)
     else:
-        vis = ~np.asarray(occ.occluded(x[r] + eps[r, None] * n[r], d[s], None), bool)
-    c = np.where(vis, cos[r, s], 0.0)
+        vis = visibility(occ, x[r] + eps[r, None] * n[r], d[s], None)
+    c = np.where(vis, cos[r, s], 0.0) if vis.dtype == bool else vis * cos[r, s]
     for k in range(3):
         out[:, k] = np.bincount(r, weights=c * w[s, k], minlength=len(x))
     return out

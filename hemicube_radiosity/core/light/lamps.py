@@ -69,6 +69,7 @@ from .polygon_ff import polygon_form_factor
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
+from .transmit import visibility
 
 __all__ = ["PointLight", "SpotLight", "SunLight", "AreaLight", "EnvironmentLight", "UNBOUNDED", "direct_irradiance",
            "light_irradiance", "spot_attenuation", "AREA_SHAPES"]
@@ -267,10 +268,10 @@ def _shade(x, n, E0, pts, w, atten, occ, eps, infinite=False):
         if r.size:
             org = x[r] + eps[r, None] * n[r]
             if infinite:
-                vis = ~occ.occluded(org, pts[r, s], None)
+                vis = visibility(occ, org, pts[r, s], None)
             else:
                 dirs = pts[r, s] - org
-                vis = ~occ.occluded(org, dirs, np.full(r.size, 1.0 - 1e-4))
+                vis = visibility(occ, org, dirs, np.full(r.size, 1.0 - 1e-4))
             v[r, s] = vis
         num = (v * w * a).sum(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -149,7 +149,7 @@ class DirectLight:
         key = None
         if self.cache is not None:   # the geometry and the points hashed once per array (a relight's are cached)
             grouped = b"" if self.groups is None else self.groups.tobytes()
-            key = cache_key(geometry_key(self.patches) + self.emitters.tobytes() + grouped + array_key(points),
+            key = cache_key(_shadow_key(self.patches) + self.emitters.tobytes() + grouped + array_key(points),
                             ("direct", where, samples, self.two_sided))
         T = cached(self.cache if key else None, key, lambda: self._transport(points, normals, samples))
         if not transposed:
@@ -160,7 +160,7 @@ class DirectLight:
         """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
         fraction of the hemisphere where rays find no surface (:func:`.rays.sky_fraction`,
         ``sky_rays`` per point; geometry only, cached)."""
-        key = cache_key(geometry_key(self.patches) + array_key(points), ("sky", where, self.sky_rays))
+        key = cache_key(_shadow_key(self.patches) + array_key(points), ("sky", where, self.sky_rays))
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
                                                          normals, self.sky_rays, eps=self.offsets(points, normals)))
         return f[:, None] * self.world[None, :]
@@ -211,6 +211,13 @@ class DirectLight:
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)
+
+
+def _shadow_key(patches: PatchSet) -> bytes:
+    """What shadow rays through ``patches`` depend on: the geometry, and what light passes
+    through its see-through faces where it has any (a relight of a new alpha casts again)."""
+    st = patches.see_through
+    return geometry_key(patches) + (b"" if st is None else st.key())
 
 
 def _turn_emitters(settings) -> bool:

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from ..runtime.cache import Memo
 from ..runtime.errors import RadiosityError
+from ..light.transmit import see_through
 
 __all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key"]
 
@@ -66,6 +67,8 @@ class MeshInput:
     back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
                   around, a hair behind: :mod:`.backs`) ...
     back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.
+    transmit:     a :class:`..light.transmit.Transmit` or None: what light passes through its
+                  faces (alpha cut-outs, transparent shaders); None: opaque.
     """
 
     verts: np.ndarray
@@ -83,6 +86,7 @@ class MeshInput:
     back_faces: np.ndarray | None = None
     face_triangles: np.ndarray | None = None
     face_glossy: np.ndarray | None = None
+    transmit: object = None
 
     @classmethod
     def from_faces(cls, verts, faces, rho=(0.5, 0.5, 0.5), emission=(0.0, 0.0, 0.0), name="mesh"):
@@ -127,6 +131,8 @@ class PatchSet:
     owner:       (N,)   int32 index into ``object_names``.
     source_face: (N,)   int32 face index in the owner's source mesh.
     object_names: list of the source object names.
+    see_through: a :class:`..light.transmit.SeeThrough` (the faces shadow rays pass through,
+                 :func:`..light.transmit.see_through` of the meshes) or None: every face opaque.
     """
 
     verts: np.ndarray
@@ -139,6 +145,7 @@ class PatchSet:
     owner: np.ndarray
     source_face: np.ndarray
     object_names: list = field(default_factory=list)
+    see_through: object = None
 
     def __len__(self) -> int:
         return int(self.polys.shape[0])
@@ -186,6 +193,14 @@ class PatchSet:
         return h.digest()
 
     def with_mesh_materials(self, meshes) -> "PatchSet":
+        """A copy whose reflectivity, emission and see-through faces are read again from the
+        source ``meshes`` (:meth:`_with_mesh_colours`), the geometry shared."""
+        out = self._with_mesh_colours(meshes)
+        if self.see_through is not None or any(getattr(m, "transmit", None) is not None for m in meshes):
+            out.see_through = see_through(meshes)
+        return out
+
+    def _with_mesh_colours(self, meshes) -> "PatchSet":
         """A copy whose reflectivity and emission are read again from the source ``meshes``
         (each patch its source face's), the geometry shared: what a relight needs.
 
@@ -214,7 +229,7 @@ class PatchSet:
             self.verts, self.polys, self.centers, self.normals, self.areas,
             self.rho if rho is None else np.asarray(rho, float),
             self.emission if emission is None else np.asarray(emission, float),
-            self.owner, self.source_face, list(self.object_names),
+            self.owner, self.source_face, list(self.object_names), self.see_through,
         )
 
 

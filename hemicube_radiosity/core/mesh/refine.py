@@ -78,14 +78,15 @@ def split_patches(patches: PatchSet, select) -> tuple[PatchSet, np.ndarray]:
     centers, normals, areas = poly_geometry(verts, polys)
     normals = patches.normals[parent]            # children lie in their parent's plane
     out = PatchSet(verts, polys, centers, normals, areas, patches.rho[parent], patches.emission[parent],
-                   patches.owner[parent], patches.source_face[parent], list(patches.object_names))
+                   patches.owner[parent], patches.source_face[parent], list(patches.object_names),
+                   patches.see_through)
     return out, parent
 
 
 def _subset(patches: PatchSet, ids) -> PatchSet:
     return PatchSet(patches.verts, patches.polys[ids], patches.centers[ids], patches.normals[ids],
                     patches.areas[ids], patches.rho[ids], patches.emission[ids], patches.owner[ids],
-                    patches.source_face[ids], list(patches.object_names))
+                    patches.source_face[ids], list(patches.object_names), patches.see_through)
 
 
 def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n=3, min_area=0.0,

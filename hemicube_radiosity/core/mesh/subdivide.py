@@ -16,6 +16,7 @@ import numpy as np
 from ..util.unique import unique_rows
 from .ngons import to_tris_and_quads
 from .patches import MeshInput, PatchError, PatchSet, check_faces, poly_geometry
+from ..light.transmit import see_through
 
 __all__ = ["build_patches", "keeps_faces_whole"]
 
@@ -399,4 +400,4 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
                       np.full(len(p), oi, np.int32), src.astype(np.int32)))
         v_base += len(v)
     cat = [np.concatenate([part[i] for part in parts]) for i in range(9)]
-    return PatchSet(*cat, object_names=[m.name for m in meshes])
+    return PatchSet(*cat, object_names=[m.name for m in meshes], see_through=see_through(meshes))
