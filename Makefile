@@ -8,6 +8,7 @@
 #   make demo        bake the Cornell box into demo/out/
 #   make bench       benchmarks (docs/performance.md)
 #   make bench-real  the real scenes of ../shared/scenes alone (BENCH_ARGS="--quick" or "--scenes a,b")
+#   make bench-lightmap  the lightmap target on a real scene against Cycles' image bake (BENCH_ARGS="--ref-spp 256")
 #   make gallery     their pictures beside Cycles' (docs/gallery.md; BENCH_ARGS="--all" or "--scenes a,b")
 #   make package     one extension zip per platform in dist/, each with its embreex wheel
 #   make clean       dist/, wheels/ and caches;  make distclean: also every .venv*
@@ -18,7 +19,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP_Q  := -q --disable-pip-version-check
 
-.PHONY: venv test viewer-deps test-lts lts-venvs demo bench bench-real gallery package wheels clean distclean
+.PHONY: venv test viewer-deps test-lts lts-venvs demo bench bench-real bench-lightmap gallery package wheels clean distclean
 
 # $(call ensure_venv,DIR,REQUIREMENTS): (re)build DIR unless it is a working Python 3.11 venv that
 # has installed exactly REQUIREMENTS (a stamp named after the file's checksum, written only when
@@ -98,6 +99,10 @@ bench: venv
 bench-real: venv
 	$(ensure_bench)
 	$(PY) bench/real_scenes.py $(BENCH_ARGS)
+
+bench-lightmap: venv
+	$(ensure_bench)
+	$(PY) bench/lightmap_real.py $(BENCH_ARGS)
 
 gallery: venv
 	$(ensure_bench)
