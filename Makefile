@@ -2,8 +2,9 @@
 # Both create .venv on first use from requirements-dev.txt; nothing installed by hand is assumed.
 #
 #   make test        the whole suite on Blender 5.0 (bpy 5.0.1), after `make viewer-deps`
-#   make viewer-deps what tests/blender/test_viewer.py needs: Debian's chromium, node and npm (apt-get,
-#                    as root) and the npm packages tests/support/viewer/package-lock.json pins
+#   make viewer-deps what the viewer tests (tests/blender/test_viewer.py, test_lightmap_viewer.py) need:
+#                    Debian's chromium, node and npm (apt-get, as root) and the npm packages
+#                    tests/support/viewer/package-lock.json pins
 #   make test-lts    the suite on Blender 4.2 LTS and 4.5 LTS (.venv-4.2, .venv-4.5; not part of `make test`)
 #   make demo        bake the Cornell box into demo/out/
 #   make bench       benchmarks (docs/performance.md)
@@ -48,7 +49,7 @@ venv:
 # The viewer test installs nothing: its browser and npm packages come from here. Where they cannot
 # be had (not root, offline) the suite still runs and that test is skipped, naming this target.
 test: venv
-	@$(MAKE) --no-print-directory viewer-deps || echo "make: viewer-deps failed: tests/blender/test_viewer.py will be skipped" >&2
+	@$(MAKE) --no-print-directory viewer-deps || echo "make: viewer-deps failed: tests/blender/test_viewer.py and test_lightmap_viewer.py will be skipped" >&2
 	$(PY) -m pytest -q tests
 
 VIEWER_DIR := tests/support/viewer
