@@ -2,12 +2,14 @@
 # Both create .venv on first use from requirements-dev.txt; nothing installed by hand is assumed.
 #
 #   make test        the whole suite on Blender 5.0 (bpy 5.0.1), after `make viewer-deps`
-#   make viewer-deps what tests/blender/test_viewer.py needs: Debian's chromium, node and npm (apt-get,
-#                    as root) and the npm packages tests/support/viewer/package-lock.json pins
+#   make viewer-deps what the viewer tests (tests/blender/test_viewer.py, test_lightmap_viewer.py) need:
+#                    Debian's chromium, node and npm (apt-get, as root) and the npm packages
+#                    tests/support/viewer/package-lock.json pins
 #   make test-lts    the suite on Blender 4.2 LTS and 4.5 LTS (.venv-4.2, .venv-4.5; not part of `make test`)
 #   make demo        bake the Cornell box into demo/out/
 #   make bench       benchmarks (docs/performance.md)
 #   make bench-real  the real scenes of ../shared/scenes alone (BENCH_ARGS="--quick" or "--scenes a,b")
+#   make bench-lightmap  the lightmap target on a real scene against Cycles' image bake (BENCH_ARGS="--ref-spp 256")
 #   make gallery     their pictures beside Cycles' (docs/gallery.md; BENCH_ARGS="--all" or "--scenes a,b")
 #   make package     one extension zip per platform in dist/, each with its embreex wheel
 #   make clean       dist/, wheels/ and caches;  make distclean: also every .venv*
@@ -18,7 +20,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP_Q  := -q --disable-pip-version-check
 
-.PHONY: venv test viewer-deps test-lts lts-venvs demo bench bench-real gallery package wheels clean distclean
+.PHONY: venv test viewer-deps test-lts lts-venvs demo bench bench-real bench-lightmap gallery package wheels clean distclean
 
 # $(call ensure_venv,DIR,REQUIREMENTS): (re)build DIR unless it is a working Python 3.11 venv that
 # has installed exactly REQUIREMENTS (a stamp named after the file's checksum, written only when
@@ -47,7 +49,7 @@ venv:
 # The viewer test installs nothing: its browser and npm packages come from here. Where they cannot
 # be had (not root, offline) the suite still runs and that test is skipped, naming this target.
 test: venv
-	@$(MAKE) --no-print-directory viewer-deps || echo "make: viewer-deps failed: tests/blender/test_viewer.py will be skipped" >&2
+	@$(MAKE) --no-print-directory viewer-deps || echo "make: viewer-deps failed: tests/blender/test_viewer.py and test_lightmap_viewer.py will be skipped" >&2
 	$(PY) -m pytest -q tests
 
 VIEWER_DIR := tests/support/viewer
@@ -98,6 +100,10 @@ bench: venv
 bench-real: venv
 	$(ensure_bench)
 	$(PY) bench/real_scenes.py $(BENCH_ARGS)
+
+bench-lightmap: venv
+	$(ensure_bench)
+	$(PY) bench/lightmap_real.py $(BENCH_ARGS)
 
 gallery: venv
 	$(ensure_bench)

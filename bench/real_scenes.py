@@ -509,12 +509,12 @@ def _on_own_face(elements, p, owner, normal, face, idx, uv):
 
 
 # ----------------------------------------------------------------------------- parent side
-def run_child(argv, log_path, timeout):
-    """Run ``this file`` with ``argv`` in its own process group; (status, max RSS MB, wall s).
-    status: 'ok', 'exit N', 'signal NAME' or 'timeout'."""
+def run_child(argv, log_path, timeout, script=__file__):
+    """Run ``script`` (this file) with ``argv`` in its own process group; (status, max RSS MB,
+    wall s). status: 'ok', 'exit N', 'signal NAME' or 'timeout'."""
     t = time.perf_counter()
     with open(log_path, "w") as logf:
-        p = subprocess.Popen([sys.executable, os.path.abspath(__file__), *argv], cwd=ROOT, stdout=logf,
+        p = subprocess.Popen([sys.executable, os.path.abspath(script), *argv], cwd=ROOT, stdout=logf,
                              stderr=subprocess.STDOUT, start_new_session=True)
         status = None
         while True:

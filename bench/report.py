@@ -17,6 +17,7 @@ be rewritten without running anything. A missing file leaves its section and tar
     formfactors.json                   bench_formfactors.py: ms per hemi-cube, NumPy and Embree
     real_scenes.json, real_scenes_quick.json
                                        real_scenes.py: the defaults on ../shared/scenes against Cycles
+    lightmap_real.json                 lightmap_real.py: lightmaps on a real scene against Cycles' image bake
 
 Of a pair, the newer file is read (``--quick``: the quick one). The targets are those each
 benchmark prints (speed_vs_error.targets, bench_dense.targets) and the thresholds of issue 9 the
@@ -36,6 +37,7 @@ ROOT = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 
 import bench_dense  # noqa: E402
+import lightmap_real  # noqa: E402
 import real_scenes  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 
@@ -68,7 +70,8 @@ def load(force_quick=False):
             "parallel": _read("bench_parallel.json"), "batch": _read("bench_batch.json"),
             "relight": _read("relight_dense.json"), "curved": _read("curved.json"),
             "formfactors": _read("formfactors.json"),
-            "real": _newer("real_scenes.json", "real_scenes_quick.json", force_quick)}
+            "real": _newer("real_scenes.json", "real_scenes_quick.json", force_quick),
+            "lightmap": _read("lightmap_real.json")}
 
 
 # ----------------------------------------------------------------------------- formatting
@@ -495,6 +498,8 @@ def write(r, doc=DOC, img_dir=IMG_DIR):
         L += dense_section(r["dense"], doc, img_dir)
     if r.get("real"):
         L += real_section(r["real"])
+    if r.get("lightmap") and r["lightmap"].get("maps"):
+        L += lightmap_real.section(r["lightmap"])
     if r["parallel"] and r["parallel"].get("cases"):
         L += parallel_section(r["parallel"], doc, img_dir)
     for key, section in (("relight", relight_section), ("curved", curved_section), ("batch", batch_section),

@@ -10,7 +10,8 @@ The benchmarks: form-factor speed (``bench_formfactors.py``), the batch speed-up
 (``bench_dense.py``), a dense room's relight (``bench_relight_dense.py``), Suzanne subdivided in the
 Cornell box (``bench_curved.py``), then speed against error (``speed_vs_error.py``, which gets the
 other arguments; ``--quick`` goes to every script), then the real scenes of ../shared/scenes
-(``real_scenes.py``: skipped with one line where that folder is absent; ``--quick``: two small ones) and their
+(``real_scenes.py``: skipped with one line where that folder is absent; ``--quick``: two small ones), a
+real scene's lightmaps against Cycles' image bake (``lightmap_real.py``; not with ``--quick``) and their
 pictures beside Cycles' (``gallery.py``: docs/gallery.md, ~14 min, ``--quick`` ~2; skipped likewise).
 Exits non-zero when a script fails; targets that do not hold are printed, not failed (they are
 measurements, not tests).
@@ -45,6 +46,8 @@ def main(argv):
         rc |= run(os.path.join(HERE, name), quick)
     rc |= run(os.path.join(HERE, "speed_vs_error.py"), argv)
     rc |= run(os.path.join(HERE, "real_scenes.py"), quick)
+    if not quick:
+        rc |= run(os.path.join(HERE, "lightmap_real.py"), [])
     rc |= run(os.path.join(HERE, "gallery.py"), quick)
     rc |= run(os.path.join(HERE, "report.py"), quick)
     print(f"\nmake bench: {time.perf_counter() - t:.0f} s", flush=True)

@@ -206,11 +206,12 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     return CyclesBake(point, corner, seconds, settings)
 
 
-def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2):
+def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, seed=0):
     """((size, size, 3) float64, seconds): Cycles' bake of mesh object ``ob`` into an image
     through UV map ``uv_layer`` ('' the active one): 'DIFFUSE' (direct + indirect + colour:
-    what a render shows of a diffuse surface) or 'EMIT' (a baked copy's own look). An image
-    node is added to each of its materials for the bake and removed again; rows bottom-up."""
+    what a render shows of a diffuse surface) or 'EMIT' (a baked copy's own look), with noise
+    seed ``seed``. An image node is added to each of its materials for the bake and removed
+    again; rows bottom-up."""
     import bpy
 
     img = bpy.data.images.new(f"{ob.name}.{kind}{samples}", size, size, float_buffer=True)
@@ -222,7 +223,7 @@ def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2):
         nt.nodes.active = node
         added.append((nt, node))
     sc = bpy.context.scene
-    configure_cycles(sc, samples=samples, threads=threads)
+    configure_cycles(sc, samples=samples, seed=seed, threads=threads)
     sc.render.bake.target = "IMAGE_TEXTURES"
     sc.render.bake.margin = 0
     vl = bpy.context.view_layer

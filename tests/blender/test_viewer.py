@@ -10,74 +10,34 @@ skipped with a message naming that target, except in CI (``CI=true``), where it 
 """
 from __future__ import annotations
 
-import functools
-import http.server
 import importlib
 import json
 import math
 import os
-import shutil
-import subprocess
 import sys
-import threading
-import urllib.parse
 
 import numpy as np
 import pytest
 
-from tests.support import ROOT
+from tests.support import ROOT, three_viewer as tv
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles, pytest.mark.slow]
 
-VIEWER = os.path.join(ROOT, "tests", "support", "viewer")
-NODE_MODULES = os.path.join(VIEWER, "node_modules")
-IN_CI = os.environ.get("CI", "").lower() in ("true", "1", "yes")
 SIZE = 512           # the demo's --render-size
-
-
-def unavailable(reason):
-    reason += ": run `make viewer-deps`"
-    if IN_CI:
-        pytest.fail(f"viewer test cannot run in CI: {reason}")
-    pytest.skip(reason)
-
-
-def _run(cmd, timeout, **kw):
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
-
-
-def _npm_packages_current():
-    """node_modules holds exactly what package-lock.json pins (npm's own record of it)."""
-    try:
-        with open(os.path.join(VIEWER, "package-lock.json")) as f:
-            want = json.load(f)["packages"]
-        with open(os.path.join(NODE_MODULES, ".package-lock.json")) as f:
-            have = json.load(f)["packages"]
-    except (OSError, ValueError, KeyError):
-        return False
-    return {k: v.get("version") for k, v in want.items() if k} == {k: v.get("version") for k, v in have.items()}
 
 
 @pytest.fixture(scope="session")
 def viewer_tools():
-    """(node, chromium), both on PATH, with the npm packages the lock file pins installed."""
-    node = shutil.which("node")
-    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
-    if not node:
-        unavailable("no node on PATH")
-    if not _npm_packages_current():
-        unavailable("the npm packages of tests/support/viewer are missing or not those its lock file pins")
-    if not chromium:
-        unavailable("no chromium on PATH")
-    return node, chromium
+    """(node, chromium): ``three_viewer.viewer_tools``, skipped where they are missing."""
+    return tv.viewer_tools()
 
 
 @pytest.fixture(scope="module")
 def demo_out(tmp_path_factory):
     """The demo as `make demo` runs it: cornell.glb and its Cycles preview cornell.png."""
     d = tmp_path_factory.mktemp("demo")
-    r = _run([sys.executable, "-m", "hemicube_radiosity", "demo", "--output-dir", str(d), "-q",
-              "--render-size", str(SIZE)], 600, cwd=ROOT)
+    r = tv.run([sys.executable, "-m", "hemicube_radiosity", "demo", "--output-dir", str(d), "-q",
+                "--render-size", str(SIZE)], 600, cwd=ROOT)
     assert r.returncode == 0, r.stderr[-2000:]
     return d
 
@@ -97,30 +57,9 @@ def demo_camera(addon):
     return M, fov
 
 
-def to_gltf(p):
-    """Blender Z-up to glTF Y-up: (x, y, z) -> (x, z, -y), as the exporter writes it."""
-    return np.array([p[0], p[2], -p[1]])
-
-
 def project(camera, points):
     """Pixel (column, row) of Blender world ``points`` (N, 3) in a SIZE x SIZE picture."""
-    M, fov = camera
-    q = (np.linalg.inv(M) @ np.c_[points, np.ones(len(points))].T).T
-    f = 0.5 / math.tan(fov / 2)
-    return np.c_[(0.5 + f * q[:, 0] / -q[:, 2]) * SIZE, (0.5 - f * q[:, 1] / -q[:, 2]) * SIZE]
-
-
-def load_png(path):
-    """8-bit RGB levels (H, W, 3), top row first, through Blender's image loader (no colour
-    conversion: byte images are read as stored)."""
-    import bpy
-
-    im = bpy.data.images.load(str(path))
-    w, h = im.size
-    px = np.empty(w * h * 4, np.float32)
-    im.pixels.foreach_get(px)
-    bpy.data.images.remove(im)
-    return np.round(px.reshape(h, w, 4)[::-1, :, :3] * 255.0)
+    return tv.project(camera, points, SIZE)
 
 
 def floor_region(img, camera, x0, x1, y0, y1, n=8):
@@ -130,62 +69,32 @@ def floor_region(img, camera, x0, x1, y0, y1, n=8):
     return img[pix[:, 1], pix[:, 0]].mean(axis=0)
 
 
-class _Handler(http.server.SimpleHTTPRequestHandler):
-    """tests/support/viewer at /, the demo's output folder at /model/."""
-
-    model_dir = None
-
-    def translate_path(self, path):
-        p = urllib.parse.unquote(urllib.parse.urlsplit(path).path)
-        if p.startswith("/model/"):
-            return os.path.join(self.model_dir, os.path.basename(p))
-        return super().translate_path(path)
-
-    def log_message(self, *args):
-        pass
-
-
 @pytest.fixture(scope="module")
 def server(demo_out):
-    handler = type("Handler", (_Handler,), {"model_dir": str(demo_out)})
-    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), functools.partial(handler, directory=VIEWER))
-    threading.Thread(target=httpd.serve_forever, daemon=True).start()
-    yield f"http://127.0.0.1:{httpd.server_address[1]}"
-    httpd.shutdown()
-    httpd.server_close()
+    with tv.serve(demo_out) as url:
+        yield url
 
 
 def render_three(viewer_tools, server, camera, out, size=SIZE, model="cornell.glb"):
-    """three.js's picture of /model/``model`` from ``camera``, written to ``out``; returns what
-    the page reports (three's revision, each mesh's material, vertex colours, attributes)."""
-    node, chromium = viewer_tools
-    M, fov = camera
-    pos, target = to_gltf(M[:3, 3]), to_gltf(M[:3, 3] - M[:3, 2])
-    q = urllib.parse.urlencode({"model": f"/model/{model}", "size": size, "fov": math.degrees(fov),
-                                "pos": ",".join(f"{v:.6f}" for v in pos),
-                                "target": ",".join(f"{v:.6f}" for v in target)})
-    r = _run([node, "render.mjs", chromium, f"{server}/index.html?{q}", str(out)], 120, cwd=VIEWER)
-    assert r.returncode == 0, r.stderr[-3000:]
-    return json.loads(r.stdout.strip().splitlines()[-1])
+    """three.js's picture of /model/``model`` from ``camera``, written to ``out``
+    (``three_viewer.render_three``)."""
+    return tv.render_three(viewer_tools, server, camera, out, size, model)
 
 
 def test_demo_glb_passes_the_khronos_validator(viewer_tools, demo_out):
-    node, _ = viewer_tools
-    r = _run([node, "validate.mjs", str(demo_out / "cornell.glb")], 120, cwd=VIEWER)
-    assert r.returncode == 0, r.stderr[-2000:]
-    issues = json.loads(r.stdout)["issues"]
+    issues = tv.validate(viewer_tools[0], demo_out / "cornell.glb")["issues"]
     codes = sorted({m["code"] for m in issues["messages"]})
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, codes
 
 
 def test_three_js_shows_what_cycles_shows(viewer_tools, demo_out, demo_camera, server, tmp_path):
     info = render_three(viewer_tools, server, demo_camera, tmp_path / "three.png")
-    with open(os.path.join(NODE_MODULES, "three", "package.json")) as f:
+    with open(os.path.join(tv.NODE_MODULES, "three", "package.json")) as f:
         assert info["three"] == json.load(f)["version"].split(".")[1]
     # unlit (KHR_materials_unlit -> MeshBasicMaterial) with COLOR_0 as vertex colours
     assert len(info["materials"]) == 8
     assert all(m[0] == "MeshBasicMaterial" and m[1] and "color" in m[2].split() for m in info["materials"])
-    three, cycles = load_png(tmp_path / "three.png"), load_png(demo_out / "cornell.png")
+    three, cycles = tv.load_png(tmp_path / "three.png"), tv.load_png(demo_out / "cornell.png")
 
     # the box interior: inside the open front's outline, 3 pixels in (edges are anti-aliased
     # differently by Cycles' pixel filter and by WebGL's MSAA)
@@ -236,10 +145,7 @@ def test_three_js_multiplies_the_texture_by_the_baked_light(viewer_tools, demo_o
     mat, = doc["materials"]
     assert "KHR_materials_unlit" in mat["extensions"] and "baseColorTexture" in mat["pbrMetallicRoughness"]
     assert {"COLOR_0", "TEXCOORD_0"} <= set(doc["meshes"][0]["primitives"][0]["attributes"])
-    node, _ = viewer_tools
-    r = _run([node, "validate.mjs", str(path)], 120, cwd=VIEWER)
-    assert r.returncode == 0, r.stderr[-2000:]
-    issues = json.loads(r.stdout)["issues"]
+    issues = tv.validate(viewer_tools[0], path)["issues"]
     assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
     # straight down onto the floor from 3 m, the floor filling the middle of the picture
@@ -253,7 +159,7 @@ def test_three_js_multiplies_the_texture_by_the_baked_light(viewer_tools, demo_o
     camera = (np.array(cam.matrix_world), cam_data.angle)
     demo.render_preview(bpy.context, str(demo_out / "floor.png"), resolution=SIZE, samples=16)
     render_three(viewer_tools, server, camera, demo_out / "floor_three.png", model="floor.glb")
-    three, cycles = load_png(demo_out / "floor_three.png"), load_png(demo_out / "floor.png")
+    three, cycles = tv.load_png(demo_out / "floor_three.png"), tv.load_png(demo_out / "floor.png")
     region = project(camera, np.array([[-0.9, -0.9, 0.0], [0.9, 0.9, 0.0]]))
     (c0, r1), (c1, r0) = np.round(region).astype(int)
     a, b = three[r0:r1, c0:c1], cycles[r0:r1, c0:c1]
