@@ -18,8 +18,10 @@ For each baked object (``settings.target == 'lightmap'``, baked copies only):
   so the density reached on the surface is lower than asked.
 * **Texels** (:mod:`..core.output.lightmap`): the bake's output read at every texel centre of
   the copy's triangles in that UV map (Blender's loop triangles, as Cycles and glTF interpolate
-  UVs), from the same solution and output elements as the vertex colours, then dilated 8 texels.
-  Values are radiance times ``2**exposure``.
+  UVs), from the same solution and output elements as the vertex colours: the direct light
+  exact at the texel (the bake's :class:`..core.light.stage.DirectLight`, lit with the mesh's
+  corner normals; averaged over the texel's square where it varies), the rest interpolated from
+  the elements' corners; then dilated 8 texels. Values are radiance times ``2**exposure``.
 * **Files** in ``lightmap_dir`` (empty: ``lightmaps/`` beside the saved .blend; unsaved: Blender's
   temporary folder, said in a note): ``<object>.lightmap.exr`` (RGBA 32-bit float, the HDR
   radiance) and ``<object>.lightmap.png`` (8-bit sRGB, Blender's Standard view: clamped to 0..1,
@@ -93,6 +95,20 @@ def _world_triangles(me, matrix):
     M = np.asarray(matrix, dtype=np.float64)
     world = co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]
     return world[lv[tl]].reshape(-1, 3, 3)
+
+
+def _corner_normals(me, matrix):
+    """(T, 3, 3) the shading normals at the corners of mesh ``me``'s loop triangles (as
+    :func:`_world_triangles` made them) in world space (``matrix`` 4x4), unit length: what
+    Cycles shades with (smooth faces, custom normals)."""
+    tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tl)
+    n = np.empty(len(me.loops) * 3)
+    me.corner_normals.foreach_get("vector", n)
+    N = np.linalg.inv(np.asarray(matrix, dtype=np.float64)[:3, :3]).T
+    n = n.reshape(-1, 3)[tl] @ N.T
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return n.reshape(-1, 3, 3)
 
 
 def _triangle_uvs(me, uv_name):
@@ -187,6 +203,20 @@ def _material(name, uv_name, exr, png):
     return mat
 
 
+def _texel_light(result, scale):
+    """(parts, direct) for :func:`..core.output.lightmap.bake_lightmap`: the bake's corner parts
+    and its exact direct light at any points, both times ``scale`` (the exposure); (None, None)
+    without the exact direct light (every texel then interpolated)."""
+    parts = result.corner_parts()
+    if parts is None or result.direct is None:
+        return None, None
+    E, rho, D, I = parts
+
+    def direct(points, normals):
+        return result.direct.at(points, normals, "texels") * scale
+    return (E * scale, rho, D * scale, I * scale), direct
+
+
 def write_lightmaps(context, scene_input, result, settings):
     """Baked copies with lightmaps (see the module docstring). Returns (copies, records, notes):
     records one dict per lightmap (object, uv_map, made_uvs, size, exr, png, covered, filled,
@@ -201,7 +231,9 @@ def write_lightmaps(context, scene_input, result, settings):
         os.makedirs(folder, exist_ok=True)
     except OSError as ex:
         raise write.WriteError(f"could not make the lightmap folder {folder}: {ex.strerror}") from None
-    corners = result.corner_values() * 2.0 ** float(settings.exposure)
+    scale = 2.0 ** float(settings.exposure)
+    corners = result.corner_values() * scale
+    parts, direct = _texel_light(result, scale)
     out, records = [], []
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
@@ -223,7 +255,8 @@ def write_lightmaps(context, scene_input, result, settings):
             _pack(ob, uv_name, size)
         uv = _triangle_uvs(me, uv_name)
         lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
-                                         flip=bool(np.linalg.det(M[:3, :3]) < 0))
+                                         flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts,
+                                         direct=direct, normals=_corner_normals(me, M))
         stem = bpy.path.clean_name(src.name)
         exr = _save_image(f"{src.name}.lightmap.exr", os.path.join(folder, stem + ".lightmap.exr"),
                           lm.image, "OPEN_EXR")

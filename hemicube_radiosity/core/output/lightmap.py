@@ -1,12 +1,14 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Lightmaps: the bake's output read at the texel centres of an image through a UV map.
 
-The same solution as the vertex colours (no new light is computed here): a texel takes the value
-the baked copy would show at the surface point under its centre, the bilinear interpolation of
-``BakeResult.corner_values()`` over the output element that holds the point (the paper's
-rendering step, :mod:`.interpolate`). So a texel is exactly as good as the output elements'
-corners around it: a shadow's edge is as sharp as the detail size cuts it, not as the texel size
-(direct light exact at texel centres is not done).
+The same solution as the vertex colours, read at the surface point under each texel centre as
+the output vertices read it (:mod:`.stage`): E + rho * (D + I), with D the direct light computed
+again exactly at that point (lamps, emitters, the world, with shadow rays: a shadow's edge is as
+sharp as the texels, not as the detail size) and the smoother rest, the emission E, reflectivity
+rho and light reflected at least once I, the bilinear interpolation of the output elements'
+corners (``BakeResult.corner_parts()``; the paper's rendering step, :mod:`.interpolate`).
+Without the exact direct light (the paper's 'hemicube' path) a texel is the bilinear
+interpolation of ``BakeResult.corner_values()``, what the vertex-colour copy shows there.
 
 Steps, all NumPy:
 
@@ -15,8 +17,9 @@ Steps, all NumPy:
    triangle and the barycentric coordinates of its centre (clamped onto the triangle when the
    centre is outside it). Where triangles share a texel, the one the centre lies deepest in wins.
 2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
-3. :func:`evaluate`: :func:`.interpolate.locate` among one object's output elements (with the
-   normals, so the two sides of a thin wall are told apart), then bilinear in the element found.
+3. :func:`texel_light` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
+   output elements (with the normals, so the two sides of a thin wall are told apart), bilinear
+   in the element found, and the direct light at all the texels in one batch.
 4. :func:`dilate`: texels outside every island are filled from their filled neighbours (the mean
    of the filled ones among their 8), ``margin`` passes: bilinear filtering and mip-maps read no
    black across an island's border.
@@ -33,10 +36,13 @@ import numpy as np
 
 from .interpolate import interpolate_corner_values, locate
 
-__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "dilate", "bake_lightmap",
-           "REACH", "MARGIN"]
+__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_direct",
+           "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "SUBTEXELS"]
 
 REACH = 0.75       # texels: a centre this close to a triangle (outside it) still takes its value
+INSET = 1e-3       # texel points are lit this share of the way toward their triangle's centre
+VARIES = 0.1       # direct light differing this much between neighbours: averaged over the texel
+SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
 MARGIN = 8         # texels of dilation around every island
 _CHUNK = 4_000_000  # candidate texels rasterized at once
 
@@ -49,13 +55,16 @@ class Lightmap:
     dilation reached. ``covered`` (H, W) bool: texels of a UV island (centre within ``REACH``
     texels of a triangle). ``filled`` (H, W) bool: texels holding a value (islands and margin).
     ``unset`` int: island texels left without a finite value (0 when the bake is whole).
-    ``inside`` (H, W) bool: texels whose centre lies inside a triangle (not clamped onto one)."""
+    ``inside`` (H, W) bool: texels whose centre lies inside a triangle (not clamped onto one).
+    ``lighting`` (H, W, 3) float32 or None: the lighting-only pass (the light arriving times the
+    material's albedo scale), filled and dilated as ``image``."""
 
     image: np.ndarray
     covered: np.ndarray
     filled: np.ndarray
     inside: np.ndarray
     unset: int
+    lighting: np.ndarray | None = None
 
     @property
     def size(self) -> tuple:
@@ -201,8 +210,104 @@ def dilate(image, known, passes=MARGIN):
     return img, known
 
 
+def texel_light(elements, parts, points, normals, owner, D):
+    """(radiosity (n, 3), light arriving (n, 3)) at n texels' world ``points`` (n, 3) with face
+    ``normals`` (n, 3) on the output elements of object ``owner``, given ``D`` (n, 3) the direct
+    light arriving there (radiance: irradiance / pi).
+
+    ``parts`` (emission, reflectivity, direct, indirect), each (N, 4, 3) per element corner
+    (:meth:`..pipeline.BakeResult.corner_parts`, any exposure already in the emission and the
+    light). Each texel is E + rho * (D + I), with E, rho and I the bilinear interpolation of the
+    corners' emission, reflectivity and indirect light in the element that holds the point
+    (:func:`.interpolate.locate`), as the output vertices are made (:mod:`.stage`). The light
+    arriving returned is D + I (what the lighting-only pass holds)."""
+    if len(points) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    light = np.asarray(D, dtype=np.float64) + indirect
+    return E + rho * light, light
+
+
+def _lit_points(world, normals, tri, bary, flip):
+    """(points, face normals, shading normals) (n, 3) each of texels ``tri``, ``bary`` (n,),
+    (n, 3), the points moved :data:`INSET` of the way toward their triangle's centre (a point on
+    an edge where two walls meet sees neither); shading normals interpolated from ``normals``
+    (T, 3, 3), or the faces' where none are given or they turn away from the face."""
+    pts, nrm = texel_points(world, tri, bary * (1.0 - INSET) + INSET / 3.0, flip)
+    if normals is None:
+        return pts, nrm, nrm
+    shading = np.einsum("nk,nkj->nj", bary, np.asarray(normals, dtype=np.float64)[tri])
+    shading /= np.maximum(np.linalg.norm(shading, axis=1, keepdims=True), 1e-300)
+    return pts, nrm, np.where(np.einsum("ij,ij->i", shading, nrm)[:, None] > 0, shading, nrm)
+
+
+def varying(light, known, ratio=VARIES):
+    """(H, W) bool: texels of ``known`` (H, W) whose ``light`` (H, W, 3) differs from a known
+    4-neighbour's by more than ``ratio`` of the larger of the two (in the bands' sum): where a
+    texel's own centre does not stand for its square (a shadow's edge, a lamp's hot spot)."""
+    y = np.where(known, light.sum(-1), np.nan)
+    out = np.zeros(known.shape, bool)
+    for axis in (0, 1):
+        a, b = np.swapaxes(y, 0, axis)[:-1], np.swapaxes(y, 0, axis)[1:]
+        with np.errstate(invalid="ignore"):
+            jump = np.abs(a - b) > ratio * np.maximum(a, b)
+        o = np.swapaxes(out, 0, axis)
+        o[:-1] |= jump
+        o[1:] |= jump
+    return out & known
+
+
+def _sub_texels(px, tri, centre, grid=SUBTEXELS):
+    """(texel (m,), barycentric (m, 3)) ``grid`` x ``grid`` points spread evenly over each texel
+    square around ``centre`` (n, 2) (texel units) that lie inside its texel's triangle ``tri``
+    (n,) of ``px`` (T, 3, 2) (Cycles' bake jitters its samples over the square, keeping those
+    inside the triangle); ``texel`` indexes the n texels."""
+    off = (np.arange(grid) + 0.5) / grid - 0.5
+    off = np.stack(np.meshgrid(off, off, indexing="ij"), -1).reshape(-1, 2)
+    n, k = len(tri), len(off)
+    texel = np.repeat(np.arange(n), k)
+    t = tri[texel]
+    _, b = _edge_distances((centre[:, None, :] + off[None]).reshape(-1, 2), px[t, 0], px[t, 1], px[t, 2])
+    ok = np.all(b >= 0, axis=1)
+    return texel[ok], b[ok]
+
+
+def texel_direct(direct, uv, world, normals, tri, bary, width, height, flip=False):
+    """(n, 3) the direct light arriving at the n covered texels (``tri`` (H, W) >= 0, in that
+    order), from ``direct(points, normals) -> (n, 3)``: at every texel's centre, then, where it
+    varies between neighbours (:func:`varying`), the mean over :data:`SUBTEXELS` squared points
+    of the texel's square inside its triangle (a box filter, as Cycles' bake averages over the
+    square): a shadow's edge falls across a texel as a share of it, not all or nothing. Two
+    batches of rays, the second only at the texels where the light varies."""
+    covered = tri >= 0
+    t, b = tri[covered], bary[covered]
+    pts, nrm, shading = _lit_points(world, normals, t, b, flip)
+    D = np.asarray(direct(pts, shading), dtype=np.float64)
+    img = np.zeros(covered.shape + (3,))
+    img[covered] = D
+    edge = varying(img, covered)[covered]
+    if not edge.any():
+        return D
+    rows, cols = np.nonzero(covered)
+    centre = np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1)
+    px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
+    which, sub = _sub_texels(px, t[edge], centre)
+    if which.size == 0:
+        return D
+    p, _, sn = _lit_points(world, normals, t[edge][which], sub, flip)
+    Ds = np.asarray(direct(p, sn), dtype=np.float64)
+    m = int(edge.sum())
+    count = np.bincount(which, minlength=m)
+    mean = np.stack([np.bincount(which, weights=Ds[:, k], minlength=m) for k in range(3)], 1)
+    at = np.flatnonzero(edge)
+    D[at] = np.where(count[:, None] > 0, mean / np.maximum(count, 1)[:, None], D[at])
+    return D
+
+
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
-                  margin=MARGIN, reach=REACH) -> Lightmap:
+                  margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
+                  lighting_scale=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -211,16 +316,36 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lightmap's UV map and in world space; ``width`` x ``height`` texels (square by default).
     ``flip``: the object's world matrix mirrors (negative determinant). Texels of no island are
     dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
-    dilated over too and, if still unset, counted in ``Lightmap.unset``."""
+    dilated over too and, if still unset, counted in ``Lightmap.unset``.
+
+    With ``parts`` and ``direct(points, normals) -> (n, 3)`` (the bake's exact direct light,
+    times the exposure) the direct light is exact at every texel (:func:`texel_direct`), the
+    rest interpolated (:func:`texel_light`), lit with ``normals`` (T, 3, 3) the triangles'
+    corner normals in world space where given (smooth shading), else the triangles' own; without
+    them every texel is the bilinear interpolation of ``corner_values``. ``lighting_scale`` (T, 3)
+    per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
+    material's albedo scale), in ``Lightmap.lighting``."""
     height = int(width if height is None else height)
     width = int(width)
     tri, bary, inside = rasterize(uv, width, height, reach)
     covered = tri >= 0
     image = np.zeros((height, width, 3))
-    pts, nrm = texel_points(world, tri[covered], bary[covered], flip)
-    image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+    lighting = None
+    t, b = tri[covered], bary[covered]
+    if parts is None or direct is None:
+        pts, nrm = texel_points(world, t, b, flip)
+        image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+    else:
+        D = texel_direct(direct, uv, world, normals, tri, bary, width, height, flip)
+        pts, nrm = texel_points(world, t, b * (1.0 - INSET) + INSET / 3.0, flip)
+        image[covered], light = texel_light(elements, parts, pts, nrm, owner, D)
+        if lighting_scale is not None:
+            lighting = np.zeros((height, width, 3))
+            lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]
     good = covered & np.all(np.isfinite(image), axis=-1)
     image, filled = dilate(np.nan_to_num(image), good, margin)
+    if lighting is not None:
+        lighting = dilate(np.nan_to_num(lighting), good, margin)[0].astype(np.float32)
     # an island texel that had no finite value takes its neighbours' (counted if none reached it)
     unset = int(np.count_nonzero(covered & ~filled))
-    return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset)
+    return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset, lighting)
