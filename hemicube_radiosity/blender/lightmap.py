@@ -35,10 +35,11 @@ For each baked object (``settings.target == 'lightmap'``, baked copies only):
   writes: an unlit material whose baseColorTexture is the PNG through the TEXCOORD_n of that UV
   map, and the lighting pass's PNG (:data:`LIGHTING_KEY`) as the light map its ``extras`` name.
 
-Not done: one atlas
-for the selection (one image per object); a relight rewrites the image by a whole bake (its form
-factors cached), not by a re-solve alone. Objects that are not meshes (text, curves) and objects
-whose evaluated mesh changed since it was read are left out with a warning.
+A relight (the same cache) re-solves and rewrites both images: the form factors and the texels'
+emitter transport (keyed on the same points: Lightmap Pack makes the same UVs again) come from
+the cache. Not done: one atlas for the selection (one image per object). Objects that are not
+meshes (text, curves) and objects whose evaluated mesh changed since it was read are left out
+with a note.
 """
 from __future__ import annotations
 

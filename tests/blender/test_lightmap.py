@@ -21,6 +21,10 @@ texture-style UV map (each face the whole square), useless as a lightmap.
 * glTF: the copy's material exports as an unlit baseColorTexture through TEXCOORD_1 (the
   lightmap's UV map), the PNG written beside the .exr byte for byte; the Khronos validator
   reports nothing (where node and the viewer's npm packages are installed).
+* The lighting-only pass against Cycles' Diffuse bake without Color, and in glTF as a light map
+  the material's extras name (the .glb valid under the Khronos validator).
+* A relight re-solves and rewrites the images with no new form factor or emitter transport, and
+  equals a bake from an empty cache.
 * The command line: ``--target lightmap`` writes the .exr and .png beside its output and lists
   them in the report.
 """
@@ -319,3 +323,64 @@ def test_a_hard_shadow_between_coarse_vertices_is_sharp_in_the_texels(tmp_path):
     # measured: 91 texels, ours 8.5% mean, 12.9% RMS; interpolated 44.5%, 54.2%
     assert mean < 0.12 and rms < 0.2, (mean, rms)
     assert plain_mean > 3 * mean, (plain_mean, mean)
+
+
+def test_relight_rewrites_the_images_without_new_form_factors(tmp_path, monkeypatch):
+    """A relight of a lightmap bake (the panel 1.5x brighter, the block repainted) with the
+    session's cache: no form factor and no emitter transport is computed again (the texels'
+    transport is cached with the geometry, like the vertices'), and both images of both
+    objects equal a bake of the changed scene from an empty cache. Lightmap Pack makes the same
+    UVs on the new copy, so the texels are the same points."""
+    from hemicube_radiosity.core.form_factors import stage as ff_stage
+    from hemicube_radiosity.core.light import stage as light_stage
+    from hemicube_radiosity.core.rays import clear_ray_cache
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    calls = {"form_factors": 0, "transports": 0}
+
+    def counted(name, real):
+        def call(*a, **k):
+            calls[name] += 1
+            return real(*a, **k)
+        return call
+    monkeypatch.setattr(ff_stage, "compute_form_factors", counted("form_factors", ff_stage.compute_form_factors))
+    monkeypatch.setattr(light_stage, "emitter_transport", counted("transports", light_stage.emitter_transport))
+    r, b, panel = room()
+
+    def bake_images(cache, folder):
+        job = bake.BakeJob.prepare(bpy.context, [r, b], bake.BakeSettings(**SETTINGS, lightmap_dir=str(folder)),
+                                   cache=cache)
+        job.run()
+        job.write(bpy.context)
+        images = {f"{o}.{k}": image_rgb(f"{o}.{k}.exr") for o in ("Room", "Block") for k in ("lightmap", "lighting")}
+        write.remove_bakes(["Room", "Block"], unhide=True)
+        return job, images
+
+    cache = FormFactorCache()
+    first_job, first = bake_images(cache, tmp_path / "first")
+    assert calls["form_factors"] == 1 and calls["transports"] > 0
+    # relight: the panel 1.5x, the block painted another colour
+    emit = panel.active_material.node_tree.nodes["Emission"].inputs["Strength"]
+    emit.default_value *= 1.5
+    paint = b.active_material.node_tree.nodes["Diffuse BSDF"].inputs["Color"]
+    paint.default_value = (0.7, 0.3, 0.2, 1.0)
+    before = dict(calls)
+    warm_job, warm = bake_images(cache, tmp_path / "warm")
+    assert calls == before, "a relight computes no form factor and no emitter transport"
+    assert warm_job.result.forecast is None                 # F came from the cache: nothing forecast
+    # the same changed scene from an empty cache
+    clear_ray_cache()
+    _, cold = bake_images(FormFactorCache(), tmp_path / "cold")
+    assert calls["form_factors"] == 2
+    for name in warm:
+        np.testing.assert_allclose(warm[name], cold[name], rtol=1e-5, atol=1e-6, err_msg=name)
+    # and the images did change: the room about 1.5x brighter, the block's radiosity redder and
+    # the light arriving at it about 1.5x (redder too: some of it comes back from the block)
+    lit = first["Room.lightmap"].mean(-1) > 0.05
+    ratio = warm["Room.lightmap"].mean(-1)[lit] / first["Room.lightmap"].mean(-1)[lit]
+    assert 1.45 < np.median(ratio) < 1.6, np.median(ratio)
+    held = first["Block.lighting"].mean(-1) > 0.05
+    ratio = warm["Block.lighting"][held].mean(-1) / first["Block.lighting"][held].mean(-1)
+    assert 1.4 < np.median(ratio) < 1.6, np.median(ratio)
+    redder = warm["Block.lightmap"][held]
+    assert np.median(redder[:, 0] / redder[:, 2]) > 2.5
