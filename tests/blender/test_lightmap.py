@@ -384,3 +384,25 @@ def test_relight_rewrites_the_images_without_new_form_factors(tmp_path, monkeypa
     assert 1.4 < np.median(ratio) < 1.6, np.median(ratio)
     redder = warm["Block.lightmap"][held]
     assert np.median(redder[:, 0] / redder[:, 2]) > 2.5
+
+
+def test_the_papers_direct_light_interpolates_every_texel(tmp_path):
+    """With direct = 'hemicube' the bake keeps no direct light apart: every texel is the
+    bilinear interpolation of the corner values (what the vertex colours show), and no
+    lighting pass is written, which a note says."""
+    r, b, _ = room()
+    job = bake.BakeJob.prepare(bpy.context, [r], bake.BakeSettings(**SETTINGS, direct="hemicube", element_size=0,
+                                                                 lightmap_dir=str(tmp_path)))
+    res = job.run()
+    assert res.corner_parts() is None and res.direct is None
+    copy, = job.write(bpy.context)
+    rec, = job.lightmaps
+    assert rec["lighting_exr"] is None and rec["passes"]["lighting"] is None
+    assert any("no lighting-only lightmap" in str(n) for n in job.notes)
+    me = copy.data
+    from hemicube_radiosity.blender import lightmap as blm
+    size = rec["size"][0]
+    want = core_lightmap.bake_lightmap(res.elements, res.corner_values(), 0, blm._triangle_uvs(me, rec["uv_map"]),
+                                       blm._world_triangles(me, np.eye(4)), size).image
+    # (Blender's EXR writer moves colours by up to 4e-5 of themselves: its colour management)
+    np.testing.assert_allclose(image_rgb("Room.lightmap.exr"), want, rtol=1e-4, atol=1e-6)
