@@ -36,13 +36,16 @@ import numpy as np
 
 from .interpolate import interpolate_corner_values, locate
 
-__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_direct",
-           "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "SUBTEXELS"]
+__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
+           "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
+           "FOOTPRINT"]
 
 REACH = 0.75       # texels: a centre this close to a triangle (outside it) still takes its value
 INSET = 1e-3       # texel points are lit this share of the way toward their triangle's centre
-VARIES = 0.1       # direct light differing this much between neighbours: averaged over the texel
+VARIES = 0.1       # light differing this much between neighbours: averaged over the texel,
+FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
 SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
+FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
 MARGIN = 8         # texels of dilation around every island
 _CHUNK = 4_000_000  # candidate texels rasterized at once
 
@@ -242,20 +245,34 @@ def _lit_points(world, normals, tri, bary, flip):
     return pts, nrm, np.where(np.einsum("ij,ij->i", shading, nrm)[:, None] > 0, shading, nrm)
 
 
-def varying(light, known, ratio=VARIES):
-    """(H, W) bool: texels of ``known`` (H, W) whose ``light`` (H, W, 3) differs from a known
-    4-neighbour's by more than ``ratio`` of the larger of the two (in the bands' sum): where a
-    texel's own centre does not stand for its square (a shadow's edge, a lamp's hot spot)."""
-    y = np.where(known, light.sum(-1), np.nan)
+def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
+    """(H, W) bool: texels of ``known`` (H, W) where any channel of ``values`` (H, W, k) differs
+    from a known 4-neighbour's by more than ``ratio`` of the larger of the two and by more than
+    ``floor`` of the channel's 99th percentile over the known texels: where a texel's own centre
+    does not stand for its square (a shadow's edge, a lamp's hot spot, a block's foot), not
+    where a faint light falls off (both tests keep their answer when a channel is scaled). ``surface`` (points (H, W, 3), normals (H, W, 3), pitch (H, W)): only neighbours on
+    one surface count, facing within 25 degrees and less than two texels (``pitch``, world
+    units) apart, so that islands packed side by side do not mark each other's borders."""
+    values = np.asarray(values, dtype=np.float64)
     out = np.zeros(known.shape, bool)
+    if not known.any():
+        return out
+    least = floor * np.percentile(values[known], 99, axis=0)          # (k,)
     for axis in (0, 1):
-        a, b = np.swapaxes(y, 0, axis)[:-1], np.swapaxes(y, 0, axis)[1:]
-        with np.errstate(invalid="ignore"):
-            jump = np.abs(a - b) > ratio * np.maximum(a, b)
+        def pair(a):
+            a = np.swapaxes(a, 0, axis)
+            return a[:-1], a[1:]
+        (a, b), (ka, kb) = pair(values), pair(known)
+        step = np.abs(a - b)
+        jump = np.any((step > ratio * np.maximum(a, b)) & (step > least), axis=-1) & ka & kb
+        if surface is not None:
+            (pa, pb), (na, nb), (sa, sb) = (pair(x) for x in surface)
+            jump &= (np.einsum("...k,...k->...", na, nb) > 0.9) & \
+                (np.linalg.norm(pa - pb, axis=-1) < 2.0 * np.maximum(sa, sb))
         o = np.swapaxes(out, 0, axis)
         o[:-1] |= jump
         o[1:] |= jump
-    return out & known
+    return out
 
 
 def _sub_texels(px, tri, centre, grid=SUBTEXELS):
@@ -263,7 +280,7 @@ def _sub_texels(px, tri, centre, grid=SUBTEXELS):
     square around ``centre`` (n, 2) (texel units) that lie inside its texel's triangle ``tri``
     (n,) of ``px`` (T, 3, 2) (Cycles' bake jitters its samples over the square, keeping those
     inside the triangle); ``texel`` indexes the n texels."""
-    off = (np.arange(grid) + 0.5) / grid - 0.5
+    off = ((np.arange(grid) + 0.5) / grid - 0.5) * FOOTPRINT
     off = np.stack(np.meshgrid(off, off, indexing="ij"), -1).reshape(-1, 2)
     n, k = len(tri), len(off)
     texel = np.repeat(np.arange(n), k)
@@ -273,41 +290,81 @@ def _sub_texels(px, tri, centre, grid=SUBTEXELS):
     return texel[ok], b[ok]
 
 
-def texel_direct(direct, uv, world, normals, tri, bary, width, height, flip=False):
-    """(n, 3) the direct light arriving at the n covered texels (``tri`` (H, W) >= 0, in that
-    order), from ``direct(points, normals) -> (n, 3)``: at every texel's centre, then, where it
-    varies between neighbours (:func:`varying`), the mean over :data:`SUBTEXELS` squared points
-    of the texel's square inside its triangle (a box filter, as Cycles' bake averages over the
-    square): a shadow's edge falls across a texel as a share of it, not all or nothing. Two
-    batches of rays, the second only at the texels where the light varies."""
+def _pitch(uv, world, width, height):
+    """(T,) the world length of a texel's side on each triangle: sqrt(world area / texel area)."""
+    px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
+    w = np.asarray(world, dtype=np.float64)
+    a_uv = 0.5 * np.abs(np.cross(px[:, 1] - px[:, 0], px[:, 2] - px[:, 0]))
+    a_w = 0.5 * np.linalg.norm(np.cross(w[:, 1] - w[:, 0], w[:, 2] - w[:, 0]), axis=1)
+    return np.sqrt(a_w / np.maximum(a_uv, 1e-300))
+
+
+def _surface(covered, points, normals, pitch):
+    """(points, normals, pitch) of the covered texels as (H, W, ...) images (:func:`varying`)."""
+    out = []
+    for a in (points, normals, pitch):
+        img = np.zeros(covered.shape + np.shape(a)[1:])
+        img[covered] = a
+        out.append(img)
+    return tuple(out)
+
+
+def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, flip=False, sources=None):
+    """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
+    in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
+    :func:`texel_light` with ``direct(points, normals) -> (n, 3)`` for the direct light: at
+    every texel's centre, then, where the light varies between neighbours (:func:`varying`: a
+    shadow's edge, a lamp's hot spot, a block's foot), the mean over :data:`SUBTEXELS` squared
+    points of the square :data:`FOOTPRINT` texels wide around the centre that lie in its triangle,
+    each lit and read on its own (a box filter, as Cycles' bake averages its samples over that
+    square: a shadow's edge, or a surface standing on the floor, falls across a texel as a share
+    of it, not all or nothing). Two batches of rays, the second only at the texels that vary.
+
+    Which texels vary is judged on ``sources(points, normals) -> (n, S)`` where given (each
+    source's direct light apart, :meth:`..light.stage.DirectLight.sources_at`) and on where any
+    light arrives reflected: both keep their shape when a source's strength or colour or a
+    surface's colour changes, so a relight picks the same texels and finds their transport
+    cached. Without it, on the light arriving. ``world`` (T, 3, 3), ``normals`` (T, 3, 3) or
+    None and ``flip`` as for :func:`bake_lightmap`."""
     covered = tri >= 0
+    height, width = covered.shape
     t, b = tri[covered], bary[covered]
-    pts, nrm, shading = _lit_points(world, normals, t, b, flip)
-    D = np.asarray(direct(pts, shading), dtype=np.float64)
-    img = np.zeros(covered.shape + (3,))
-    img[covered] = D
-    edge = varying(img, covered)[covered]
+
+    def light_at(tris, bs):
+        pts, nrm, shading = _lit_points(world, normals, tris, bs, flip)
+        D = np.asarray(direct(pts, shading), dtype=np.float64)
+        return texel_light(elements, parts, pts, nrm, owner, D) + (pts, nrm, shading, D)
+    value, light, pts, nrm, shading, D = light_at(t, b)
+    if sources is None:
+        marks = light.sum(axis=1, keepdims=True)
+    else:
+        marks = np.column_stack([np.asarray(sources(pts, shading), dtype=np.float64),
+                                 np.any(light - D > 0, axis=1)])
+    img = np.zeros(covered.shape + (marks.shape[1],))
+    img[covered] = marks
+    surface = _surface(covered, pts, nrm, _pitch(uv, world, width, height)[t])
+    edge = varying(img, covered, surface=surface)[covered]
     if not edge.any():
-        return D
+        return value, light
     rows, cols = np.nonzero(covered)
     centre = np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1)
     px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
     which, sub = _sub_texels(px, t[edge], centre)
     if which.size == 0:
-        return D
-    p, _, sn = _lit_points(world, normals, t[edge][which], sub, flip)
-    Ds = np.asarray(direct(p, sn), dtype=np.float64)
+        return value, light
+    sub_value, sub_light = light_at(t[edge][which], sub)[:2]
     m = int(edge.sum())
     count = np.bincount(which, minlength=m)
-    mean = np.stack([np.bincount(which, weights=Ds[:, k], minlength=m) for k in range(3)], 1)
-    at = np.flatnonzero(edge)
-    D[at] = np.where(count[:, None] > 0, mean / np.maximum(count, 1)[:, None], D[at])
-    return D
+    at = np.flatnonzero(edge)[count > 0]
+    for out, per in ((value, sub_value), (light, sub_light)):
+        mean = np.stack([np.bincount(which, weights=per[:, k], minlength=m) for k in range(3)], 1)
+        out[at] = (mean / np.maximum(count, 1)[:, None])[count > 0]
+    return value, light
 
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None) -> Lightmap:
+                  lighting_scale=None, sources=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -319,8 +376,9 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     dilated over too and, if still unset, counted in ``Lightmap.unset``.
 
     With ``parts`` and ``direct(points, normals) -> (n, 3)`` (the bake's exact direct light,
-    times the exposure) the direct light is exact at every texel (:func:`texel_direct`), the
-    rest interpolated (:func:`texel_light`), lit with ``normals`` (T, 3, 3) the triangles'
+    times the exposure) the direct light is exact at every texel, the rest interpolated, and
+    texels where the light varies are the mean over their square (:func:`texel_values`, judged
+    on ``sources(points, normals) -> (n, S)`` where given), lit with ``normals`` (T, 3, 3) the triangles'
     corner normals in world space where given (smooth shading), else the triangles' own; without
     them every texel is the bilinear interpolation of ``corner_values``. ``lighting_scale`` (T, 3)
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
@@ -336,9 +394,8 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
         pts, nrm = texel_points(world, t, b, flip)
         image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
     else:
-        D = texel_direct(direct, uv, world, normals, tri, bary, width, height, flip)
-        pts, nrm = texel_points(world, t, b * (1.0 - INSET) + INSET / 3.0, flip)
-        image[covered], light = texel_light(elements, parts, pts, nrm, owner, D)
+        image[covered], light = texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary,
+                                             flip, sources)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]
