@@ -17,9 +17,11 @@ Steps, all NumPy:
    triangle and the barycentric coordinates of its centre (clamped onto the triangle when the
    centre is outside it). Where triangles share a texel, the one the centre lies deepest in wins.
 2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
-3. :func:`texel_light` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
+3. :func:`texel_values` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
    output elements (with the normals, so the two sides of a thin wall are told apart), bilinear
-   in the element found, and the direct light at all the texels in one batch.
+   in the element found (:func:`texel_light`), and the direct light at all the texel centres in
+   one batch; where the light varies between neighbours (:func:`varying`), the mean over points
+   of the texel's square, as Cycles' bake averages there (a second batch).
 4. :func:`dilate`: texels outside every island are filled from their filled neighbours (the mean
    of the filled ones among their 8), ``margin`` passes: bilinear filtering and mip-maps read no
    black across an island's border.
@@ -250,9 +252,10 @@ def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
     from a known 4-neighbour's by more than ``ratio`` of the larger of the two and by more than
     ``floor`` of the channel's 99th percentile over the known texels: where a texel's own centre
     does not stand for its square (a shadow's edge, a lamp's hot spot, a block's foot), not
-    where a faint light falls off (both tests keep their answer when a channel is scaled). ``surface`` (points (H, W, 3), normals (H, W, 3), pitch (H, W)): only neighbours on
-    one surface count, facing within 25 degrees and less than two texels (``pitch``, world
-    units) apart, so that islands packed side by side do not mark each other's borders."""
+    where a faint light falls off (both tests keep their answer when a channel is scaled).
+    ``surface`` (points (H, W, 3), normals (H, W, 3), pitch (H, W)): only neighbours on one
+    surface count, facing within 25 degrees and less than two texels (``pitch``, world units)
+    apart, so that islands packed side by side do not mark each other's borders."""
     values = np.asarray(values, dtype=np.float64)
     out = np.zeros(known.shape, bool)
     if not known.any():
@@ -276,10 +279,11 @@ def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
 
 
 def _sub_texels(px, tri, centre, grid=SUBTEXELS):
-    """(texel (m,), barycentric (m, 3)) ``grid`` x ``grid`` points spread evenly over each texel
-    square around ``centre`` (n, 2) (texel units) that lie inside its texel's triangle ``tri``
-    (n,) of ``px`` (T, 3, 2) (Cycles' bake jitters its samples over the square, keeping those
-    inside the triangle); ``texel`` indexes the n texels."""
+    """(texel (m,), barycentric (m, 3)) ``grid`` x ``grid`` points spread evenly over the square
+    :data:`FOOTPRINT` texels wide around each texel ``centre`` (n, 2) (texel units) that lie
+    inside its triangle ``tri`` (n,) of ``px`` (T, 3, 2): Cycles' bake jitters its samples over
+    that square (Blender's bake differentials are half a texel's), keeping those inside the
+    triangle; ``texel`` indexes the n texels."""
     off = ((np.arange(grid) + 0.5) / grid - 0.5) * FOOTPRINT
     off = np.stack(np.meshgrid(off, off, indexing="ij"), -1).reshape(-1, 2)
     n, k = len(tri), len(off)
