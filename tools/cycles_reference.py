@@ -206,10 +206,11 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     return CyclesBake(point, corner, seconds, settings)
 
 
-def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, seed=0):
+def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, seed=0, color=True):
     """((size, size, 3) float64, seconds): Cycles' bake of mesh object ``ob`` into an image
     through UV map ``uv_layer`` ('' the active one): 'DIFFUSE' (direct + indirect + colour:
-    what a render shows of a diffuse surface) or 'EMIT' (a baked copy's own look), with noise
+    what a render shows of a diffuse surface; ``color=False``: without the colour, the light
+    arriving as radiance, irradiance / pi) or 'EMIT' (a baked copy's own look), with noise
     seed ``seed``. An image node is added to each of its materials for the bake and removed
     again; rows bottom-up."""
     import bpy
@@ -230,7 +231,7 @@ def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, s
     for o in vl.objects:
         o.select_set(o == ob)
     vl.objects.active = ob
-    kw = dict(pass_filter={"DIRECT", "INDIRECT", "COLOR"}) if kind == "DIFFUSE" else {}
+    kw = dict(pass_filter={"DIRECT", "INDIRECT"} | ({"COLOR"} if color else set())) if kind == "DIFFUSE" else {}
     t = time.perf_counter()
     with bpy.context.temp_override(scene=sc, view_layer=vl, active_object=ob, object=ob,
                                    selected_objects=[ob], selected_editable_objects=[ob]):

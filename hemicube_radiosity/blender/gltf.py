@@ -24,7 +24,11 @@
   TEXCOORD_n of the lightmap's UV map. The material shows the HDR .exr in Blender; while the
   exporter runs, its image is the tone-mapped .png instead (glTF holds PNG or JPEG only), so the
   file carries exactly that PNG. Such a copy keeps the user's colour attributes; it is exported
-  through a stand-in without them, as a COLOR_0 would multiply the lightmap.
+  through a stand-in without them, as a COLOR_0 would multiply the lightmap. The lighting-only
+  pass (its PNG) is added to the file after the exporter ran (``core/formats/gltf.py``
+  ``add_light_maps``): one more image and texture, named in the material's
+  ``extras.hemicube_radiosity.lightMap`` with the same TEXCOORD_n, for engines that multiply a
+  light map by the surface's base colour at run time (docs/gltf.md: three.js).
 Options missing from an older exporter are skipped.
 """
 from __future__ import annotations
@@ -33,7 +37,7 @@ import os
 
 import bpy
 
-from ..core.formats.gltf import tone_map_gltf
+from ..core.formats.gltf import LIGHTING_NOTE, add_light_maps, tone_map_gltf
 
 __all__ = ["export_gltf", "EXPORT_OPTIONS"]
 
@@ -55,6 +59,7 @@ EXPORT_OPTIONS = dict(
 
 
 LIGHTMAP_KEY = "radiosity_lightmap_png"    # blender/lightmap.py MATERIAL_KEY
+LIGHTING_KEY = "radiosity_lighting_png"    # blender/lightmap.py LIGHTING_KEY
 
 
 def _lightmapped(ob):
@@ -110,6 +115,19 @@ def _png_for_exr(objects):
     return swapped
 
 
+def _light_maps(objects) -> dict:
+    """{material name: (the lighting pass's PNG file, what it holds)} of the lightmap materials
+    of ``objects`` that carry a lighting pass."""
+    out = {}
+    for o in objects:
+        for slot in getattr(o, "material_slots", ()):
+            m = slot.material
+            img = bpy.data.images.get(m[LIGHTING_KEY]) if m is not None and LIGHTING_KEY in m else None
+            if img is not None:
+                out[m.name] = (bpy.path.abspath(img.filepath), LIGHTING_NOTE)
+    return out
+
+
 def export_gltf(filepath, objects, view_transform="standard", **overrides):
     """Write ``objects`` (and nothing else) to ``filepath`` (.glb binary, .gltf separate), with
     COLOR_0 through ``view_transform`` (a choice of the ``view_transform`` setting) and the HDR
@@ -156,4 +174,7 @@ def export_gltf(filepath, objects, view_transform="standard", **overrides):
             o.select_set(o in before)
         view_layer.objects.active = active
     tone_map_gltf(filepath, view_transform)
+    maps = _light_maps(objects)
+    if maps:
+        add_light_maps(filepath, maps)
     return filepath

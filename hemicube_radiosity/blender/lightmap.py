@@ -18,23 +18,28 @@ For each baked object (``settings.target == 'lightmap'``, baked copies only):
   so the density reached on the surface is lower than asked.
 * **Texels** (:mod:`..core.output.lightmap`): the bake's output read at every texel centre of
   the copy's triangles in that UV map (Blender's loop triangles, as Cycles and glTF interpolate
-  UVs), from the same solution and output elements as the vertex colours, then dilated 8 texels.
-  Values are radiance times ``2**exposure``.
+  UVs), from the same solution and output elements as the vertex colours: the direct light
+  exact at the texel (the bake's :class:`..core.light.stage.DirectLight`, lit with the mesh's
+  corner normals; averaged over the texel's square where it varies), the rest interpolated from
+  the elements' corners; then dilated 8 texels. Values are radiance times ``2**exposure``.
 * **Files** in ``lightmap_dir`` (empty: ``lightmaps/`` beside the saved .blend; unsaved: Blender's
   temporary folder, said in a note): ``<object>.lightmap.exr`` (RGBA 32-bit float, the HDR
   radiance) and ``<object>.lightmap.png`` (8-bit sRGB, Blender's Standard view: clamped to 0..1,
-  sRGB-encoded). Both are loaded as images ``<object>.lightmap.exr`` / ``.png``.
+  sRGB-encoded). Both are loaded as images ``<object>.lightmap.exr`` / ``.png``. Beside them the
+  lighting-only pass, ``<object>.lighting.exr`` / ``.png``: the light arriving times each slot's
+  albedo scale (:func:`albedo_scale_of`), what an engine multiplies the base colour by (not
+  written with the paper's direct light, which keeps no direct light apart: a note says so).
 * **Material** ``Radiosity Lightmap (<object>)`` on every slot: a UV Map node (the lightmap UV
   map) -> Image Texture (the EXR) -> Material Output, so Cycles and EEVEE show it as emission
   and the viewport shows it. glTF export (:mod:`.gltf`) swaps the EXR for the PNG while it
   writes: an unlit material whose baseColorTexture is the PNG through the TEXCOORD_n of that UV
-  map.
+  map, and the lighting pass's PNG (:data:`LIGHTING_KEY`) as the light map its ``extras`` name.
 
-Not done: the lighting-only pass as a second texture for engines that multiply a lightmap at run
-time (``output_pass='lighting'`` writes the light arriving into the same image instead); one atlas
-for the selection (one image per object); a relight rewrites the image by a whole bake (its form
-factors cached), not by a re-solve alone. Objects that are not meshes (text, curves) and objects
-whose evaluated mesh changed since it was read are left out with a warning.
+A relight (the same cache) re-solves and rewrites both images: the form factors and the texels'
+emitter transport (keyed on the same points: Lightmap Pack makes the same UVs again) come from
+the cache. Not done: one atlas for the selection (one image per object). Objects that are not
+meshes (text, curves) and objects whose evaluated mesh changed since it was read are left out
+with a note.
 """
 from __future__ import annotations
 
@@ -46,14 +51,16 @@ import tempfile
 import bpy
 import numpy as np
 
-from ..core.formats.gltf import srgb_encode
+from ..core.formats.gltf import LIGHTING_NOTE, srgb_encode
 from ..core.output import lightmap as core_lightmap
-from . import write
+from . import textures, write
 
-__all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "lightmap_folder"]
+__all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "LIGHTING_KEY", "lightmap_folder",
+           "albedo_scale_of"]
 
 LIGHTMAP_UV = "Lightmap"
 MATERIAL_KEY = "radiosity_lightmap_png"   # on a lightmap material: the PNG image glTF exports
+LIGHTING_KEY = "radiosity_lighting_png"   # on a lightmap material: the lighting pass's PNG image
 MARGIN_TEXELS = 2.0                       # Lightmap Pack's margin around each face, in texels
 
 
@@ -95,6 +102,20 @@ def _world_triangles(me, matrix):
     return world[lv[tl]].reshape(-1, 3, 3)
 
 
+def _corner_normals(me, matrix):
+    """(T, 3, 3) the shading normals at the corners of mesh ``me``'s loop triangles (as
+    :func:`_world_triangles` made them) in world space (``matrix`` 4x4), unit length: what
+    Cycles shades with (smooth faces, custom normals)."""
+    tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+    me.loop_triangles.foreach_get("loops", tl)
+    n = np.empty(len(me.loops) * 3)
+    me.corner_normals.foreach_get("vector", n)
+    N = np.linalg.inv(np.asarray(matrix, dtype=np.float64)[:3, :3]).T
+    n = n.reshape(-1, 3)[tl] @ N.T
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    return n.reshape(-1, 3, 3)
+
+
 def _triangle_uvs(me, uv_name):
     """(T, 3, 2) mesh ``me``'s loop triangles (as :func:`_world_triangles` made them) in UV map
     ``uv_name``."""
@@ -103,6 +124,33 @@ def _triangle_uvs(me, uv_name):
     uv = np.empty(len(me.loops) * 2)
     me.uv_layers[uv_name].data.foreach_get("uv", uv)
     return uv.reshape(-1, 2)[tl].reshape(-1, 3, 2)
+
+
+def _triangle_slots(me, slots):
+    """(T,) int64 the material slot of each of mesh ``me``'s loop triangles, clipped to the
+    ``slots`` there are."""
+    slot = np.empty(len(me.loop_triangles), np.int64)
+    me.loop_triangles.foreach_get("material_index", slot)
+    return np.clip(slot, 0, max(int(slots) - 1, 0))
+
+
+def albedo_scale_of(objects) -> dict:
+    """{material name_full: k (3,)} for every material of ``objects`` (bpy objects): Cycles'
+    diffuse albedo of the material with its colour input white (:func:`.textures.albedo_scales`,
+    one Cycles evaluation for all), what the lighting pass is multiplied by so that a base colour
+    times it is what the surface reflects; 1 for a material with no Principled or Diffuse BSDF
+    colour to multiply (and for an empty slot)."""
+    mats = {s.material.name_full: s.material for ob in objects for s in ob.material_slots if s.material}
+    k = textures.albedo_scales([m for m in mats.values() if textures.colour_input(m) is not None])
+    return {name: np.asarray(k.get(name, np.ones(3)), dtype=np.float64) for name in mats}
+
+
+def _lighting_scale(ob, me, scales):
+    """(T, 3) per loop triangle of the copy mesh ``me`` of object ``ob`` its slot's albedo scale."""
+    slots = ob.material_slots
+    k = np.array([scales.get(s.material.name_full, np.ones(3)) if s.material else np.ones(3)
+                  for s in slots] or [np.ones(3)], dtype=np.float64)
+    return k[_triangle_slots(me, len(k))]
 
 
 def _triangle_area(world):
@@ -161,9 +209,10 @@ def _save_image(name, path, pixels, file_format):
     return loaded
 
 
-def _material(name, uv_name, exr, png):
+def _material(name, uv_name, exr, png, lighting_png=None):
     """A material showing image ``exr`` through UV map ``uv_name`` as emitted light (unlit);
-    glTF exports ``png`` in its place (:data:`MATERIAL_KEY`)."""
+    glTF exports ``png`` in its place (:data:`MATERIAL_KEY`) and ``lighting_png``, the lighting
+    pass, as its light map (:data:`LIGHTING_KEY`, :func:`..core.formats.gltf.add_light_maps`)."""
     mat = bpy.data.materials.get(name)
     if mat is None:
         mat = bpy.data.materials.new(name)
@@ -184,13 +233,36 @@ def _material(name, uv_name, exr, png):
     nt.nodes.active = tex
     mat.diffuse_color = (1.0, 1.0, 1.0, 1.0)
     mat[MATERIAL_KEY] = png.name
+    if lighting_png is not None:
+        mat[LIGHTING_KEY] = lighting_png.name
+    elif LIGHTING_KEY in mat:
+        del mat[LIGHTING_KEY]
     return mat
+
+
+def _texel_light(result, scale):
+    """(parts, direct, sources) for :func:`..core.output.lightmap.bake_lightmap`: the bake's
+    corner parts and its exact direct light at any points, both times ``scale`` (the exposure),
+    and each source's apart (which texels vary: the same after a relight); (None, None, None)
+    without the exact direct light (every texel then interpolated)."""
+    parts = result.corner_parts()
+    if parts is None or result.direct is None:
+        return None, None, None
+    E, rho, D, I = parts
+
+    def direct(points, normals):
+        return result.direct.at(points, normals, "texels") * scale
+
+    def sources(points, normals):
+        return result.direct.sources_at(points, normals, "texels")
+    return (E * scale, rho, D * scale, I * scale), direct, sources
 
 
 def write_lightmaps(context, scene_input, result, settings):
     """Baked copies with lightmaps (see the module docstring). Returns (copies, records, notes):
-    records one dict per lightmap (object, uv_map, made_uvs, size, exr, png, covered, filled,
-    unset texels), notes plain lines."""
+    records one dict per lightmap (object, uv_map, made_uvs, size, exr, png, lighting_exr,
+    lighting_png (None without the exact direct light), covered, filled, unset texels, passes:
+    which file holds which pass), notes plain lines."""
     baked = [s for s in scene_input.objects if s.bake]
     write.remove_bakes([s.name for s in baked])
     coll = write.copies_collection(context.scene)
@@ -201,7 +273,10 @@ def write_lightmaps(context, scene_input, result, settings):
         os.makedirs(folder, exist_ok=True)
     except OSError as ex:
         raise write.WriteError(f"could not make the lightmap folder {folder}: {ex.strerror}") from None
-    corners = result.corner_values() * 2.0 ** float(settings.exposure)
+    scale = 2.0 ** float(settings.exposure)
+    light = (result.corner_values() * scale,) + _texel_light(result, scale)
+    users = [bpy.data.objects.get(s.name) for s in baked]
+    scales = albedo_scale_of([o for o in users if o is not None]) if light[1] is not None else None
     out, records = [], []
     for oi, src in enumerate(scene_input.objects):
         if not src.bake:
@@ -213,31 +288,57 @@ def write_lightmaps(context, scene_input, result, settings):
             continue
         if result.owners_of(oi).size > 1:
             notes.append(f"'{src.name}': its lightmap shows the front of its open faces only")
+        if scales is None:
+            notes.append(f"'{src.name}': no lighting-only lightmap: the paper's direct light "
+                         "('hemicube') keeps no direct light apart; choose 'exact'")
         ob = write.place_copy(coll, src, me, "source")
-        uv_name, make = _uv_layer(me, settings.lightmap_uv)
-        M = np.asarray(src.matrix_world, dtype=np.float64)
-        world = _world_triangles(me, M)
-        size = core_lightmap.image_size(_triangle_area(world), settings.lightmap_density,
-                                        settings.lightmap_max_size)
-        if make:
-            _pack(ob, uv_name, size)
-        uv = _triangle_uvs(me, uv_name)
-        lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
-                                         flip=bool(np.linalg.det(M[:3, :3]) < 0))
-        stem = bpy.path.clean_name(src.name)
-        exr = _save_image(f"{src.name}.lightmap.exr", os.path.join(folder, stem + ".lightmap.exr"),
-                          lm.image, "OPEN_EXR")
-        png = _save_image(f"{src.name}.lightmap.png", os.path.join(folder, stem + ".lightmap.png"),
-                          srgb_encode(lm.image), "PNG")
-        mat = _material(f"Radiosity Lightmap ({src.name})", uv_name, exr, png)
-        write.set_materials(me, [mat] * max(1, len(me.materials)))
-        ob["radiosity_lightmap_uv"] = uv_name
-        if lm.unset:
-            notes.append(f"'{src.name}': {lm.unset} texels of its lightmap's islands hold no value")
+        rec = _write_one(ob, me, src, oi, result, light, scales, settings, folder)
+        if rec["unset"]:
+            notes.append(f"'{src.name}': {rec['unset']} texels of its lightmap's islands hold no value")
         out.append(ob)
-        records.append({"object": src.name, "uv_map": uv_name, "made_uvs": bool(make),
-                        "size": list(lm.size), "exr": bpy.path.abspath(exr.filepath),
-                        "png": bpy.path.abspath(png.filepath), "covered": int(lm.covered.sum()),
-                        "filled": int(lm.filled.sum()), "unset": int(lm.unset)})
+        records.append(rec)
     write.select_copies(context, out)
     return out, records, notes
+
+
+def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
+    """Bake, write and show the lightmap of one copy ``ob`` (mesh ``me``) of ``src`` (owner
+    ``oi``); ``light`` (corner values, parts, direct, sources; :func:`_texel_light`); ``scales`` the
+    materials' albedo scales (None: no lighting pass). Returns its record."""
+    uv_name, make = _uv_layer(me, settings.lightmap_uv)
+    M = np.asarray(src.matrix_world, dtype=np.float64)
+    world = _world_triangles(me, M)
+    size = core_lightmap.image_size(_triangle_area(world), settings.lightmap_density, settings.lightmap_max_size)
+    if make:
+        _pack(ob, uv_name, size)
+    uv = _triangle_uvs(me, uv_name)
+    user = bpy.data.objects.get(src.name)
+    k = None if scales is None or user is None else _lighting_scale(user, me, scales)
+    corners, parts, direct, sources = light
+    lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
+                                     flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, direct=direct,
+                                     normals=_corner_normals(me, M), lighting_scale=k, sources=sources)
+    stem = bpy.path.clean_name(src.name)
+    exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)
+    lit = (None, None) if lm.lighting is None else _save_pass(src.name, folder, stem, "lighting", lm.lighting)
+    mat = _material(f"Radiosity Lightmap ({src.name})", uv_name, exr, png, lit[1])
+    write.set_materials(me, [mat] * max(1, len(me.materials)))
+    ob["radiosity_lightmap_uv"] = uv_name
+    files = [None if i is None else bpy.path.abspath(i.filepath) for i in (exr, png) + lit]
+    return {"object": src.name, "uv_map": uv_name, "made_uvs": bool(make), "size": list(lm.size),
+            "exr": files[0], "png": files[1], "lighting_exr": files[2], "lighting_png": files[3],
+            "passes": {"radiosity": "exr, png: what the surface shows (radiance x 2^exposure); the copy's "
+                                    "material and glTF's unlit baseColorTexture",
+                       "lighting": None if lit[0] is None else
+                       "lighting_exr, lighting_png: " + LIGHTING_NOTE + "; glTF: the material's "
+                       "extras.hemicube_radiosity.lightMap"},
+            "covered": int(lm.covered.sum()), "filled": int(lm.filled.sum()), "unset": int(lm.unset)}
+
+
+def _save_pass(name, folder, stem, kind, pixels):
+    """(EXR image, PNG image) of one pass ``kind`` ('lightmap': the radiosity, 'lighting'):
+    ``<stem>.<kind>.exr`` (32-bit float) and ``.png`` (Standard view: clamped, sRGB) in
+    ``folder``, loaded as images ``<name>.<kind>.exr`` / ``.png``."""
+    exr = _save_image(f"{name}.{kind}.exr", os.path.join(folder, f"{stem}.{kind}.exr"), pixels, "OPEN_EXR")
+    png = _save_image(f"{name}.{kind}.png", os.path.join(folder, f"{stem}.{kind}.png"), srgb_encode(pixels), "PNG")
+    return exr, png

@@ -67,6 +67,11 @@ class BakeResult:
     back_faces: tuple = ()                    # per object: None, or (a back) the face of its front behind each face
     corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours vary by corner
     vertex_lighting: np.ndarray | None = None    # (V, 3) the light arriving, where colours vary by corner
+    direct: DirectLight | None = None            # the exact direct light, to light other points (lightmaps)
+    vertex_direct: np.ndarray | None = None      # (V, 3) direct light arriving at the output vertices
+    vertex_indirect: np.ndarray | None = None    # (V, 3) light arriving reflected at least once
+    vertex_rho: np.ndarray | None = None         # (V, 3) reflectivity at the vertices (lighting pass: 1)
+    corner_rho: np.ndarray | None = None         # (N, 4, 3) per element corner where colours vary by corner
 
     def __post_init__(self):
         if self.elements is None:
@@ -87,6 +92,20 @@ class BakeResult:
         if self.vertex_lighting is None:
             return None
         return self.vertex_lighting[self.elements.corner_ids()]
+
+    def corner_parts(self) -> tuple | None:
+        """(emission, reflectivity, direct, indirect), each (N, 4, 3) at every corner of
+        ``elements``, with ``corner_values() == emission + reflectivity * (direct + indirect)``
+        (to round-off): direct and indirect are the light arriving (radiance: irradiance / pi)
+        straight from the sources and reflected at least once. With ``output_pass='lighting'``
+        the reflectivity is 1 and the emission 0. None without the exact direct light (the
+        paper's 'hemicube' path)."""
+        if self.vertex_direct is None:
+            return None
+        cv = self.elements.corner_ids()
+        rho = self.vertex_rho[cv] if self.corner_rho is None else self.corner_rho
+        D, I = self.vertex_direct[cv], self.vertex_indirect[cv]
+        return self.corner_values() - rho * (D + I), rho, D, I
 
     def front_faces(self, owner, faces) -> np.ndarray:
         """(n,) int64 the faces of the object ``owner`` is (or is the back of) that ``faces`` (n,)
@@ -154,6 +173,10 @@ class BakeContext:
     vertex_radiosity: np.ndarray | None = None
     corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured corners (output stage)
     vertex_lighting: np.ndarray | None = None    # (V, 3): the light arriving there (output stage)
+    vertex_direct: np.ndarray | None = None      # (V, 3): the direct part of it (output stage)
+    vertex_indirect: np.ndarray | None = None    # (V, 3): the part reflected at least once (output stage)
+    vertex_rho: np.ndarray | None = None         # (V, 3): reflectivity there (output stage)
+    corner_rho: np.ndarray | None = None         # (N, 4, 3): textured corners' reflectivity (output stage)
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
@@ -211,7 +234,9 @@ class BakeContext:
                           self.forecast, tuple(m.size_scale for m in self.meshes or ()),
                           tuple(getattr(m, "back_of", -1) for m in self.meshes or ()),
                           tuple(getattr(m, "back_faces", None) for m in self.meshes or ()),
-                          self.corner_radiosity, self.vertex_lighting)
+                          self.corner_radiosity, self.vertex_lighting, direct=self.direct,
+                          vertex_direct=self.vertex_direct, vertex_indirect=self.vertex_indirect,
+                          vertex_rho=self.vertex_rho, corner_rho=self.corner_rho)
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time

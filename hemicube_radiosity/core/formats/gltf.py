@@ -27,6 +27,10 @@ Blender shows on an sRGB display with that view transform:
     Blender's AgX LUT output is (three.js uses 2.2, which is further from Blender). Blender's "AgX"
     view is a 3D LUT (``AgX_Base_sRGB.cube``) in E-Gamut: close, not identical (docs/gltf.md).
 
+:func:`add_light_maps` adds a lightmap's lighting-only pass to the materials of lightmapped
+copies: the PNG as one more image and texture of the file, named in the material's ``extras``
+(glTF has no lightmap slot; see docs/gltf.md for how three.js wires it).
+
 Pure Python + NumPy: reads and writes ``.glb`` and ``.gltf`` (external ``.bin`` or data URI).
 """
 from __future__ import annotations
@@ -34,16 +38,20 @@ from __future__ import annotations
 import base64
 import json
 import os
+import shutil
 import struct
 
 import numpy as np
 
 __all__ = ["VIEW_TRANSFORMS", "RADIANCE_ATTRIBUTE", "display_linear", "srgb_encode",
-           "tone_map_gltf", "read_gltf", "write_gltf"]
+           "tone_map_gltf", "add_light_maps", "LIGHT_MAP_EXTRAS", "LIGHTING_NOTE", "read_gltf", "write_gltf"]
 
 RADIANCE_ATTRIBUTE = "_RADIANCE"
 VIEW_TRANSFORMS = ("standard", "khronos_neutral", "agx")
 
+LIGHTING_NOTE = ("the light arriving (radiance: irradiance / pi) x the material's albedo scale x "
+                 "2^exposure, clamped to 0..1 and sRGB-encoded: multiply the surface's base colour by it")
+LIGHT_MAP_EXTRAS = "hemicube_radiosity"   # the key of a material's extras that names its light map
 _FLOAT, _ARRAY_BUFFER = 5126, 34962
 _GLB_MAGIC, _JSON, _BIN = b"glTF", 0x4E4F534A, 0x004E4942
 
@@ -237,3 +245,61 @@ def tone_map_gltf(path, view_transform="standard"):
         }
         write_gltf(path, doc, buffers)
     return {"primitives": changed, "max_radiance": peak}
+
+
+def _append_image(doc, buffers, path, png, glb):
+    """A new image holding the PNG file ``png``: in buffer 0 (a .glb), else the file copied beside
+    ``path`` (a .gltf) and named by its URI; its index."""
+    if glb:
+        if not buffers:
+            buffers.append(bytearray())
+            doc.setdefault("buffers", []).append({"byteLength": 0})
+        buf = buffers[0]
+        buf.extend(b"\0" * (-len(buf) % 4))
+        with open(png, "rb") as f:
+            data = f.read()
+        doc.setdefault("bufferViews", []).append({"buffer": 0, "byteOffset": len(buf), "byteLength": len(data)})
+        buf.extend(data)
+        doc["buffers"][0]["byteLength"] = len(buf)
+        image = {"bufferView": len(doc["bufferViews"]) - 1, "mimeType": "image/png"}
+    else:
+        name = os.path.basename(png)
+        target = os.path.join(os.path.dirname(os.path.abspath(path)), name)
+        if os.path.abspath(png) != target:
+            shutil.copyfile(png, target)
+        image = {"uri": name.replace(" ", "%20"), "mimeType": "image/png"}
+    images = doc.setdefault("images", [])
+    image["name"] = os.path.splitext(os.path.basename(png))[0]
+    images.append(image)
+    return len(images) - 1
+
+
+def add_light_maps(path, maps):
+    """Give each material of ``path`` (.glb/.gltf) named in ``maps`` {material name: (PNG file,
+    note)} that PNG as a light map: one more image and texture (the sampler and texCoord of the
+    material's baseColorTexture), and ``extras[LIGHT_MAP_EXTRAS]`` = {"lightMap": {"index":
+    texture, "texCoord": n}, "lightMapPass": note, "baseColorPass": ...}. A material that already
+    has one is left alone. Returns how many materials got one."""
+    doc, buffers = read_gltf(path)
+    with open(path, "rb") as f:
+        glb = f.read(4) == _GLB_MAGIC
+    count = 0
+    for mat in doc.get("materials", []):
+        if mat.get("name") not in maps or LIGHT_MAP_EXTRAS in mat.get("extras", {}):
+            continue
+        png, note = maps[mat["name"]]
+        base = mat.get("pbrMetallicRoughness", {}).get("baseColorTexture", {})
+        texture = {"source": _append_image(doc, buffers, path, png, glb)}
+        if "index" in base and "sampler" in doc["textures"][base["index"]]:
+            texture["sampler"] = doc["textures"][base["index"]]["sampler"]
+        doc.setdefault("textures", []).append(texture)
+        mat.setdefault("extras", {})[LIGHT_MAP_EXTRAS] = {
+            "lightMap": {"index": len(doc["textures"]) - 1, "texCoord": int(base.get("texCoord", 0))},
+            "lightMapPass": note,
+            "baseColorPass": "the radiosity: what the surface shows (radiance x 2^exposure, Standard "
+                             "view), unlit",
+        }
+        count += 1
+    if count:
+        write_gltf(path, doc, buffers)
+    return count

@@ -1,12 +1,14 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Lightmaps: the bake's output read at the texel centres of an image through a UV map.
 
-The same solution as the vertex colours (no new light is computed here): a texel takes the value
-the baked copy would show at the surface point under its centre, the bilinear interpolation of
-``BakeResult.corner_values()`` over the output element that holds the point (the paper's
-rendering step, :mod:`.interpolate`). So a texel is exactly as good as the output elements'
-corners around it: a shadow's edge is as sharp as the detail size cuts it, not as the texel size
-(direct light exact at texel centres is not done).
+The same solution as the vertex colours, read at the surface point under each texel centre as
+the output vertices read it (:mod:`.stage`): E + rho * (D + I), with D the direct light computed
+again exactly at that point (lamps, emitters, the world, with shadow rays: a shadow's edge is as
+sharp as the texels, not as the detail size) and the smoother rest, the emission E, reflectivity
+rho and light reflected at least once I, the bilinear interpolation of the output elements'
+corners (``BakeResult.corner_parts()``; the paper's rendering step, :mod:`.interpolate`).
+Without the exact direct light (the paper's 'hemicube' path) a texel is the bilinear
+interpolation of ``BakeResult.corner_values()``, what the vertex-colour copy shows there.
 
 Steps, all NumPy:
 
@@ -15,8 +17,11 @@ Steps, all NumPy:
    triangle and the barycentric coordinates of its centre (clamped onto the triangle when the
    centre is outside it). Where triangles share a texel, the one the centre lies deepest in wins.
 2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
-3. :func:`evaluate`: :func:`.interpolate.locate` among one object's output elements (with the
-   normals, so the two sides of a thin wall are told apart), then bilinear in the element found.
+3. :func:`texel_values` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
+   output elements (with the normals, so the two sides of a thin wall are told apart), bilinear
+   in the element found (:func:`texel_light`), and the direct light at all the texel centres in
+   one batch; where the light varies between neighbours (:func:`varying`), the mean over points
+   of the texel's square, as Cycles' bake averages there (a second batch).
 4. :func:`dilate`: texels outside every island are filled from their filled neighbours (the mean
    of the filled ones among their 8), ``margin`` passes: bilinear filtering and mip-maps read no
    black across an island's border.
@@ -33,10 +38,16 @@ import numpy as np
 
 from .interpolate import interpolate_corner_values, locate
 
-__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "dilate", "bake_lightmap",
-           "REACH", "MARGIN"]
+__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
+           "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
+           "FOOTPRINT"]
 
 REACH = 0.75       # texels: a centre this close to a triangle (outside it) still takes its value
+INSET = 1e-3       # texel points are lit this share of the way toward their triangle's centre
+VARIES = 0.1       # light differing this much between neighbours: averaged over the texel,
+FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
+SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
+FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
 MARGIN = 8         # texels of dilation around every island
 _CHUNK = 4_000_000  # candidate texels rasterized at once
 
@@ -49,13 +60,16 @@ class Lightmap:
     dilation reached. ``covered`` (H, W) bool: texels of a UV island (centre within ``REACH``
     texels of a triangle). ``filled`` (H, W) bool: texels holding a value (islands and margin).
     ``unset`` int: island texels left without a finite value (0 when the bake is whole).
-    ``inside`` (H, W) bool: texels whose centre lies inside a triangle (not clamped onto one)."""
+    ``inside`` (H, W) bool: texels whose centre lies inside a triangle (not clamped onto one).
+    ``lighting`` (H, W, 3) float32 or None: the lighting-only pass (the light arriving times the
+    material's albedo scale), filled and dilated as ``image``."""
 
     image: np.ndarray
     covered: np.ndarray
     filled: np.ndarray
     inside: np.ndarray
     unset: int
+    lighting: np.ndarray | None = None
 
     @property
     def size(self) -> tuple:
@@ -201,8 +215,160 @@ def dilate(image, known, passes=MARGIN):
     return img, known
 
 
+def texel_light(elements, parts, points, normals, owner, D):
+    """(radiosity (n, 3), light arriving (n, 3)) at n texels' world ``points`` (n, 3) with face
+    ``normals`` (n, 3) on the output elements of object ``owner``, given ``D`` (n, 3) the direct
+    light arriving there (radiance: irradiance / pi).
+
+    ``parts`` (emission, reflectivity, direct, indirect), each (N, 4, 3) per element corner
+    (:meth:`..pipeline.BakeResult.corner_parts`, any exposure already in the emission and the
+    light). Each texel is E + rho * (D + I), with E, rho and I the bilinear interpolation of the
+    corners' emission, reflectivity and indirect light in the element that holds the point
+    (:func:`.interpolate.locate`), as the output vertices are made (:mod:`.stage`). The light
+    arriving returned is D + I (what the lighting-only pass holds)."""
+    if len(points) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3))
+    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    light = np.asarray(D, dtype=np.float64) + indirect
+    return E + rho * light, light
+
+
+def _lit_points(world, normals, tri, bary, flip):
+    """(points, face normals, shading normals) (n, 3) each of texels ``tri``, ``bary`` (n,),
+    (n, 3), the points moved :data:`INSET` of the way toward their triangle's centre (a point on
+    an edge where two walls meet sees neither); shading normals interpolated from ``normals``
+    (T, 3, 3), or the faces' where none are given or they turn away from the face."""
+    pts, nrm = texel_points(world, tri, bary * (1.0 - INSET) + INSET / 3.0, flip)
+    if normals is None:
+        return pts, nrm, nrm
+    shading = np.einsum("nk,nkj->nj", bary, np.asarray(normals, dtype=np.float64)[tri])
+    shading /= np.maximum(np.linalg.norm(shading, axis=1, keepdims=True), 1e-300)
+    return pts, nrm, np.where(np.einsum("ij,ij->i", shading, nrm)[:, None] > 0, shading, nrm)
+
+
+def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
+    """(H, W) bool: texels of ``known`` (H, W) where any channel of ``values`` (H, W, k) differs
+    from a known 4-neighbour's by more than ``ratio`` of the larger of the two and by more than
+    ``floor`` of the channel's 99th percentile over the known texels: where a texel's own centre
+    does not stand for its square (a shadow's edge, a lamp's hot spot, a block's foot), not
+    where a faint light falls off (both tests keep their answer when a channel is scaled).
+    ``surface`` (points (H, W, 3), normals (H, W, 3), pitch (H, W)): only neighbours on one
+    surface count, facing within 25 degrees and less than two texels (``pitch``, world units)
+    apart, so that islands packed side by side do not mark each other's borders."""
+    values = np.asarray(values, dtype=np.float64)
+    out = np.zeros(known.shape, bool)
+    if not known.any():
+        return out
+    least = floor * np.percentile(values[known], 99, axis=0)          # (k,)
+    for axis in (0, 1):
+        def pair(a):
+            a = np.swapaxes(a, 0, axis)
+            return a[:-1], a[1:]
+        (a, b), (ka, kb) = pair(values), pair(known)
+        step = np.abs(a - b)
+        jump = np.any((step > ratio * np.maximum(a, b)) & (step > least), axis=-1) & ka & kb
+        if surface is not None:
+            (pa, pb), (na, nb), (sa, sb) = (pair(x) for x in surface)
+            jump &= (np.einsum("...k,...k->...", na, nb) > 0.9) & \
+                (np.linalg.norm(pa - pb, axis=-1) < 2.0 * np.maximum(sa, sb))
+        o = np.swapaxes(out, 0, axis)
+        o[:-1] |= jump
+        o[1:] |= jump
+    return out
+
+
+def _sub_texels(px, tri, centre, grid=SUBTEXELS):
+    """(texel (m,), barycentric (m, 3)) ``grid`` x ``grid`` points spread evenly over the square
+    :data:`FOOTPRINT` texels wide around each texel ``centre`` (n, 2) (texel units) that lie
+    inside its triangle ``tri`` (n,) of ``px`` (T, 3, 2): Cycles' bake jitters its samples over
+    that square (Blender's bake differentials are half a texel's), keeping those inside the
+    triangle; ``texel`` indexes the n texels."""
+    off = ((np.arange(grid) + 0.5) / grid - 0.5) * FOOTPRINT
+    off = np.stack(np.meshgrid(off, off, indexing="ij"), -1).reshape(-1, 2)
+    n, k = len(tri), len(off)
+    texel = np.repeat(np.arange(n), k)
+    t = tri[texel]
+    _, b = _edge_distances((centre[:, None, :] + off[None]).reshape(-1, 2), px[t, 0], px[t, 1], px[t, 2])
+    ok = np.all(b >= 0, axis=1)
+    return texel[ok], b[ok]
+
+
+def _pitch(uv, world, width, height):
+    """(T,) the world length of a texel's side on each triangle: sqrt(world area / texel area)."""
+    px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
+    w = np.asarray(world, dtype=np.float64)
+    a_uv = 0.5 * np.abs(np.cross(px[:, 1] - px[:, 0], px[:, 2] - px[:, 0]))
+    a_w = 0.5 * np.linalg.norm(np.cross(w[:, 1] - w[:, 0], w[:, 2] - w[:, 0]), axis=1)
+    return np.sqrt(a_w / np.maximum(a_uv, 1e-300))
+
+
+def _surface(covered, points, normals, pitch):
+    """(points, normals, pitch) of the covered texels as (H, W, ...) images (:func:`varying`)."""
+    out = []
+    for a in (points, normals, pitch):
+        img = np.zeros(covered.shape + np.shape(a)[1:])
+        img[covered] = a
+        out.append(img)
+    return tuple(out)
+
+
+def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, flip=False, sources=None):
+    """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
+    in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
+    :func:`texel_light` with ``direct(points, normals) -> (n, 3)`` for the direct light: at
+    every texel's centre, then, where the light varies between neighbours (:func:`varying`: a
+    shadow's edge, a lamp's hot spot, a block's foot), the mean over :data:`SUBTEXELS` squared
+    points of the square :data:`FOOTPRINT` texels wide around the centre that lie in its triangle,
+    each lit and read on its own (a box filter, as Cycles' bake averages its samples over that
+    square: a shadow's edge, or a surface standing on the floor, falls across a texel as a share
+    of it, not all or nothing). Two batches of rays, the second only at the texels that vary.
+
+    Which texels vary is judged on ``sources(points, normals) -> (n, S)`` where given (each
+    source's direct light apart, :meth:`..light.stage.DirectLight.sources_at`) and on where any
+    light arrives reflected: both keep their shape when a source's strength or colour or a
+    surface's colour changes, so a relight picks the same texels and finds their transport
+    cached. Without it, on the light arriving. ``world`` (T, 3, 3), ``normals`` (T, 3, 3) or
+    None and ``flip`` as for :func:`bake_lightmap`."""
+    covered = tri >= 0
+    height, width = covered.shape
+    t, b = tri[covered], bary[covered]
+
+    def light_at(tris, bs):
+        pts, nrm, shading = _lit_points(world, normals, tris, bs, flip)
+        D = np.asarray(direct(pts, shading), dtype=np.float64)
+        return texel_light(elements, parts, pts, nrm, owner, D) + (pts, nrm, shading, D)
+    value, light, pts, nrm, shading, D = light_at(t, b)
+    if sources is None:
+        marks = light.sum(axis=1, keepdims=True)
+    else:
+        marks = np.column_stack([np.asarray(sources(pts, shading), dtype=np.float64),
+                                 np.any(light - D > 0, axis=1)])
+    img = np.zeros(covered.shape + (marks.shape[1],))
+    img[covered] = marks
+    surface = _surface(covered, pts, nrm, _pitch(uv, world, width, height)[t])
+    edge = varying(img, covered, surface=surface)[covered]
+    if not edge.any():
+        return value, light
+    rows, cols = np.nonzero(covered)
+    centre = np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1)
+    px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
+    which, sub = _sub_texels(px, t[edge], centre)
+    if which.size == 0:
+        return value, light
+    sub_value, sub_light = light_at(t[edge][which], sub)[:2]
+    m = int(edge.sum())
+    count = np.bincount(which, minlength=m)
+    at = np.flatnonzero(edge)[count > 0]
+    for out, per in ((value, sub_value), (light, sub_light)):
+        mean = np.stack([np.bincount(which, weights=per[:, k], minlength=m) for k in range(3)], 1)
+        out[at] = (mean / np.maximum(count, 1)[:, None])[count > 0]
+    return value, light
+
+
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
-                  margin=MARGIN, reach=REACH) -> Lightmap:
+                  margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
+                  lighting_scale=None, sources=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -211,16 +377,36 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lightmap's UV map and in world space; ``width`` x ``height`` texels (square by default).
     ``flip``: the object's world matrix mirrors (negative determinant). Texels of no island are
     dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
-    dilated over too and, if still unset, counted in ``Lightmap.unset``."""
+    dilated over too and, if still unset, counted in ``Lightmap.unset``.
+
+    With ``parts`` and ``direct(points, normals) -> (n, 3)`` (the bake's exact direct light,
+    times the exposure) the direct light is exact at every texel, the rest interpolated, and
+    texels where the light varies are the mean over their square (:func:`texel_values`, judged
+    on ``sources(points, normals) -> (n, S)`` where given), lit with ``normals`` (T, 3, 3) the triangles'
+    corner normals in world space where given (smooth shading), else the triangles' own; without
+    them every texel is the bilinear interpolation of ``corner_values``. ``lighting_scale`` (T, 3)
+    per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
+    material's albedo scale), in ``Lightmap.lighting``."""
     height = int(width if height is None else height)
     width = int(width)
     tri, bary, inside = rasterize(uv, width, height, reach)
     covered = tri >= 0
     image = np.zeros((height, width, 3))
-    pts, nrm = texel_points(world, tri[covered], bary[covered], flip)
-    image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+    lighting = None
+    t, b = tri[covered], bary[covered]
+    if parts is None or direct is None:
+        pts, nrm = texel_points(world, t, b, flip)
+        image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+    else:
+        image[covered], light = texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary,
+                                             flip, sources)
+        if lighting_scale is not None:
+            lighting = np.zeros((height, width, 3))
+            lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]
     good = covered & np.all(np.isfinite(image), axis=-1)
     image, filled = dilate(np.nan_to_num(image), good, margin)
+    if lighting is not None:
+        lighting = dilate(np.nan_to_num(lighting), good, margin)[0].astype(np.float32)
     # an island texel that had no finite value takes its neighbours' (counted if none reached it)
     unset = int(np.count_nonzero(covered & ~filled))
-    return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset)
+    return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset, lighting)

@@ -52,7 +52,8 @@ def vertex_stage(ctx) -> None:
         return w
     weights = F.memo(key, make)
     ctx.elements = patches
-    ctx.corner_radiosity = ctx.vertex_lighting = None
+    ctx.corner_radiosity = ctx.vertex_lighting = ctx.corner_rho = None
+    ctx.vertex_direct = ctx.vertex_indirect = ctx.vertex_rho = None
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
         if lighting or textured:
@@ -109,11 +110,28 @@ def vertex_stage(ctx) -> None:
             D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
     if side is not None:                                # what a buried vertex gathered: the inside
         rest_v = side.spread(rest_v)
+    _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
         return
     E_v = vertex_radiosity(ctx.elements, ctx.elements.emission, cache=ctx.cache)
     ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v)
+
+
+def _keep_light(ctx, D_vert, rest_v, rho_v):
+    """``ctx.vertex_direct`` (V, 3) the direct light arriving at each output vertex and
+    ``ctx.vertex_indirect`` (V, 3) the light arriving that was reflected at least once (radiance:
+    irradiance / pi), with ``ctx.vertex_rho`` (V, 3) the reflectivity that made ``rest_v`` (V, 3)
+    of it (``rho_v`` None: the lighting pass, whose ``rest_v`` is the light arriving: ones).
+    Every vertex value is then E + rho * (direct + indirect) (:meth:`..pipeline.BakeResult.corner_parts`),
+    so a lightmap can take the direct part exactly at its texels (:mod:`.lightmap`)."""
+    ctx.vertex_direct = D_vert
+    if rho_v is None:
+        ctx.vertex_rho, ctx.vertex_indirect = np.ones_like(D_vert), rest_v
+        return
+    pos = rho_v > 0
+    ctx.vertex_rho = rho_v
+    ctx.vertex_indirect = np.where(pos, rest_v / np.where(pos, rho_v, 1.0), 0.0)
 
 
 def _reflected_by_patches(ctx, reflected):
@@ -149,6 +167,7 @@ def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v):
     faces meet with different colours at one vertex (a UV seam, a texture's tiles): what Cycles
     shows at each face corner, and what the writer writes."""
     rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
+    ctx.corner_rho = rho_c
     if rho_c is None and em_c is None:
         return E_v + rho_v * light_v + reflected_v
     cv = ctx.elements.corner_ids()                                  # (N, 4) vertex of each corner

@@ -97,3 +97,76 @@ def test_image_size():
     assert lm.image_size(4.0, 32, 1024) == 64
     assert lm.image_size(1e6, 32, 1024) == 1024
     assert lm.image_size(0.0, 32, 1024) == 8
+
+
+def test_direct_light_at_the_texels_a_step_averaged_over_each_texel():
+    """The direct light taken at the texels, the rest interpolated: a light that steps from 0
+    to 1 across x = 0.73 on the floor (a hard shadow's edge, between the elements' vertices
+    0.1 m apart and off the texel grid) reads 0 or 1 at every texel clear of it, and at the
+    texels it crosses the share on its lit side of the square half a texel wide around the
+    texel's centre (the box filter Cycles' bake applies), to the 4 x 4 points' resolution; the rest is E + rho * I with E, rho and I
+    linear in position, which bilinear interpolation keeps exactly."""
+    elements, uv, world = walls()
+    c = elements.corners()
+    E, rho, I = 0.1 * f(c), np.full(c.shape, 0.5), 0.2 * f(c)
+    parts = (E, rho, np.zeros(c.shape), I)
+    x0 = 0.73
+    seen = []
+
+    def direct(points, normals):
+        seen.append(len(points))
+        return np.repeat((points[:, :1] > x0) & (normals[:, 2:] > 0.5), 3, axis=1).astype(float)
+    size = 64
+    L = lm.bake_lightmap(elements, None, 0, uv, world, size, parts=parts, direct=direct, lighting_scale=np.ones((4, 3)))
+    tri, bary, inside = lm.rasterize(uv, size, size)
+    covered = tri >= 0
+    assert len(seen) == 2 and seen[0] == covered.sum() and 0 < seen[1] <= 16 * 2 * size
+    # the points lit and read: a hair (INSET) inside their triangles
+    pts, _ = lm.texel_points(world, tri[covered], bary[covered] * (1 - lm.INSET) + lm.INSET / 3)
+    img = np.zeros((size, size, 3))
+    img[covered] = pts
+    # floor texels inside the island whose square lies in one triangle of the floor
+    u0, u1, v0, v1 = 0.02 * size, 0.62 * size, 0.02 * size, 0.32 * size     # the floor's UV box, texels
+    r, col = np.mgrid[0:size, 0:size]
+    inner = inside & (col > u0 + 1) & (col + 1 < u1 - 1) & (r > v0 + 1) & (r + 1 < v1 - 1)
+    diag = (r + 0.5 - v0) / (v1 - v0) - (col + 0.5 - u0) / (u1 - u0)      # the quad's diagonal
+    inner &= np.abs(diag) * (u1 - u0) > 1.5
+    # the exact share with x > x0 (x = 2 (u - u0) / (u1 - u0)) of the square half a texel wide
+    # around each texel's centre (Cycles' bake jitters its samples over that: Blender's bake
+    # differentials are half the texel's)
+    edge = u0 + x0 / 2 * (u1 - u0)
+    share = np.clip((col + 0.5 + lm.FOOTPRINT / 2 - edge) / lm.FOOTPRINT, 0, 1)
+    want_D = np.repeat(share[..., None], 3, axis=-1)
+    rest = 0.1 * f(img) + 0.5 * 0.2 * f(img)
+    got_D = (L.image - rest) / 0.5
+    crossed = inner & (share > 0) & (share < 1)
+    clear = inner & ~crossed
+    assert crossed.sum() >= 8 and clear.sum() > 400
+    np.testing.assert_allclose(got_D[clear], want_D[clear], atol=1e-4)
+    assert np.abs(got_D[crossed] - want_D[crossed]).max() <= 1 / 8 + 1e-6
+    # the lighting pass: D + I (albedo scale 1), E and rho left out
+    np.testing.assert_allclose(L.lighting[inner], got_D[inner] + 0.2 * f(img)[inner], atol=1e-4)
+
+
+def test_varying_marks_both_sides_of_a_jump():
+    light = np.ones((4, 6, 3))
+    light[:, 3:] = 2.0
+    known = np.ones((4, 6), bool)
+    known[0, 0] = False
+    v = lm.varying(light, known)
+    assert v[:, 2:4].all() and not v[:, :2].any() and not v[:, 4:].any()
+    assert not lm.varying(light * 1.05 ** np.arange(6)[None, :, None] / 2 ** (np.arange(6) >= 3)[None, :, None],
+                          known).any()
+    # scaled, the same texels; a faint light halving from texel to texel is not marked
+    assert np.array_equal(lm.varying(7.5 * light, known), v)
+    faint = np.concatenate([light, 1e-3 * 0.5 ** np.arange(6)[None, :, None] * np.ones((2, 6, 3))])
+    assert not lm.varying(faint, np.ones((6, 6), bool))[5:].any()        # (row 4 meets row 3)
+    # two islands side by side (columns 0-2 on the floor, 3-5 on a wall far away): no jump
+    pts = np.zeros((4, 6, 3))
+    pts[..., 0] = np.arange(6)[None, :] * 0.1
+    pts[:, 3:, 2] = 5.0
+    nrm = np.zeros((4, 6, 3))
+    nrm[..., 2] = 1.0
+    assert not lm.varying(light, known, surface=(pts, nrm, np.full((4, 6), 0.1))).any()
+    pts[:, 3:, 2] = 0.0                          # one surface: the jump counts
+    assert np.array_equal(lm.varying(light, known, surface=(pts, nrm, np.full((4, 6), 0.1))), v)
