@@ -64,8 +64,8 @@ class BakeResult:
     size_scales: tuple = ()                   # per object: its sizes are the settings' times this (core.mesh.sizes)
     back_of: tuple = ()                       # per object: -1, or the object whose back it is (core.mesh.backs)
     back_faces: tuple = ()                    # per object: None, or (a back) the face of its front behind each face
-    corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours vary by corner
-    vertex_lighting: np.ndarray | None = None    # (V, 3) the light arriving, where colours vary by corner
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours or light vary by corner
+    corner_light: np.ndarray | None = None       # (N, 4, 3) the light arriving, where colours vary by corner
 
     def __post_init__(self):
         if self.elements is None:
@@ -73,8 +73,9 @@ class BakeResult:
 
     def corner_values(self) -> np.ndarray:
         """(N, 4, 3) the output at every corner of ``elements`` (a triangle's fourth corner is its
-        third): each corner's own value where the meshes' colours vary by corner (a texture:
-        ``corner_radiosity``), else its vertex's ``vertex_radiosity``."""
+        third): each corner's own value where the meshes' colours vary by corner (a texture) or
+        a corner was lit on its own (a crease, :mod:`.output.crease`): ``corner_radiosity``;
+        else its vertex's ``vertex_radiosity``."""
         if self.corner_radiosity is not None:
             return self.corner_radiosity
         return self.vertex_radiosity[self.elements.corner_ids()]
@@ -83,9 +84,7 @@ class BakeResult:
         """(N, 4, 3) the light arriving at every corner of ``elements`` (radiance: irradiance / pi,
         without the surface's colour or emission), or None: kept only where the meshes' colours
         vary by corner (a texture), for a baked copy that multiplies its texture by it."""
-        if self.vertex_lighting is None:
-            return None
-        return self.vertex_lighting[self.elements.corner_ids()]
+        return self.corner_light
 
     def front_faces(self, owner, faces) -> np.ndarray:
         """(n,) int64 the faces of the object ``owner`` is (or is the back of) that ``faces`` (n,)
@@ -151,8 +150,8 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
-    corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured corners (output stage)
-    vertex_lighting: np.ndarray | None = None    # (V, 3): the light arriving there (output stage)
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured or creased corners (output stage)
+    corner_lighting: np.ndarray | None = None    # (N, 4, 3): the light arriving there (output stage)
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
@@ -210,7 +209,7 @@ class BakeContext:
                           self.forecast, tuple(m.size_scale for m in self.meshes or ()),
                           tuple(getattr(m, "back_of", -1) for m in self.meshes or ()),
                           tuple(getattr(m, "back_faces", None) for m in self.meshes or ()),
-                          self.corner_radiosity, self.vertex_lighting)
+                          self.corner_radiosity, self.corner_lighting)
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time
