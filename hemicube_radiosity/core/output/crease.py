@@ -13,34 +13,38 @@ not skip its own triangle (``kernel/light/sample.h`` ``shadow_ray_offset``). So 
 corner sees only the lune between the two planes: a sun above the undercut does not light it,
 where one value per vertex, lit along the smoothed normal, gave it the full sun.
 
-Where the triangle is not turned around, Cycles' shadow ray starts lifted toward the smooth
-surface (the shadow-terminator geometry offset, 0.1 by default: the start moves by the smooth
-surface's height over the triangle at the bake point, which Cycles puts 1e-4 of the coordinates
-in from the corner), and then passes light from a little below the plane, more the lower the
-corner's neighbours lie: cutting all light from below the plane at such corners made truck
-town's error 19.0% (from 15.8%), cutting it where the corner's neighbours lie on or below the
-shading normal's tangent plane (no lift) 17.0%. It is not cut there: those corners take the
-cosine to the shading normal at their own point.
+Where the triangle is not turned around, Cycles' shadow ray toward a light below the plane
+starts lifted toward the smooth surface (the shadow-terminator geometry offset) and does not
+skip its own triangle: the slope's corner is dark where that ray meets the slope, lit where it
+passes over the lip's edge (:mod:`.lift` says which, for the scene's strongest sun, from
+Blender's triangles of the face). Cutting all light from below the plane there made truck
+town's error 19.0% (from 15.8%); cutting it where :mod:`.lift` finds the ray blocked, 12.0%.
 
 Here, at every corner whose shading normal (its own face's corner normal, interpolated at the
 vertex: :func:`.normals.corner_shading_normals`) leans more than :data:`CREASE_ANGLE` off its
 own triangle's geometric normal, or off the normal its vertex was lit with, the direct light is
-found again at that corner alone: at a point :data:`INSET` of the way from the vertex to its
-element's centre (on the element's plane), the cosine taken to the shading normal, rays starting
-off the point by its object's offset (:func:`.rays.ray_offsets`) along the bisector of the two
-normals; at a turned-around corner both normals negated, no lamp's or world's light from below
-the triangle's plane (``facing`` of :meth:`.light.stage.DirectLight.at`; an emitting face's is
-not cut, its shadow rays start above the plane) and its light reflected more than once (per
-vertex) scaled by the share of its hemisphere above that plane (:func:`corner_light`). Only
+found again for that corner alone, the cosine taken to its shading normal
+(:func:`corner_light`). A turned-around corner has both normals negated and its light reflected
+more than once (per vertex) scaled by the share of its hemisphere above the triangle's plane.
+There, and where :mod:`.lift` finds the sun's ray blocked, the lamps' and the world's light from
+below the triangle's plane is cut (``facing`` of :meth:`.light.stage.DirectLight.at`; an
+emitting face's is not: its shadow rays start above the plane), the rays starting at a point
+:data:`INSET` of the way into the corner's element, off it by its object's offset
+(:func:`.rays.ray_offsets`) along the two normals' bisector. Elsewhere they start at the
+vertex's own point (on the front of all its elements), as Cycles' leave the corner itself. Only
 meshes with corner normals (smooth or custom-normal faces as Blender reads them) have such
 corners: elsewhere the faces that share a vertex lie in one plane, and the bake is as before
 bit for bit. Radiance units; world space.
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
-from ..rays import ray_offsets
+from ..rays import occluder, ray_offsets
+from ..light.lamps import SunLight
+from .lift import blocked_share, face_corners
 from .normals import corner_shading_normals
 
 __all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light"]
@@ -102,9 +106,10 @@ def corner_normals(elements, p, c) -> np.ndarray:
     return np.where((np.einsum("ij,ij->i", n, own) < 0)[:, None], -n, n)
 
 
-def corner_light(ctx, elements, nv, light_v, opened=None, buried=None):
+def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
     """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
-    (radiance arriving), each vertex's ``light_v`` (V, 3) but at the corners of
+    (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
+    (V, 3)) but at the corners of
     :func:`crease_corners` their own, lit by ``ctx.direct`` (a triangle's fourth corner its
     third); and the share of the light reflected more than once that each corner keeps: 1, but
     at a turned-around corner the share of its shading normal's cosine-weighted hemisphere
@@ -115,6 +120,7 @@ def corner_light(ctx, elements, nv, light_v, opened=None, buried=None):
     if found is None or ctx.direct is None:
         return None
     p, c, x, shade, geo, turned = found
+    cut = turned | _sun_blocked(ctx, elements, p, c, turned)
     # rays start off the point along the two normals' bisector: above the triangle's plane and
     # toward the side the smoothing leans to (along the triangle's own normal, a corner a hair
     # from a concave fold started past its neighbour)
@@ -122,8 +128,12 @@ def corner_light(ctx, elements, nv, light_v, opened=None, buried=None):
     length = np.linalg.norm(up, axis=1)
     up = np.where((length > 1e-6)[:, None], up / np.maximum(length, 1e-300)[:, None], geo)
     eps = ray_offsets(ctx.patches, owner=elements.owner[p])
-    D = ctx.direct.at(x + eps[:, None] * up, shade, "corners", eps=np.zeros(len(p)),
-                      facing=np.where(turned[:, None], geo, shade))
+    # where the light below the plane is not cut, Cycles' ray leaves the corner itself, over
+    # the edges that meet there: from the vertex's own point (on the front of all its
+    # elements, :func:`.emitters.vertex_frames`) along the corner's shading normal
+    v = elements.polys[p, c]
+    start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * shade)
+    D = ctx.direct.at(start, shade, "corners", eps=np.zeros(len(p)), facing=np.where(cut[:, None], geo, shade))
     k = np.where(turned, (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2, 1.0)
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
@@ -132,3 +142,46 @@ def corner_light(ctx, elements, nv, light_v, opened=None, buried=None):
         out[p, c] = value
         out[p[tri], 3] = value[tri]
     return light, keep
+
+
+def _sun_blocked(ctx, elements, p, c, turned) -> np.ndarray:
+    """(K,) bool: corners (not ``turned``) of ``elements`` at a corner of their source face on
+    whose Blender triangles (most of them) Cycles' shadow ray toward the scene's strongest sun
+    is blocked below the triangle's plane, from its lifted start (:func:`.lift.blocked_share`):
+    their light from below that plane is cut. False elsewhere, and without a sun."""
+    out = np.zeros(len(p), bool)
+    suns = [li for li in ctx.direct.lights if isinstance(li, SunLight) and li.strength > 0]
+    if not suns:
+        return out
+    to_sun = -max(suns, key=lambda li: li.strength * float(np.max(li.color))).direction
+    scene = _fronts_scene(ctx)
+
+    def occluded(x, d):
+        return scene.occluded(x, np.broadcast_to(d, x.shape), None)
+    owner = elements.owner[p]
+    size = float(np.linalg.norm(np.ptp(elements.verts, axis=0))) if len(elements.verts) else 1.0
+    for oi, m in enumerate(ctx.meshes):
+        if getattr(m, "corner_normal", None) is None or getattr(m, "back_of", -1) >= 0:
+            continue
+        rows = np.flatnonzero((owner == oi) & ~turned)
+        if not rows.size:
+            continue
+        face = elements.source_face[p[rows]].astype(np.int64)
+        j = face_corners(m, face, elements.verts[elements.polys[p[rows], c[rows]]], 1e-9 * size)
+        at = j >= 0
+        out[rows[at]] = blocked_share(m, face[at], j[at], to_sun, occluded) >= 0.5
+    return out
+
+
+def _fronts_scene(ctx):
+    """The shadow rays' scene without the backs of open surfaces (:mod:`..mesh.backs`), which
+    Cycles has not: a ray lifted a few micrometres off a slope's corner passes over the lip's
+    edge there, and the slope's back, a hair behind it, stopped it here."""
+    P = ctx.patches
+    fronts = [i for i, m in enumerate(ctx.meshes or ()) if getattr(m, "back_of", -1) < 0]
+    keep = np.isin(P.owner, fronts)
+    if keep.all():
+        return ctx.direct.scene()
+    return occluder(replace(P, polys=P.polys[keep], centers=P.centers[keep], normals=P.normals[keep],
+                            areas=P.areas[keep], rho=P.rho[keep], emission=P.emission[keep],
+                            owner=P.owner[keep], source_face=P.source_face[keep]), "auto")

@@ -114,7 +114,7 @@ def vertex_stage(ctx) -> None:
     if side is not None:                                # what a buried vertex gathered: the inside
         rest_v = side.spread(rest_v)
     # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
-    creased = corner_light(ctx, ctx.elements, nv, D_vert, opened, None if side is None else side.count > 0)
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, None if side is None else side.count > 0)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
         if creased is not None:

@@ -66,3 +66,48 @@ def test_the_world_lights_a_turned_around_corner_through_the_lune_only():
     got = _corners(r)
     assert want == pytest.approx(0.125)
     np.testing.assert_allclose(got, want, rtol=0.015)
+
+
+def _step(profile, nx=3):
+    """A step extruded along x over [-1, 1] from ``profile`` (y, z) points, quads facing up and
+    +y, its corner normals Blender's smooth ones (the mean of the faces' at each vertex: all
+    the faces' corners there are right angles)."""
+    xs = np.linspace(-1.0, 1.0, nx + 1)
+    verts = np.array([(x, y, z) for y, z in profile for x in xs])
+    row = nx + 1
+    faces = [(k * row + i, k * row + i + 1, (k + 1) * row + i + 1, (k + 1) * row + i)
+             for k in range(len(profile) - 1) for i in range(nx)]
+    m = MeshInput.from_faces(verts, faces, name="step")
+    seg = [np.array([0.0, z0 - z1, y1 - y0]) / np.hypot(z0 - z1, y1 - y0)
+           for (y0, z0), (y1, z1) in zip(profile[:-1], profile[1:])]
+    k = np.arange(len(profile))
+    vn = [seg[0] if i == 0 else seg[-1] if i == len(profile) - 1 else seg[i - 1] + seg[i] for i in k]
+    vn = np.repeat([v / np.linalg.norm(v) for v in vn], row, axis=0)
+    m.corner_normal = vn[m.face_indices]
+    return m, faces
+
+
+@pytest.mark.parametrize("profile, zenith, blocked", [
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.15, 0.5), (0.3, 0.0)), 30.0, 0.0),
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.1, 0.0)), 40.0, 1.0)])
+def test_a_lip_s_slope_corner_is_blocked_where_cycles_lifted_ray_meets_the_slope(profile, zenith, blocked):
+    """The sun below the slope's plane, above the smoothed normal's at the lip: Cycles' shadow
+    ray, lifted off the slope's corner, passes over the lip's edge on the 73-degree slope and
+    meets the slope on the 84-degree one (Cycles itself: tests/blender/test_shading_normals.py)."""
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    from hemicube_radiosity.core.output.lift import blocked_share, face_corners
+    from hemicube_radiosity.core.rays import occluder
+
+    m, faces = _step(profile)
+    occ = occluder(build_patches([m], 10.0), "auto")
+    zen = np.radians(zenith)
+    to_sun = np.array([0.0, -np.sin(zen), np.cos(zen)])
+    face = np.array([6, 7, 8] * 2)                              # the slope's first row
+    top = np.array([np.asarray(m.verts)[faces[f][j]] for j in (0, 1) for f in (6, 7, 8)])
+    corner = face_corners(m, face, top, 1e-9)
+    assert np.array_equal(corner, [0, 0, 0, 1, 1, 1])
+    got = blocked_share(m, face, corner, to_sun, lambda x, d: occ.occluded(x, np.broadcast_to(d, x.shape), None))
+    np.testing.assert_array_equal(got, blocked)
+    # the plateau's corners on the lip see the sun above their plane: nothing to block
+    np.testing.assert_array_equal(blocked_share(m, np.array([3, 4, 5]), np.array([3, 3, 3]), to_sun,
+                                                lambda x, d: np.ones(len(x), bool)), 0.0)
