@@ -24,8 +24,8 @@ Here, at every corner whose shading normal (its own face's corner normal, interp
 vertex: :func:`.normals.corner_shading_normals`) leans more than :data:`CREASE_ANGLE` off its
 own triangle's geometric normal, or off the normal its vertex was lit with, the direct light is
 found again for that corner alone, the cosine taken to its shading normal
-(:func:`corner_light`). A turned-around corner has both normals negated and its light reflected
-more than once (per vertex) scaled by the share of its hemisphere above the triangle's plane.
+(:func:`corner_light`), and its light reflected more than once (per vertex) scaled by the share
+of its hemisphere above the triangle's plane. A turned-around corner has both normals negated.
 There, and where :mod:`.lift` finds the sun's ray blocked, the lamps' and the world's light from
 below the triangle's plane is cut (``facing`` of :meth:`.light.stage.DirectLight.at`; an
 emitting face's is not: its shadow rays start above the plane), the rays starting at a point
@@ -112,10 +112,11 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
     (V, 3)) but at the corners of
     :func:`crease_corners` their own, lit by ``ctx.direct`` (a triangle's fourth corner its
     third); and the share of the light reflected more than once that each corner keeps: 1, but
-    at a turned-around corner the share of its shading normal's cosine-weighted hemisphere
-    above its triangle's plane, (1 + N . Ng) / 2 (the sky view factor of a plane tilted by
-    their angle; Cycles' diffuse bounce takes nothing from below that plane). None when no
-    corner is lit on its own."""
+    at those corners the share of the shading normal's cosine-weighted hemisphere above the
+    triangle's plane, (1 + N . Ng) / 2 (the sky view factor of a plane tilted by their angle;
+    Cycles' diffuse bounce takes nothing from below that plane, ``bsdf_diffuse_sample``), the
+    light arriving at the vertex taken as even over its hemisphere. None when no corner is lit
+    on its own."""
     found = crease_corners(elements, ctx.meshes, nv, opened, buried)
     if found is None or ctx.direct is None:
         return None
@@ -134,7 +135,7 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
     v = elements.polys[p, c]
     start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * shade)
     D = ctx.direct.at(start, shade, "corners", eps=np.zeros(len(p)), facing=np.where(cut[:, None], geo, shade))
-    k = np.where(turned, (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2, 1.0)
+    k = (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2           # the hemisphere's share above the plane
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
     tri = (elements.polys[p, 3] < 0) & (c == 2)
