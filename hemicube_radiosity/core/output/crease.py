@@ -50,8 +50,9 @@ from .normals import corner_shading_normals
 __all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light"]
 
 #: Degrees: a corner's shading normal leaning this far off its triangle's normal, or off its
-#: vertex's normal, gets the corner its own direct light.
-CREASE_ANGLE = 5.0
+#: vertex's normal, gets the corner its own direct light. Truck town: 5 degrees lit 63,204 of
+#: its 91,431 corners on their own, 15 degrees 31,467, for the same error (11.21%, 11.22%).
+CREASE_ANGLE = 15.0
 #: How far toward its element's centre a corner is lit (as :func:`.emitters.vertex_frames`' points).
 INSET = 1e-2
 
