@@ -110,9 +110,8 @@ def corner_normals(elements, p, c) -> np.ndarray:
 def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
     """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
     (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
-    (V, 3)) but at the corners of
-    :func:`crease_corners` their own, lit by ``ctx.direct`` (a triangle's fourth corner its
-    third); and the share of the light reflected more than once that each corner keeps: 1, but
+    (V, 3)) but at the corners of :func:`crease_corners` their own, lit by ``ctx.direct`` (a
+    triangle's fourth corner its third); and the share of the light reflected more than once that each corner keeps: 1, but
     at those corners the share of the shading normal's cosine-weighted hemisphere above the
     triangle's plane, (1 + N . Ng) / 2 (the sky view factor of a plane tilted by their angle;
     Cycles' diffuse bounce takes nothing from below that plane, ``bsdf_diffuse_sample``), the
