@@ -65,13 +65,15 @@ class BakeResult:
     size_scales: tuple = ()                   # per object: its sizes are the settings' times this (core.mesh.sizes)
     back_of: tuple = ()                       # per object: -1, or the object whose back it is (core.mesh.backs)
     back_faces: tuple = ()                    # per object: None, or (a back) the face of its front behind each face
-    corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours vary by corner
-    vertex_lighting: np.ndarray | None = None    # (V, 3) the light arriving, where colours vary by corner
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3) per element corner where colours or light vary by corner
+    corner_light: np.ndarray | None = None       # (N, 4, 3) the light arriving, where colours vary by corner
     direct: DirectLight | None = None            # the exact direct light, to light other points (lightmaps)
     vertex_direct: np.ndarray | None = None      # (V, 3) direct light arriving at the output vertices
     vertex_indirect: np.ndarray | None = None    # (V, 3) light arriving reflected at least once
     vertex_rho: np.ndarray | None = None         # (V, 3) reflectivity at the vertices (lighting pass: 1)
     corner_rho: np.ndarray | None = None         # (N, 4, 3) per element corner where colours vary by corner
+    corner_direct: np.ndarray | None = None      # (N, 4, 3) direct light per corner, where corners are lit on their own
+    corner_keep: np.ndarray | None = None        # (N, 4) the share of the vertex's indirect light each corner keeps
 
     def __post_init__(self):
         if self.elements is None:
@@ -79,8 +81,9 @@ class BakeResult:
 
     def corner_values(self) -> np.ndarray:
         """(N, 4, 3) the output at every corner of ``elements`` (a triangle's fourth corner is its
-        third): each corner's own value where the meshes' colours vary by corner (a texture:
-        ``corner_radiosity``), else its vertex's ``vertex_radiosity``."""
+        third): each corner's own value where the meshes' colours vary by corner (a texture) or
+        a corner was lit on its own (a crease, :mod:`.output.crease`): ``corner_radiosity``;
+        else its vertex's ``vertex_radiosity``."""
         if self.corner_radiosity is not None:
             return self.corner_radiosity
         return self.vertex_radiosity[self.elements.corner_ids()]
@@ -89,9 +92,7 @@ class BakeResult:
         """(N, 4, 3) the light arriving at every corner of ``elements`` (radiance: irradiance / pi,
         without the surface's colour or emission), or None: kept only where the meshes' colours
         vary by corner (a texture), for a baked copy that multiplies its texture by it."""
-        if self.vertex_lighting is None:
-            return None
-        return self.vertex_lighting[self.elements.corner_ids()]
+        return self.corner_light
 
     def corner_parts(self) -> tuple | None:
         """(emission, reflectivity, direct, indirect), each (N, 4, 3) at every corner of
@@ -104,7 +105,10 @@ class BakeResult:
             return None
         cv = self.elements.corner_ids()
         rho = self.vertex_rho[cv] if self.corner_rho is None else self.corner_rho
-        D, I = self.vertex_direct[cv], self.vertex_indirect[cv]
+        D = self.vertex_direct[cv] if self.corner_direct is None else self.corner_direct
+        I = self.vertex_indirect[cv]
+        if self.corner_keep is not None:          # a corner lit on its own (a crease, :mod:`.output.crease`)
+            I = I * self.corner_keep[..., None]
         return self.corner_values() - rho * (D + I), rho, D, I
 
     def front_faces(self, owner, faces) -> np.ndarray:
@@ -171,12 +175,14 @@ class BakeContext:
     solution: Solution | None = None
     elements: PatchSet | None = None
     vertex_radiosity: np.ndarray | None = None
-    corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured corners (output stage)
-    vertex_lighting: np.ndarray | None = None    # (V, 3): the light arriving there (output stage)
+    corner_radiosity: np.ndarray | None = None   # (N, 4, 3): textured or creased corners (output stage)
+    corner_lighting: np.ndarray | None = None    # (N, 4, 3): the light arriving there (output stage)
     vertex_direct: np.ndarray | None = None      # (V, 3): the direct part of it (output stage)
     vertex_indirect: np.ndarray | None = None    # (V, 3): the part reflected at least once (output stage)
     vertex_rho: np.ndarray | None = None         # (V, 3): reflectivity there (output stage)
     corner_rho: np.ndarray | None = None         # (N, 4, 3): textured corners' reflectivity (output stage)
+    corner_direct: np.ndarray | None = None      # (N, 4, 3): creased corners' own direct light (output stage)
+    corner_keep: np.ndarray | None = None        # (N, 4): their share of the vertex's indirect light (output stage)
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake
@@ -234,9 +240,10 @@ class BakeContext:
                           self.forecast, tuple(m.size_scale for m in self.meshes or ()),
                           tuple(getattr(m, "back_of", -1) for m in self.meshes or ()),
                           tuple(getattr(m, "back_faces", None) for m in self.meshes or ()),
-                          self.corner_radiosity, self.vertex_lighting, direct=self.direct,
+                          self.corner_radiosity, self.corner_lighting, direct=self.direct,
                           vertex_direct=self.vertex_direct, vertex_indirect=self.vertex_indirect,
-                          vertex_rho=self.vertex_rho, corner_rho=self.corner_rho)
+                          vertex_rho=self.vertex_rho, corner_rho=self.corner_rho,
+                          corner_direct=self.corner_direct, corner_keep=self.corner_keep)
 
 
 # Every stage in order: its name, the function that runs it, and its usual share of a bake's time

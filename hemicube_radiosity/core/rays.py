@@ -436,13 +436,15 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
 
 
 def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20, *,
-                 eps) -> np.ndarray:
+                 eps, facing=None) -> np.ndarray:
     """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
     surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
     anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
     start offsets (:func:`ray_offsets` of the points on the scene's patches). One pattern of ``rays``
     (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
-    cast parallel rays, so the estimate varies smoothly over a surface."""
+    cast parallel rays, so the estimate varies smoothly over a surface. ``facing`` (P, 3) or
+    None: rays with a negative or zero component along it count as hitting a surface (below a
+    point's own triangle, :func:`.light.lamps.direct_irradiance`)."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     local = cosine_lattice(rays, seed)                                             # (R, 3)
@@ -454,9 +456,15 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         o = np.repeat(x + eps[s:s + step] * n, R, axis=0)
+        below = None if facing is None else np.einsum("ij,ij->i", d, np.repeat(facing[s:s + step], R, axis=0)) <= 0
         if getattr(scene, "see_through", False):
-            out[s:s + step] = scene.transmitted(o, d).reshape(len(x), R).mean(axis=1)
+            passed = scene.transmitted(o, d)
+            if below is not None:
+                passed = np.where(below, 0.0, passed)
+            out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
             continue
         hit = np.asarray(scene.occluded(o, d))
+        if below is not None:
+            hit = hit | below
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     return out

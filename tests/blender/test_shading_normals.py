@@ -130,3 +130,52 @@ def test_inside_a_smooth_face_the_light_follows_the_interpolated_normal():
         errors.append(np.abs(r.vertex_radiosity[v][lit].mean(axis=1) / closed - 1))
     assert len(errors[0]) > 100
     assert errors[0].max() < 1e-4 and errors[1].max() > 0.1, (errors[0].max(), errors[1].max())
+
+
+def _lip(nx=3, profile=((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.15, 0.5), (0.3, 0.0))):
+    """A smooth-shaded step, extruded along x over [-1, 1]: ``profile`` (y, z) points, by
+    default a plateau at z = 1 from y = -1 to y = 0, then a steep slope (73 degrees) down to
+    z = 0 at y = 0.3; quads, outward (up and +y)."""
+    xs = np.linspace(-1.0, 1.0, nx + 1)
+    verts = np.array([(x, y, z) for y, z in profile for x in xs])
+    row = nx + 1
+    faces = [(k * row + i, k * row + i + 1, (k + 1) * row + i + 1, (k + 1) * row + i)
+             for k in range(len(profile) - 1) for i in range(nx)]
+    ob = cr.mesh_object(verts, faces, cr.diffuse_material((RHO,) * 3), "lip")
+    ob.data.shade_smooth()
+    return ob
+
+
+@pytest.mark.parametrize("profile, zenith, slope_lit", [
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.15, 0.5), (0.3, 0.0)), 30.0, True),
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.1, 0.0)), 40.0, False)])
+def test_a_smooth_lip_s_slope_corners_take_the_sun_as_cycles_does(profile, zenith, slope_lit):
+    """A smooth step under a sun from the plateau's side, below the slope's plane (73 degrees
+    steep, the sun 30 degrees off the zenith: Ng . L = -0.23; 84 degrees and 40: -0.56) but
+    above the normal smoothed over the lip. Cycles lights the plateau's corners on the lip
+    (rho E cos(N, L) / pi); the slope's corners there it lights as much where its shadow ray,
+    lifted off the slope by the shadow-terminator offset, passes over the lip's edge (the first
+    step), and not at all where the slope itself stops it (the second): here likewise, each
+    corner within 0.005 of Cycles (:mod:`core.output.crease`, :mod:`core.output.lift`). One
+    value per vertex gave the second step's slope corners the plateau's light."""
+    cr.new_empty_scene()
+    ob = _lip(profile=profile)
+    zen = math.radians(zenith)
+    cr.add_light("SUN", (0, 0, 5), (zen, 0, 0), energy=IRRADIANCE, angle=0.0)
+    c = Comparison([ob], samples=16)
+    to_sun = np.array([0.0, -math.sin(zen), math.cos(zen)])
+    lip = np.abs(c.pos[:, 1]) < 1e-6
+    slope = lip & (c.normal[:, 1] > 0.5)
+    plateau = lip & (c.normal[:, 2] > 0.99)
+    assert slope.sum() == plateau.sum() == 6
+    n = _unit(sum(_unit((0.0, z0 - z1, y1 - y0)) for (y0, z0), (y1, z1) in zip(profile[1:3], profile[2:4])))
+    lit = RHO * IRRADIANCE * float(np.dot(n, to_sun)) / math.pi
+    assert lit > 0.1
+    np.testing.assert_allclose(c.cycles[plateau].mean(axis=1), lit, rtol=0.01)
+    np.testing.assert_allclose(c.cycles[slope].mean(axis=1), lit if slope_lit else 0.0, atol=0.01 * lit)
+    np.testing.assert_allclose(c.ours, c.cycles, atol=0.005)
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=np.float64)
+    return v / np.linalg.norm(v)

@@ -185,20 +185,39 @@ def test_dense_copy_keeps_the_evaluated_mesh(addon, baked, name):
 
 
 @pytest.mark.parametrize("name", ["Dense", "Mirrored"])
-def test_dense_copy_colours_are_the_vertex_radiosity(addon, baked, name):
+def test_dense_copy_colours_are_the_bake_s_corner_values(addon, baked, name):
+    """Each face corner of the copy (the user's own triangles) holds the bake's value at that
+    corner of the same triangle (``BakeResult.corner_values``): the random custom normals lean
+    many corners more than 15 degrees off their triangle, and those are lit on their own
+    (core/output/crease.py), so corners at one vertex differ."""
     job = baked["job"]
     ob = copy_of(addon, name)
     oi = [o.name for o in job.scene_input.objects].index(name)
     E = job.result.elements
-    vids = np.unique(E.polys[E.owner == oi])
-    vids = vids[vids >= 0]
-    epos, ecol = E.verts[vids], job.result.vertex_radiosity[vids]
+    mine = np.flatnonzero(E.owner == oi)
+    values = job.result.corner_values()[mine]                        # (n, 4, 3)
+    corners = E.corners()[mine]                                      # (n, 4, 3)
     pos, col = corner_data(ob)
-    d = np.linalg.norm(pos[:, None, :] - epos[None, :, :], axis=2)
-    nearest = d.argmin(axis=1)
-    assert d.min(axis=1).max() < 1e-5, "a corner of the copy is not at a vertex of the bake"
-    np.testing.assert_allclose(col, ecol[nearest], rtol=1e-5, atol=1e-7)
+    me = ob.data
+    start = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("loop_start", start)
+    total = np.empty(len(me.polygons), np.int64)
+    me.polygons.foreach_get("loop_total", total)
+    face = np.repeat(np.arange(len(start)), total)
+    centre = np.stack([np.bincount(face, pos[:, k]) for k in range(3)], 1) / total[:, None]
+    element = np.linalg.norm(centre[:, None, :] - E.centers[mine][None, :, :], axis=2).argmin(axis=1)[face]
+    d = np.linalg.norm(corners[element] - pos[:, None, :], axis=2)  # (L, 4)
+    assert d.min(axis=1).max() < 1e-5, "a corner of the copy is not a corner of its element"
+    want = values[element, d.argmin(axis=1)]
+    np.testing.assert_allclose(col, want, rtol=1e-5, atol=1e-7)
     assert col.max() > 0.05 and np.ptp(col[:, 0]) > 0.2 * col.max()   # lit, and not uniformly
+    # corners that share a vertex differ where they are lit on their own
+    ids = np.unique(np.round(pos, 5), axis=0, return_inverse=True)[1].reshape(-1)
+    spread = np.zeros(ids.max() + 1)
+    np.maximum.at(spread, ids, col[:, 0])
+    low = np.full(ids.max() + 1, np.inf)
+    np.minimum.at(low, ids, col[:, 0])
+    assert np.any(spread - low > 0.05 * col.max())
 
 
 def test_originals_untouched(addon, baked):

@@ -156,10 +156,11 @@ class EnvironmentLight:
         return dirs, w
 
 
-def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps) -> np.ndarray:
+def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps, facing=None) -> np.ndarray:
     """(P, 3) W/m^2: the map's variation about its base arriving at points ``x`` (P, 3) with unit
     normals ``n`` (P, 3), through shadow rays (``occ``: an occluder or None) starting ``eps``
-    (P,) off the surface. ``light.rays``
+    (P,) off the surface; ``facing`` (P, 3) or None: only from directions on its side (as
+    :func:`.lamps.direct_irradiance`). ``light.rays``
     directions per point, one set for all (module docstring); ``rng`` and ``samples`` are the
     lamps' (unused: the set is fixed by the map, for smooth light)."""
     d, w = light.directions(light.rays, seed=0)
@@ -167,7 +168,7 @@ def environment_irradiance(light: EnvironmentLight, x, n, rng, samples, occ, eps
     if not len(d):
         return out
     cos = n @ d.T                                                            # (P, R)
-    r, s = np.nonzero(cos > 0)
+    r, s = np.nonzero((cos > 0) if facing is None else (cos > 0) & (facing @ d.T > 0))
     if not r.size:
         return out
     if occ is None:

@@ -253,11 +253,14 @@ def spot_attenuation(cos_angle, spot_size, spot_blend):
 # Per light
 
 
-def _shade(x, n, E0, pts, w, atten, occ, eps, infinite=False):
+def _shade(x, n, E0, pts, w, atten, occ, eps, infinite=False, facing=None):
     """H = E0 * sum(v w a) / sum(w) over samples (N,S) toward points pts (N,S,3) (directions
-    when ``infinite``). Rays only where E0 > 0 and w > 0."""
+    when ``infinite``). Rays only where E0 > 0 and w > 0; with ``facing`` (N, 3), only toward
+    samples on its side (:func:`direct_irradiance`)."""
     N, S = w.shape
     a = np.ones_like(w) if atten is None else atten
+    if facing is not None:
+        a = a * (np.einsum("nsc,nc->ns", pts if infinite else pts - x[:, None], facing) > 0)
     wsum = w.sum(axis=1)
     if occ is None:
         num = (w * a).sum(axis=1)
@@ -290,7 +293,7 @@ def _area_weights(x, n, pts, light_n):
         return np.where(t2 > 0, cr * cl / t2, 0.0)
 
 
-def _point_like(light, x, n, rng, samples, occ, eps):
+def _point_like(light, x, n, rng, samples, occ, eps, facing=None):
     """Point and spot lights (irradiance per unit of color)."""
     P, r, c = light.power_w, light.radius, light.position
     spot = isinstance(light, SpotLight)
@@ -303,7 +306,8 @@ def _point_like(light, x, n, rng, samples, occ, eps):
         a = None
         if spot:
             a = spot_attenuation(-(v @ light.direction) / d, light.spot_size, light.spot_blend)[:, None]
-        return _shade(x, n, E0, c[None, None, :] + 0 * x[:, None], np.ones((len(x), 1)), a, occ, eps)
+        return _shade(x, n, E0, c[None, None, :] + 0 * x[:, None], np.ones((len(x), 1)), a, occ, eps,
+                      facing=facing)
     L = P / (4 * np.pi ** 2 * r * r)                    # radiance of the light's surface
     towards = -v / d[:, None]                            # unit, light -> receiver
     if light.soft_falloff:
@@ -320,15 +324,15 @@ def _point_like(light, x, n, rng, samples, occ, eps):
         dv = x[:, None] - pts
         cosang = np.einsum("nsc,c->ns", dv, light.direction) / np.linalg.norm(dv, axis=-1)
         a = spot_attenuation(cosang, light.spot_size, light.spot_blend)
-    return _shade(x, n, E0, pts, w, a, occ, eps)
+    return _shade(x, n, E0, pts, w, a, occ, eps, facing=facing)
 
 
-def _sun(light, x, n, rng, samples, occ, eps):
+def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     to_sun = -light.direction
     if light.angle == 0:
         E0 = light.strength * np.maximum(n @ to_sun, 0.0)
         return _shade(x, n, E0, np.broadcast_to(to_sun, (len(x), 1, 3)), np.ones((len(x), 1)),
-                      None, occ, eps, infinite=True)
+                      None, occ, eps, infinite=True, facing=facing)
     h = 0.5 * light.angle
     L = light.strength / (np.pi * np.sin(h) ** 2)
     # the sun as a disk at unit distance from each receiver: same solid angle, same radiance
@@ -340,10 +344,10 @@ def _sun(light, x, n, rng, samples, occ, eps):
     w = _area_weights(x, n, pts, m)
     dirs = pts - x[:, None]
     dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    return _shade(x, n, E0, dirs, w, None, occ, eps, infinite=True)
+    return _shade(x, n, E0, dirs, w, None, occ, eps, infinite=True, facing=facing)
 
 
-def _area(light, x, n, rng, samples, occ, eps):
+def _area(light, x, n, rng, samples, occ, eps, facing=None):
     A = light.area
     if A == 0 or light.power_w == 0:
         return np.zeros(len(x))
@@ -361,10 +365,10 @@ def _area(light, x, n, rng, samples, occ, eps):
         su, sv = u[..., 0] - 0.5, u[..., 1] - 0.5
     pts = c + (su * lu)[..., None] * au + (sv * lv)[..., None] * av
     w = _area_weights(x, n, pts, np.broadcast_to(emit, x.shape))
-    return _shade(x, n, E0, pts, w, None, occ, eps)
+    return _shade(x, n, E0, pts, w, None, occ, eps, facing=facing)
 
 
-# light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps (P,)) -> (P,) W/m^2
+# light type -> kernel(light, x (P,3), n (P,3), rng, samples, occluder|None, eps (P,), facing=None) -> (P,) W/m^2
 # ((P, 3) for a light of its own colours: ``bands == 3``, the environment map)
 KERNELS = {PointLight: _point_like, SpotLight: _point_like, SunLight: _sun, AreaLight: _area,
            EnvironmentLight: environment_irradiance}
@@ -373,13 +377,14 @@ UNBOUNDED = (SunLight, EnvironmentLight)
 
 
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
-                     receivers=None, points=None, normals=None, eps=None, _occ=None, _index=0):
+                     receivers=None, points=None, normals=None, eps=None, facing=None, _occ=None, _index=0):
     """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``);
     (P, 3) for a light with its own colours (``light.bands == 3``: an environment map).
 
     At the patch centres by default, or at ``points`` (P, 3) with unit ``normals`` (P, 3) on the
     patches' surfaces (e.g. the patch vertices); ``receivers`` indexes into those points.
-    ``eps`` (P,): the shadow rays' start offsets (default :func:`.rays.ray_offsets`).
+    ``eps`` (P,): the shadow rays' start offsets (default :func:`.rays.ray_offsets`);
+    ``facing`` (P, 3) or None: as :func:`direct_irradiance`.
     """
     occ = occluder(patches, shadows) if _occ is None else _occ
     x_all = patches.centers if points is None else np.asarray(points, np.float64)
@@ -397,14 +402,15 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         # one random stream per (seed, light, chunk start): reproducible for a given receiver set
         rng = np.random.default_rng([seed, _index, s])
         # a light with Blender's 'Shadow' switch off shines through everything
+        kw = {} if facing is None else {"facing": np.asarray(facing, np.float64)[ids]}
         out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples,
-                      occ if light.cast_shadows else None, eps[ids])
+                      occ if light.cast_shadows else None, eps[ids], **kw)
     return out
 
 
 def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, seed=0,
                       receivers=None, points=None, normals=None, eps=None, progress=None,
-                      cancelled=None) -> np.ndarray:
+                      cancelled=None, facing=None) -> np.ndarray:
     """Incident irradiance H_direct (N, 3) in W/m^2 from ``lights`` at every patch centre
     (or at ``points`` with ``normals``, see :func:`light_irradiance`).
 
@@ -413,6 +419,9 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     patch for lights with a size (radius, angle, area); zero-size lights use one ray.
     ``receivers``: patch ids to compute (others 0); ``eps`` (P,) the shadow rays' start offsets
     (default :func:`.rays.ray_offsets`). ``progress(f)``/``cancelled()`` as elsewhere.
+    ``facing`` (P, 3) or None: light arrives only from directions d with d . facing > 0 (a
+    point's own triangle's normal where its shading normal leans off it: Cycles blocks light
+    from below the triangle's plane, :mod:`..output.crease`).
     """
     lights = list(lights)
     H = np.zeros((len(patches) if points is None else len(points), 3))
@@ -424,7 +433,7 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     for i, light in enumerate(lights):
         ticker.tick(i, len(lights), force=True)
         E = light_irradiance(patches, light, shadows=shadows, samples=samples, seed=seed,
-                             receivers=receivers, points=points, normals=normals, eps=eps, _occ=occ,
+                             receivers=receivers, points=points, normals=normals, eps=eps, facing=facing, _occ=occ,
                              _index=i)
         H += (E if E.ndim == 2 else E[:, None]) * light.color[None, :]
     ticker.tick(len(lights), len(lights), force=True)

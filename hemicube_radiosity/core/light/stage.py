@@ -113,10 +113,11 @@ class DirectLight:
         their own objects', found by a probe ray), made once per point array."""
         return _OFFSETS.of((self.patches.verts, points, normals), lambda: ray_offsets(self.patches, points, normals))
 
-    def _transport(self, points, normals, samples=None):
+    def _transport(self, points, normals, samples=None, eps=None):
         """The emitters' transport to ``points``: their fronts, plus their backs when two-sided
-        (the same faces turned around, so the front-only tests and shadow-ray offsets apply)."""
-        eps = self.offsets(points, normals)
+        (the same faces turned around, so the front-only tests and shadow-ray offsets apply).
+        ``eps`` (P,): the rays' start offsets (default :meth:`offsets`)."""
+        eps = self.offsets(points, normals) if eps is None else eps
 
         def transport(patches):
             return emitter_transport(patches, points, normals, self.emitters, scene=self.scene(),
@@ -141,28 +142,34 @@ class DirectLight:
             self._emitted = L
         return self._emitted
 
-    def _emitters_at(self, points, normals, where, samples=None, transposed=False):
+    def _emitters_at(self, points, normals, where, samples=None, transposed=False, eps=None):
         """(P, units) the emitters' transport to ``points`` (cached: geometry only);
         ``transposed``: (units, P) float64 instead, as :func:`.gather.transport_product` reads
-        it fastest (cached beside it)."""
+        it fastest (cached beside it); ``eps`` (P,): the rays' start offsets (default
+        :meth:`offsets`)."""
         samples = None if samples is None else min(samples, self.samples)
         key = None
         if self.cache is not None:   # the geometry and the points hashed once per array (a relight's are cached)
             grouped = b"" if self.groups is None else self.groups.tobytes()
-            key = cache_key(_shadow_key(self.patches) + self.emitters.tobytes() + grouped + array_key(points),
+            own = b"" if eps is None else array_key(np.asarray(eps, dtype=np.float64))
+            key = cache_key(_shadow_key(self.patches) + self.emitters.tobytes() + grouped + array_key(points) + own,
                             ("direct", where, samples, self.two_sided))
-        T = cached(self.cache if key else None, key, lambda: self._transport(points, normals, samples))
+        T = cached(self.cache if key else None, key, lambda: self._transport(points, normals, samples, eps))
         if not transposed:
             return T
         return cached(self.cache if key else None, key and key + "-t", lambda: transposed_transport(T), disk=False)
 
-    def world_at(self, points, normals, where: str) -> np.ndarray:
+    def world_at(self, points, normals, where: str, eps=None, facing=None) -> np.ndarray:
         """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
         fraction of the hemisphere where rays find no surface (:func:`.rays.sky_fraction`,
-        ``sky_rays`` per point; geometry only, cached)."""
-        key = cache_key(_shadow_key(self.patches) + array_key(points), ("sky", where, self.sky_rays))
+        ``sky_rays`` per point; geometry only, cached). ``eps`` (P,): the rays' start offsets
+        (default :meth:`offsets`); ``facing`` (P, 3): as :meth:`at`."""
+        own = b"" if eps is None else array_key(np.asarray(eps, dtype=np.float64))
+        own += b"" if facing is None else array_key(np.asarray(facing, dtype=np.float64))
+        key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays))
+        eps = self.offsets(points, normals) if eps is None else eps
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
-                                                         normals, self.sky_rays, eps=self.offsets(points, normals)))
+                                                         normals, self.sky_rays, eps=eps, facing=facing))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
@@ -191,21 +198,26 @@ class DirectLight:
             self._scene = occluder(self.patches, "auto")
         return self._scene
 
-    def at(self, points, normals, where: str, samples=None) -> np.ndarray:
+    def at(self, points, normals, where: str, samples=None, eps=None, facing=None) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
-        (where many points are averaged, as a gather's hits are)."""
+        (where many points are averaged, as a gather's hits are). ``eps`` (P,): how far the
+        rays start off ``points`` along ``normals`` (default :meth:`offsets`; 0 where the points
+        are the rays' starts already, :mod:`..output.crease`). ``facing`` (P, 3) or None: the
+        lamps' and the world's light only from directions on its side (a corner's own
+        triangle's normal, :mod:`..output.crease`); the emitters' is not limited by it."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
-            D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True),
+            D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True, eps=eps),
                                    self.emitted(), transposed=True)
         if self.world is not None:
-            D += self.world_at(points, normals, where)
+            D += self.world_at(points, normals, where, eps=eps, facing=facing)
         if self.lights:
             D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
-                                   eps=self.offsets(points, normals), cancelled=self.cancelled,
+                                   eps=self.offsets(points, normals) if eps is None else eps,
+                                   cancelled=self.cancelled, facing=facing,
                                    samples=min(samples or self.light_samples, self.light_samples),
                                    seed=self.light_seed) / np.pi
         # an environment map's variation about its mean is signed (its estimate, near a point

@@ -21,7 +21,7 @@ import numpy as np
 from ..mesh.patches import PatchSet
 from .interpolate import inverse_bilinear
 
-__all__ = ["shading_normals", "MAX_LEAN"]
+__all__ = ["shading_normals", "corner_shading_normals", "MAX_LEAN"]
 
 #: Degrees: a shading normal leaning this far off the vertex's geometric normal is not used.
 MAX_LEAN = 89.0
@@ -58,6 +58,31 @@ def shading_normals(elements: PatchSet, meshes, normals) -> np.ndarray:
         ok = (length > 1e-12) & (np.einsum("ij,ij->i", n, out[vs]) > cos_max)
         out[vs[ok]] = n[ok]
     return out
+
+
+def corner_shading_normals(elements: PatchSet, meshes, p, c):
+    """(shading (K, 3), has (K,) bool) at corners ``c`` (K,) of elements ``p`` (K,): each corner's
+    own source face's corner normals interpolated at its vertex (unit; Cycles shades that face's
+    triangles with them), ``has`` False (and the row 0) where the element's mesh has no corner
+    normals; (None, None) when no mesh has any."""
+    if meshes is None or all(getattr(m, "corner_normal", None) is None for m in meshes):
+        return None, None
+    p = np.asarray(p, dtype=np.int64)
+    out = np.zeros((len(p), 3))
+    has = np.zeros(len(p), bool)
+    owner = elements.owner[p]
+    for oi, m in enumerate(meshes):
+        cn = getattr(m, "corner_normal", None)
+        rows = np.flatnonzero(owner == oi) if cn is not None else ()
+        if not len(rows):
+            continue
+        x = elements.verts[elements.polys[p[rows], np.asarray(c)[rows]]]
+        n = _at(m, np.asarray(cn, dtype=np.float64), elements.source_face[p[rows]].astype(np.int64), x)
+        length = np.linalg.norm(n, axis=1)
+        ok = length > 1e-12
+        out[rows[ok]] = n[ok] / length[ok, None]
+        has[rows[ok]] = True
+    return out, has
 
 
 def _at(mesh, cn, face, x) -> np.ndarray:

@@ -25,6 +25,7 @@ from ..mesh.elements import cut_elements
 from ..rays import embree_available
 from ..runtime.cache import array_key
 from .corners import corner_values, vertex_mean
+from .crease import corner_light
 from .normals import shading_normals
 from .indirect import element_indirect, start_gather
 from .sides import buried_side, open_elements, sided_mesh
@@ -37,8 +38,9 @@ def vertex_stage(ctx) -> None:
     """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts:
     radiosity, or with ``output_pass='lighting'`` the light arriving (direct + indirect, as
     radiance: irradiance / pi) without the surface's own colour or emission; and where the
-    meshes have corner colours (a texture), ``ctx.corner_radiosity`` (N, 4, 3): each element
-    corner's own colour times the light at its vertex (:func:`_with_corner_colours`)."""
+    meshes have corner colours (a texture) or a corner is lit on its own (:mod:`.crease`),
+    ``ctx.corner_radiosity`` (N, 4, 3): each element corner's own colour times its light
+    (:func:`_with_corner_colours`)."""
     patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
     # F's and the geometry's only: kept on F, the same array every relight (the fits, frames and
@@ -52,8 +54,9 @@ def vertex_stage(ctx) -> None:
         return w
     weights = F.memo(key, make)
     ctx.elements = patches
-    ctx.corner_radiosity = ctx.vertex_lighting = ctx.corner_rho = None
+    ctx.corner_radiosity = ctx.corner_lighting = ctx.corner_rho = None
     ctx.vertex_direct = ctx.vertex_indirect = ctx.vertex_rho = None
+    ctx.corner_direct = ctx.corner_keep = None
     if ctx.direct is None:
         textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
         if lighting or textured:
@@ -84,7 +87,8 @@ def vertex_stage(ctx) -> None:
             rest_v = fill_buried(sided, rest_v, weights, cache=ctx.cache)
         elements = cut_elements(ctx)
         ctx.elements = sided if elements is patches else sided_mesh(ctx, elements)
-        xv, nv, rho_v = frames(ctx.elements, open_elements(ctx, ctx.elements), ctx.cache)
+        opened = open_elements(ctx, ctx.elements)
+        xv, nv, rho_v = frames(ctx.elements, opened, ctx.cache)
         nv = shading_normals(ctx.elements, ctx.meshes, nv)     # as Cycles shades: smooth, custom
         # the gather's rays (geometry only) cast on the workers while this thread finds the
         # direct light, the open side and what shines (else a core idles through them)
@@ -101,7 +105,8 @@ def vertex_stage(ctx) -> None:
                 pending.close()
     else:
         ctx.elements = sided
-        xv, nv, rho_v = frames(sided, open_elements(ctx, sided), ctx.cache)
+        opened = open_elements(ctx, sided)
+        xv, nv, rho_v = frames(sided, opened, ctx.cache)
         nv = shading_normals(sided, ctx.meshes, nv)
         rest_v = rest_v if in_v is None else in_v
         D_vert = ctx.direct.at(xv, nv, "vertices")
@@ -110,22 +115,32 @@ def vertex_stage(ctx) -> None:
             D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
     if side is not None:                                # what a buried vertex gathered: the inside
         rest_v = side.spread(rest_v)
-    _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v)
+    # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, None if side is None else side.count > 0)
+    _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
+        if creased is not None:
+            ctx.corner_radiosity = creased[0] + rest_v[ctx.elements.corner_ids()] * creased[1][..., None]
+            ctx.vertex_radiosity = vertex_mean(ctx.elements, ctx.corner_radiosity)
         return
     E_v = vertex_radiosity(ctx.elements, ctx.elements.emission, cache=ctx.cache)
-    ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v)
+    ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v, creased)
 
 
-def _keep_light(ctx, D_vert, rest_v, rho_v):
+def _keep_light(ctx, D_vert, rest_v, rho_v, creased=None):
     """``ctx.vertex_direct`` (V, 3) the direct light arriving at each output vertex and
     ``ctx.vertex_indirect`` (V, 3) the light arriving that was reflected at least once (radiance:
     irradiance / pi), with ``ctx.vertex_rho`` (V, 3) the reflectivity that made ``rest_v`` (V, 3)
-    of it (``rho_v`` None: the lighting pass, whose ``rest_v`` is the light arriving: ones).
-    Every vertex value is then E + rho * (direct + indirect) (:meth:`..pipeline.BakeResult.corner_parts`),
-    so a lightmap can take the direct part exactly at its texels (:mod:`.lightmap`)."""
+    of it (``rho_v`` None: the lighting pass, whose ``rest_v`` is the light arriving: ones);
+    where corners are lit on their own (``creased``, :func:`.crease.corner_light`), also
+    ``ctx.corner_direct`` (N, 4, 3) and ``ctx.corner_keep`` (N, 4), the share of the vertex's
+    indirect light each corner keeps. Every corner value is then E + rho * (direct + indirect)
+    (:meth:`..pipeline.BakeResult.corner_parts`), so a lightmap can take the direct part exactly
+    at its texels (:mod:`.lightmap`)."""
     ctx.vertex_direct = D_vert
+    if creased is not None:
+        ctx.corner_direct, ctx.corner_keep = creased
     if rho_v is None:
         ctx.vertex_rho, ctx.vertex_indirect = np.ones_like(D_vert), rest_v
         return
@@ -154,35 +169,45 @@ def _incoming(reflected, rho):
     return np.where(rho > 0, reflected / np.where(rho > 0, rho, 1.0), 0.0)
 
 
-def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v):
+def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v, creased=None):
     """E_v + rho_v * light_v + reflected_v, with the source meshes' corner colours (a texture)
     where they have them: emission and reflectivity per vertex, and the light reflected more
     than once (``reflected_v``, made with the faces' reflectivity ``rho_v``) rescaled to it.
+    ``creased``: None (each corner takes its vertex's light), or where some corner is lit on its
+    own (:func:`.crease.corner_light`) the direct light at every element corner (N, 4, 3) and
+    the share (N, 4) of ``reflected_v`` each corner keeps.
 
-    With corner colours, also ``ctx.corner_radiosity`` (N, 4, 3): the same sum at every element
-    corner with that corner's own colour (E_c + rho_c * light_v + reflected_v * rho_c / rho_v, a
-    triangle's fourth corner its third), and ``ctx.vertex_lighting`` (V, 3): the light arriving
-    at each vertex (light_v + reflected_v / rho_v), which the writer multiplies by a texture.
-    A vertex's value is the mean of its corners'; the corners keep what the mean loses where
-    faces meet with different colours at one vertex (a UV seam, a texture's tiles): what Cycles
-    shows at each face corner, and what the writer writes."""
+    With corner colours or ``creased``, also ``ctx.corner_radiosity`` (N, 4, 3): the same sum at
+    every element corner with that corner's own colour and light (E_c + rho_c * light_c + keep *
+    reflected_v * rho_c / rho_v, a triangle's fourth corner its third), and with corner
+    reflectivities ``ctx.corner_lighting`` (N, 4, 3): the light arriving at each corner
+    (light_c + keep * reflected_v / rho_v), which the writer multiplies by a texture. A
+    vertex's value is then the mean of its corners'; the corners keep what the mean loses where faces meet with
+    different colours or light at one vertex (a UV seam, a texture's tiles, a crease): what
+    Cycles shows at each face corner, and what the writer writes."""
     rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
     ctx.corner_rho = rho_c
-    if rho_c is None and em_c is None:
+    if rho_c is None and em_c is None and creased is None:
         return E_v + rho_v * light_v + reflected_v
     cv = ctx.elements.corner_ids()                                  # (N, 4) vertex of each corner
     R = np.broadcast_to(np.asarray(reflected_v, dtype=np.float64), np.shape(light_v))
     E_c = E_v[cv] if em_c is None else em_c
+    L_c, R_c = (light_v[cv], R[cv]) if creased is None else (creased[0], R[cv] * creased[1][..., None])
     if rho_c is None:
-        ctx.corner_radiosity = E_c + (rho_v * light_v + R)[cv]
-        return vertex_mean(ctx.elements, em_c) + rho_v * light_v + reflected_v
+        ctx.corner_radiosity = E_c + (rho_v[cv] * L_c + R_c)
+        if creased is not None:
+            return vertex_mean(ctx.elements, ctx.corner_radiosity)
+        E_v = E_v if em_c is None else vertex_mean(ctx.elements, em_c)
+        return E_v + rho_v * light_v + reflected_v
     pos = rho_v > 0
     per_rho = np.where(pos, R / np.where(pos, rho_v, 1.0), 0.0)     # light reflected again, per rho
-    ctx.corner_radiosity = E_c + rho_c * light_v[cv] + np.where(pos[cv], rho_c * per_rho[cv], R[cv])
-    ctx.vertex_lighting = light_v + per_rho
+    keep = 1.0 if creased is None else creased[1][..., None]
+    ctx.corner_radiosity = E_c + rho_c * L_c + np.where(pos[cv], rho_c * per_rho[cv], R[cv]) * keep
+    ctx.corner_lighting = L_c + per_rho[cv] * keep
+    if creased is not None:
+        return vertex_mean(ctx.elements, ctx.corner_radiosity)
     textured = vertex_mean(ctx.elements, rho_c)
     reflected_v = reflected_v * np.where(rho_v > 0, textured / np.where(rho_v > 0, rho_v, 1.0), 1.0)
-    rho_v = textured
     if em_c is not None:
         E_v = vertex_mean(ctx.elements, em_c)
-    return E_v + rho_v * light_v + reflected_v
+    return E_v + textured * light_v + reflected_v

@@ -1,0 +1,188 @@
+"""Direct light per element corner where the faces that meet at a vertex disagree.
+
+An output vertex is lit once (:mod:`.stage`): at a point a hair inside the mean of its elements,
+with one shading normal. Cycles bakes every face corner on its own triangle
+(``intern/cycles/kernel/integrator/init_from_bake.h``: the point nudged toward the triangle's
+centre, the bake's ray arriving along the shading normal N there), and its shader set-up
+(``kernel/geom/shader_data.h`` ``shader_setup_from_ray``) turns a triangle around whose geometric
+normal Ng faces away from that ray: where N . Ng < 0 (a face turned down whose smoothed normal
+points up: a kerb's undercut, a fold of grass) both are negated. A diffuse closure then takes
+cos(N, L) of a light direction L, and light from below the triangle's plane (Ng . L < 0) is
+lost: a bounce sampled there is dropped (``bsdf_diffuse_sample``), and a shadow ray there does
+not skip its own triangle (``kernel/light/sample.h`` ``shadow_ray_offset``). So a turned-around
+corner sees only the lune between the two planes: a sun above the undercut does not light it,
+where one value per vertex, lit along the smoothed normal, gave it the full sun.
+
+Where the triangle is not turned around, Cycles' shadow ray toward a light below the plane
+starts lifted toward the smooth surface (the shadow-terminator geometry offset) and does not
+skip its own triangle: the slope's corner is dark where that ray meets the slope, lit where it
+passes over the lip's edge (:mod:`.lift` says which, for the scene's strongest sun, from
+Blender's triangles of the face). Cutting all light from below the plane there made truck
+town's error 19.0% (from 15.8%); cutting it where :mod:`.lift` finds the ray blocked, 12.0%.
+
+Here, at every corner whose shading normal (its own face's corner normal, interpolated at the
+vertex: :func:`.normals.corner_shading_normals`) leans more than :data:`CREASE_ANGLE` off its
+own triangle's geometric normal, or off the normal its vertex was lit with, the direct light is
+found again for that corner alone, the cosine taken to its shading normal
+(:func:`corner_light`), and its light reflected more than once (per vertex) scaled by the share
+of its hemisphere above the triangle's plane. A turned-around corner has both normals negated.
+There, and where :mod:`.lift` finds the sun's ray blocked, the lamps' and the world's light from
+below the triangle's plane is cut (``facing`` of :meth:`.light.stage.DirectLight.at`; an
+emitting face's is not: its shadow rays start above the plane), the rays starting at a point
+:data:`INSET` of the way into the corner's element, off it by its object's offset
+(:func:`.rays.ray_offsets`) along the two normals' bisector. Elsewhere they start at the
+vertex's own point (on the front of all its elements), as Cycles' leave the corner itself. Only
+meshes with corner normals (smooth or custom-normal faces as Blender reads them) have such
+corners: elsewhere the faces that share a vertex lie in one plane, and the bake is as before
+bit for bit. Radiance units; world space.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..rays import occluder, ray_offsets
+from ..light.lamps import SunLight
+from .lift import blocked_share, face_corners
+from .normals import corner_shading_normals
+
+__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light"]
+
+#: Degrees: a corner's shading normal leaning this far off its triangle's normal, or off its
+#: vertex's normal, gets the corner its own direct light. Truck town: 5 degrees lit 63,204 of
+#: its 91,431 corners on their own, 15 degrees 31,467, for the same error (11.21%, 11.22%).
+CREASE_ANGLE = 15.0
+#: How far toward its element's centre a corner is lit (as :func:`.emitters.vertex_frames`' points).
+INSET = 1e-2
+
+
+def crease_corners(elements, meshes, nv, opened=None, buried=None):
+    """The element corners lit on their own, or None when there are none:
+    (p (K,) element, c (K,) corner 0..3, points (K, 3) where each is lit, shading (K, 3) unit
+    normal for the cosine, geometric (K, 3) the corner triangle's unit normal, turned (K,) bool:
+    the two faced apart and are both negated, to the side Cycles shades (module docstring)).
+    ``nv`` (V, 3) the normals the vertices were lit with; ``opened`` (N,) 0 for elements the
+    scene does not see and ``buried`` (V,) bool vertices that take the open side's light
+    (:func:`.sides.buried_side`): neither is lit again."""
+    polys = elements.polys
+    p, c = np.nonzero(polys >= 0)
+    shade, has = corner_shading_normals(elements, meshes, p, c)
+    if shade is None:
+        return None
+    keep = has if opened is None else has & (np.asarray(opened)[p] > 0)
+    p, c, shade = p[keep], c[keep], shade[keep]
+    v = polys[p, c]
+    if buried is not None:
+        open_v = ~np.asarray(buried, bool)[v]
+        p, c, v, shade = p[open_v], c[open_v], v[open_v], shade[open_v]
+    geo = corner_normals(elements, p, c)
+    cos_max = np.cos(np.radians(CREASE_ANGLE))
+    facing = np.einsum("ij,ij->i", shade, geo)
+    fire = (facing < cos_max) | (np.einsum("ij,ij->i", shade, nv[v]) < cos_max)
+    if not fire.any():
+        return None
+    p, c, v, shade, geo, facing = p[fire], c[fire], v[fire], shade[fire], geo[fire], facing[fire]
+    turn = np.where(facing < 0, -1.0, 1.0)[:, None]
+    x = elements.verts[v] + INSET * (elements.centers[p] - elements.verts[v])
+    return p, c, x, shade * turn, geo * turn, facing < 0
+
+
+def corner_normals(elements, p, c) -> np.ndarray:
+    """(K, 3) unit normal of the triangle each corner ``c`` (K,) of element ``p`` (K,) makes with
+    its two neighbouring corners, turned to the element's side; the element's own normal where
+    that triangle has no area."""
+    polys = elements.polys
+    k = np.where(polys[p, 3] >= 0, 4, 3)
+    X = elements.verts
+    here = X[polys[p, c]]
+    nxt = X[polys[p, (c + 1) % k]] - here
+    prv = X[polys[p, (c - 1) % k]] - here
+    n = np.cross(nxt, prv)
+    length = np.linalg.norm(n, axis=1)
+    own = elements.normals[p]
+    scale = np.linalg.norm(nxt, axis=1) * np.linalg.norm(prv, axis=1)
+    flat = ~(length > 1e-9 * scale)
+    n = np.where(flat[:, None], own, n / np.where(flat, 1.0, length)[:, None])
+    return np.where((np.einsum("ij,ij->i", n, own) < 0)[:, None], -n, n)
+
+
+def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
+    """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
+    (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
+    (V, 3)) but at the corners of :func:`crease_corners` their own, lit by ``ctx.direct`` (a
+    triangle's fourth corner its third); and the share of the light reflected more than once that each corner keeps: 1, but
+    at those corners the share of the shading normal's cosine-weighted hemisphere above the
+    triangle's plane, (1 + N . Ng) / 2 (the sky view factor of a plane tilted by their angle;
+    Cycles' diffuse bounce takes nothing from below that plane, ``bsdf_diffuse_sample``), the
+    light arriving at the vertex taken as even over its hemisphere. None when no corner is lit
+    on its own."""
+    found = crease_corners(elements, ctx.meshes, nv, opened, buried)
+    if found is None or ctx.direct is None:
+        return None
+    p, c, x, shade, geo, turned = found
+    cut = turned | _sun_blocked(ctx, elements, p, c, turned)
+    # rays start off the point along the two normals' bisector: above the triangle's plane and
+    # toward the side the smoothing leans to (along the triangle's own normal, a corner a hair
+    # from a concave fold started past its neighbour)
+    up = shade + geo
+    length = np.linalg.norm(up, axis=1)
+    up = np.where((length > 1e-6)[:, None], up / np.maximum(length, 1e-300)[:, None], geo)
+    eps = ray_offsets(ctx.patches, owner=elements.owner[p])
+    # where the light below the plane is not cut, Cycles' ray leaves the corner itself, over
+    # the edges that meet there: from the vertex's own point (on the front of all its
+    # elements, :func:`.emitters.vertex_frames`) along the corner's shading normal
+    v = elements.polys[p, c]
+    start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * shade)
+    D = ctx.direct.at(start, shade, "corners", eps=np.zeros(len(p)), facing=np.where(cut[:, None], geo, shade))
+    k = (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2           # the hemisphere's share above the plane
+    light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
+    keep = np.ones(light.shape[:2])
+    tri = (elements.polys[p, 3] < 0) & (c == 2)
+    for out, value in ((light, D), (keep, k)):
+        out[p, c] = value
+        out[p[tri], 3] = value[tri]
+    return light, keep
+
+
+def _sun_blocked(ctx, elements, p, c, turned) -> np.ndarray:
+    """(K,) bool: corners (not ``turned``) of ``elements`` at a corner of their source face on
+    whose Blender triangles (most of them) Cycles' shadow ray toward the scene's strongest sun
+    is blocked below the triangle's plane, from its lifted start (:func:`.lift.blocked_share`):
+    their light from below that plane is cut. False elsewhere, and without a sun."""
+    out = np.zeros(len(p), bool)
+    suns = [li for li in ctx.direct.lights if isinstance(li, SunLight) and li.strength > 0]
+    if not suns:
+        return out
+    to_sun = -max(suns, key=lambda li: li.strength * float(np.max(li.color))).direction
+    scene = _fronts_scene(ctx)
+
+    def occluded(x, d):
+        return scene.occluded(x, np.broadcast_to(d, x.shape), None)
+    owner = elements.owner[p]
+    size = float(np.linalg.norm(np.ptp(elements.verts, axis=0))) if len(elements.verts) else 1.0
+    for oi, m in enumerate(ctx.meshes):
+        if getattr(m, "corner_normal", None) is None or getattr(m, "back_of", -1) >= 0:
+            continue
+        rows = np.flatnonzero((owner == oi) & ~turned)
+        if not rows.size:
+            continue
+        face = elements.source_face[p[rows]].astype(np.int64)
+        j = face_corners(m, face, elements.verts[elements.polys[p[rows], c[rows]]], 1e-9 * size)
+        at = j >= 0
+        out[rows[at]] = blocked_share(m, face[at], j[at], to_sun, occluded) >= 0.5
+    return out
+
+
+def _fronts_scene(ctx):
+    """The shadow rays' scene without the backs of open surfaces (:mod:`..mesh.backs`), which
+    Cycles has not: a ray lifted a few micrometres off a slope's corner passes over the lip's
+    edge there, and the slope's back, a hair behind it, stopped it here."""
+    P = ctx.patches
+    fronts = [i for i, m in enumerate(ctx.meshes or ()) if getattr(m, "back_of", -1) < 0]
+    keep = np.isin(P.owner, fronts)
+    if keep.all():
+        return ctx.direct.scene()
+    return occluder(replace(P, polys=P.polys[keep], centers=P.centers[keep], normals=P.normals[keep],
+                            areas=P.areas[keep], rho=P.rho[keep], emission=P.emission[keep],
+                            owner=P.owner[keep], source_face=P.source_face[keep]), "auto")

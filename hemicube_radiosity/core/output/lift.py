@@ -1,0 +1,133 @@
+"""Whether Cycles' own triangle blocks a sun below its plane at a smooth face's corner.
+
+A corner whose shading normal N leans off its triangle's normal Ng sees a light direction L
+with N . L > 0 > Ng . L. Cycles' shadow ray from there (``intern/cycles/kernel/light/sample.h``
+``shadow_ray_offset``, with the shadow-terminator geometry offset of 0.1 that every object has by
+default) does not skip its own triangle, and starts lifted off it toward the smooth surface
+(``shadow_ray_smooth_surface_offset``: the height h of a parabola through the triangle's
+corners and corner normals, bounded below by a linear envelope, along the interpolated normal).
+The bake's point lies 1e-4 of its largest coordinate (at least 1e-4) in from the corner toward
+the triangle's centre (``kernel/integrator/init_from_bake.h`` ``bake_offset_towards_center``).
+From the lifted start the ray meets the triangle's plane again at a distance h (n . Ng) /
+(-Ng . L): inside the triangle, or on a neighbour that carries the surface on, the sun is
+blocked; past a convex edge it passes (a light a little below the plane, a start lifted much).
+A face's corner is baked on each of Blender's triangles of the
+face that hold it (a quad: cut along its first diagonal); this gives the share of those
+triangles that block, the rays cast by the caller. World units.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners"]
+
+#: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
+TERMINATOR_OFFSET = 0.1
+#: How far Cycles moves a corner's bake point toward its triangle's centre, per unit of its
+#: largest coordinate (at least 1).
+BAKE_NUDGE = 1e-4
+
+
+def blocked_share(mesh, face, corner, to_light, occluded) -> np.ndarray:
+    """(K,) in [0, 1]: the share of Blender's triangles of face ``face`` (K,) of ``mesh`` (a
+    :class:`.mesh.patches.MeshInput` with ``corner_normal``) holding its corner ``corner`` (K,)
+    (0.. in the face's loop order) on which Cycles' shadow ray toward the unit direction
+    ``to_light`` (3,), below the triangle's plane, is blocked: from its lifted start
+    (module docstring) ``occluded(origins (m, 3), direction (3,)) -> (m,) bool`` says whether
+    the scene (the triangle and its neighbours among it) stops it. 0 where the light is above the plane or behind the shading normal, and on
+    n-gons (more than four corners)."""
+    off = np.asarray(mesh.face_offsets, dtype=np.int64)
+    idx = np.asarray(mesh.face_indices, dtype=np.int64)
+    X = np.asarray(mesh.verts, dtype=np.float64)
+    cn = np.asarray(mesh.corner_normal, dtype=np.float64)
+    L = np.asarray(to_light, dtype=np.float64)
+    face, corner = np.asarray(face, dtype=np.int64), np.asarray(corner, dtype=np.int64)
+    size = off[face + 1] - off[face]
+    total, count = np.zeros(len(face)), np.zeros(len(face))
+    # Blender's triangles of a triangle and of a quad (first diagonal), as loop positions
+    for k, tris in ((3, ((0, 1, 2),)), (4, ((0, 1, 2), (0, 2, 3)))):
+        for tri in tris:
+            rows = np.flatnonzero((size == k) & np.isin(corner, tri))
+            if not rows.size:
+                continue
+            loops = off[face[rows]][:, None] + np.asarray(tri)[None, :]
+            at = np.argmax(corner[rows][:, None] == np.asarray(tri)[None, :], axis=1)
+            start, below = _lifted(X[idx[loops]], cn[loops], at, L)
+            hit = np.zeros(len(rows), bool)
+            if below.any():
+                hit[below] = np.asarray(occluded(start[below], L), bool)
+            total[rows] += hit
+            count[rows] += 1
+    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
+
+
+def _lifted(V, N, at, L):
+    """Cycles' shadow ray from corner ``at`` (m,) of triangles ``V`` (m, 3, 3) with corner
+    normals ``N`` (m, 3, 3) toward ``L``: (start (m, 3), below (m,) bool: L below the triangle's
+    plane and above the shading normal's)."""
+    m = len(V)
+    Ng = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
+    Ng /= np.maximum(np.linalg.norm(Ng, axis=1, keepdims=True), 1e-300)
+    corner = V[np.arange(m), at]
+    to_centre = V.mean(axis=1) - corner
+    dist = np.linalg.norm(to_centre, axis=1)
+    step = np.minimum(dist, np.maximum(np.abs(corner).max(axis=1), 1.0) * BAKE_NUDGE)
+    P = corner + to_centre * (step / np.maximum(dist, 1e-300))[:, None]
+    w = _weights(V, P)
+    n = np.einsum("mk,mkj->mj", w, N)                        # interpolated, not normalised
+    nl = np.einsum("ij,j->i", n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), L)
+    ngl = Ng @ L
+    cut = TERMINATOR_OFFSET
+    amount = np.where(nl < cut, np.clip(2.0 - (ngl + nl) / cut, 0.0, 1.0), np.clip(1.0 - ngl / cut, 0.0, 1.0))
+    start = P + (_height(V, N, P, w, np.einsum("ij,ij->i", n, Ng) > 0) * amount)[:, None] * n
+    return start, (ngl < 0) & (nl > 0)
+
+
+def _height(V, N, P, w, facing) -> np.ndarray:
+    """(m,) Cycles' ``shadow_ray_smooth_surface_offset`` height at ``P`` (m, 3), barycentric
+    ``w`` (m, 3); ``facing``: its interpolated normal on the triangle's side."""
+    a = np.einsum("ij,ij->i", N[:, 2] - N[:, 0], V[:, 0] - V[:, 2])
+    b = np.einsum("ij,ij->i", N[:, 2] - N[:, 1], V[:, 1] - V[:, 2])
+    c = np.einsum("ij,ij->i", N[:, 1] - N[:, 0], V[:, 1] - V[:, 0])
+    u, v = w[:, 0], w[:, 1]
+    h = a * u * (u - 1) + (a + b + c) * u * v + b * v * (v - 1)
+    up, down = [], []
+    for i in range(3):
+        j, k = (i + 1) % 3, (i + 2) % 3
+        d_j = np.einsum("ij,ij->i", V[:, j] - V[:, i], N[:, i])
+        d_k = np.einsum("ij,ij->i", V[:, k] - V[:, i], N[:, i])
+        at = np.einsum("ij,ij->i", V[:, i] - P, N[:, i])
+        up.append(np.maximum(at + np.maximum(np.maximum(d_j, d_k), 0.0), 0.0))
+        down.append(np.maximum(-at + np.maximum(np.maximum(-d_j, -d_k), 0.0), 0.0))
+    env_up = np.minimum(np.minimum(up[0], up[1]), up[2])
+    env_down = np.minimum(np.minimum(down[0], down[1]), down[2])
+    return np.where(facing, np.maximum(env_up, 0.5 * h), np.minimum(-env_down, 0.5 * h))
+
+
+def _weights(V, x) -> np.ndarray:
+    """(m, 3) barycentric weights of points ``x`` (m, 3) in triangles ``V`` (m, 3, 3)."""
+    a, b = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    d = x - V[:, 0]
+    aa, ab, bb = (np.einsum("ij,ij->i", *q) for q in ((a, a), (a, b), (b, b)))
+    da, db = np.einsum("ij,ij->i", d, a), np.einsum("ij,ij->i", d, b)
+    det = aa * bb - ab * ab
+    det = np.where(np.abs(det) > 0, det, 1.0)
+    s, t = (bb * da - ab * db) / det, (aa * db - ab * da) / det
+    return np.stack([1 - s - t, s, t], 1)
+
+
+def face_corners(mesh, face, points, tol) -> np.ndarray:
+    """(K,) int64: which corner (0.. in loop order) of face ``face`` (K,) of ``mesh`` lies at each
+    of ``points`` (K, 3) within ``tol`` (world units), -1 for a point at none."""
+    off = np.asarray(mesh.face_offsets, dtype=np.int64)
+    idx = np.asarray(mesh.face_indices, dtype=np.int64)
+    X = np.asarray(mesh.verts, dtype=np.float64)
+    face = np.asarray(face, dtype=np.int64)
+    size = off[face + 1] - off[face]
+    out = np.full(len(face), -1, dtype=np.int64)
+    for k in np.unique(size):
+        rows = np.flatnonzero(size == k)
+        d = np.linalg.norm(X[idx[off[face[rows]][:, None] + np.arange(k)[None, :]]] - points[rows][:, None], axis=2)
+        j = np.argmin(d, axis=1)
+        out[rows] = np.where(d[np.arange(len(rows)), j] <= tol, j, -1)
+    return out

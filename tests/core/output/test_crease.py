@@ -1,0 +1,113 @@
+"""Direct light per corner where a corner's shading normal and its triangle disagree
+(core/output/crease.py), against closed forms of Cycles' rule: a triangle whose smoothed normal
+faces away from it is turned around (N and Ng both negated) and takes no light from below its
+plane, with the cosine to the shading normal.
+
+A single square faces down (Ng = -z); its corner normals lean 120 degrees off it, 60 degrees off
++z toward +x. Cycles shades it with N' = -N (30 degrees below the horizon, toward -x) and
+Ng' = +z: light arrives only from the lune above the horizon on N''s side."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.light.lamps import SunLight
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.pipeline import BakeSettings, bake
+from hemicube_radiosity.core.rays import embree_available
+
+pytestmark = pytest.mark.skipif(not embree_available(), reason="the corners' rays need Embree")
+
+RHO = 0.5
+LEAN = np.radians(120.0)                       # shading normal off the face's own normal (-z)
+N_SHADE = np.array([np.sin(LEAN), 0.0, -np.cos(LEAN)])    # (0.87, 0, 0.5): up and toward +x
+
+
+def _overhang():
+    """A 1 m square at z = 1 facing down, its corner normals all ``N_SHADE``."""
+    m = MeshInput.from_faces([(0, 0, 1), (0, 1, 1), (1, 1, 1), (1, 0, 1)], [(0, 1, 2, 3)],
+                             rho=(RHO, RHO, RHO), name="overhang")
+    m.corner_normal = np.tile(N_SHADE, (4, 1))
+    return m
+
+
+def _corners(result):
+    """(n, 3) the written values at the front object's element corners."""
+    own = result.elements.owner == 0
+    return result.corner_values()[own].reshape(-1, 3)
+
+
+def _settings():
+    return BakeSettings(patch_size=0.5, element_size=0.25, two_sided_reflection=False)
+
+
+def test_a_sun_in_the_lune_lights_a_turned_around_corner_by_its_shading_cosine():
+    # a sun 10 degrees above the horizon, from -x: 40 degrees off N' = -N_SHADE, 80 off Ng' = +z
+    el = np.radians(10.0)
+    to_sun = np.array([-np.cos(el), 0.0, np.sin(el)])
+    r = bake([_overhang()], _settings(), lights=[SunLight(-to_sun, strength=3.0)])
+    want = RHO * 3.0 * float(-N_SHADE @ to_sun) / np.pi      # cos 40 degrees
+    got = _corners(r)
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+
+
+def test_a_sun_above_the_shading_normal_does_not_light_a_turned_around_corner():
+    # straight above: 30 degrees off the shading normal, but Cycles turns the face around (its
+    # N' points down): 0, not the cos 30 of the shading normal as it is
+    r = bake([_overhang()], _settings(), lights=[SunLight((0.0, 0.0, -1.0), strength=3.0)])
+    np.testing.assert_array_equal(_corners(r), 0.0)
+
+
+def test_the_world_lights_a_turned_around_corner_through_the_lune_only():
+    # the cosine-weighted share of N''s hemisphere above the plane of Ng': (1 + N' . Ng') / 2
+    # (the sky view factor of a plane tilted by their angle), 1/4 here
+    s = _settings()
+    s.sky_rays = 1024                         # the lattice's estimate of a lune: ~1% at 1024 rays
+    r = bake([_overhang()], s, world=np.array([1.0, 1.0, 1.0]))
+    want = RHO * (1.0 + float(-N_SHADE @ np.array([0.0, 0.0, 1.0]))) / 2
+    got = _corners(r)
+    assert want == pytest.approx(0.125)
+    np.testing.assert_allclose(got, want, rtol=0.015)
+
+
+def _step(profile, nx=3):
+    """A step extruded along x over [-1, 1] from ``profile`` (y, z) points, quads facing up and
+    +y, its corner normals Blender's smooth ones (the mean of the faces' at each vertex: all
+    the faces' corners there are right angles)."""
+    xs = np.linspace(-1.0, 1.0, nx + 1)
+    verts = np.array([(x, y, z) for y, z in profile for x in xs])
+    row = nx + 1
+    faces = [(k * row + i, k * row + i + 1, (k + 1) * row + i + 1, (k + 1) * row + i)
+             for k in range(len(profile) - 1) for i in range(nx)]
+    m = MeshInput.from_faces(verts, faces, name="step")
+    seg = [np.array([0.0, z0 - z1, y1 - y0]) / np.hypot(z0 - z1, y1 - y0)
+           for (y0, z0), (y1, z1) in zip(profile[:-1], profile[1:])]
+    k = np.arange(len(profile))
+    vn = [seg[0] if i == 0 else seg[-1] if i == len(profile) - 1 else seg[i - 1] + seg[i] for i in k]
+    vn = np.repeat([v / np.linalg.norm(v) for v in vn], row, axis=0)
+    m.corner_normal = vn[m.face_indices]
+    return m, faces
+
+
+@pytest.mark.parametrize("profile, zenith, blocked", [
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.15, 0.5), (0.3, 0.0)), 30.0, 0.0),
+    (((-1.0, 1.0), (-0.5, 1.0), (0.0, 1.0), (0.1, 0.0)), 40.0, 1.0)])
+def test_a_lip_s_slope_corner_is_blocked_where_cycles_lifted_ray_meets_the_slope(profile, zenith, blocked):
+    """The sun below the slope's plane, above the smoothed normal's at the lip: Cycles' shadow
+    ray, lifted off the slope's corner, passes over the lip's edge on the 73-degree slope and
+    meets the slope on the 84-degree one (Cycles itself: tests/blender/test_shading_normals.py)."""
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    from hemicube_radiosity.core.output.lift import blocked_share, face_corners
+    from hemicube_radiosity.core.rays import occluder
+
+    m, faces = _step(profile)
+    occ = occluder(build_patches([m], 10.0), "auto")
+    zen = np.radians(zenith)
+    to_sun = np.array([0.0, -np.sin(zen), np.cos(zen)])
+    face = np.array([6, 7, 8] * 2)                              # the slope's first row
+    top = np.array([np.asarray(m.verts)[faces[f][j]] for j in (0, 1) for f in (6, 7, 8)])
+    corner = face_corners(m, face, top, 1e-9)
+    assert np.array_equal(corner, [0, 0, 0, 1, 1, 1])
+    got = blocked_share(m, face, corner, to_sun, lambda x, d: occ.occluded(x, np.broadcast_to(d, x.shape), None))
+    np.testing.assert_array_equal(got, blocked)
+    # the plateau's corners on the lip see the sun above their plane: nothing to block
+    np.testing.assert_array_equal(blocked_share(m, np.array([3, 4, 5]), np.array([3, 3, 3]), to_sun,
+                                                lambda x, d: np.ones(len(x), bool)), 0.0)
