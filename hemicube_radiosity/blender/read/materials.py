@@ -288,9 +288,9 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
             n = [s for s in n if not any(f in s for f in _FIXED_BY_CYCLES)]
             c_rho, c_em, c_glossy = shaded.materials[m.original.name_full]
             n += [_of(label, w) for w in why]
-            if np.any(rho - c_rho - c_glossy > UNBAKED_SHARE * np.maximum(rho, 1e-3)):
-                n.append(note(label, "transmission or a layer other than diffuse and specular "
-                              "takes light this bake leaves out (10% of the colour or more; "
+            if np.any(rho - c_rho - c_glossy > UNBAKED_SHARE * np.maximum(rho, 1e-3)) and not _passes_light(m):
+                n.append(note(label, "a layer other than diffuse and specular (sheen, subsurface, "
+                              "...) takes light this bake leaves out (10% of the colour or more; "
                               "Cycles' diffuse and glossy reflectance are baked)"))
             if np.any(c_glossy > SPREAD_SHARE):
                 n.append(note(label, SPREAD_NOTE))
@@ -313,6 +313,21 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
         if k in used:
             notes += [s for s in n if s not in notes]
     return corner_rho, corner_em, corner_glossy, notes
+
+
+def _passes_light(mat) -> bool:
+    """Whether material ``mat`` has glass in it (a Glass or Refraction BSDF, a Principled BSDF's
+    Transmission): what it takes from the diffuse colour is light it passes, which
+    :mod:`.transparency` speaks of (glass passes no light in Cycles' shadow rays either)."""
+    nt = mat.node_tree if mat is not None and uses_nodes(mat) else None
+    for node in (nt.nodes if nt is not None else ()):
+        if node.type in ("BSDF_GLASS", "BSDF_REFRACTION"):
+            return True
+        if node.type == "BSDF_PRINCIPLED":
+            s = node.inputs.get("Transmission Weight") or node.inputs.get("Transmission")
+            if s is not None and (s.is_linked or float(s.default_value) > 0):
+                return True
+    return False
 
 
 def _glossy(g):
