@@ -102,6 +102,14 @@ def _world_triangles(me, matrix):
     return world[lv[tl]].reshape(-1, 3, 3)
 
 
+def _triangle_faces(me):
+    """(T,) int64 the face of each of mesh ``me``'s loop triangles (as :func:`_world_triangles`
+    made them): the bake's ``source_face`` of the copy's own topology."""
+    f = np.empty(len(me.loop_triangles), np.int64)
+    me.loop_triangles.foreach_get("polygon_index", f)
+    return f
+
+
 def _corner_normals(me, matrix):
     """(T, 3, 3) the shading normals at the corners of mesh ``me``'s loop triangles (as
     :func:`_world_triangles` made them) in world space (``matrix`` 4x4), unit length: what
@@ -317,7 +325,8 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     corners, parts, direct, sources = light
     lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
                                      flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, direct=direct,
-                                     normals=_corner_normals(me, M), lighting_scale=k, sources=sources)
+                                     normals=_corner_normals(me, M), lighting_scale=k, sources=sources,
+                                     faces=_triangle_faces(me))
     stem = bpy.path.clean_name(src.name)
     exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)
     lit = (None, None) if lm.lighting is None else _save_pass(src.name, folder, stem, "lighting", lm.lighting)

@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..mesh.patches import PatchSet
 from .interpolate import interpolate_corner_values, locate
 
 __all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
@@ -176,14 +177,44 @@ def texel_points(world, tri, bary, flip=False):
     return points, -normal if flip else normal
 
 
-def evaluate(elements, corner_values, points, normals, owner):
+def evaluate(elements, corner_values, points, normals, owner, faces=None):
     """(n, 3) the output at world ``points`` (n, 3) with face ``normals`` (n, 3) on the output
     elements of object ``owner`` (an ``elements.owner`` value): located with
-    :func:`.interpolate.locate`, then bilinear in that element's ``corner_values`` (N, 4, 3)."""
+    :func:`locate_texels` (on their own ``faces`` (n,) where given), then bilinear in that
+    element's ``corner_values`` (N, 4, 3)."""
     if len(points) == 0:
         return np.zeros((0, 3))
-    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    idx, uv = locate_texels(elements, points, normals, owner, faces)
     return interpolate_corner_values(corner_values, idx, uv)
+
+
+def locate_texels(elements, points, normals, owner, faces=None):
+    """(element index (n,), bilinear (u, v) (n, 2)) of world ``points`` (n, 3) with face
+    ``normals`` among the output elements of object ``owner`` (:func:`.interpolate.locate`).
+
+    ``faces`` (n,) int or None: the source face (``elements.source_face``) each point lies on. A
+    point that :func:`.interpolate.locate` puts on another face's element (it tries the 8
+    nearest element centres: on a strip 2 cm wide beside a large wall, a bevel or a window
+    frame, none of them may be the strip's own) is located again among its own face's elements,
+    where that face has any: the texel shows its own surface's light, not a neighbour's."""
+    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    if faces is None or len(points) == 0:
+        return idx, uv
+    faces = np.asarray(faces, dtype=np.int64)
+    wrong = np.asarray(elements.source_face, dtype=np.int64)[idx] != faces
+    if not wrong.any():
+        return idx, uv
+    mine = np.flatnonzero((elements.owner == owner) & np.isin(elements.source_face, faces[wrong]))
+    again = wrong & np.isin(faces, np.asarray(elements.source_face)[mine])
+    if not again.any():
+        return idx, uv
+    key = np.asarray(elements.source_face, dtype=np.int64)[mine]
+    sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
+                   elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
+    j, w = locate(sub, points[again], faces[again], None if normals is None else normals[again])
+    idx, uv = idx.copy(), uv.copy()
+    idx[again], uv[again] = mine[j], w
+    return idx, uv
 
 
 def dilate(image, known, passes=MARGIN):
@@ -215,7 +246,7 @@ def dilate(image, known, passes=MARGIN):
     return img, known
 
 
-def texel_light(elements, parts, points, normals, owner, D):
+def texel_light(elements, parts, points, normals, owner, D, faces=None):
     """(radiosity (n, 3), light arriving (n, 3)) at n texels' world ``points`` (n, 3) with face
     ``normals`` (n, 3) on the output elements of object ``owner``, given ``D`` (n, 3) the direct
     light arriving there (radiance: irradiance / pi).
@@ -225,10 +256,11 @@ def texel_light(elements, parts, points, normals, owner, D):
     light). Each texel is E + rho * (D + I), with E, rho and I the bilinear interpolation of the
     corners' emission, reflectivity and indirect light in the element that holds the point
     (:func:`.interpolate.locate`), as the output vertices are made (:mod:`.stage`). The light
-    arriving returned is D + I (what the lighting-only pass holds)."""
+    arriving returned is D + I (what the lighting-only pass holds). ``faces`` (n,): each point's
+    source face, as :func:`locate_texels` takes it."""
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3))
-    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    idx, uv = locate_texels(elements, points, normals, owner, faces)
     E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
     light = np.asarray(D, dtype=np.float64) + indirect
     return E + rho * light, light
@@ -313,7 +345,8 @@ def _surface(covered, points, normals, pitch):
     return tuple(out)
 
 
-def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, flip=False, sources=None):
+def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, flip=False, sources=None,
+                 faces=None):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
     :func:`texel_light` with ``direct(points, normals) -> (n, 3)`` for the direct light: at
@@ -337,7 +370,8 @@ def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, 
     def light_at(tris, bs):
         pts, nrm, shading = _lit_points(world, normals, tris, bs, flip)
         D = np.asarray(direct(pts, shading), dtype=np.float64)
-        return texel_light(elements, parts, pts, nrm, owner, D) + (pts, nrm, shading, D)
+        return texel_light(elements, parts, pts, nrm, owner, D,
+                           None if faces is None else faces[tris]) + (pts, nrm, shading, D)
     value, light, pts, nrm, shading, D = light_at(t, b)
     if sources is None:
         marks = light.sum(axis=1, keepdims=True)
@@ -368,7 +402,7 @@ def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, 
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None, sources=None) -> Lightmap:
+                  lighting_scale=None, sources=None, faces=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -386,7 +420,10 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     corner normals in world space where given (smooth shading), else the triangles' own; without
     them every texel is the bilinear interpolation of ``corner_values``. ``lighting_scale`` (T, 3)
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
-    material's albedo scale), in ``Lightmap.lighting``."""
+    material's albedo scale), in ``Lightmap.lighting``. ``faces`` (T,) int: each triangle's face in
+    the object's mesh (``elements.source_face``): a texel is read on its own face's elements
+    (:func:`locate_texels`)."""
+    faces = None if faces is None else np.asarray(faces, dtype=np.int64)
     height = int(width if height is None else height)
     width = int(width)
     tri, bary, inside = rasterize(uv, width, height, reach)
@@ -396,10 +433,10 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     t, b = tri[covered], bary[covered]
     if parts is None or direct is None:
         pts, nrm = texel_points(world, t, b, flip)
-        image[covered] = evaluate(elements, corner_values, pts, nrm, owner)
+        image[covered] = evaluate(elements, corner_values, pts, nrm, owner, None if faces is None else faces[t])
     else:
         image[covered], light = texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary,
-                                             flip, sources)
+                                             flip, sources, faces)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]

@@ -170,3 +170,35 @@ def test_varying_marks_both_sides_of_a_jump():
     assert not lm.varying(light, known, surface=(pts, nrm, np.full((4, 6), 0.1))).any()
     pts[:, 3:, 2] = 0.0                          # one surface: the jump counts
     assert np.array_equal(lm.varying(light, known, surface=(pts, nrm, np.full((4, 6), 0.1))), v)
+
+
+def test_a_thin_strip_beside_a_wall_reads_its_own_element():
+    """A 2 cm bevel strip, one face 4 m long, along the top edge of a wall modelled as a grid of
+    0.1 m faces, its normal 69 degrees from the wall's (a chamfer toward the roof, as Blender's
+    Bevel modifier makes one), in one object, neither cut further: the 8 element centres nearest
+    a point on the strip are the wall's, and a lookup by position and normal alone reads the
+    wall's light there. Each element holds its own face's number (the strip's is 0): with the
+    points' face given, every point on the strip reads 0.0."""
+    h, w, n, tilt = 1.0, 4.0, 10, np.radians(21.0)
+    d = 0.02 * np.array([0.0, np.cos(tilt), np.sin(tilt)])                      # in and up
+    a, b = np.array([0, 0, h], float), np.array([w, 0, h], float)
+    xs, zs = np.linspace(0, w, 4 * n + 1), np.linspace(0, h, n + 1)
+    grid = np.array([[x, 0.0, z] for z in zs for x in xs])                       # faces -y
+    k = len(xs)
+    wall = [[4 + r * k + c, 4 + r * k + c + 1, 4 + (r + 1) * k + c + 1, 4 + (r + 1) * k + c]
+            for r in range(n) for c in range(4 * n)]
+    mesh = MeshInput.from_faces(np.vstack([[a, b, b + d, a + d], grid]), [[0, 1, 2, 3]] + wall, name="wall")
+    elements = build_patches([mesh], 0)                                          # a patch per face
+    values = np.repeat(elements.source_face.astype(float)[:, None, None], 4, axis=1).repeat(3, axis=2)
+    rng = np.random.default_rng(3)
+    s, r = rng.uniform(0.0, 1.0, (400, 1)), rng.uniform(0.05, 0.95, (400, 1))
+    points = a + s * (b - a) + r * d
+    normal = np.cross(b - a, d)
+    normals = np.tile(normal / np.linalg.norm(normal), (len(points), 1))
+    alone = lm.evaluate(elements, values, points, normals, 0)
+    assert (alone[:, 0] > 0.5).mean() > 0.5            # without the face: most read the wall
+    own = lm.evaluate(elements, values, points, normals, 0, faces=np.zeros(len(points), np.int64))
+    np.testing.assert_array_equal(own, 0.0)
+    # a point whose face has no element of its own keeps the first answer, not an error
+    kept = lm.evaluate(elements, values, points[:5], normals[:5], 0, faces=np.full(5, 10**6, np.int64))
+    np.testing.assert_array_equal(kept, alone[:5])
