@@ -109,17 +109,19 @@ def test_joined_bake_equals_each_object_alone(monkeypatch):
     monkeypatch.setattr(shading, "_bake", counting)
     together = shading.shade(obs, dg)
     assert together.failed is None
-    # one Cycles run (no material emits: no EMIT run) of 4 objects: the join of the three objects
+    # one Cycles run a pass, DIFFUSE and GLOSSY (no material emits: no EMIT run), of 4 objects:
+    # the join of the three objects
     # that read the render UV map 'UVMap' and nothing else (its first layer in 'second_uv'),
     # 'renamed_uv' (render UV map 'other'), 'painted' (reads the colour attribute 'paint' too)
     # and 'object_coords' as itself
-    assert runs == [4], runs
+    assert runs == [4, 4], runs
     for ob in obs:
         alone = shading.shade([ob], bpy.context.evaluated_depsgraph_get())
-        r, e = together.corners[ob.name]
+        r, e, g = together.corners[ob.name]
         assert r.shape == alone.corners[ob.name][0].shape == (ob.evaluated_get(dg).data.loops.__len__(), 3)
         np.testing.assert_allclose(r, alone.corners[ob.name][0], atol=1e-6, err_msg=ob.name)
         np.testing.assert_allclose(e, alone.corners[ob.name][1], atol=1e-6, err_msg=ob.name)
+        np.testing.assert_allclose(g, alone.corners[ob.name][2], atol=1e-6, err_msg=ob.name)
         assert np.ptp(r[:, 0]) > 0.2, ob.name                 # really textured, not a fallback
     # nothing of the temporary scene is left
     assert not [o for o in bpy.data.objects if o.name.startswith(shading.SCENE)]
