@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..util.geometry import barycentric
+
 __all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners"]
 
 #: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
@@ -73,7 +75,7 @@ def _lifted(V, N, at, L):
     dist = np.linalg.norm(to_centre, axis=1)
     step = np.minimum(dist, np.maximum(np.abs(corner).max(axis=1), 1.0) * BAKE_NUDGE)
     P = corner + to_centre * (step / np.maximum(dist, 1e-300))[:, None]
-    w = _weights(V, P)
+    w = barycentric(V, P)
     n = np.einsum("mk,mkj->mj", w, N)                        # interpolated, not normalised
     nl = np.einsum("ij,j->i", n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), L)
     ngl = Ng @ L
@@ -102,18 +104,6 @@ def _height(V, N, P, w, facing) -> np.ndarray:
     env_up = np.minimum(np.minimum(up[0], up[1]), up[2])
     env_down = np.minimum(np.minimum(down[0], down[1]), down[2])
     return np.where(facing, np.maximum(env_up, 0.5 * h), np.minimum(-env_down, 0.5 * h))
-
-
-def _weights(V, x) -> np.ndarray:
-    """(m, 3) barycentric weights of points ``x`` (m, 3) in triangles ``V`` (m, 3, 3)."""
-    a, b = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
-    d = x - V[:, 0]
-    aa, ab, bb = (np.einsum("ij,ij->i", *q) for q in ((a, a), (a, b), (b, b)))
-    da, db = np.einsum("ij,ij->i", d, a), np.einsum("ij,ij->i", d, b)
-    det = aa * bb - ab * ab
-    det = np.where(np.abs(det) > 0, det, 1.0)
-    s, t = (bb * da - ab * db) / det, (aa * db - ab * da) / det
-    return np.stack([1 - s - t, s, t], 1)
 
 
 def face_corners(mesh, face, points, tol) -> np.ndarray:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet
+from ..util.geometry import barycentric
 from .interpolate import inverse_bilinear
 
 __all__ = ["shading_normals", "corner_shading_normals", "MAX_LEAN"]
@@ -113,13 +114,6 @@ def _at(mesh, cn, face, x) -> np.ndarray:
 def _barycentric(X, N, x) -> np.ndarray:
     """(m, 3) ``N`` (m, 3, 3) at the corners of triangles ``X`` (m, 3, 3) weighted by the
     barycentric coordinates of ``x`` (m, 3), clipped to the triangle."""
-    a, b = X[:, 1] - X[:, 0], X[:, 2] - X[:, 0]
-    d = x - X[:, 0]
-    aa, ab, bb = (np.einsum("ij,ij->i", *q) for q in ((a, a), (a, b), (b, b)))
-    da, db = np.einsum("ij,ij->i", d, a), np.einsum("ij,ij->i", d, b)
-    det = aa * bb - ab * ab
-    det = np.where(np.abs(det) > 0, det, 1.0)
-    s, t = (bb * da - ab * db) / det, (aa * db - ab * da) / det
-    w = np.clip(np.stack([1 - s - t, s, t], 1), 0.0, 1.0)
+    w = np.clip(barycentric(X, x), 0.0, 1.0)
     w /= np.maximum(w.sum(axis=1, keepdims=True), 1e-300)
     return np.einsum("mk,mkj->mj", w, N)

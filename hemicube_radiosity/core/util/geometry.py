@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["orthonormal_basis", "tangent_frames", "in_frames", "bilinear", "equal_area_scale",
+__all__ = ["orthonormal_basis", "tangent_frames", "in_frames", "bilinear", "barycentric", "equal_area_scale",
            "disk_polygons", "DISK_SIDES"]
 
 #: Sides of the regular polygon standing in for disks and ellipses.
@@ -88,6 +88,19 @@ def bilinear(c, u, v):
 
 # --------------------------------------------------------------------------------------------
 # Disks
+
+
+def barycentric(V, x) -> np.ndarray:
+    """(m, 3) barycentric weights of points ``x`` (m, 3) in triangles ``V`` (m, 3, 3): of their
+    projections onto the triangles' planes; outside a triangle some are negative."""
+    a, b = V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]
+    d = x - V[:, 0]
+    aa, ab, bb = (np.einsum("ij,ij->i", *q) for q in ((a, a), (a, b), (b, b)))
+    da, db = np.einsum("ij,ij->i", d, a), np.einsum("ij,ij->i", d, b)
+    det = aa * bb - ab * ab
+    det = np.where(np.abs(det) > 0, det, 1.0)
+    s, t = (bb * da - ab * db) / det, (aa * db - ab * da) / det
+    return np.stack([1 - s - t, s, t], 1)
 
 
 def equal_area_scale(sides=DISK_SIDES):
