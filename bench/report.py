@@ -388,7 +388,10 @@ def real_section(res):
          f" the closed `sauer_pandora`), baked by us with `BakeSettings()` through the CLI's `BakeJob` (one child"
          f" process a bake, peak resident set with Blender) and once with patches twice as large (\"coarser\");"
          f" Cycles COMBINED vertex bakes of the same scene at {res['cand_spp']} spp and, as the reference,"
-         f" {res['ref_spp']} spp (not 4,096: minutes per 64 samples on the big scenes on 2 cores). RMS at Cycles' face"
+         f" {res['ref_spp']} spp (not 4,096: minutes per 64 samples on the big scenes on 2 cores)"
+         + (f", with {res['glossy']} glossy bounces and reflective caustics as a user's render has them (light off"
+            " metal and glossy layers reaches the walls)" if res.get("glossy") else ", with no glossy bounce")
+         + ". RMS at Cycles' face"
          " corners matched by position and normal, zero-area faces, emitters and never-lit corners left out, the"
          " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
          " filled the cache). Failures (refused, crashed, timed out) are rows with their first error line."
