@@ -44,7 +44,7 @@ import numpy as np
 
 from ...core.light.lamps import AreaLight, EnvironmentLight, PointLight, SpotLight, SunLight
 from ...core.runtime.notes import warning
-from .materials import follow, rgb
+from .materials import follow, image_pixels, rgb
 from .visibility import is_render_visible, render_visible_objects, unevaluated_note, world_matrix
 
 __all__ = ["read_lights", "light_from_object", "world_radiance"]
@@ -258,10 +258,8 @@ def _environment(tex, notes):
     w, h = img.size
     if w == 0 or h == 0 or img.channels < 3:
         return None
-    px = np.empty(w * h * img.channels, np.float32)
-    img.pixels.foreach_get(px)
     rotation = _mapping_rotation(tex, notes)
-    return EnvironmentLight(px.reshape(h, w, img.channels)[..., :3], rotation, name=f"world '{img.name}'")
+    return EnvironmentLight(image_pixels(img)[..., :3], rotation, name=f"world '{img.name}'")
 
 
 def _mapping_rotation(tex, notes):
@@ -295,9 +293,7 @@ def _image_mean(image, projection="EQUIRECTANGULAR"):
     w, h = image.size
     if w == 0 or h == 0:
         return np.zeros(3)
-    px = np.empty(w * h * image.channels, np.float32)
-    image.pixels.foreach_get(px)
-    px = px.reshape(h, w, image.channels)[..., :3].astype(np.float64)
+    px = image_pixels(image)[..., :3].astype(np.float64)
     if projection == "EQUIRECTANGULAR":
         lat = (np.arange(h) + 0.5) / h * np.pi - np.pi / 2
         wt = np.cos(lat)

@@ -14,21 +14,21 @@ material. Strength 0 is no light in Cycles too; negative light is not modelled (
 emission >= 0): Cycles subtracts light for an Emission node's negative strength, and for a
 Principled BSDF's before Blender 5.0 (5.0 clamps that one to no light, as here).
 
-:func:`follow` and :func:`rgb` are the node helpers the lamp and world reader
+:func:`follow`, :func:`rgb` and :func:`image_pixels` are the node helpers the lamp and world reader
 (:mod:`.lights`) shares.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ...core.mesh.patches import RHO_MAX       # the core needs reflectivity < 1 in every band
 from ...core.runtime.notes import Note, note
 
-__all__ = ["RHO_MAX", "rgb", "follow", "uses_nodes", "material_rho_emission", "corner_materials"]
+__all__ = ["RHO_MAX", "rgb", "follow", "image_pixels", "uses_nodes", "material_rho_emission", "corner_materials"]
 
-RHO_MAX = 0.999          # the core needs reflectivity < 1 in every band
-# Cycles' diffuse reflectance this far below a material's colour is worth a note (light its
-# metallic, transmission, specular or coat reflects is not baked); Blender's default Principled
-# BSDF (specular IOR level 0.5, IOR 1.5) keeps 96.3% and says nothing
+# Cycles' diffuse plus glossy reflectance this far below a material's colour is worth a note (a
+# layer other than diffuse and specular takes light the bake leaves out; glass has its own line);
+# Blender's default Principled BSDF (specular IOR level 0.5, IOR 1.5) keeps its colour
 UNBAKED_SHARE = 0.10
 # a specular or metallic layer reflecting more than this is light the solve spreads as diffuse
 # light (core/mesh/specular.py): worth a note; the default material's 0.037 is not
@@ -78,6 +78,15 @@ def _value(node, notes, *names, default=0.0, color=True):
     if color:
         return rgb(s.default_value)
     return float(s.default_value)
+
+
+def image_pixels(img) -> np.ndarray:
+    """(H, W, channels) float32 the pixels of Blender image ``img``, row 0 at the bottom
+    (``Image.pixels`` order)."""
+    w, h = img.size
+    px = np.empty(w * h * img.channels, np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(h, w, img.channels)
 
 
 def follow(socket):

@@ -31,7 +31,7 @@ import numpy as np
 
 from ...core.light.transmit import AlphaImage, Transmit
 from ...core.runtime.notes import note, warning
-from .materials import follow
+from .materials import RHO_MAX, follow, image_pixels
 from .shading import output_node
 
 __all__ = ["material_transmit", "mesh_transmit", "see_through_note", "solve_rho"]
@@ -114,7 +114,7 @@ def solve_rho(rho, corner_rho, tr, offsets):
     cut = (tr.face_image >= 0) & (den > 0)
     out = np.array(rho, float)
     out[cut] = num[cut] / den[cut, None] * tr.opacity(offsets)[cut, None]
-    return np.clip(out, 0.0, 0.999)
+    return np.clip(out, 0.0, RHO_MAX)
 
 
 def _shader(node, glass, depth):
@@ -177,9 +177,7 @@ def _alpha(node, socket, to_t):
     W, H = img.size
     if W == 0 or H == 0 or img.channels < 4:
         return float(to_t(1.0)), None                # no alpha channel: alpha 1 everywhere
-    px = np.empty(W * H * img.channels, np.float32)
-    img.pixels.foreach_get(px)
-    alpha = px.reshape(H, W, img.channels)[..., 3]
+    alpha = image_pixels(img)[..., 3]
     pixels = np.clip(to_t(alpha.astype(np.float64)), 0.0, 1.0).astype(np.float32)
     return 0.0, (AlphaImage(pixels, closest=src.interpolation == "Closest",
                             repeat=src.extension in ("REPEAT", "MIRROR")), uv_map)

@@ -21,6 +21,8 @@ import tempfile
 
 import numpy as np
 
+from .materials import image_pixels
+
 __all__ = ["render_world_map", "MAP_WIDTH", "MAP_SAMPLES"]
 
 MAP_WIDTH = 256          # 1.4 degrees a pixel: a sun disk of Nishita's sky spans a pixel or two
@@ -69,10 +71,7 @@ def render_world_map(world, notes, width=MAP_WIDTH, samples=MAP_SAMPLES):
         bpy.ops.render.render(write_still=True, scene=sc.name)
         img = bpy.data.images.load(path)
         made.append((bpy.data.images, img))
-        w, hh = img.size
-        px = np.empty(w * hh * img.channels, np.float32)
-        img.pixels.foreach_get(px)
-        return px.reshape(hh, w, img.channels)[..., :3].astype(np.float64)
+        return image_pixels(img)[..., :3].astype(np.float64)
     except (RuntimeError, AttributeError, TypeError) as ex:
         notes.append(f"world: Cycles could not render its light by direction ({ex}); used a constant sky")
         return None

@@ -25,7 +25,9 @@ from ..runtime.cache import Memo
 from ..runtime.errors import RadiosityError
 from ..light.transmit import see_through
 
-__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key"]
+__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key", "RHO_MAX"]
+
+RHO_MAX = 0.999          # the solve needs every band's reflectivity below 1: the most a face takes
 
 
 class PatchError(RadiosityError, ValueError):

@@ -20,11 +20,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .patches import MeshInput
+from .patches import RHO_MAX, MeshInput
 
-__all__ = ["RHO_LIMIT", "with_specular_bounce"]
-
-RHO_LIMIT = 0.999        # the solve needs every band's reflectance below 1
+__all__ = ["with_specular_bounce"]
 
 
 def with_specular_bounce(meshes) -> list:
@@ -40,5 +38,5 @@ def _bounced(m: MeshInput) -> MeshInput:
         return m
     counts = np.diff(m.face_offsets)
     shown = m.corner_rho if m.corner_rho is not None else np.repeat(m.face_rho, counts, axis=0)
-    rho = np.clip(np.asarray(m.face_rho, float) + np.asarray(g, float), 0.0, RHO_LIMIT)
+    rho = np.clip(np.asarray(m.face_rho, float) + np.asarray(g, float), 0.0, RHO_MAX)
     return replace(m, face_rho=rho, corner_rho=np.asarray(shown, float), face_glossy=None)

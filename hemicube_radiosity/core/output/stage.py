@@ -144,9 +144,8 @@ def _keep_light(ctx, D_vert, rest_v, rho_v, creased=None):
     if rho_v is None:
         ctx.vertex_rho, ctx.vertex_indirect = np.ones_like(D_vert), rest_v
         return
-    pos = rho_v > 0
     ctx.vertex_rho = rho_v
-    ctx.vertex_indirect = np.where(pos, rest_v / np.where(pos, rho_v, 1.0), 0.0)
+    ctx.vertex_indirect = _incoming(rest_v, rho_v)
 
 
 def _reflected_by_patches(ctx, reflected):
@@ -200,7 +199,7 @@ def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v, creased=None):
         E_v = E_v if em_c is None else vertex_mean(ctx.elements, em_c)
         return E_v + rho_v * light_v + reflected_v
     pos = rho_v > 0
-    per_rho = np.where(pos, R / np.where(pos, rho_v, 1.0), 0.0)     # light reflected again, per rho
+    per_rho = _incoming(R, rho_v)                                   # light reflected again, per rho
     keep = 1.0 if creased is None else creased[1][..., None]
     ctx.corner_radiosity = E_c + rho_c * L_c + np.where(pos[cv], rho_c * per_rho[cv], R[cv]) * keep
     ctx.corner_lighting = L_c + per_rho[cv] * keep
