@@ -30,11 +30,7 @@ from tools import cycles_reference as cr  # noqa: E402
 
 
 def image_rgb(name):
-    im = bpy.data.images[name]
-    w, h = im.size
-    px = np.empty(w * h * 4, np.float32)
-    im.pixels.foreach_get(px)
-    return px.reshape(h, w, 4)[..., :3].astype(np.float64)
+    return cr.image_rgb(bpy.data.images[name])
 
 
 def pack(ob, name="LightmapUV"):

@@ -240,10 +240,17 @@ def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, s
     seconds = time.perf_counter() - t
     for nt, node in added:
         nt.nodes.remove(node)
-    px = np.empty(size * size * 4, np.float32)
-    img.pixels.foreach_get(px)
+    rgb = image_rgb(img)
     bpy.data.images.remove(img)
-    return px.reshape(size, size, 4)[..., :3].astype(np.float64), seconds
+    return rgb, seconds
+
+
+def image_rgb(img) -> np.ndarray:
+    """(H, W, 3) float64 the colour of a Blender image (RGBA), rows bottom-up."""
+    w, h = img.size
+    px = np.empty(w * h * 4, np.float32)
+    img.pixels.foreach_get(px)
+    return px.reshape(h, w, 4)[..., :3].astype(np.float64)
 
 
 def bake_seconds(objects, **kw) -> float:

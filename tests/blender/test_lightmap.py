@@ -47,7 +47,7 @@ from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender import bake, gltf, write  # noqa: E402
 from hemicube_radiosity.core.output import lightmap as core_lightmap  # noqa: E402
 from tests.support import ROOT  # noqa: E402
-from tests.support.fingerprint import hash_mesh  # noqa: E402
+from tests.support.fingerprint import hash_user_mesh  # noqa: E402
 from tests.support.gltf import read_gltf  # noqa: E402
 from tests.support.lightmap_scenes import room  # noqa: E402
 
@@ -64,11 +64,7 @@ def cycles_bake(ob, uv_layer, size, samples, color=True):
 
 
 def image_rgb(name):
-    im = bpy.data.images[name]
-    w, h = im.size
-    px = np.empty(w * h * 4, np.float32)
-    im.pixels.foreach_get(px)
-    return px.reshape(h, w, 4)[..., :3].astype(np.float64)
+    return cr.image_rgb(bpy.data.images[name])
 
 
 def relative_errors(a, ref, mask):
@@ -95,14 +91,7 @@ def fingerprint():
     for me in sorted(bpy.data.meshes, key=lambda m: m.name):
         if me.get(write.SOURCE_KEY):
             continue                                  # a baked copy's mesh
-        hash_mesh(h, me)
-        for layer in me.uv_layers:
-            a = np.empty(len(me.loops) * 2, np.float64)
-            layer.data.foreach_get("uv", a)
-            h.update(layer.name.encode() + a.tobytes())
-        h.update(repr(sorted((a.name, a.domain, a.data_type) for a in me.attributes)).encode())
-        h.update(repr([m.name if m else None for m in me.materials]).encode())
-        h.update(repr(me.uv_layers.active.name if me.uv_layers.active else None).encode())
+        hash_user_mesh(h, me)
     for m in sorted(bpy.data.materials, key=lambda m: m.name):
         if m.name.startswith("Radiosity"):
             continue

@@ -31,7 +31,7 @@ bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender import bake, write  # noqa: E402
-from tests.support.fingerprint import hash_mesh  # noqa: E402
+from tests.support.fingerprint import hash_user_mesh  # noqa: E402
 
 pytestmark = [pytest.mark.blender]
 
@@ -71,18 +71,12 @@ def topology(me):
 
 def user_data():
     """Every user mesh (not a baked copy's): geometry, every UV map's values, attributes, active
-    UV map; in bytes."""
+    UV map, material slots; in bytes."""
     h = hashlib.sha256()
     for me in sorted(bpy.data.meshes, key=lambda m: m.name):
         if me.get(write.SOURCE_KEY):
             continue
-        hash_mesh(h, me)
-        for layer in me.uv_layers:
-            a = np.empty(len(me.loops) * 2, np.float32)
-            layer.data.foreach_get("uv", a)
-            h.update(layer.name.encode() + a.tobytes())
-        h.update(repr(sorted((a.name, a.domain, a.data_type) for a in me.attributes)).encode())
-        h.update(repr(me.uv_layers.active.name if me.uv_layers.active else None).encode())
+        hash_user_mesh(h, me)
     return h.hexdigest()
 
 
@@ -122,11 +116,9 @@ def grow(mask, texels):
 def read_exr(path):
     """(H, W, 3) float64 of the .exr at ``path`` through Blender's image loader."""
     im = bpy.data.images.load(path, check_existing=False)
-    w, h = im.size
-    px = np.empty(w * h * 4, np.float32)
-    im.pixels.foreach_get(px)
+    rgb = cr.image_rgb(im)
     bpy.data.images.remove(im)
-    return px.reshape(h, w, 4)[..., :3].astype(np.float64)
+    return rgb
 
 
 def scene():

@@ -12,3 +12,16 @@ def hash_mesh(h, me):
         a = np.empty(len(coll) * n, np.float64)
         coll.foreach_get(prop, a)
         h.update(a.tobytes())
+
+
+def hash_user_mesh(h, me):
+    """:func:`hash_mesh`, and mesh ``me``'s UV maps (names and values), the active one, its
+    attributes (names, domains, types) and its material slots, into hash ``h``."""
+    hash_mesh(h, me)
+    for layer in me.uv_layers:
+        a = np.empty(len(me.loops) * 2, np.float64)
+        layer.data.foreach_get("uv", a)
+        h.update(layer.name.encode() + a.tobytes())
+    h.update(repr(sorted((a.name, a.domain, a.data_type) for a in me.attributes)).encode())
+    h.update(repr([m.name if m else None for m in me.materials]).encode())
+    h.update(repr(me.uv_layers.active.name if me.uv_layers.active else None).encode())
