@@ -24,7 +24,7 @@ from ..core.pipeline import BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
 from .read import scene as read
 from .read.visibility import render_visible_objects
-from . import write
+from . import in_place, write
 
 __all__ = ["BakeJob", "StagePrinter", "resolve_objects", "other_meshes", "session_cache",
            "clear_session_cache"]
@@ -189,7 +189,7 @@ class BakeJob:
         if progress:
             progress("write", 0.0, "writing")
         if s.output_mode == "in_place":
-            self.written, notes = write.write_in_place(context, self.scene_input, self.result,
+            self.written, notes = in_place.write_in_place(context, self.scene_input, self.result,
                                                        s.attribute_name, s.exposure)
             self.notes += notes
         elif s.target == "lightmap":

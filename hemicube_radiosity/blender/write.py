@@ -20,10 +20,7 @@ Copies live in the "Radiosity" collection; each remembers its source in
 ``obj["radiosity_source"]``. The originals are hidden (viewport and render), never deleted or
 edited. Re-baking an object removes its previous copy first.
 
-In-place mode: the attribute goes on the original mesh, one value per face corner: the output at
-that corner (where patches are finer than faces, the detail inside a face is lost;
-a bake report line says so). Needs modifiers that keep the topology. A mesh shared by several
-baked objects (linked duplicates) is made single-user first so each object keeps its own result.
+In-place mode (the attribute on the user's own meshes) is :mod:`.in_place`.
 
 Values are radiance (an emission strength of 1 in white is 1.0) times ``2**exposure``; no
 clamping or tone mapping.
@@ -38,9 +35,10 @@ import numpy as np
 from ..core.runtime.errors import RadiosityError
 from . import textures
 
-__all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies", "write_in_place",
+__all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies",
            "baked_material", "remove_bakes", "copies_of", "copies_collection",
-           "place_copy", "select_copies", "source_mesh_copy", "set_materials"]
+           "place_copy", "select_copies", "source_mesh_copy", "set_materials",
+           "set_color_attribute", "corner_slots"]
 
 COLLECTION_NAME = "Radiosity"
 SOURCE_KEY = "radiosity_source"
@@ -137,7 +135,7 @@ def _element_layout(patches, owner, matrix_world, flipped):
     return local, loop_vert, starts, (sel[:, None] * 4 + order)[mask], sel
 
 
-def _set_color_attribute(me, name, rgb):
+def set_color_attribute(me, name, rgb):
     old = me.color_attributes.get(name)
     if old is not None:
         me.color_attributes.remove(old)
@@ -303,7 +301,7 @@ def _show_textures(copy, user, corners, lighting, attribute_name, scale, scales,
     light_name = attribute_name + textures.LIGHT_SUFFIX
     light, rad = (a.reshape(-1, 3)[copy.loop_corner] for a in (lighting, corners))
     values = textures.light_values(light, rad, copy.loop_face, user.slot, user.mats, scales)
-    _set_color_attribute(copy.me, light_name, values * scale)
+    set_color_attribute(copy.me, light_name, values * scale)
     plain = baked_material(light_name, culled=culled)
     set_materials(copy.me, textures.lit_materials(user.mats, scales, light_name, plain, culled=culled),
                   copy.slots(user))
@@ -362,7 +360,7 @@ def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user
     me.polygons.add(len(starts))
     me.polygons.foreach_set("loop_start", starts.astype(np.int32))
     me.update(calc_edges=True)
-    _set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[take] * scale)
+    set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[take] * scale)
     me.materials.append(mat)
     faces = _element_faces(result, sel)
     loop_face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
@@ -387,7 +385,7 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
     P = result.elements
     if not faces_uncut(P, oi, src):
         return None
-    slots = _corner_slots(P, oi, src)
+    slots = corner_slots(P, oi, src)
     if np.any(slots < 0):
         return None
     me = source_mesh_copy(depsgraph, src)
@@ -396,7 +394,7 @@ def _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, s
     loop_corner = np.zeros(len(me.loops), np.int64)
     loop_corner[src.corner_loop] = slots
     try:
-        _set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[loop_corner] * scale)
+        set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[loop_corner] * scale)
     except WriteError:                        # a non-colour attribute of that name: keep it
         bpy.data.meshes.remove(me)
         return None
@@ -434,45 +432,7 @@ def _matrix(m):
     return Matrix([list(map(float, row)) for row in np.asarray(m)])
 
 
-def write_in_place(context, scene_input, result, attribute_name="Radiosity", exposure=0.0):
-    """Write the attribute on the original meshes; returns (objects, notes)."""
-    scale = 2.0 ** float(exposure)
-    notes = []
-    written = []
-    P = result.elements
-    corners = result.corner_values()
-    # an earlier baked copy of these objects is replaced by the in-place result
-    remove_bakes([s.name for s in scene_input.objects if s.bake], unhide=True)
-    for oi, src in enumerate(scene_input.objects):
-        if not src.bake:
-            continue
-        ob = bpy.data.objects[src.name]
-        me = ob.data
-        if (len(me.vertices), len(me.loops), len(me.polygons)) != src.eval_counts or \
-                len(me.loops) != src.corner_loop.size:
-            raise WriteError(f"'{src.name}': its modifiers change the topology, so the result "
-                             "cannot be written in place; use the baked-copy output")
-        values = _corner_values(P, oi, src, corners)
-        if me.users > 1:
-            ob.data = me.copy()
-            notes.append(f"{src.name}: mesh '{me.name}' was shared; gave it its own copy "
-                         f"'{ob.data.name}'")
-            me = ob.data
-        loop_rgb = np.zeros((len(me.loops), 3))
-        loop_rgb[src.corner_loop] = values
-        _set_color_attribute(me, attribute_name, loop_rgb * scale)
-        n_src = len(src.mesh.face_offsets) - 1
-        if np.count_nonzero(P.owner == oi) > n_src:
-            notes.append(f"{src.name}: in place keeps one value per face corner; "
-                         "the finer patch detail inside faces is averaged away")
-        if result.owners_of(oi).size > 1:
-            notes.append(f"{src.name}: in place keeps the light on the front of its faces; "
-                         "the light on the back of its open surfaces is in baked copies only")
-        written.append(ob)
-    return written, notes
-
-
-def _corner_slots(P, oi, src):
+def corner_slots(P, oi, src):
     """Element corner at every source-face corner (order of src.mesh.face_indices), as an index
     into the (N * 4) flattened corners: a corner of one of that face's elements at exactly the
     corner's position; -1 where there is none."""
@@ -501,13 +461,3 @@ def _face_position_keys(faces, pos):
     a[:, 0] = faces
     a[:, 1:] = pos
     return np.ascontiguousarray(a).view(np.dtype((np.void, 32))).reshape(-1)
-
-
-def _corner_values(P, oi, src, corner_values):
-    """The output at every source-face corner (order of src.mesh.face_indices), from the
-    elements' (N, 4, 3) ``corner_values``; 0 where no element corner is at the corner."""
-    slots = _corner_slots(P, oi, src)
-    out = np.zeros((slots.size, 3))
-    found = slots >= 0
-    out[found] = np.asarray(corner_values).reshape(-1, 3)[slots[found]]
-    return out
