@@ -276,20 +276,13 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     sel = np.concatenate([offsets[i] + np.flatnonzero(f) for i, f in opened.items()])
     if not sel.size or scene is None:
         return out
-    # rays start as the bake's do (:func:`.rays.ray_offsets`): off each face by its mesh's offset
     eps = np.concatenate([np.full(max(len(m.face_offsets) - 1, 0), START_BACKS * offset(m.verts)) for m in meshes])
-    c, n = centres[sel], normals[sel]
-    big = np.zeros(len(centres), bool)
-    big[sel] = areas[sel] > (LARGE_FACE * scene.scale) ** 2
-    of_sel = np.full(len(centres), -1, np.int64)
-    of_sel[sel] = np.arange(sel.size)
-    on = big[corner_face]
-    halfway = 0.5 * (corner[on] + centres[corner_face[on]])
-    at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
-    points = np.concatenate([c, halfway])
+    # rays start as the bake's do (:func:`.rays.ray_offsets`): off each face by its mesh's offset
+    points, at = _probe_points(sel, centres, areas, corner, corner_face, scene.scale)
+    n, start_eps = normals[sel], eps[sel][at]
     S, R = len(sel), probe_rays
-    matter, world_on = _lit(scene, lights, world, points, n[at], at, S, eps[sel][at])
-    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, eps[sel][at])
+    matter, world_on = _lit(scene, lights, world, points, n[at], at, S, start_eps)
+    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, start_eps)
     ray_face = np.repeat(at, R)
     rays = np.bincount(ray_face, minlength=S)
     if emit:                                    # an emitter's back shines on whatever it faces
@@ -302,10 +295,30 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     if front.size:
         fronts = np.bincount(ray_face[front], minlength=S)
         matter |= fronts * _open_share(scene, normals, x, m, front, ray_face[front], S, eps[hit]) >= FACING_SHARE * rays
-    start = 0
+    return _per_mesh(opened, matter)
+
+
+def _probe_points(sel, centres, areas, corner, corner_face, scale):
+    """Where the backs of faces ``sel`` (S,) are probed from: each face's centre, and halfway to
+    each corner on faces larger than :data:`LARGE_FACE` of ``scale`` squared. Returns the points
+    (P, 3) and the face of each, as an index into ``sel`` (P,)."""
+    big = np.zeros(len(centres), bool)
+    big[sel] = areas[sel] > (LARGE_FACE * scale) ** 2
+    of_sel = np.full(len(centres), -1, np.int64)
+    of_sel[sel] = np.arange(sel.size)
+    on = big[corner_face]
+    halfway = 0.5 * (corner[on] + centres[corner_face[on]])
+    at = np.concatenate([np.arange(len(sel)), of_sel[corner_face[on]]]).astype(np.int64)
+    return np.concatenate([centres[sel], halfway]), at
+
+
+def _per_mesh(opened, matter) -> dict:
+    """{mesh index: (F,) bool}: ``matter`` (S,), one per open face of ``opened`` in its order,
+    scattered back onto each mesh's faces (False where a face is not open)."""
+    out, start = {}, 0
     for o, f in opened.items():
         k = int(f.sum())
-        out[o][:] = False
+        out[o] = np.zeros_like(f)
         out[o][np.flatnonzero(f)] = matter[start:start + k]
         start += k
     return out
