@@ -125,8 +125,27 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     keys = np.full(B * P, empty_key(N), dtype=np.int64)
     ctx = (scene, keys, fr, eyes[recv], face_rows, face_base)
 
-    # patches wholly inside one face's frustum: their corners' own projections
-    bi, ni = np.nonzero(whole & visible & ~empty)
+    # patches wholly inside one face's frustum, drawn in one pass with the clipped ones
+    # (fewer, larger rasteriser calls)
+    todo = [_whole_pairs(ctx, whole & visible & ~empty, low, vpx, vpy, V)]
+    bi, ni = np.nonzero(visible & ~whole)
+    if bi.size:
+        todo.append(_clipped_pairs(ctx, bi, ni, x, y, z, V))
+    bi, ni, d, faces = (np.concatenate([t[k] for t in todo]) for k in range(4))
+    px = [np.concatenate(c) for c in zip(*(t[4] for t in todo))]
+    py = [np.concatenate(c) for c in zip(*(t[5] for t in todo))]
+    _draw(ctx, bi, ni, d, faces, px, py)
+    return keys.reshape(B, P)
+
+
+def _whole_pairs(ctx, inside, low, vpx, vpy, V):
+    """The (receiver, patch) pairs ``inside`` (B, N) bool, each wholly inside the frustum of one
+    hemi-cube face (``low`` - 9), drawn from their corners' own projections ``vpx``, ``vpy``
+    (B, V): (receivers, patches, plane distances, faces, [4 x px], [4 x py]), each (M,), of those
+    that can cover a pixel centre and are not edge-on."""
+    scene, face_rows = ctx[0], ctx[4]
+    R = scene.resolution
+    bi, ni = np.nonzero(inside)
     vpx, vpy = vpx.ravel(), vpy.ravel()
     faces = (low[bi, ni] - 9).astype(np.intp)
     corner = np.take(scene.corners_t, ni, axis=1) + bi * V            # (4, M)
@@ -135,47 +154,47 @@ def _batch_item_buffer(scene, recv, frames, eyes):
     d = _pair_dist(ctx, bi[keep], ni[keep])
     seen = np.abs(d) > scene.near                                     # not edge-on
     keep = keep[seen]
-    # drawn in one pass with the clipped ones below (fewer, larger rasteriser calls)
-    todo = [(bi[keep], ni[keep], d[seen], faces[keep], [p[keep] for p in px], [p[keep] for p in py])]
-    # the rest: clip against every face whose frustum they may reach
-    bi, ni = np.nonzero(visible & ~whole)
-    if bi.size:
-        corner = np.take(scene.corners_t, ni, axis=1) + bi * V
-        xyz = [c.ravel()[corner] for c in (x, y, z)]                 # each (4, S)
-        polys, faces, pairs = [], [], []
-        for f in range(5):
-            u, v, w = face_uvw(f, *xyz)
-            # wholly outside one of the face's clip planes: clipping would leave nothing
-            out = None
-            for p in range(5):
-                d = plane_distance(u, v, w, FACE_V0[f], p, scene.near) < 0
-                d = d[0] & d[1] & d[2] & d[3]
-                out = d if out is None else out | d
-            if CLIP_CULL:
-                out |= hull_misses_centres(u, v, w, f, R)
-            s = np.flatnonzero(~out)
-            polys.append(np.stack([u[:, s], v[:, s], w[:, s]], axis=-1).transpose(1, 0, 2))
-            faces.append(np.full(s.size, f))
-            pairs.append(s)
-        fi = np.concatenate(faces)
-        si = np.concatenate(pairs)
-        poly, count, src = clip_to_faces(np.concatenate(polys), fi, scene.near)
-        bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
-        d = _pair_dist(ctx, bi, ni)
-        seen = np.flatnonzero(np.abs(d) > scene.near)                # not edge-on
-        bi, ni, d, fi, poly, count = bi[seen], ni[seen], d[seen], fi[seen], poly[seen], count[seen]
-        px, py, m = fans(*project(poly, fi, R), count)
-        keep = np.flatnonzero(can_cover(px, py, face_rows[fi[m]], R))
-        m = m[keep]
-        # fan triangles as quads repeating their last corner (as triangle patches are): a
-        # zero-length edge excludes nothing and adds 0 to the area, so they cover as before
-        px, py = [p[keep] for p in px], [p[keep] for p in py]
-        todo.append((bi[m], ni[m], d[m], fi[m], px + px[2:], py + py[2:]))
-    bi, ni, d, faces = (np.concatenate([t[k] for t in todo]) for k in range(4))
-    px = [np.concatenate(c) for c in zip(*(t[4] for t in todo))]
-    py = [np.concatenate(c) for c in zip(*(t[5] for t in todo))]
-    _draw(ctx, bi, ni, d, faces, px, py)
-    return keys.reshape(B, P)
+    return bi[keep], ni[keep], d[seen], faces[keep], [p[keep] for p in px], [p[keep] for p in py]
+
+
+def _clipped_pairs(ctx, bi, ni, x, y, z, V):
+    """The pairs (receiver ``bi``, patch ``ni``) (S,) not wholly inside one face's frustum,
+    clipped against every face whose frustum they may reach (receiver-local corners ``x``, ``y``,
+    ``z`` (B, V)): (receivers, patches, plane distances, faces, [4 x px], [4 x py]) of the clipped
+    pieces as fans of triangles, each a quad repeating its last corner."""
+    scene, face_rows = ctx[0], ctx[4]
+    R = scene.resolution
+    corner = np.take(scene.corners_t, ni, axis=1) + bi * V
+    xyz = [c.ravel()[corner] for c in (x, y, z)]                     # each (4, S)
+    polys, faces, pairs = [], [], []
+    for f in range(5):
+        u, v, w = face_uvw(f, *xyz)
+        # wholly outside one of the face's clip planes: clipping would leave nothing
+        out = None
+        for p in range(5):
+            d = plane_distance(u, v, w, FACE_V0[f], p, scene.near) < 0
+            d = d[0] & d[1] & d[2] & d[3]
+            out = d if out is None else out | d
+        if CLIP_CULL:
+            out |= hull_misses_centres(u, v, w, f, R)
+        s = np.flatnonzero(~out)
+        polys.append(np.stack([u[:, s], v[:, s], w[:, s]], axis=-1).transpose(1, 0, 2))
+        faces.append(np.full(s.size, f))
+        pairs.append(s)
+    fi = np.concatenate(faces)
+    si = np.concatenate(pairs)
+    poly, count, src = clip_to_faces(np.concatenate(polys), fi, scene.near)
+    bi, ni, fi = bi[si[src]], ni[si[src]], fi[src]
+    d = _pair_dist(ctx, bi, ni)
+    seen = np.flatnonzero(np.abs(d) > scene.near)                    # not edge-on
+    bi, ni, d, fi, poly, count = bi[seen], ni[seen], d[seen], fi[seen], poly[seen], count[seen]
+    px, py, m = fans(*project(poly, fi, R), count)
+    keep = np.flatnonzero(can_cover(px, py, face_rows[fi[m]], R))
+    m = m[keep]
+    # fan triangles as quads repeating their last corner (as triangle patches are): a
+    # zero-length edge excludes nothing and adds 0 to the area, so they cover as before
+    px, py = [p[keep] for p in px], [p[keep] for p in py]
+    return bi[m], ni[m], d[m], fi[m], px + px[2:], py + py[2:]
 
 
 def _pair_dist(ctx, bi, ni):
