@@ -44,7 +44,10 @@ are published). Without that folder this prints one line and exits 0. Smallest f
    ``python -m hemicube_radiosity bake`` runs (``BakeJob.prepare`` on every render-visible object,
    ``run``, ``write``), with ``BakeSettings()`` as shipped, then once more with the patches twice as
    large (``patch_size`` x2, ``element_size`` kept at the defaults' resolved value: only the
-   grouping of the solve is coarser). Each child has a timeout (``--timeout``, 20 min); a refusal,
+   grouping of the solve is coarser). After the defaults' bake the same child relights: every
+   lamp and the world's strength x ``RELIGHT``, then prepare + run + write again in the same
+   process (the session's cache holds form factors and transports), timed against Cycles'
+   64-spp bake (a Cycles re-bake costs as much) and checked to be ``RELIGHT`` x the first. Each child has a timeout (``--timeout``, 20 min); a refusal,
    a crash or a timeout is a row saying so (the first line of the error), not the end of the run.
    Peak memory: the child's peak resident set (``VmHWM``) after the write, Blender included, and
    the whole process's from ``wait4``.
@@ -95,6 +98,7 @@ WORK_DIR = os.path.join(OUT_DIR, "real")
 REF_SPP = 256
 GLOSSY = 4           # the references' glossy bounces (with reflective caustics): a user's render
 CAND_SPP = 64
+RELIGHT = 1.5        # the relight after the defaults' bake: every lamp and the world this much brighter
 MEMORY_TARGET_MB = 4096
 TIMEOUT = 20 * 60          # a bake of ours
 CYCLES_TIMEOUT = 60 * 60   # the Cycles child: reference, 64 spp and EMIT (cached afterwards)
@@ -398,7 +402,48 @@ def _vm_hwm_mb():
     return float("nan")
 
 
-def ours_child(name, corners_npz, out_npz, settings_json):
+def scale_light(factor):
+    """Every lamp's power and the world's Background strength times ``factor`` (a relight: no
+    geometry or material changes, so the result must scale by exactly ``factor``); returns how
+    many were scaled (0: the scene is lit by emitting surfaces only)."""
+    import bpy
+
+    n = 0
+    for light in bpy.data.lights:
+        light.energy *= factor
+        n += 1
+    world = bpy.context.scene.world
+    for node in (world.node_tree.nodes if world is not None and world.node_tree is not None else ()):
+        if node.type == "BACKGROUND":
+            node.inputs["Strength"].default_value *= factor
+            n += 1
+    return n
+
+
+def relight(objs, settings, first):
+    """Bake again in this process after :func:`scale_light` by :data:`RELIGHT`, as an artist's
+    second bake after changing a lamp: the session's cache holds the form factors and
+    transports. The time (prepare + run + write), its stages, and how far the new corner values
+    are from ``RELIGHT`` x ``first`` (a check that the relight is the same bake)."""
+    import bpy
+    from hemicube_radiosity.blender.bake import BakeJob
+
+    if not scale_light(RELIGHT):
+        return {"skipped": "no lamp or world to change"}
+    t = time.perf_counter()
+    job = BakeJob.prepare(bpy.context, objs, settings)
+    job.run()
+    job.write(bpy.context)
+    seconds = time.perf_counter() - t
+    new = np.asarray(job.result.corner_values(), float)
+    want = RELIGHT * np.asarray(first, float)
+    dev = float(np.nanmax(np.abs(new - want)) / max(float(np.nanmax(np.abs(want))), 1e-30)) \
+        if new.shape == want.shape else None
+    return {"seconds": seconds, "stages": {k: float(v) for k, v in job.timings.items()},
+            "max_deviation": dev}
+
+
+def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
     import bpy
     from hemicube_radiosity.blender.bake import BakeJob
     from hemicube_radiosity.blender.read.scene import GEOMETRY_TYPES
@@ -439,6 +484,8 @@ def ours_child(name, corners_npz, out_npz, settings_json):
         rec["corners_nan"] = int((matched & ~np.all(np.isfinite(vals), 1)).sum())
     rec["vertices_nan"] = int((~np.all(np.isfinite(r.vertex_radiosity), 1)).sum())
     rec["vertices"] = int(len(r.vertex_radiosity))
+    if relit == "1":
+        rec["relight"] = relight(objs, settings, r.corner_values())
     return rec
 
 
@@ -634,7 +681,8 @@ def run_scene(spec, args):
     for label, asked in runs:
         out = base + f"_{label}"
         st, rss, wall = run_child(["--ours-child", spec.folder, cyc_npz if have_ref else "", out + ".npy",
-                                   json.dumps(asked), out + ".json"], out + ".log", args.timeout)
+                                   json.dumps(asked), "1" if label == "defaults" else "0", out + ".json"],
+                                  out + ".log", args.timeout)
         rec = dict(_child_result(st, out + ".log", out + ".json", args.timeout), wall_seconds=wall, max_rss_mb=rss)
         if have_ref and not failed(rec) and os.path.exists(out + ".npy"):
             o, c, n = compare(cyc_npz, np.load(out + ".npy"))
@@ -642,7 +690,7 @@ def run_scene(spec, args):
             if label == "defaults":
                 row["cycles"].update(error=c, compared=n)
         row[label] = rec
-        brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "peak_mb", "max_rss_mb")}
+        brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "peak_mb", "max_rss_mb", "relight")}
         log(f"{label}: {json.dumps(brief, default=float)[:500]}")
         if label == "defaults":
             coarser = coarser_settings(rec, cyc_npz if have_ref else None)
@@ -688,6 +736,12 @@ def targets(res):
             lo, hi = (fc["seconds"] * k for k in SPREAD)
             out.append((f"`{n}`: the forecast's range holds the form factors and output's time",
                         f"{took:.1f} s measured, {lo:.1f}-{hi:.1f} s forecast", lo <= took <= hi))
+        rl = d.get("relight") or {}
+        if rl.get("seconds") is not None and not failed(c) and (c.get("cand") or {}).get("seconds"):
+            ratio = c["cand"]["seconds"] / rl["seconds"]
+            out.append((f"`{n}`: a relight (lamps and world x{RELIGHT:g}) 20x faster than a Cycles {CAND_SPP} spp re-bake",
+                        f"{rl['seconds']:.2f} s vs {c['cand']['seconds']:.1f} s: {ratio:.1f}x"
+                        f" (result off {RELIGHT:g}x the first by {rl.get('max_deviation') or 0:.1e})", ratio >= 20))
         ke = (k.get("error") or {}).get(sve.METRIC)
         if oe is not None and ke is not None:
             out.append((f"`{n}`: error no worse than at the coarser grouping (patches x2)",
@@ -734,7 +788,7 @@ def levels_table(res):
 def table(res):
     """The Markdown table of a results dict (also what report.py puts in docs/performance.md)."""
     head = ["scene", "triangles", "patches", "ours (s)", "read / form factors / direct / solve / vertices / write (s)",
-            "peak (MB)", "RMS ours (median)", "RMS coarser (patches)", f"Cycles {CAND_SPP} spp (s)",
+            "peak (MB)", f"relight x{RELIGHT:g} (s)", "RMS ours (median)", "RMS coarser (patches)", f"Cycles {CAND_SPP} spp (s)",
             f"RMS Cycles {CAND_SPP} (median)", "reference (s)"]
     rows = []
     for r in res["scenes"]:
@@ -750,12 +804,14 @@ def table(res):
                                   f" {_f(k.get('seconds'))} s, {_f(k.get('peak_mb'), '{:,.0f}')} MB)")
         if failed(d):
             rows.append([f"`{r['name']}`", _f(tri, "{:,}"), "", f"**failed**: {failed(d)}", "", _f(d.get("max_rss_mb"), "{:,.0f}"),
-                         "", ke, cyc_t, cyc_e, ref_t])
+                         "", "", ke, cyc_t, cyc_e, ref_t])
             continue
         st = d.get("stages", {})
         stages = " / ".join(_f(st.get(s), "{:.2f}") for s in ("read", "form_factors", "direct", "solve", "vertices", "write"))
+        rl = d.get("relight") or {}
+        relit = _f(rl.get("seconds"), "{:.2f}") if rl.get("seconds") is not None else "n/a"
         rows.append([f"`{r['name']}`", _f(tri, "{:,}"), f"{d['patches']:,}", _f(d["seconds"]), stages,
-                     _f(d["peak_mb"], "{:,.0f}"), _rms(d.get("error")), ke, cyc_t, cyc_e,
+                     _f(d["peak_mb"], "{:,.0f}"), relit, _rms(d.get("error")), ke, cyc_t, cyc_e,
                      ref_t])
     return ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)] + ["| " + " | ".join(r) + " |" for r in rows]
 
