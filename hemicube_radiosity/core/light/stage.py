@@ -22,7 +22,7 @@ from ..runtime.notes import warning
 from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
-from .lamps import direct_irradiance
+from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
@@ -184,10 +184,10 @@ class DirectLight:
             owner = _unit_owner(self)
             cols += [T[:, owner == o].astype(np.float64) @ Y[owner == o] for o in np.unique(owner)]
         for lamp in self.lights:
-            cols.append(direct_irradiance(self.patches, [lamp], points=points, normals=normals,
-                                          eps=self.offsets(points, normals),
-                                          cancelled=self.cancelled, samples=self.light_samples,
-                                          seed=self.light_seed) @ LUMA)
+            cols.append(lamp_irradiance(self.patches, [lamp], self.cache, points=points, normals=normals,
+                                        eps=self.offsets(points, normals),
+                                        cancelled=self.cancelled, samples=self.light_samples,
+                                        seed=self.light_seed) @ LUMA)
         if self.world is not None:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
@@ -215,21 +215,14 @@ class DirectLight:
         if self.world is not None:
             D += self.world_at(points, normals, where, eps=eps, facing=facing)
         if self.lights:
-            D += direct_irradiance(self.patches, self.lights, points=points, normals=normals,
-                                   eps=self.offsets(points, normals) if eps is None else eps,
-                                   cancelled=self.cancelled, facing=facing,
-                                   samples=min(samples or self.light_samples, self.light_samples),
-                                   seed=self.light_seed) / np.pi
+            D += lamp_irradiance(self.patches, self.lights, self.cache, points=points, normals=normals,
+                                 eps=self.offsets(points, normals) if eps is None else eps,
+                                 cancelled=self.cancelled, facing=facing,
+                                 samples=min(samples or self.light_samples, self.light_samples),
+                                 seed=self.light_seed) / np.pi
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)
-
-
-def _shadow_key(patches: PatchSet) -> bytes:
-    """What shadow rays through ``patches`` depend on: the geometry, and what light passes
-    through its see-through faces where it has any (a relight of a new alpha casts again)."""
-    st = patches.see_through
-    return geometry_key(patches) + (b"" if st is None else st.key())
 
 
 def _turn_emitters(settings) -> bool:
@@ -383,8 +376,8 @@ def direct_stage(ctx) -> None:
                              "('hemicube'); 'exact' lights both sides as Cycles does")
         if ctx.lights:
             ctx.say(0.0, f"{len(ctx.lights)} lights")
-            ctx.irradiance = direct_irradiance(p, ctx.lights, cancelled=ctx.cancelled,
-                                               samples=s.light_samples, seed=s.light_seed)
+            ctx.irradiance = lamp_irradiance(p, ctx.lights, ctx.cache, cancelled=ctx.cancelled,
+                                             samples=s.light_samples, seed=s.light_seed)
         ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
         if ctx.irradiance is not None:
             ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi

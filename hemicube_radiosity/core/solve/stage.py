@@ -13,7 +13,8 @@ import numpy as np
 
 from ..form_factors.stage import receivers_needed
 from ..runtime.notes import warning
-from ..light.lamps import UNBOUNDED, SpotLight, direct_irradiance
+from ..light.lamp_cache import lamp_irradiance
+from ..light.lamps import UNBOUNDED, SpotLight
 from ..light.points import patch_average
 from .solvers import solve
 
@@ -68,8 +69,8 @@ def _suns_at(ctx):
             for li in ctx.lights]
 
     def at(points=None, normals=None, where=""):
-        return direct_irradiance(p, only, points=points, normals=normals, samples=s.light_samples,
-                                 seed=s.light_seed, cancelled=ctx.cancelled) / np.pi
+        return lamp_irradiance(p, only, ctx.cache, points=points, normals=normals, samples=s.light_samples,
+                               seed=s.light_seed, cancelled=ctx.cancelled) / np.pi
     if ctx.direct is None:
         return at()
     grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1

@@ -1,0 +1,79 @@
+"""Lamps' light at a set of points, kept for a relight.
+
+A lamp's irradiance at fixed points scales with its strength (a sun's W/m^2, the watts of a
+point, spot or area light) and with its colour; its shape (where the light falls, its
+penumbrae, the shadow rays' verdicts) depends on the geometry and the lamp's place, size and
+cone alone. :func:`lamp_irradiance` computes each lamp at unit strength in white
+(:func:`.lamps.light_irradiance`, the same points, samples and random streams as
+:func:`.lamps.direct_irradiance`), keeps that in the bake's cache under what it depends on, and
+scales it. So a relight that changes a lamp's strength or colour, the world's or a material's
+casts no shadow ray toward the lamps again, and the energy report's sun-only pass finds the
+direct light's own rays. An environment map (a light of its own colours) is computed as it is.
+"""
+from __future__ import annotations
+
+from dataclasses import fields, replace
+
+import numpy as np
+
+from ..mesh.patches import PatchSet
+from ..rays import ray_offsets
+from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.progress import Ticker
+from .lamps import AreaLight, PointLight, SpotLight, SunLight, light_irradiance
+
+__all__ = ["lamp_irradiance", "shadow_key", "SCALE"]
+
+#: the field that scales each kind of lamp's light; every other field but ``color`` shapes it
+SCALE = {PointLight: "power_w", SpotLight: "power_w", SunLight: "strength", AreaLight: "power_w"}
+
+
+def shadow_key(patches: PatchSet) -> bytes:
+    """What shadow rays through ``patches`` depend on: the geometry, and what light passes
+    through its see-through faces where it has any (a relight of a new alpha casts again)."""
+    st = patches.see_through
+    return geometry_key(patches) + (b"" if st is None else st.key())
+
+
+def _shape_key(light) -> str:
+    """The lamp's kind and every field but its colour and strength, as text."""
+    skip = ("color", SCALE[type(light)])
+    vals = {f.name: getattr(light, f.name) for f in fields(light) if f.name not in skip}
+    return type(light).__name__ + repr({k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
+                                        for k, v in vals.items()})
+
+
+def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples=16, seed=0, points=None,
+                    normals=None, eps=None, facing=None, progress=None, cancelled=None) -> np.ndarray:
+    """Incident irradiance (P, 3) W/m^2 from ``lights``, as :func:`.lamps.direct_irradiance`
+    with the same arguments gives it (at the patch centres, or at ``points`` (P, 3) with unit
+    ``normals`` (P, 3); ``eps`` (P,) the rays' start offsets; ``facing`` (P, 3) or None), each
+    lamp's unit transport (P,) kept in ``cache`` (None: nothing kept). Equal to
+    ``direct_irradiance`` up to rounding: each lamp's light is its unit light times its
+    strength."""
+    lights = list(lights)
+    x = patches.centers if points is None else np.asarray(points, np.float64)
+    n = patches.normals if points is None else np.asarray(normals, np.float64)
+    H = np.zeros((len(x), 3))
+    if not lights:
+        return H
+    eps = ray_offsets(patches, points, normals) if eps is None else np.asarray(eps, np.float64)
+    base = shadow_key(patches) + array_key(x) + array_key(n) + array_key(eps)
+    base += b"" if facing is None else array_key(np.asarray(facing, np.float64))
+    kw = dict(shadows=shadows, samples=samples, seed=seed, points=points, normals=normals, eps=eps,
+              facing=facing)
+    ticker = Ticker(progress, cancelled)
+    for i, light in enumerate(lights):
+        ticker.tick(i, len(lights), force=True)
+        scale = SCALE.get(type(light))
+        if scale is None:                      # an environment map: its own colours, not kept
+            E = light_irradiance(patches, light, _index=i, **kw)
+        elif getattr(light, scale) == 0:       # dark: no light, no ray
+            continue
+        else:
+            unit = replace(light, **{scale: 1.0}, color=(1.0, 1.0, 1.0))
+            key = cache_key(base, ("lamp", _shape_key(light), i, int(samples), seed, shadows))
+            E = cached(cache, key, lambda: light_irradiance(patches, unit, _index=i, **kw)) * getattr(light, scale)
+        H += (E if E.ndim == 2 else E[:, None]) * np.asarray(light.color, np.float64)[None, :]
+    ticker.tick(len(lights), len(lights), force=True)
+    return H
