@@ -19,7 +19,7 @@ import bpy
 from ..core.runtime.cache import FormFactorCache
 from ..core.runtime.errors import RadiosityError
 from ..core.runtime.forecast import SAID as FORECAST_SAID
-from ..core.runtime.notes import grouped
+from ..core.runtime.notes import grouped, help_url
 from ..core.pipeline import BakeSettings, bake
 from ..core.rays import clear_ray_cache, embree_available
 from .read import scene as read
@@ -261,6 +261,7 @@ class BakeJob:
             "lightmaps": list(self.lightmaps),
             **self.counts(),
             "warnings": list(messages.warnings),
+            "help": {t: help_url(t) for t in messages.topics},
             "notes": list(messages.notes),
             "note_lines": [str(n) for n in self.notes],
         }

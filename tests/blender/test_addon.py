@@ -348,7 +348,14 @@ def test_material_reading(addon, empty_scene):
     assert kinds[0] == {"WARNING"} and kinds.count({"INFO"}) >= 1
     assert kinds == sorted(kinds, key=lambda k: "INFO" in k)           # no warning after the summary
     assert any("material 'G'" in t and "viewport colour" in t for k, t in lines if "WARNING" in k)
-    summary = next(t for k, t in lines if "INFO" in k)
+    # then where to read what to change (the popup also has a button that opens it)
+    helps = [t for k, t in lines if "what to change" in t]
+    assert helps[0] == ("Radiosity: what to change: docs/troubleshooting.md, 'Materials (the bake goes on)' "
+                        "(https://github.com/hemicube-radiosity/hemicube_radiosity/blob/main/docs/troubleshooting.md"
+                        "#materials-the-bake-goes-on)")
+    assert len(helps) == len(set(helps)) == len(job.messages().topics)   # once per topic
+    assert [t for _, t in lines[len(job.messages().warnings):][:len(helps)]] == helps
+    summary = next(t for k, t in lines if "INFO" in k and "what to change" not in t)
     assert summary == job.summary() and "patches solved from 1 face," in summary
 
 

@@ -80,7 +80,8 @@ def _light_node_factor(data, notes, what):
     if node is None:
         return np.zeros(3)
     if node.type != "EMISSION":
-        notes.append(warning(f"light nodes other than Emission ('{node.name}'); used strength 1", what))
+        notes.append(warning(f"light nodes other than Emission ('{node.name}'); used strength 1", what,
+                             topic="scene"))
         return np.ones(3)
     return (_input_value(node, "Color", notes, what, np.ones(3))
             * _input_value(node, "Strength", notes, what, 1.0))
@@ -106,7 +107,7 @@ def light_from_object(ob, matrix_world, notes):
     color = color * _light_node_factor(data, notes, what)
     energy = float(data.energy) * 2.0 ** float(getattr(data, "exposure", 0.0))   # exposure: 4.5 on
     if energy < 0 or np.any(color < 0):
-        notes.append(warning("negative power is not supported; left out", what))
+        notes.append(warning("negative power is not supported; left out", what, topic="scene"))
         return None
     if energy == 0 or not np.any(color > 0):
         return None
@@ -137,7 +138,7 @@ def light_from_object(ob, matrix_world, notes):
         if not getattr(data, "normalize", True):        # Blender 4.5 on
             light.power_w = energy * light.area          # Cycles: radiance P / pi, not P / (pi A)
         return light
-    notes.append(warning(f"type {t} not supported; left out", what))
+    notes.append(warning(f"type {t} not supported; left out", what, topic="scene"))
     return None
 
 
@@ -173,12 +174,12 @@ def _world_color(node, notes, envs=None, scale=1.0):
         c = _image_mean(src.image, src.projection)
         notes.append(warning(f"environment texture '{src.image.name}' replaced by its average colour "
                              f"({c[0]:.3g}, {c[1]:.3g}, {c[2]:.3g}); only an equirectangular map "
-                             "lights by direction", "world"))
+                             "lights by direction", "world", topic="scene"))
     elif src is not None and src.type not in ("RGB",):
         c = rgb(cs.default_value)
         notes.append(warning(f"colour of '{node.name}' comes from '{src.name}' ({src.type}), which "
                              f"is not read; used the socket's own colour ({c[0]:.3g}, {c[1]:.3g}, "
-                             f"{c[2]:.3g}) as a constant sky", "world"))
+                             f"{c[2]:.3g}) as a constant sky", "world", topic="scene"))
     else:
         c = _input_value(node, "Color", notes, "world", np.zeros(3))
     return np.asarray(c, float) * float(strength)
@@ -202,7 +203,7 @@ def _world_shader(node, notes, depth=0, envs=None, scale=1.0):
             parts.append(np.zeros(3))
         return weights[0] * parts[0] + weights[1] * parts[1]
     notes.append(warning(f"shader '{node.name}' ({node.type}) is not a Background; it gives no sky "
-                         "light here", "world"))
+                         "light here", "world", topic="scene"))
     return np.zeros(3)
 
 

@@ -245,7 +245,7 @@ def material_rho_emission(mat):
                 else:
                     sub = []
                     rho, em = _shader(node, sock, mat, sub)
-                    notes += [note(f"material '{mat.name}'", s, warning="viewport colour" in s)
+                    notes += [note(f"material '{mat.name}'", s, warning="viewport colour" in s, topic="materials")
                               for s in sub]
     rho = np.asarray(rho, float)
     em = np.asarray(em, float)

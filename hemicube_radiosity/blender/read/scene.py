@@ -105,7 +105,7 @@ class SceneInput:
         out = []
         for line in self.skipped:
             subject, kind, _ = subject_and_kind(line)
-            out.append(Note(line, subject, kind, warning=True))
+            out.append(Note(line, subject, kind, warning=True, topic="scene"))
         for line in self.instanced:         # the instances' note (of the whole bake) and theirs
             out.append(line if isinstance(line, Note) else Note(line, *subject_and_kind(line)[:2]))
         for o in self.objects:
@@ -388,7 +388,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
         inst_reader.remove(protos)
     said = inst_reader.note(counts, emits)
     said = [Note(said, None, said)] if said else []
-    said += [Note(n, None, n, warning=True) for n in inst_reader.unread(depsgraph, made, instancers)]
+    said += [Note(n, None, n, warning=True, topic="scene") for n in inst_reader.unread(depsgraph, made, instancers)]
     return SceneInput(out, skipped=skipped, instanced=said + inst_notes)
 
 

@@ -319,7 +319,7 @@ def _missing_note(node):
     if img is None:
         return f"'{node.name}' has no image (Cycles renders it magenta): the inputs it feeds use their own values"
     return warning("cannot be read (Cycles renders it magenta): the inputs it feeds use their own "
-                   "values", f"image '{img.name}'", detail=img.filepath or "no file")
+                   "values", f"image '{img.name}'", detail=img.filepath or "no file", topic="materials")
 
 
 def _stand_in(mat, nodes):

@@ -57,11 +57,12 @@ def material_transmit(mats, me, caustics: bool):
             t, img = _shader(node, glass, 0)
         except _Unread as ex:
             notes.append(warning("Alpha is not transparency here: the surface is opaque where "
-                                 "Cycles lets light through", label, detail=str(ex)))
+                                 "Cycles lets light through", label, detail=str(ex), topic="materials"))
             t, img = 0.0, None
         if glass and caustics:
             notes.append(warning("glass passes no light here; Cycles passes some along refracted "
-                                 "paths with refractive caustics on", label, detail=", ".join(glass)))
+                                 "paths with refractive caustics on", label, detail=", ".join(glass),
+                                 topic="materials"))
         uv = None
         if img is not None:
             uv = _uvs(me, img[1], label, notes)
@@ -190,7 +191,8 @@ def _uvs(me, name, label, notes):
     layer = layers.get(name) if name else next((l for l in layers if l.active_render), None)
     if layer is None:
         notes.append(warning("Alpha is not transparency here: the surface is opaque where "
-                             "Cycles lets light through", label, detail=f"no UV map '{name or ''}'"))
+                             "Cycles lets light through", label, detail=f"no UV map '{name or ''}'",
+                             topic="materials"))
         return None
     uv = np.empty(len(me.loops) * 2, np.float32)
     layer.data.foreach_get("uv", uv)

@@ -21,6 +21,7 @@ import bpy
 from ...core.pipeline import STAGE_SHARES, STAGES
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.progress import Cancelled
+from ...core.runtime.notes import TOPICS, help_line, help_url
 from ..bake import BakeJob, StagePrinter
 from .props import SETTING_NAMES, setting_annotations, to_settings
 from .. import write
@@ -59,7 +60,8 @@ def report_lines(job):
     the summary and the grouped notes (INFO), one report each, so the Info editor lists them
     one per line and the status bar shows the first warning."""
     m = job.messages()
-    return ([({"WARNING"}, f"Radiosity: {w}") for w in m.warnings] + [({"INFO"}, job.summary())]
+    return ([({"WARNING"}, f"Radiosity: {w}") for w in m.warnings]
+            + [({"INFO"}, f"Radiosity: {help_line(t)}") for t in m.topics] + [({"INFO"}, job.summary())]
             + [({"INFO"}, f"Radiosity note: {n}") for n in m.notes])
 
 
@@ -97,6 +99,9 @@ class OBJECT_OT_radiosity_bake(bpy.types.Operator):
             def draw(menu, _context):          # the popup: warnings first, then the numbers
                 for kind, line in lines:
                     menu.layout.label(text=line, icon="ERROR" if "WARNING" in kind else "INFO")
+                for t in job.messages().topics:  # where the page says what to change
+                    menu.layout.operator("wm.url_open", text=f"Troubleshooting: {TOPICS[t]}",
+                                         icon="HELP").url = help_url(t)
             wm.popup_menu(draw, title="Radiosity bake", icon="ERROR" if job.messages().warnings else "INFO")
 
     # -- synchronous path

@@ -368,7 +368,7 @@ def direct_stage(ctx) -> None:
     if not ctx.lights and not world > 0 and not p.emitting().any():
         ctx.notes.append(warning("nothing lights the scene: no face emits, and no lamp or world "
                                  "light reaches it (a file with no light, or Lamps and World "
-                                 "off): every vertex bakes black"))
+                                 "off): every vertex bakes black", topic="scene"))
     ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if ctx.direct is None:
         if _turn_emitters(s) and s.direct == "hemicube" and p.emission.max(initial=0) > 0:

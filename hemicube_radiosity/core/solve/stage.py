@@ -35,7 +35,7 @@ def solve_stage(ctx) -> None:
     if not sol.converged:
         ctx.notes.append(warning(f"solver stopped after {sol.iterations} iterations with a "
                                  f"relative error up to {bound:.1e}, above the tolerance "
-                                 f"{s.tolerance:g}: raise max iterations"))
+                                 f"{s.tolerance:g}: raise max iterations", topic="scene"))
     energy = scene_energy(ctx, sol.energy, computed) if sol.energy else sol.energy
     if ctx.direct is not None:
         ctx.reflected = sol.B
