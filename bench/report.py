@@ -384,7 +384,8 @@ def real_section(res):
     """bench/real_scenes.py: one row a scene of ../shared/scenes, failures as rows."""
     L = ["## Real scenes" + _quick(res), "",
          f"`bench/real_scenes.py` (`make bench-real`): the scenes of `../shared/scenes`, made by others (credits in its"
-         f" README.md), each lit as the module says (a sun and a sky where the file has no light, point lamps inside"
+         f" README.md), and `generated_terrain` (`bench/terrain.py`: 1 km of ground as 128 x 128 quads with five"
+         f" buildings), each lit as the module says (a sun and a sky where the file has no light, point lamps inside"
          f" the closed `sauer_pandora`), baked by us with `BakeSettings()` through the CLI's `BakeJob` (one child"
          f" process a bake, peak resident set with Blender) and once with patches twice as large (\"coarser\");"
          f" Cycles COMBINED vertex bakes of the same scene at {res['cand_spp']} spp and, as the reference,"
@@ -394,7 +395,10 @@ def real_section(res):
          + ". RMS at Cycles' face"
          " corners matched by position and normal, zero-area faces, emitters and never-lit corners left out, the"
          " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
-         " filled the cache). Failures (refused, crashed, timed out) are rows with their first error line."
+         " filled the cache). Relight: after the defaults' bake, every lamp and the world's strength x"
+         f" {real_scenes.RELIGHT:g} and the bake again, in the same process (the session's cache) and through"
+         " `--cache` in a new process (a first child fills the folder), against Cycles' 64-spp time (a re-bake"
+         " costs Cycles as much). Failures (refused, crashed, timed out) are rows with their first error line."
          + (f" The run took {res['seconds'] / 60:.0f} min." if res.get("seconds") else ""), ""]
     L += real_scenes.table(res) + [""]
     notes = []
