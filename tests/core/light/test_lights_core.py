@@ -315,3 +315,17 @@ def test_bad_inputs_and_missing_embree(monkeypatch):
     # 'auto' falls back to NumPy and still shadows
     H = direct_irradiance(p, [PointLight((0, 0, 1))], shadows="auto")
     assert H.max() > 0
+
+
+def test_lamps_on_two_threads_light_as_on_one_bit_for_bit():
+    """Chunks of receivers on threads: each chunk draws its own random stream, so the sun's and
+    a sphere lamp's soft shadows (and the sun's closed-form disk) are the same for any count."""
+    p = build_patches([scenes.quad([(-3, -3, 0), (3, -3, 0), (3, 3, 0), (-3, 3, 0)], name="floor"),
+                       scenes.box((-0.5, -0.5, 0), (0.5, 0.5, 1.0), bottom=False)], 0.05)
+    assert len(p) > 2 * 4096
+    lights = [SunLight((0.2, 0.5, -0.8), strength=3.0, angle=np.radians(8)),
+              PointLight((0.3, 1.2, 1.5), power_w=200.0, radius=0.2)]
+    one = direct_irradiance(p, lights, samples=4, workers=1)
+    two = direct_irradiance(p, lights, samples=4, workers=2)
+    np.testing.assert_array_equal(one, two)
+    assert (one[:, 0] == 0).sum() > 100 and (one[:, 0] > 0).sum() > 1000
