@@ -65,7 +65,7 @@ import numpy as np
 from ..util.geometry import DISK_SIDES, disk_polygons, equal_area_scale
 from ..util.sampling import disk_samples, stratified_unit_square
 from .environment import EnvironmentLight, environment_irradiance
-from .polygon_ff import polygon_form_factor
+from .polygon_ff import distant_form_factor, polygon_form_factor
 from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..runtime.progress import Ticker
@@ -340,7 +340,13 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     dc = x + to_sun
     m = np.broadcast_to(-to_sun, x.shape)
     dr = np.full(len(x), np.tan(h))
-    E0 = L * np.pi * polygon_form_factor(x, n, disk_polygons(dc, m, dr))
+    # the disk at the same offsets from every receiver: its form factor in closed form where it
+    # is wholly above the horizon, clipped to it only where it is not (:func:`.distant_form_factor`)
+    F, whole = distant_form_factor(n, disk_polygons(to_sun[None], -to_sun[None], np.full(1, np.tan(h)))[0])
+    cut = np.flatnonzero(~whole)
+    if cut.size:
+        F[cut] = polygon_form_factor(x[cut], n[cut], disk_polygons(dc[cut], m[cut], dr[cut]))
+    E0 = L * np.pi * F
     pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, m, dr)
     w = _area_weights(x, n, pts, m)
     dirs = pts - x[:, None]
