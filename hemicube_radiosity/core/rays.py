@@ -435,8 +435,8 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
     return cosine_directions(np.stack([u, v], -1))
 
 
-def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20, *,
-                 eps, facing=None) -> np.ndarray:
+def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 16, *,
+                 eps, facing=None, workers: int = 1) -> np.ndarray:
     """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
     surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
     anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
@@ -444,7 +444,12 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
     cast parallel rays, so the estimate varies smoothly over a surface. ``facing`` (P, 3) or
     None: rays with a negative or zero component along it count as hitting a surface (below a
-    point's own triangle, :func:`.light.lamps.direct_irradiance`)."""
+    point's own triangle, :func:`.light.lamps.direct_irradiance`).
+
+    ``chunk_rays``: rays cast at once (65,536: their temporaries stay in the caches); ``workers``
+    (0 = every core): threads casting chunks of points (Embree lets go of the GIL while it
+    casts, and so do the large NumPy steps). Each point's value depends on neither, so the
+    result is the same, bit for bit, for any chunking and any count."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     local = cosine_lattice(rays, seed)                                             # (R, 3)
@@ -452,19 +457,30 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(points),))[:, None]
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
-    for s in range(0, len(points), step):
+    workers = resolve_workers(workers) if len(points) > step else 1
+    see_through = getattr(scene, "see_through", False)
+    if workers > 1 and not see_through:
+        scene.occluded(points[:1], normals[:1])       # commit the scene before threads share it
+    # Embree takes float32: the directions rounded once from the same float64 sums, the
+    # origins before they are repeated (the same values as a float64 array cast whole)
+    single = facing is None and not see_through
+
+    def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
-        d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        o = np.repeat(x + eps[s:s + step] * n, R, axis=0)
+        d = in_frames(local, tangent_frames(n), np.float32 if single else np.float64).reshape(-1, 3)
+        o = x + eps[s:s + step] * n
+        o = np.repeat(o.astype(np.float32) if single else o, R, axis=0)
         below = None if facing is None else np.einsum("ij,ij->i", d, np.repeat(facing[s:s + step], R, axis=0)) <= 0
-        if getattr(scene, "see_through", False):
+        if see_through:
             passed = scene.transmitted(o, d)
             if below is not None:
                 passed = np.where(below, 0.0, passed)
             out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
-            continue
+            return
         hit = np.asarray(scene.occluded(o, d))
         if below is not None:
             hit = hit | below
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
+    for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
+        pass
     return out

@@ -55,7 +55,7 @@ def form_factor_stage(ctx) -> None:
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:
         recv = receivers_needed(ctx.unknowns)
-        ctx.forecast = _forecast(ctx, recv.size)
+        ctx.forecast = _forecast(ctx, recv)
         ctx.say(0.0, ctx.forecast.describe())
         started = time.perf_counter()
 
@@ -74,7 +74,8 @@ def form_factor_stage(ctx) -> None:
 
 
 def _forecast(ctx, receivers):
-    """:func:`.forecast.forecast` of this bake, before its form factors, for about as many
+    """:func:`.forecast.forecast` of this bake, before its form factors (``receivers``: the ids of
+    the unknowns that draw a hemi-cube), for about as many
     output vertices as it will have (:func:`.elements.output_vertices_ahead`: the elements before
     their cut along contacts, which is made meanwhile on a process of its own)."""
     from ..runtime.forecast import forecast

@@ -44,11 +44,12 @@ def _shape_key(light) -> str:
 
 
 def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples=16, seed=0, points=None,
-                    normals=None, eps=None, facing=None, progress=None, cancelled=None) -> np.ndarray:
+                    normals=None, eps=None, facing=None, progress=None, cancelled=None, workers=1) -> np.ndarray:
     """Incident irradiance (P, 3) W/m^2 from ``lights``, as :func:`.lamps.direct_irradiance`
     with the same arguments gives it (at the patch centres, or at ``points`` (P, 3) with unit
-    ``normals`` (P, 3); ``eps`` (P,) the rays' start offsets; ``facing`` (P, 3) or None), each
-    lamp's unit transport (P,) kept in ``cache`` (None: nothing kept). Equal to
+    ``normals`` (P, 3); ``eps`` (P,) the rays' start offsets; ``facing`` (P, 3) or None;
+    ``workers``: threads, the same result for any count), each lamp's unit transport (P,) kept
+    in ``cache`` (None: nothing kept). Equal to
     ``direct_irradiance`` up to rounding: each lamp's light is its unit light times its
     strength."""
     lights = list(lights)
@@ -61,7 +62,7 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
     base = shadow_key(patches) + array_key(x) + array_key(n) + array_key(eps)
     base += b"" if facing is None else array_key(np.asarray(facing, np.float64))
     kw = dict(shadows=shadows, samples=samples, seed=seed, points=points, normals=normals, eps=eps,
-              facing=facing)
+              facing=facing, workers=workers)
     ticker = Ticker(progress, cancelled)
     for i, light in enumerate(lights):
         ticker.tick(i, len(lights), force=True)

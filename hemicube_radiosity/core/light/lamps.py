@@ -65,8 +65,9 @@ import numpy as np
 from ..util.geometry import DISK_SIDES, disk_polygons, equal_area_scale
 from ..util.sampling import disk_samples, stratified_unit_square
 from .environment import EnvironmentLight, environment_irradiance
-from .polygon_ff import polygon_form_factor
+from .polygon_ff import distant_form_factor, polygon_form_factor
 from ..mesh.patches import PatchSet
+from ..runtime.parallel import ordered_map, resolve_workers
 from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
 from .transmit import visibility
@@ -339,7 +340,13 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     dc = x + to_sun
     m = np.broadcast_to(-to_sun, x.shape)
     dr = np.full(len(x), np.tan(h))
-    E0 = L * np.pi * polygon_form_factor(x, n, disk_polygons(dc, m, dr))
+    # the disk at the same offsets from every receiver: its form factor in closed form where it
+    # is wholly above the horizon, clipped to it only where it is not (:func:`.distant_form_factor`)
+    F, whole = distant_form_factor(n, disk_polygons(to_sun[None], -to_sun[None], np.full(1, np.tan(h)))[0])
+    cut = np.flatnonzero(~whole)
+    if cut.size:
+        F[cut] = polygon_form_factor(x[cut], n[cut], disk_polygons(dc[cut], m[cut], dr[cut]))
+    E0 = L * np.pi * F
     pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, m, dr)
     w = _area_weights(x, n, pts, m)
     dirs = pts - x[:, None]
@@ -377,14 +384,18 @@ UNBOUNDED = (SunLight, EnvironmentLight)
 
 
 def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, seed=0,
-                     receivers=None, points=None, normals=None, eps=None, facing=None, _occ=None, _index=0):
+                     receivers=None, points=None, normals=None, eps=None, facing=None, workers=1, _occ=None,
+                     _index=0):
     """Irradiance (P,) W/m^2 per unit of the light's colour (multiply by ``light.color``);
     (P, 3) for a light with its own colours (``light.bands == 3``: an environment map).
 
     At the patch centres by default, or at ``points`` (P, 3) with unit ``normals`` (P, 3) on the
     patches' surfaces (e.g. the patch vertices); ``receivers`` indexes into those points.
     ``eps`` (P,): the shadow rays' start offsets (default :func:`.rays.ray_offsets`);
-    ``facing`` (P, 3) or None: as :func:`direct_irradiance`.
+    ``facing`` (P, 3) or None: as :func:`direct_irradiance`. ``workers`` (0 = every core): threads
+    lighting chunks of :data:`RECEIVERS_PER_CHUNK` receivers at once (Embree lets go of the GIL
+    while it casts, NumPy in its large steps); each chunk draws from its own random stream, so
+    the result is the same, bit for bit, for any count.
     """
     occ = occluder(patches, shadows) if _occ is None else _occ
     x_all = patches.centers if points is None else np.asarray(points, np.float64)
@@ -397,7 +408,12 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
     if fn is None:
         raise TypeError(f"unknown light type {type(light).__name__}")
     samples = max(1, int(samples))
-    for s in range(0, len(recv), RECEIVERS_PER_CHUNK):
+    starts = range(0, len(recv), RECEIVERS_PER_CHUNK)
+    workers = resolve_workers(workers) if len(starts) > 1 else 1
+    if workers > 1 and occ is not None and len(recv):
+        occ.occluded(x_all[:1], n_all[:1])   # commit the scene before threads share it
+
+    def chunk(s):
         ids = recv[s:s + RECEIVERS_PER_CHUNK]
         # one random stream per (seed, light, chunk start): reproducible for a given receiver set
         rng = np.random.default_rng([seed, _index, s])
@@ -405,12 +421,14 @@ def light_irradiance(patches: PatchSet, light, *, shadows="auto", samples=16, se
         kw = {} if facing is None else {"facing": np.asarray(facing, np.float64)[ids]}
         out[ids] = fn(light, x_all[ids], n_all[ids], rng, samples,
                       occ if light.cast_shadows else None, eps[ids], **kw)
+    for _ in ordered_map(chunk, starts, workers):
+        pass
     return out
 
 
 def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, seed=0,
                       receivers=None, points=None, normals=None, eps=None, progress=None,
-                      cancelled=None, facing=None) -> np.ndarray:
+                      cancelled=None, facing=None, workers=1) -> np.ndarray:
     """Incident irradiance H_direct (N, 3) in W/m^2 from ``lights`` at every patch centre
     (or at ``points`` with ``normals``, see :func:`light_irradiance`).
 
@@ -421,7 +439,8 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     (default :func:`.rays.ray_offsets`). ``progress(f)``/``cancelled()`` as elsewhere.
     ``facing`` (P, 3) or None: light arrives only from directions d with d . facing > 0 (a
     point's own triangle's normal where its shading normal leans off it: Cycles blocks light
-    from below the triangle's plane, :mod:`..output.crease`).
+    from below the triangle's plane, :mod:`..output.crease`). ``workers``: as
+    :func:`light_irradiance` (the same result for any count).
     """
     lights = list(lights)
     H = np.zeros((len(patches) if points is None else len(points), 3))
@@ -433,7 +452,8 @@ def direct_irradiance(patches: PatchSet, lights, *, shadows="auto", samples=16, 
     for i, light in enumerate(lights):
         ticker.tick(i, len(lights), force=True)
         E = light_irradiance(patches, light, shadows=shadows, samples=samples, seed=seed,
-                             receivers=receivers, points=points, normals=normals, eps=eps, facing=facing, _occ=occ,
+                             receivers=receivers, points=points, normals=normals, eps=eps, facing=facing,
+                             workers=workers, _occ=occ,
                              _index=i)
         H += (E if E.ndim == 2 else E[:, None]) * light.color[None, :]
     ticker.tick(len(lights), len(lights), force=True)

@@ -2,7 +2,8 @@
 form (Lambert's contour integral), for the direct light of emitters and lamps.
 
 * :func:`polygon_form_factor` (N,): differential area -> convex polygon, over the part above the
-  receiver's horizon.
+  receiver's horizon; :func:`distant_form_factor` the same where every receiver sees the polygon
+  at the same offsets (the sun's disk), in closed form where it is wholly above the horizon.
 * :func:`polygon_form_factors` (P, M): every point to every polygon, optionally one-sided;
   :func:`front_polygon_sum` (P,) their sum over the polygons in front of each point.
 * :func:`group_form_factors` (P, G): every point to every group of front-facing polygons, by the
@@ -17,7 +18,7 @@ import numpy as np
 
 from .outline import GroupOutline
 
-__all__ = ["polygon_form_factor", "polygon_form_factors", "front_polygon_sum",
+__all__ = ["polygon_form_factor", "distant_form_factor", "polygon_form_factors", "front_polygon_sum",
            "group_form_factors", "GROUP_LOOP", "BLOCK_PAIRS"]
 
 
@@ -60,6 +61,29 @@ def polygon_form_factor(x, n, poly):
     F = np.abs((theta * g).sum(axis=1)) / (2 * np.pi)
     F[last[:, 0] < 0] = 0.0
     return F
+
+
+def distant_form_factor(n, rel, margin=1e-9):
+    """((N,), (N,) bool): :func:`polygon_form_factor` of a planar convex polygon at the same
+    offsets ``rel`` (K, 3) from each of N receivers with unit normals ``n`` (N, 3) (a light at
+    infinity: the sun's disk at unit distance), and where that holds. Where every corner lies
+    above a receiver's tangent plane by more than ``margin`` (of the offsets' length: 1 for
+    the sun's disk) nothing is clipped, and Lambert's contour integral is linear in the normal:
+    ``F = |n . V| / (2 pi)`` with ``V = sum_k angle(a_k, a_k+1) unit(a_k x a_k+1)``, one vector
+    for every receiver, instead of a (N, 2K, 3) contour each. The same sum as
+    :func:`polygon_form_factor` to round-off (its per-receiver offsets ``poly - x`` carry
+    the receivers' coordinates' rounding, which this does not); elsewhere (the polygon
+    crosses the horizon) F is 0 and the mask False: the caller clips those."""
+    n = np.asarray(n, np.float64)
+    rel = np.asarray(rel, np.float64)
+    nxt = np.roll(rel, -1, axis=0)
+    c = np.cross(rel, nxt)
+    cn = np.linalg.norm(c, axis=1)
+    theta = np.arctan2(cn, np.einsum("kc,kc->k", rel, nxt))
+    V = (theta * np.where(cn > 0, 1.0 / np.where(cn > 0, cn, 1.0), 0.0)) @ c
+    scale = float(np.sqrt(np.einsum("kc,kc->k", rel, rel).max(initial=0.0)))
+    whole = (n @ rel.T).min(axis=1, initial=np.inf) > margin * scale
+    return np.where(whole, np.abs(n @ V) / (2 * np.pi), 0.0), whole
 
 
 def polygon_form_factors(points, normals, polys, poly_normals=None):

@@ -169,7 +169,8 @@ class DirectLight:
         key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays))
         eps = self.offsets(points, normals) if eps is None else eps
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
-                                                         normals, self.sky_rays, eps=eps, facing=facing))
+                                                         normals, self.sky_rays, eps=eps, facing=facing,
+                                                         workers=self.workers))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
@@ -187,7 +188,7 @@ class DirectLight:
             cols.append(lamp_irradiance(self.patches, [lamp], self.cache, points=points, normals=normals,
                                         eps=self.offsets(points, normals),
                                         cancelled=self.cancelled, samples=self.light_samples,
-                                        seed=self.light_seed) @ LUMA)
+                                        seed=self.light_seed, workers=self.workers) @ LUMA)
         if self.world is not None:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
@@ -219,7 +220,7 @@ class DirectLight:
                                  eps=self.offsets(points, normals) if eps is None else eps,
                                  cancelled=self.cancelled, facing=facing,
                                  samples=min(samples or self.light_samples, self.light_samples),
-                                 seed=self.light_seed) / np.pi
+                                 seed=self.light_seed, workers=self.workers) / np.pi
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)
@@ -377,7 +378,7 @@ def direct_stage(ctx) -> None:
         if ctx.lights:
             ctx.say(0.0, f"{len(ctx.lights)} lights")
             ctx.irradiance = lamp_irradiance(p, ctx.lights, ctx.cache, cancelled=ctx.cancelled,
-                                             samples=s.light_samples, seed=s.light_seed)
+                                             samples=s.light_samples, seed=s.light_seed, workers=s.workers)
         ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
         if ctx.irradiance is not None:
             ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi

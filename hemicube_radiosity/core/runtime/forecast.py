@@ -2,9 +2,10 @@
 :func:`..mesh.stage.form_factor_gb`'s, said by the patch stage).
 
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
-receiver (one hemi-cube each) and per piece drawn one by one in it (a curved cluster's faces;
-a flat cluster is drawn as its outline, whatever it is cut into), and the output, per output
-vertex (the final gather's rays, the exact direct light and what shines). The rates below were
+receiver (one hemi-cube each) and per polygon drawn in it (:func:`polygons_seen`: those in
+front of it and facing it, a flat cluster as its outline, whatever it is cut into), and the
+output, per output vertex (the final gather's rays, the exact direct light and what shines;
+less where no emitting face lights the scene, :data:`PER_VERTEX_LAMPS`). The rates below were
 measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
 ``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
 subdivided: the time taken came out between about 0.6 and 1.8 times the forecast, hence the
@@ -28,12 +29,26 @@ __all__ = ["Forecast", "forecast", "SAID"]
 #: How :meth:`Forecast.describe` begins (a headless run prints such a message at once).
 SAID = "expected about"
 
-#: Seconds per receiver's hemi-cube, and per curved piece drawn in it (one worker).
+#: Seconds per receiver's hemi-cube, and per polygon it draws (one worker): in front of the
+#: receiver and facing it (:func:`polygons_seen`). The per-polygon rate fitted to the real
+#: scenes' idle times (``docs/performance.md``, 2 workers): a hemi-cube took 1.1 ms for the
+#: living room's 1,460 polygons seen, 2.4 ms for the truck town's 7,500, 6.5 ms for zdm2's
+#: 10,600 (an indoor level: every wall faces the receivers), 2.5 ms for the bunny's 4,100 (a
+#: convex body turns most of itself away). This says 1.3, 2.0, 1.0 and 1.15 times those; one
+#: rate per curved piece (every piece of a curved cluster, seen or not) said 0.7, 0.8, 0.4
+#: (zdm2's form factors 2.4 times their forecast) and 1.6.
 PER_RECEIVER = 6e-4
-PER_CURVED_PIECE = 5e-8
+PER_SEEN = 5.5e-7
+#: Receivers :func:`polygons_seen` looks from (a fixed, even sample: the same forecast each time).
+SEEN_SAMPLE = 64
 #: Seconds per output vertex at 128 gather rays, the default (the exact direct light, the gather,
-#: what shines).
+#: what shines), where emitting faces light the scene (their transport and what shines are
+#: most of it: the Cornell box, ``bench_dense.py``) ...
 PER_VERTEX = 2.2e-4
+#: ... and where only lamps, suns and the world do (their rays on every core): fitted to the
+#: real scenes' sun and sky (``bench/real_scenes.py``): from 0.6x (the bunny, few abrupt elements)
+#: to 2x (zdm2, a shadow's edge across most of its rooms) of this.
+PER_VERTEX_LAMPS = 1.3e-4
 #: The other stages (patches, refinement, direct light at the patches, solve) as a share of these.
 OTHER = 0.15
 #: The time taken over the forecast, as measured (module docstring), the most for ``make demo``'s
@@ -49,7 +64,8 @@ PER_EXTRA_WORKER = 0.4
 class Forecast:
     """Seconds expected for a bake: ``form_factors`` and ``output`` (the vertex stage) on
     ``workers`` workers, ``seconds`` in all; for ``receivers`` hemi-cubes with ``curved``
-    pieces drawn one by one, and ``vertices`` output vertices."""
+    pieces drawn one by one and about ``seen`` polygons drawn in each (:func:`polygons_seen`),
+    and ``vertices`` output vertices."""
 
     seconds: float
     form_factors: float
@@ -58,6 +74,7 @@ class Forecast:
     curved: int
     vertices: int
     workers: int
+    seen: float = 0.0
 
     def describe(self) -> str:
         lo, hi = (_seconds(self.seconds * k) for k in SPREAD)
@@ -69,6 +86,44 @@ class Forecast:
         return dict(self.__dict__)
 
 
+def polygons_seen(patches, clusters, centers, normals, sample=SEEN_SAMPLE) -> float:
+    """About how many polygons a hemi-cube draws: the mean over ``sample`` receivers, evenly
+    spread through ``centers`` (R, 3) with unit ``normals`` (R, 3), of the pieces in front of the
+    receiver and facing it, a piece of a flat cluster counted as 2 / its cluster's pieces (a
+    flat cluster is drawn as its outline, :mod:`..form_factors.drawn`), any other as 1. Costs
+    ``sample`` x pieces comparisons (zdm2's 63,000 pieces: a few milliseconds)."""
+    c = np.asarray(patches.centers, dtype=np.float64)
+    m = np.asarray(patches.normals, dtype=np.float64)
+    if not len(c) or not len(centers):
+        return 0.0
+    w = np.ones(len(c))
+    if clusters is not None:
+        of = np.asarray(clusters.of, dtype=np.int64)
+        bent = _bent(patches, of)
+        size = np.bincount(of, minlength=len(bent))
+        w = np.where(bent[of], 1.0, 2.0 / np.maximum(size[of], 1))
+    pick = np.unique(np.linspace(0, len(centers) - 1, min(sample, len(centers))).astype(np.int64))
+    x, n = np.asarray(centers, np.float64)[pick], np.asarray(normals, np.float64)[pick]
+    cm = np.einsum("ij,ij->i", c, m)
+    total = 0.0
+    for s in range(0, len(x), 16):                       # (pieces, 16) at a time
+        xs, ns = x[s:s + 16], n[s:s + 16]
+        front = c @ ns.T > np.einsum("ij,ij->i", xs, ns)[None]
+        facing = cm[:, None] < m @ xs.T
+        total += float((w @ (front & facing)).sum())
+    return total / len(x)
+
+
+def _bent(patches, of) -> np.ndarray:
+    """(K,) bool: clusters ``of`` (N,) whose pieces do not all share one normal."""
+    first = np.full(int(of.max(initial=-1)) + 1, -1, np.int64)
+    first[of[::-1]] = np.arange(len(of))[::-1]
+    bent = np.abs(patches.normals - patches.normals[first[of]]).max(axis=1) > 1e-6
+    curved = np.zeros(len(first), bool)
+    curved[of[bent]] = True
+    return curved
+
+
 def curved_pieces(patches, clusters) -> int:
     """Pieces in clusters whose pieces do not all share one normal: a hemi-cube draws them face
     by face (a flat cluster is drawn as its outline). None without clusters: each piece is a
@@ -76,25 +131,26 @@ def curved_pieces(patches, clusters) -> int:
     if clusters is None:
         return 0
     of = np.asarray(clusters.of, dtype=np.int64)
-    first = np.full(int(of.max(initial=-1)) + 1, -1, np.int64)
-    first[of[::-1]] = np.arange(len(of))[::-1]
-    bent = np.abs(patches.normals - patches.normals[first[of]]).max(axis=1) > 1e-6
-    curved = np.zeros(len(first), bool)
-    curved[of[bent]] = True
-    return int(curved[of].sum())
+    return int(_bent(patches, of)[of].sum())
 
 
-def forecast(ctx, receivers: int, output_vertices: int) -> Forecast:
+def forecast(ctx, receivers, output_vertices: int) -> Forecast:
     """The :class:`Forecast` of the bake of ``ctx`` (after its patch stage) with ``receivers``
-    hemi-cubes to draw and ``output_vertices`` to evaluate."""
+    hemi-cubes to draw (their ids among ``ctx.unknowns``, or how many: then looked at from all
+    of them) and ``output_vertices`` to evaluate."""
     s = ctx.settings
     workers = resolve_workers(s.workers)
     speed = 1.0 + PER_EXTRA_WORKER * (workers - 1)
-    curved = curved_pieces(ctx.patches, ctx.clusters)
-    ff = receivers * (PER_RECEIVER + PER_CURVED_PIECE * curved) / speed
+    u = ctx.unknowns if hasattr(ctx, "unknowns") else ctx.patches
+    ids = np.arange(int(receivers)) if np.ndim(receivers) == 0 else np.asarray(receivers, np.int64)
+    ids = ids[ids < len(u.centers)]
+    seen = polygons_seen(ctx.patches, ctx.clusters, u.centers[ids], u.normals[ids])
+    ff = len(ids) * (PER_RECEIVER + PER_SEEN * seen) / speed
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
-    out = output_vertices * PER_VERTEX * rays / 128 / speed
-    return Forecast((1 + OTHER) * (ff + out), ff, out, int(receivers), curved, int(output_vertices), workers)
+    rate = PER_VERTEX if ctx.patches.emitting().any() else PER_VERTEX_LAMPS
+    out = output_vertices * rate * rays / 128 / speed
+    return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
+                    int(output_vertices), workers, float(seen))
 
 
 def _seconds(x: float) -> str:

@@ -70,7 +70,7 @@ def _suns_at(ctx):
 
     def at(points=None, normals=None, where=""):
         return lamp_irradiance(p, only, ctx.cache, points=points, normals=normals, samples=s.light_samples,
-                               seed=s.light_seed, cancelled=ctx.cancelled) / np.pi
+                               seed=s.light_seed, cancelled=ctx.cancelled, workers=s.workers) / np.pi
     if ctx.direct is None:
         return at()
     grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1

@@ -64,14 +64,22 @@ def tangent_frames(normals, angles=None):
     return np.stack([u, v, n], axis=1)
 
 
-def in_frames(local, frames):
+def in_frames(local, frames, dtype=np.float64):
     """(M, R, 3) the directions ``local`` (R, 3), given in each frame's (u, v, n), in world
     space for every frame of ``frames`` (M, 3, 3) (from :func:`tangent_frames`): the sum over
     the three axes in order, as ``np.einsum("rj,mjc->mrc", local, frames)`` sums it (the same
-    values, bit for bit, in half its time on a gather's quarter million rays)."""
-    d = local[None, :, 0, None] * frames[:, None, 0, :]
-    d += local[None, :, 1, None] * frames[:, None, 1, :]
-    d += local[None, :, 2, None] * frames[:, None, 2, :]
+    values, bit for bit). One world axis at a time, as outer products of contiguous (M, R)
+    planes: about four times as fast as broadcasting the (M, R, 3) products (a vertex stage's
+    sky and gather rays are tens of millions). ``dtype``: of the result, each sum rounded to it
+    once (float32: what Embree is handed, without a float64 copy)."""
+    frames = np.asarray(frames, dtype=np.float64)
+    local = np.asarray(local, dtype=np.float64)
+    d = np.empty((len(frames), len(local), 3), dtype=dtype)
+    for c in range(3):
+        x = np.multiply.outer(frames[:, 0, c], local[:, 0])
+        x += np.multiply.outer(frames[:, 1, c], local[:, 1])
+        x += np.multiply.outer(frames[:, 2, c], local[:, 2])
+        d[..., c] = x
     return d
 
 

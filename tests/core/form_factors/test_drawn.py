@@ -147,3 +147,24 @@ def test_a_face_modelled_twice_is_drawn_as_its_pieces(faces):
     pieces = build_patches([quad], None)
     d = draw_set(pieces, make_clusters(pieces, np.zeros(len(pieces), np.int64)))
     assert not d.outlined.any() and len(d) == len(pieces)
+
+
+def test_the_outlines_area_check_sums_each_cluster_as_alone():
+    """:func:`drawn._area_differs` (every cluster's triangles at once) decides as the check of
+    one cluster at a time did, from the same sums to the bit: clusters of 1 to 40 triangles,
+    their areas given exactly, a little off, and off by more than the tolerance."""
+    from hemicube_radiosity.core.form_factors import drawn
+    rng = np.random.default_rng(2)
+    pos = rng.normal(size=(500, 3)) * 10 ** rng.uniform(-2, 2, (500, 1))
+    tris = [rng.integers(0, 500, (int(rng.integers(1, 41)), 3)) for _ in range(300)]
+    alone = []
+    for t in tris:
+        p = pos[t]
+        alone.append(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
+    alone = np.array(alone)
+    areas = alone * rng.choice([1.0, 1 + 1e-12, 1 + 1e-6, 1 - 1e-6], size=len(alone))
+    wrong = drawn._area_differs(pos, tris, areas)
+    np.testing.assert_array_equal(wrong, np.abs(alone - areas) > 1e-9 * areas)
+    assert 100 < wrong.sum() < 200
+    exact = drawn._area_differs(pos, tris, alone)
+    assert not exact.any()

@@ -126,3 +126,25 @@ def test_a_relight_with_a_new_alpha_casts_its_rays_again():
     on_floor = first.patches.owner == 0
     assert second.patch_radiosity[on_floor].mean() > 1.5 * first.patch_radiosity[on_floor].mean()
     np.testing.assert_allclose(second.patch_radiosity, fresh.patch_radiosity, rtol=1e-6)
+
+
+def test_sky_fraction_on_threads_and_in_float32_is_the_serial_float64_cast():
+    """The sky rays cast in chunks on two threads, their origins and directions rounded to
+    float32 once (Embree's precision) instead of cast from float64 arrays: the same fractions,
+    bit for bit, as the serial cast of the float64 rays it replaced (written out here)."""
+    from hemicube_radiosity.core.rays import cosine_lattice, ray_offsets
+    from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
+    floor, roof = _scene(None, leaf_half=1.0)
+    P = build_patches([floor, roof], None)
+    sel = np.flatnonzero(P.owner == 0)
+    x, n = P.centers[sel], P.normals[sel]
+    eps = ray_offsets(P, x, n)
+    occ = occluder(P)
+    local = cosine_lattice(64, 0)
+    d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
+    o = np.repeat(x + eps[:, None] * n, 64, axis=0)
+    ref = 1.0 - np.asarray(occ.occluded(o, d)).reshape(len(x), 64).mean(axis=1)
+    assert 0.05 < ref.min() < 0.9 < ref.max()
+    for workers, chunk in ((1, 1 << 16), (2, 1 << 16), (2, 640)):
+        f = sky_fraction(occ, x, n, 64, eps=eps, workers=workers, chunk_rays=chunk)
+        np.testing.assert_array_equal(f, ref)

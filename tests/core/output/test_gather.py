@@ -180,3 +180,17 @@ def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeyp
     got = one.matvec(np.concatenate([vals, x]))
     assert np.abs(want).max() > 1e-3
     np.testing.assert_allclose(got, want, rtol=1e-10, atol=1e-12)
+
+
+def test_directions_rounded_to_float32_once_are_the_float64_ones_cast():
+    """``in_frames(..., np.float32)`` (the sky rays handed to Embree) rounds the same float64
+    sums once: the float64 directions cast, bit for bit."""
+    from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
+    from hemicube_radiosity.core.rays import cosine_lattice
+    rng = np.random.default_rng(4)
+    n = rng.normal(size=(300, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    local, frames = cosine_lattice(256, 0), tangent_frames(n)
+    d32 = in_frames(local, frames, np.float32)
+    assert d32.dtype == np.float32
+    np.testing.assert_array_equal(d32, in_frames(local, frames).astype(np.float32))

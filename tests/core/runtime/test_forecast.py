@@ -57,3 +57,26 @@ def test_curved_pieces_are_those_of_bent_clusters():
     on_ball = np.array([pieces.object_names[o] == "Sphere" for o in pieces.owner])
     n = curved_pieces(pieces, clusters)
     assert 0.8 * on_ball.sum() <= n <= on_ball.sum()
+
+
+def test_polygons_seen_are_those_in_front_and_facing():
+    """Inside a room every receiver on the floor sees the four walls and the ceiling whole
+    (their pieces in front of it and facing it), none of the floor; outside a sphere a point
+    on it sees none of the sphere's other faces (but for a neighbour in its plane, to
+    round-off). A flat cluster counts as its outline (2)."""
+    from hemicube_radiosity.core.mesh.clusters import make_clusters
+    from hemicube_radiosity.core.runtime.forecast import polygons_seen
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    room = build_patches([scenes.box((0, 0, 0), (2, 2, 2), inward=True)], 0.25)
+    floor = np.flatnonzero(room.normals[:, 2] > 0.5)
+    assert len(floor) == 64 and len(room) == 6 * 64
+    seen = polygons_seen(room, None, room.centers[floor], room.normals[floor])
+    assert seen == 5 * 64
+    # each face one flat cluster: drawn as its outline, 2 polygons a face seen
+    axis = np.argmax(np.abs(room.normals), axis=1)
+    face = 2 * axis + (room.normals[np.arange(len(room)), axis] > 0)
+    clusters = make_clusters(room, np.unique(face, return_inverse=True)[1])
+    assert len(clusters) == 6
+    assert np.isclose(polygons_seen(room, clusters, room.centers[floor], room.normals[floor]), 5 * 2)
+    ball = build_patches([sphere(16)], None)
+    assert len(ball) == 512 and polygons_seen(ball, None, ball.centers, ball.normals) < 1   # (round-off at the poles)
