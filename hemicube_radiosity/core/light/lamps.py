@@ -339,7 +339,14 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     dc = x + to_sun
     m = np.broadcast_to(-to_sun, x.shape)
     dr = np.full(len(x), np.tan(h))
-    E0 = L * np.pi * polygon_form_factor(x, n, disk_polygons(dc, m, dr))
+    # a disk wholly above a receiver's horizon: its projected solid angle is pi sin^2(h) cos(theta),
+    # H = S cos(theta) (what the 64-gon's contour gives, to 1e-7); wholly below it, 0; the
+    # contour only where the horizon cuts it
+    cos_t = n @ to_sun
+    E0 = light.strength * np.maximum(cos_t, 0.0)
+    cut = np.abs(cos_t) < np.sin(np.arctan(equal_area_scale() * np.tan(h))) + 1e-9
+    if cut.any():
+        E0[cut] = L * np.pi * polygon_form_factor(x[cut], n[cut], disk_polygons(dc[cut], m[cut], dr[cut]))
     pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, m, dr)
     w = _area_weights(x, n, pts, m)
     dirs = pts - x[:, None]
