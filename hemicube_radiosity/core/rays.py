@@ -436,7 +436,7 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
 
 
 def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 20, *,
-                 eps, facing=None) -> np.ndarray:
+                 eps, facing=None, workers: int = 1) -> np.ndarray:
     """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
     surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
     anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
@@ -444,7 +444,8 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
     cast parallel rays, so the estimate varies smoothly over a surface. ``facing`` (P, 3) or
     None: rays with a negative or zero component along it count as hitting a surface (below a
-    point's own triangle, :func:`.light.lamps.direct_irradiance`)."""
+    point's own triangle, :func:`.light.lamps.direct_irradiance`). ``workers`` (0 = every core):
+    threads casting chunks of points, as :func:`open_fraction` (the same result for any count)."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     local = cosine_lattice(rays, seed)                                             # (R, 3)
@@ -452,7 +453,13 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(points),))[:, None]
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
-    for s in range(0, len(points), step):
+    workers = resolve_workers(workers)
+    if workers > 1:                  # two chunks a worker, of at least 4,096 points
+        step = max(1, min(step, max(4096, -(-len(points) // (2 * workers)))))
+    if len(points) and workers > 1 and len(points) > step and not getattr(scene, "see_through", False):
+        scene.occluded(points[:1], normals[:1])       # commit the scene before threads share it
+
+    def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         o = np.repeat(x + eps[s:s + step] * n, R, axis=0)
@@ -462,9 +469,12 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
             if below is not None:
                 passed = np.where(below, 0.0, passed)
             out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
-            continue
+            return
         hit = np.asarray(scene.occluded(o, d))
         if below is not None:
             hit = hit | below
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
+    many = workers if len(points) > step and not getattr(scene, "see_through", False) else 1
+    for _ in ordered_map(chunk, range(0, len(points), step), many):
+        pass
     return out

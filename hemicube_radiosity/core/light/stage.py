@@ -169,7 +169,8 @@ class DirectLight:
         key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays))
         eps = self.offsets(points, normals) if eps is None else eps
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
-                                                         normals, self.sky_rays, eps=eps, facing=facing))
+                                                         normals, self.sky_rays, eps=eps, facing=facing,
+                                                         workers=self.workers))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
