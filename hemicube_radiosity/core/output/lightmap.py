@@ -197,27 +197,28 @@ def locate_texels(elements, points, normals, owner, faces=None):
     ``normals`` among the output elements of object ``owner`` (:func:`.interpolate.locate`).
 
     ``faces`` (n,) int or None: the source face (``elements.source_face``) each point lies on. A
-    point that :func:`.interpolate.locate` puts on another face's element (it tries the 8
-    nearest element centres: on a strip 2 cm wide beside a large wall, a bevel or a window
-    frame, none of them may be the strip's own) is located again among its own face's elements,
-    where that face has any: the texel shows its own surface's light, not a neighbour's."""
-    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    point whose face has elements is located among its own face's (:func:`.interpolate.locate`
+    keyed by face: among the object's, the 8 element centres nearest a point on a strip 2 cm
+    wide beside a large wall, a bevel or a window frame, may all be the wall's): the texel
+    shows its own surface's light, not a neighbour's; and a face's few elements are searched
+    faster than the object's (a third of the time on the living room's 512,720 texels). The
+    others are located among the object's elements."""
+    owners = np.full(len(points), int(owner), np.int64)
     if faces is None or len(points) == 0:
-        return idx, uv
+        return locate(elements, points, owners, normals)
     faces = np.asarray(faces, dtype=np.int64)
-    wrong = np.asarray(elements.source_face, dtype=np.int64)[idx] != faces
-    if not wrong.any():
-        return idx, uv
-    mine = np.flatnonzero((elements.owner == owner) & np.isin(elements.source_face, faces[wrong]))
-    again = wrong & np.isin(faces, np.asarray(elements.source_face)[mine])
-    if not again.any():
-        return idx, uv
+    mine = np.flatnonzero(elements.owner == owner)
     key = np.asarray(elements.source_face, dtype=np.int64)[mine]
-    sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
-                   elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
-    j, w = locate(sub, points[again], faces[again], None if normals is None else normals[again])
-    idx, uv = idx.copy(), uv.copy()
-    idx[again], uv[again] = mine[j], w
+    own = np.isin(faces, key)
+    idx, uv = np.zeros(len(points), np.int64), np.zeros((len(points), 2))
+    if own.any():
+        sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
+                       elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
+        j, uv[own] = locate(sub, points[own], faces[own], None if normals is None else normals[own])
+        idx[own] = mine[j]
+    if not own.all():
+        idx[~own], uv[~own] = locate(elements, points[~own], owners[~own],
+                                     None if normals is None else normals[~own])
     return idx, uv
 
 
