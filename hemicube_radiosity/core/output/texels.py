@@ -8,14 +8,19 @@ between four such anchors takes their bilinear interpolation, source by source, 
 * the four anchors and the texel lie on one face of the mesh, and the texel's world point is
   the bilinear interpolation of theirs (within :data:`FLAT` of a texel: the UV map is affine
   there, not folded across an edge, not clamped onto an island's border);
-* every source's light agrees at the four anchors within :data:`AGREE` of the largest, or
-  :data:`AGREE_FLOOR` of the source's 99th percentile over the anchors (faint light);
+* every source's light is smooth there: within :data:`AGREE` of the largest value, or
+  :data:`AGREE_FLOOR` of the source's 99th percentile over the anchors (faint light), as
+  below;
 * the probe agrees: every emitter and lamp lit with one shadow ray at the texel itself gives
   what the interpolation gives (a shadow thinner than the grid, falling between the anchors,
   is found there), and no texel within :data:`MARGIN` texels disagrees (a penumbra's edge
   beside a shadow whose centre ray the texel sees).
 
-The grids run from coarse to fine (4 texels, then 2); a texel no grid settles is lit exactly.
+The grids run from coarse to fine (4 texels, then 2); on the 4-texel grid the cell's middle is
+lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
+corners must agree, or the light must run straight across it (its second differences through
+the anchors beyond it, over 8, within the same bound: a linear ramp of the sky toward a window
+is interpolated exactly). A texel no grid settles is lit exactly.
 Both tests compare each source with itself, relative to its own scale: a relight of new
 strengths or colours picks the same texels (and finds their rays cached). Smooth light (the
 sky on a wall, a lamp's falloff, the sun on a lit floor) costs the anchors; shadow edges,
@@ -67,6 +72,30 @@ def _affine(points, corners, w, ids, pitch):
     w = np.broadcast_to(w, corners.shape)
     off = np.einsum("mk,mkj->mj", w, points[corners]) - points[ids]
     return np.linalg.norm(off, axis=1) <= FLAT * pitch[ids]
+
+
+def _bend(value, done, faces, index, rows, cols, s, face):
+    """(m, S) the interpolation's error the light's bend suggests across each texel's cell of
+    stride ``s``: the largest second difference of each source's luminance along the cell's
+    two rows and two columns, through the texels ``s`` beyond it on either side (on ``face``
+    and ``done``; one side where the other has none), over 8 (a quadratic's error at a cell's
+    middle); inf where neither side has one."""
+    H, W = index.shape
+    r0, c0 = rows // s * s, cols // s * s
+    out = np.zeros((len(rows), value.shape[1]))
+
+    def at(r, c):
+        ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        i = np.full(len(r), -1, np.int64)
+        i[ok] = index[r[ok], c[ok]]
+        ok = i >= 0
+        ok[ok] = done[i[ok]] & (faces[i[ok]] == face[ok])
+        return np.where(ok[:, None], value[np.maximum(i, 0)] @ LUMA, np.nan)
+    for r, c, dr, dc in ((r0, c0, 0, s), (r0 + s, c0, 0, s), (r0, c0, s, 0), (r0, c0 + s, s, 0)):
+        a, b, c1, d = (at(r + k * dr, c + k * dc) for k in (-1, 0, 1, 2))
+        both = np.fmax(np.abs(a - 2 * b + c1), np.abs(b - 2 * c1 + d))       # either side where one lacks
+        out = np.maximum(out, np.where(np.isnan(both), np.inf, both))
+    return out / 8
 
 
 def _near(mask_ids, rows, cols, shape, margin):
@@ -139,8 +168,10 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
             keep &= _affine(points, corners, 0.25, mid, pitch)
             keep &= np.all(_agree(Y.mean(axis=1), value[mid] @ LUMA, floor), axis=1)
-        else:          # a cell two texels wide: its corners agree
-            keep &= np.all(_agree(Y.max(axis=1), Y.min(axis=1), floor), axis=1)
+        else:          # a cell two texels wide: its corners agree, or the light is straight across it
+            bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
+            keep &= np.all(_agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor),
+                           axis=1)
         interp = np.einsum("mk,mksc->msc", w, value[corners])
         if probed is not None and np.any(probed):
             if probe is None:
