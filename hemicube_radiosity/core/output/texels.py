@@ -16,8 +16,8 @@ between four such anchors takes their bilinear interpolation, source by source, 
   is found there), and no texel within :data:`MARGIN` texels disagrees (a penumbra's edge
   beside a shadow whose centre ray the texel sees).
 
-The grids run from coarse to fine (4 texels, then 2); on the 4-texel grid the cell's middle is
-lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
+The grids run from coarse to fine (8 texels, 4, then 2); on the 8- and 4-texel grids a cell's
+middle is lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
 corners must agree, or the light must run straight across it (its second differences through
 the anchors beyond it, over 8, within the same bound: a linear ramp of the sky toward a window
 is interpolated exactly). A texel no grid settles is lit exactly.
@@ -33,7 +33,7 @@ import numpy as np
 __all__ = ["by_source", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
-STRIDES = (4, 2)      # texels between the anchors of the grids tried, coarse to fine
+STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
 AGREE = 0.02          # a source's light at the four anchors within this share of the largest ...
 AGREE_FLOOR = 0.002   # ... or of this share of its 99th percentile over the anchors
 FLAT = 1.0           # texels: the texel's point off the anchors' bilinear interpolation at most
