@@ -249,21 +249,20 @@ def _material(name, uv_name, exr, png, lighting_png=None):
 
 
 def _texel_light(result, scale):
-    """(parts, direct, sources) for :func:`..core.output.lightmap.bake_lightmap`: the bake's
-    corner parts and its exact direct light at any points, both times ``scale`` (the exposure),
-    and each source's apart (which texels vary: the same after a relight); (None, None, None)
-    without the exact direct light (every texel then interpolated)."""
+    """(parts, split, probed) for :func:`..core.output.lightmap.bake_lightmap`: the bake's
+    corner parts and its exact direct light at any points, each source apart
+    (:meth:`..core.light.stage.DirectLight.split_at`), both times ``scale`` (the exposure), and
+    which sources a one-ray probe stands for (:meth:`..core.light.stage.DirectLight.probed`); (None,
+    None, None) without the exact direct light (every texel then interpolated)."""
     parts = result.corner_parts()
     if parts is None or result.direct is None:
         return None, None, None
     E, rho, D, I = parts
+    light = result.direct
 
-    def direct(points, normals):
-        return result.direct.at(points, normals, "texels") * scale
-
-    def sources(points, normals):
-        return result.direct.sources_at(points, normals, "texels")
-    return (E * scale, rho, D * scale, I * scale), direct, sources
+    def split(points, normals, samples=None, which=None):
+        return light.split_at(points, normals, "texels", samples, which) * scale
+    return (E * scale, rho, D * scale, I * scale), split, light.probed()
 
 
 def write_lightmaps(context, scene_input, result, settings):
@@ -311,7 +310,7 @@ def write_lightmaps(context, scene_input, result, settings):
 
 def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     """Bake, write and show the lightmap of one copy ``ob`` (mesh ``me``) of ``src`` (owner
-    ``oi``); ``light`` (corner values, parts, direct, sources; :func:`_texel_light`); ``scales`` the
+    ``oi``); ``light`` (corner values, parts, split, probed; :func:`_texel_light`); ``scales`` the
     materials' albedo scales (None: no lighting pass). Returns its record."""
     uv_name, make = _uv_layer(me, settings.lightmap_uv)
     M = np.asarray(src.matrix_world, dtype=np.float64)
@@ -322,10 +321,10 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     uv = _triangle_uvs(me, uv_name)
     user = bpy.data.objects.get(src.name)
     k = None if scales is None or user is None else _lighting_scale(user, me, scales)
-    corners, parts, direct, sources = light
+    corners, parts, split, probed = light
     lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
-                                     flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, direct=direct,
-                                     normals=_corner_normals(me, M), lighting_scale=k, sources=sources,
+                                     flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, split=split,
+                                     normals=_corner_normals(me, M), lighting_scale=k, probed=probed,
                                      faces=_triangle_faces(me))
     stem = bpy.path.clean_name(src.name)
     exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)

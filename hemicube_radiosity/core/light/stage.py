@@ -23,6 +23,7 @@ from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
+from .lamps import light_irradiance
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
@@ -192,6 +193,46 @@ class DirectLight:
         if self.world is not None:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
+
+    def split_at(self, points, normals, where: str, samples=None, which=None) -> np.ndarray:
+        """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
+        emitting object (its faces together), every lamp, the world, in that order; summed over
+        the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
+        scales with its strength and colour, so what depends only on each column's shape, not
+        its scale, is the same after a relight. ``samples``: fewer shadow rays per point for the
+        emitters and lamps, as :meth:`at` takes it (the world's rays are ``sky_rays``);
+        ``which`` (S,) bool or None: only those columns (the others 0)."""
+        x = np.asarray(points, dtype=np.float64)
+        owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
+        S = len(owners) + len(self.lights) + (self.world is not None)
+        out = np.zeros((len(x), S, 3))
+        want = np.ones(S, bool) if which is None else np.asarray(which, bool)
+        if not len(x) or not want.any():
+            return out
+        eps = self.offsets(x, normals)
+        if want[:len(owners)].any():
+            T = self._emitters_at(x, normals, where, samples)
+            L, owner = self.emitted(), _unit_owner(self)
+            for j, o in enumerate(owners):
+                if want[j]:
+                    out[:, j] = T[:, owner == o].astype(np.float64) @ L[owner == o]
+        for i, lamp in enumerate(self.lights):
+            if want[len(owners) + i]:
+                E = light_irradiance(self.patches, lamp, samples=min(samples or self.light_samples, self.light_samples),
+                                     seed=self.light_seed, points=x, normals=normals, eps=eps, _occ=self.scene(),
+                                     _index=i)
+                out[:, len(owners) + i] = (E if E.ndim == 2 else E[:, None]) * lamp.color / np.pi
+        if self.world is not None and want[-1]:
+            out[:, -1] = self.world_at(x, normals, where)
+        return out
+
+    def probed(self) -> np.ndarray:
+        """(S,) bool per column of :meth:`split_at`: a source whose light one shadow ray per point
+        stands for where it is smooth (an emitting object, a lamp: a bounded source seen or not),
+        not the world or an environment map (light from a whole hemisphere)."""
+        owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0)
+        lamps = [not isinstance(li, EnvironmentLight) for li in self.lights]
+        return np.array([True] * len(owners) + lamps + [False] * (self.world is not None), bool)
 
     def scene(self):
         """The shadow-ray scene, built once and only if a ray is cast."""

@@ -19,9 +19,11 @@ Steps, all NumPy:
 2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
 3. :func:`texel_values` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
    output elements (with the normals, so the two sides of a thin wall are told apart), bilinear
-   in the element found (:func:`texel_light`), and the direct light at all the texel centres in
-   one batch; where the light varies between neighbours (:func:`varying`), the mean over points
-   of the texel's square, as Cycles' bake averages there (a second batch).
+   in the element found (:func:`texel_light`), and the direct light at the texel centres, each
+   source apart, exact at a coarse grid of texels and wherever the light is not smooth between
+   them, interpolated elsewhere (:mod:`.texels`); where a source's light varies between
+   neighbours (:func:`varying`), its mean over points of the texel's square, as Cycles' bake
+   averages there.
 4. :func:`dilate`: texels outside every island are filled from their filled neighbours (the mean
    of the filled ones among their 8), ``margin`` passes: bilinear filtering and mip-maps read no
    black across an island's border.
@@ -38,6 +40,7 @@ import numpy as np
 
 from ..mesh.patches import PatchSet
 from .interpolate import interpolate_corner_values, locate
+from .texels import LUMA, by_source
 
 __all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
@@ -49,6 +52,7 @@ VARIES = 0.1       # light differing this much between neighbours: averaged over
 FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
 SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
 FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
+SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel)
 MARGIN = 8         # texels of dilation around every island
 _CHUNK = 4_000_000  # candidate texels rasterized at once
 
@@ -193,27 +197,28 @@ def locate_texels(elements, points, normals, owner, faces=None):
     ``normals`` among the output elements of object ``owner`` (:func:`.interpolate.locate`).
 
     ``faces`` (n,) int or None: the source face (``elements.source_face``) each point lies on. A
-    point that :func:`.interpolate.locate` puts on another face's element (it tries the 8
-    nearest element centres: on a strip 2 cm wide beside a large wall, a bevel or a window
-    frame, none of them may be the strip's own) is located again among its own face's elements,
-    where that face has any: the texel shows its own surface's light, not a neighbour's."""
-    idx, uv = locate(elements, points, np.full(len(points), int(owner), np.int64), normals)
+    point whose face has elements is located among its own face's (:func:`.interpolate.locate`
+    keyed by face: among the object's, the 8 element centres nearest a point on a strip 2 cm
+    wide beside a large wall, a bevel or a window frame, may all be the wall's): the texel
+    shows its own surface's light, not a neighbour's; and a face's few elements are searched
+    faster than the object's (a third of the time on the living room's 512,720 texels). The
+    others are located among the object's elements."""
+    owners = np.full(len(points), int(owner), np.int64)
     if faces is None or len(points) == 0:
-        return idx, uv
+        return locate(elements, points, owners, normals)
     faces = np.asarray(faces, dtype=np.int64)
-    wrong = np.asarray(elements.source_face, dtype=np.int64)[idx] != faces
-    if not wrong.any():
-        return idx, uv
-    mine = np.flatnonzero((elements.owner == owner) & np.isin(elements.source_face, faces[wrong]))
-    again = wrong & np.isin(faces, np.asarray(elements.source_face)[mine])
-    if not again.any():
-        return idx, uv
+    mine = np.flatnonzero(elements.owner == owner)
     key = np.asarray(elements.source_face, dtype=np.int64)[mine]
-    sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
-                   elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
-    j, w = locate(sub, points[again], faces[again], None if normals is None else normals[again])
-    idx, uv = idx.copy(), uv.copy()
-    idx[again], uv[again] = mine[j], w
+    own = np.isin(faces, key)
+    idx, uv = np.zeros(len(points), np.int64), np.zeros((len(points), 2))
+    if own.any():
+        sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
+                       elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
+        j, uv[own] = locate(sub, points[own], faces[own], None if normals is None else normals[own])
+        idx[own] = mine[j]
+    if not own.all():
+        idx[~own], uv[~own] = locate(elements, points[~own], owners[~own],
+                                     None if normals is None else normals[~own])
     return idx, uv
 
 
@@ -258,12 +263,19 @@ def texel_light(elements, parts, points, normals, owner, D, faces=None):
     (:func:`.interpolate.locate`), as the output vertices are made (:mod:`.stage`). The light
     arriving returned is D + I (what the lighting-only pass holds). ``faces`` (n,): each point's
     source face, as :func:`locate_texels` takes it."""
-    if len(points) == 0:
-        return np.zeros((0, 3)), np.zeros((0, 3))
-    idx, uv = locate_texels(elements, points, normals, owner, faces)
-    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    E, rho, indirect = located_parts(elements, parts, points, normals, owner, faces)
     light = np.asarray(D, dtype=np.float64) + indirect
     return E + rho * light, light
+
+
+def located_parts(elements, parts, points, normals, owner, faces=None):
+    """(E, rho, I) (n, 3) each: the emission, reflectivity and indirect light of ``parts``
+    (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`)."""
+    if len(points) == 0:
+        return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
+    idx, uv = locate_texels(elements, points, normals, owner, faces)
+    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    return E, rho, indirect
 
 
 def _lit_points(world, normals, tri, bary, flip):
@@ -279,8 +291,9 @@ def _lit_points(world, normals, tri, bary, flip):
     return pts, nrm, np.where(np.einsum("ij,ij->i", shading, nrm)[:, None] > 0, shading, nrm)
 
 
-def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
-    """(H, W) bool: texels of ``known`` (H, W) where any channel of ``values`` (H, W, k) differs
+def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR, channels=False):
+    """(H, W) bool (``channels``: (H, W, k), channel by channel): texels of ``known`` (H, W)
+    where any channel of ``values`` (H, W, k) differs
     from a known 4-neighbour's by more than ``ratio`` of the larger of the two and by more than
     ``floor`` of the channel's 99th percentile over the known texels: where a texel's own centre
     does not stand for its square (a shadow's edge, a lamp's hot spot, a block's foot), not
@@ -289,9 +302,9 @@ def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
     surface count, facing within 25 degrees and less than two texels (``pitch``, world units)
     apart, so that islands packed side by side do not mark each other's borders."""
     values = np.asarray(values, dtype=np.float64)
-    out = np.zeros(known.shape, bool)
+    out = np.zeros(values.shape, bool)
     if not known.any():
-        return out
+        return out if channels else out.any(axis=-1)
     least = floor * np.percentile(values[known], 99, axis=0)          # (k,)
     for axis in (0, 1):
         def pair(a):
@@ -299,15 +312,16 @@ def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR):
             return a[:-1], a[1:]
         (a, b), (ka, kb) = pair(values), pair(known)
         step = np.abs(a - b)
-        jump = np.any((step > ratio * np.maximum(a, b)) & (step > least), axis=-1) & ka & kb
+        same = ka & kb
         if surface is not None:
             (pa, pb), (na, nb), (sa, sb) = (pair(x) for x in surface)
-            jump &= (np.einsum("...k,...k->...", na, nb) > 0.9) & \
+            same &= (np.einsum("...k,...k->...", na, nb) > 0.9) & \
                 (np.linalg.norm(pa - pb, axis=-1) < 2.0 * np.maximum(sa, sb))
+        jump = (step > ratio * np.maximum(a, b)) & (step > least) & same[..., None]
         o = np.swapaxes(out, 0, axis)
         o[:-1] |= jump
         o[1:] |= jump
-    return out
+    return out if channels else out.any(axis=-1)
 
 
 def _sub_texels(px, tri, centre, grid=SUBTEXELS):
@@ -345,64 +359,76 @@ def _surface(covered, points, normals, pitch):
     return tuple(out)
 
 
-def texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary, flip=False, sources=None,
-                 faces=None):
+def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, flip=False, probed=None,
+                 faces=None, inside=None):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
-    :func:`texel_light` with ``direct(points, normals) -> (n, 3)`` for the direct light: at
-    every texel's centre, then, where the light varies between neighbours (:func:`varying`: a
-    shadow's edge, a lamp's hot spot, a block's foot), the mean over :data:`SUBTEXELS` squared
-    points of the square :data:`FOOTPRINT` texels wide around the centre that lie in its triangle,
-    each lit and read on its own (a box filter, as Cycles' bake averages its samples over that
-    square: a shadow's edge, or a surface standing on the floor, falls across a texel as a share
-    of it, not all or nothing). Two batches of rays, the second only at the texels that vary.
+    :func:`texel_light` with ``split(points, normals, samples=None, which=None) -> (n, S, 3)``
+    the direct light of each source apart (:meth:`..light.stage.DirectLight.split_at`): at the
+    texel centres, exact where the light needs it and interpolated where it is smooth
+    (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
+    then, where a source's light varies between neighbours (:func:`varying`: a shadow's edge, a
+    lamp's hot spot), that source's mean over the :data:`SUBTEXELS` squared points of the square
+    :data:`FOOTPRINT` texels wide around the centre that lie in its triangle (a box filter, as
+    Cycles' bake averages its samples over that square: a shadow's edge falls across a texel as
+    a share of it, not all or nothing), every source's where the reflected light starts (a
+    block's foot). Emission, reflectivity and reflected light are read at the centre.
 
-    Which texels vary is judged on ``sources(points, normals) -> (n, S)`` where given (each
-    source's direct light apart, :meth:`..light.stage.DirectLight.sources_at`) and on where any
-    light arrives reflected: both keep their shape when a source's strength or colour or a
-    surface's colour changes, so a relight picks the same texels and finds their transport
-    cached. Without it, on the light arriving. ``world`` (T, 3, 3), ``normals`` (T, 3, 3) or
-    None and ``flip`` as for :func:`bake_lightmap`."""
+    Which texels vary is judged on each source's light apart and on where any light arrives
+    reflected: both keep their shape when a source's strength or colour or a surface's colour
+    changes, so a relight picks the same texels and finds their transport cached. ``world``
+    (T, 3, 3), ``normals`` (T, 3, 3) or None and ``flip`` as for :func:`bake_lightmap`;
+    ``inside`` (H, W) bool from :func:`rasterize` or None: a texel whose centre lies outside its
+    triangle takes the direct light of its neighbours inside on the same face where it has any."""
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
+    pts, nrm, shading = _lit_points(world, normals, t, b, flip)
+    pitch = _pitch(uv, world, width, height)[t]
+    own = None if faces is None else faces[t]
+    Ds = by_source(lambda ids, samples: split(pts[ids], shading[ids], samples), covered,
+                   texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
+                   None if inside is None else inside[covered])[0]
+    E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)
+    D = np.maximum(Ds.sum(axis=1), 0.0)
+    S = Ds.shape[1]
+    img = np.zeros(covered.shape + (S + 1,))
+    img[covered] = np.column_stack([Ds @ LUMA, np.any(indirect > 0, axis=1)])
+    need = varying(img, covered, surface=_surface(covered, pts, nrm, pitch), channels=True)[covered]
+    # a bounded source's shadow edge or hot spot: that source; where reflected light starts (a
+    # block's foot), every source; the world's light is smooth elsewhere (no edge to average)
+    need = (need[:, :S] & (True if probed is None else np.asarray(probed, bool))) | need[:, S:]
+    edge = np.flatnonzero(need.any(axis=1))
+    if edge.size:
+        rows, cols = np.nonzero(covered)
+        px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
+        which, sub = _sub_texels(px, t[edge], np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1))
+        D[edge] = _sub_mean(split, world, normals, flip, t[edge], which, sub, Ds[edge], need[edge], D[edge])
+    light = D + indirect
+    return E + rho * light, light
 
-    def light_at(tris, bs):
-        pts, nrm, shading = _lit_points(world, normals, tris, bs, flip)
-        D = np.asarray(direct(pts, shading), dtype=np.float64)
-        return texel_light(elements, parts, pts, nrm, owner, D,
-                           None if faces is None else faces[tris]) + (pts, nrm, shading, D)
-    value, light, pts, nrm, shading, D = light_at(t, b)
-    if sources is None:
-        marks = light.sum(axis=1, keepdims=True)
-    else:
-        marks = np.column_stack([np.asarray(sources(pts, shading), dtype=np.float64),
-                                 np.any(light - D > 0, axis=1)])
-    img = np.zeros(covered.shape + (marks.shape[1],))
-    img[covered] = marks
-    surface = _surface(covered, pts, nrm, _pitch(uv, world, width, height)[t])
-    edge = varying(img, covered, surface=surface)[covered]
-    if not edge.any():
-        return value, light
-    rows, cols = np.nonzero(covered)
-    centre = np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1)
-    px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
-    which, sub = _sub_texels(px, t[edge], centre)
-    if which.size == 0:
-        return value, light
-    sub_value, sub_light = light_at(t[edge][which], sub)[:2]
-    m = int(edge.sum())
+
+def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D):
+    """(m, 3) the direct light of m texels (triangles ``tri`` (m,)) averaged over their sub-texel
+    points (``which`` (k,) texel, ``sub`` (k, 3) barycentric: :func:`_sub_texels`): the sources
+    ``need`` (m, S) bool lit again at each point, the others the centre's ``Ds`` (m, S, 3); a
+    texel with no point keeps ``D`` (m, 3)."""
+    pts, _, shading = _lit_points(world, normals, tri[which], sub, flip)
+    per = Ds[which].copy()                                            # (k, S, 3)
+    for k in range(Ds.shape[1]):
+        at = np.flatnonzero(need[which, k])
+        if at.size:
+            per[at, k] = split(pts[at], shading[at], SUB_RAYS, np.arange(Ds.shape[1]) == k)[:, k]
+    per = np.maximum(per.sum(axis=1), 0.0)
+    m = len(tri)
     count = np.bincount(which, minlength=m)
-    at = np.flatnonzero(edge)[count > 0]
-    for out, per in ((value, sub_value), (light, sub_light)):
-        mean = np.stack([np.bincount(which, weights=per[:, k], minlength=m) for k in range(3)], 1)
-        out[at] = (mean / np.maximum(count, 1)[:, None])[count > 0]
-    return value, light
+    mean = np.stack([np.bincount(which, weights=per[:, c], minlength=m) for c in range(3)], 1)
+    return np.where(count[:, None] > 0, mean / np.maximum(count, 1)[:, None], D)
 
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None, sources=None, faces=None) -> Lightmap:
+                  lighting_scale=None, split=None, probed=None, faces=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -413,10 +439,13 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
     dilated over too and, if still unset, counted in ``Lightmap.unset``.
 
-    With ``parts`` and ``direct(points, normals) -> (n, 3)`` (the bake's exact direct light,
-    times the exposure) the direct light is exact at every texel, the rest interpolated, and
-    texels where the light varies are the mean over their square (:func:`texel_values`, judged
-    on ``sources(points, normals) -> (n, S)`` where given), lit with ``normals`` (T, 3, 3) the triangles'
+    With ``parts`` and ``split(points, normals, samples=None, which=None) -> (n, S, 3)`` (the
+    bake's exact direct light of each source apart, times the exposure:
+    :meth:`..light.stage.DirectLight.split_at`; ``probed`` (S,) bool the sources a one-ray
+    probe stands for), or ``direct(points, normals) -> (n, 3)`` (one source, no probe), the
+    direct light is taken at the texels (exact where it needs to be, :func:`texel_values`), the
+    rest interpolated, and texels where the light varies are the mean over their square, lit
+    with ``normals`` (T, 3, 3) the triangles'
     corner normals in world space where given (smooth shading), else the triangles' own; without
     them every texel is the bilinear interpolation of ``corner_values``. ``lighting_scale`` (T, 3)
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
@@ -431,12 +460,15 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     image = np.zeros((height, width, 3))
     lighting = None
     t, b = tri[covered], bary[covered]
-    if parts is None or direct is None:
+    if split is None and direct is not None:
+        def split(points, normals, samples=None, which=None):      # one source, no probe
+            return np.asarray(direct(points, normals), dtype=np.float64)[:, None, :]
+    if parts is None or split is None:
         pts, nrm = texel_points(world, t, b, flip)
         image[covered] = evaluate(elements, corner_values, pts, nrm, owner, None if faces is None else faces[t])
     else:
-        image[covered], light = texel_values(elements, parts, direct, owner, uv, world, normals, tri, bary,
-                                             flip, sources, faces)
+        image[covered], light = texel_values(elements, parts, split, owner, uv, world, normals, tri, bary,
+                                             flip, probed, faces, inside)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]

@@ -1,0 +1,212 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The direct light at a lightmap's texels, exact only where the light needs it.
+
+A texel's direct light is exact (:meth:`..light.stage.DirectLight.split_at`, each source apart)
+at the corners of a coarse grid of texels (every :data:`STRIDES`-th row and column); a texel
+between four such anchors takes their bilinear interpolation, source by source, where:
+
+* the four anchors and the texel lie on one face of the mesh, and the texel's world point is
+  the bilinear interpolation of theirs (within :data:`FLAT` of a texel: the UV map is affine
+  there, not folded across an edge, not clamped onto an island's border);
+* every source's light is smooth there: within :data:`AGREE` of the largest value, or
+  :data:`AGREE_FLOOR` of the source's 99th percentile over the anchors (faint light), as
+  below;
+* the probe agrees: every emitter and lamp lit with one shadow ray at the texel itself gives
+  what the interpolation gives (a shadow thinner than the grid, falling between the anchors,
+  is found there), and no texel within :data:`MARGIN` texels disagrees (a penumbra's edge
+  beside a shadow whose centre ray the texel sees).
+
+The grids run from coarse to fine (8 texels, 4, then 2); on the 8- and 4-texel grids a cell's
+middle is lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
+corners must agree, or the light must run straight across it (its second differences through
+the anchors beyond it, over 8, within the same bound: a linear ramp of the sky toward a window
+is interpolated exactly). A texel no grid settles is lit exactly.
+Both tests compare each source with itself, relative to its own scale: a relight of new
+strengths or colours picks the same texels (and finds their rays cached). Smooth light (the
+sky on a wall, a lamp's falloff, the sun on a lit floor) costs the anchors; shadow edges,
+contacts and small faces cost what they did.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["by_source", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
+AGREE = 0.02          # a source's light at the four anchors within this share of the largest ...
+AGREE_FLOOR = 0.002   # ... or of this share of its 99th percentile over the anchors
+FLAT = 1.0           # texels: the texel's point off the anchors' bilinear interpolation at most
+MARGIN = 2            # texels around a texel whose probe disagrees that are lit exactly too
+
+
+def _corners(index, rows, cols, s):
+    """(m, 4) texel ids (-1 off the image or not covered) of the anchors around texels at
+    ``rows``, ``cols`` on the grid of stride ``s``, and (m, 4) their bilinear weights."""
+    H, W = index.shape
+    r0, c0 = rows // s * s, cols // s * s
+    fr, fc = (rows - r0) / s, (cols - c0) / s
+    out = np.full((len(rows), 4), -1, np.int64)
+    for k, (dr, dc) in enumerate(((0, 0), (0, s), (s, 0), (s, s))):
+        r, c = r0 + dr, c0 + dc
+        ok = (r < H) & (c < W)
+        out[ok, k] = index[r[ok], c[ok]]
+    w = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], 1)
+    return out, w
+
+
+def _middle(index, rows, cols, s):
+    """(m,) the texel id (-1: none) in the middle of the grid cell of stride ``s`` around each
+    texel at ``rows``, ``cols`` (rounded down for a stride of 1... 2: its first inner texel)."""
+    H, W = index.shape
+    r, c = rows // s * s + s // 2, cols // s * s + s // 2
+    out = np.full(len(rows), -1, np.int64)
+    ok = (r < H) & (c < W)
+    out[ok] = index[r[ok], c[ok]]
+    return out
+
+
+def _affine(points, corners, w, ids, pitch):
+    """(m,) bool: the texels ``ids``' points lie where the bilinear weights ``w`` (m, 4) of their
+    ``corners`` (m, 4) put them, within :data:`FLAT` of a texel (``pitch`` (n,) world units)."""
+    w = np.broadcast_to(w, corners.shape)
+    off = np.einsum("mk,mkj->mj", w, points[corners]) - points[ids]
+    return np.linalg.norm(off, axis=1) <= FLAT * pitch[ids]
+
+
+def _bend(value, done, faces, index, rows, cols, s, face):
+    """(m, S) the interpolation's error the light's bend suggests across each texel's cell of
+    stride ``s``: the largest second difference of each source's luminance along the cell's
+    two rows and two columns, through the texels ``s`` beyond it on either side (on ``face``
+    and ``done``; one side where the other has none), over 8 (a quadratic's error at a cell's
+    middle); inf where neither side has one."""
+    H, W = index.shape
+    r0, c0 = rows // s * s, cols // s * s
+    out = np.zeros((len(rows), value.shape[1]))
+
+    def at(r, c):
+        ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+        i = np.full(len(r), -1, np.int64)
+        i[ok] = index[r[ok], c[ok]]
+        ok = i >= 0
+        ok[ok] = done[i[ok]] & (faces[i[ok]] == face[ok])
+        return np.where(ok[:, None], value[np.maximum(i, 0)] @ LUMA, np.nan)
+    for r, c, dr, dc in ((r0, c0, 0, s), (r0 + s, c0, 0, s), (r0, c0, s, 0), (r0, c0 + s, s, 0)):
+        a, b, c1, d = (at(r + k * dr, c + k * dc) for k in (-1, 0, 1, 2))
+        both = np.fmax(np.abs(a - 2 * b + c1), np.abs(b - 2 * c1 + d))       # either side where one lacks
+        out = np.maximum(out, np.where(np.isnan(both), np.inf, both))
+    return out / 8
+
+
+def _near(mask_ids, rows, cols, shape, margin):
+    """(H, W) bool: texels within ``margin`` (Chebyshev) of the texels ``mask_ids`` at ``rows``,
+    ``cols``."""
+    img = np.zeros(shape, bool)
+    img[rows[mask_ids], cols[mask_ids]] = True
+    out = img.copy()
+    H, W = shape
+    for dr in range(-margin, margin + 1):
+        for dc in range(-margin, margin + 1):
+            src = img[max(0, -dr):H - max(0, dr), max(0, -dc):W - max(0, dc)]
+            out[max(0, dr):H - max(0, -dr), max(0, dc):W - max(0, -dc)] |= src
+    return out
+
+
+def _agree(a, b, floor):
+    """(m, S) bool: luminances ``a`` and ``b`` (m, S) agree (:data:`AGREE`, ``floor`` (S,))."""
+    return np.abs(a - b) <= AGREE * np.maximum(a, b) + floor
+
+
+def by_source(split, covered, points, normals, faces, pitch, probed=None, inside=None, strides=STRIDES):
+    """(n, S, 3) the direct light of each source at the n covered texels (``covered`` (H, W),
+    row-major order): exact at the anchors and where the light needs it, bilinear between
+    anchors elsewhere (module docstring). Also (n,) bool: the texels lit exactly.
+
+    ``split(ids, samples) -> (m, S, 3)`` the exact light at texels ``ids`` (with ``samples``
+    shadow rays per emitter and lamp: None the bake's, 1 the probe); ``points``, ``normals`` (n, 3),
+    ``faces`` (n,) each texel's mesh face, ``pitch`` (n,) its side in world units; ``probed``
+    (S,) bool: the sources a one-ray probe stands for (emitters and lamps; not the world), None
+    for none; ``inside`` (n,) bool or None: texels whose centre lies inside their triangle (the
+    others, on an island's rim, take their inside neighbours' light where they have any:
+    :func:`_rim`)."""
+    H, W = covered.shape
+    n = int(covered.sum())
+    index = np.full((H, W), -1, np.int64)
+    index[covered] = np.arange(n)
+    rows, cols = np.nonzero(covered)
+    value, exact = None, np.zeros(n, bool)
+    done = np.zeros(n, bool)
+    floor = probe = None
+
+    def light(ids):
+        nonlocal value
+        ids = ids[~exact[ids]]
+        if ids.size:
+            v = split(ids, None)
+            if value is None:
+                value = np.zeros((n,) + v.shape[1:])
+            value[ids] = v
+            exact[ids] = done[ids] = True
+
+    for s in strides:
+        ids = np.flatnonzero(~done)
+        if ids.size == 0:
+            break
+        corners, w = _corners(index, rows[ids], cols[ids], s)
+        mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
+        ok = np.all(corners >= 0, axis=1) & (mid >= 0)
+        ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
+        light(np.unique(np.concatenate([corners[ok].ravel(), mid[ok]])))
+        if floor is None and value is not None:
+            floor = AGREE_FLOOR * np.percentile(value[exact] @ LUMA, 99, axis=0)
+        ok &= ~done[ids]
+        ids, corners, w, mid = ids[ok], corners[ok], w[ok], mid[ok]
+        if ids.size == 0:
+            continue
+        keep = _affine(points, corners, w, ids, pitch)
+        Y = value[corners] @ LUMA                                         # (m, 4, S)
+        if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
+            keep &= _affine(points, corners, 0.25, mid, pitch)
+            keep &= np.all(_agree(Y.mean(axis=1), value[mid] @ LUMA, floor), axis=1)
+        else:          # a cell two texels wide: its corners agree, or the light is straight across it
+            bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
+            keep &= np.all(_agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor),
+                           axis=1)
+        interp = np.einsum("mk,mksc->msc", w, value[corners])
+        if probed is not None and np.any(probed):
+            if probe is None:
+                probe = split(np.arange(n), 1) @ LUMA                     # (n, S)
+            off = ~np.all(_agree(probe[ids][:, probed], interp[:, probed] @ LUMA, floor[probed]), axis=1)
+            keep &= ~_near(ids[off], rows, cols, (H, W), MARGIN)[rows[ids], cols[ids]]
+        value[ids[keep]] = interp[keep]
+        done[ids[keep]] = True
+    if inside is not None:
+        light(np.flatnonzero(~done & inside))
+        _rim(value, done, inside, faces, index, rows, cols)
+    light(np.flatnonzero(~done))
+    return value, exact
+
+
+def _rim(value, done, inside, faces, index, rows, cols):
+    """Texels not ``done`` whose centre lies outside their triangle (an island's rim, read
+    clamped onto it) take the mean of their 8 neighbours inside on the same face, as Cycles'
+    bake margin extends an island from its texels; ``value`` and ``done`` updated in place."""
+    rim = np.flatnonzero(~done & ~inside)
+    if rim.size == 0 or value is None:
+        return
+    H, W = index.shape
+    total = np.zeros((rim.size,) + value.shape[1:])
+    count = np.zeros(rim.size)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            r, c = rows[rim] + dr, cols[rim] + dc
+            nb = np.full(rim.size, -1, np.int64)
+            ok = (r >= 0) & (r < H) & (c >= 0) & (c < W) & ((dr != 0) | (dc != 0))
+            nb[ok] = index[r[ok], c[ok]]
+            ok = nb >= 0
+            ok[ok] = inside[nb[ok]] & done[nb[ok]] & (faces[nb[ok]] == faces[rim[ok]])
+            total[ok] += value[nb[ok]]
+            count[ok] += 1
+    got = count > 0
+    value[rim[got]] = total[got] / count[got][:, None, None]
+    done[rim[got]] = True
