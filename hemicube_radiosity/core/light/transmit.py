@@ -15,11 +15,15 @@ triangles (fans of each face's corners, with their UVs), which faces of which me
 :func:`..rays.occluder`), and each see-through triangle a ray crosses multiplies its throughput
 by the transmittance at the crossing, up to :data:`LAYERS` of them.
 
-What the solve sees is not changed here: a see-through patch still hides what is behind it from
-the hemi-cube and the final gather, and reflects its diffuse albedo (Cycles' albedo already
-carries the alpha, :mod:`...blender.read.shading`), so light reflected by surfaces behind a
-cut-out reaches the surfaces in front of it only through the cut-out's own reflection. Direct
-light (lamps, emitting faces, the world) and the world's light through the sky rays pass.
+The final gather's rays pass them too (:mod:`..output.through`): a gather ray takes (1 - t) of
+a see-through surface it lands on, read at the face's colour (the solve's reflectance over its
+mean opacity, ``SeeThrough.opacity``), and goes on with t for what lies behind. The solve
+itself is not changed here: a see-through patch still hides what is behind it from the
+hemi-cube's (and Embree's) form factors, and reflects its diffuse albedo (Cycles' albedo
+already carries the alpha, :mod:`...blender.read.shading`), so between patches light reflected
+by surfaces behind a cut-out reaches the surfaces in front of it only through the cut-out's own
+reflection. Direct light (lamps, emitting faces, the world) and the world's light through the
+sky rays pass.
 Transmittance is one value for the three bands (a coloured Transparent BSDF passes its mean).
 """
 from __future__ import annotations
@@ -130,6 +134,8 @@ class SeeThrough:
     image:     (T,) int64 index into ``images`` or -1.
     images:    list of :class:`AlphaImage`.
     faces:     per mesh of the bake, (F,) bool, its see-through faces (a back's with its front's).
+    opacity:   (T,) float64 the mean opacity of each triangle's face (:meth:`Transmit.opacity`:
+               what the solve's reflectance carries), or None (read as 1).
     """
 
     tris: np.ndarray
@@ -138,6 +144,7 @@ class SeeThrough:
     image: np.ndarray
     images: list
     faces: list
+    opacity: np.ndarray | None = None
     _key: bytes | None = field(default=None, repr=False, compare=False)
 
     def key(self) -> bytes:
@@ -197,13 +204,13 @@ def see_through(meshes) -> SeeThrough | None:
             continue
         parts.append(_fans(m, np.flatnonzero(flags[i]), len(images)))
         images += list(m.transmit.images)
-    cat = [np.concatenate([p[k] for p in parts]) for k in range(4)]
-    return SeeThrough(*cat, images=images, faces=flags)
+    cat = [np.concatenate([p[k] for p in parts]) for k in range(5)]
+    return SeeThrough(*cat[:4], images=images, faces=flags, opacity=cat[4])
 
 
 def _fans(mesh, faces, image_base):
-    """(tris (T,3,3), uv (T,3,2), transmit (T,), image (T,)) of ``faces`` of ``mesh``, each a fan
-    from its first corner."""
+    """(tris (T,3,3), uv (T,3,2), transmit (T,), image (T,), opacity (T,)) of ``faces`` of
+    ``mesh``, each a fan from its first corner; opacity: its face's (:meth:`Transmit.opacity`)."""
     tr = mesh.transmit
     off = np.asarray(mesh.face_offsets, np.int64)
     n = off[faces + 1] - off[faces]
@@ -216,7 +223,7 @@ def _fans(mesh, faces, image_base):
     image = np.full(face.size, -1, np.int64) if tr.face_image is None \
         else np.asarray(tr.face_image, np.int64)[face]
     image = np.where(image >= 0, image + image_base, -1)
-    return verts, uv, np.asarray(tr.face_transmit, float)[face], image
+    return verts, uv, np.asarray(tr.face_transmit, float)[face], image, tr.opacity(off)[face]
 
 
 class SeeThroughScene:
