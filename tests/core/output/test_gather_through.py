@@ -110,3 +110,33 @@ def test_rays_that_meet_no_see_through_face_give_the_opaque_gather_bit_for_bit()
     for x, y in ((a[1].indptr, b[1].indptr), (a[1].indices, b[1].indices), (a[1].data, b[1].data), (a[2], b[2])):
         assert np.array_equal(x, y)
     assert np.array_equal(a[3][:, :5], b[3]) and np.all(a[3][:, 5] == 1)
+
+
+def _lid_scene(t):
+    """The 4 x 4 m floor, a 2 x 2 m roof of transmittance ``t`` 1 m over it and an opaque lid
+    facing down 1 m over the roof, a point lamp between the two: the floor under the roof sees
+    the lit lid through it."""
+    floor, roof = _meshes(Transmit(np.array([t])), back=False)
+    lid = MeshInput.from_faces(np.array([[-2, -2, 2], [-2, 2, 2], [2, 2, 2], [2, -2, 2]], float),
+                               [[0, 1, 2, 3]], rho=(0.8,) * 3, name="lid")
+    return [floor, roof, lid]
+
+
+def test_a_relight_with_a_new_transmittance_gathers_again():
+    """The gather's matrix is cached by geometry and by what passes: a roof made more
+    transparent on a relight (same geometry, cache shared) gathers the new share of the lid's
+    light, as a bake without the cache does (the first bake's matrix, passing 0.2 of it, would
+    not)."""
+    from hemicube_radiosity.core.light.lamps import PointLight
+    from hemicube_radiosity.core.pipeline import BakeSettings, bake
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    s = BakeSettings(patch_size=1.0, element_size=0.5, method="hemicube", resolution=16, gather_rays=64,
+                     group_faces=False)
+    lamp = [PointLight(position=(0.0, 0.0, 1.5), power_w=200.0)]
+    cache = FormFactorCache()
+    first = bake(_lid_scene(0.2), s, lights=lamp, cache=cache)
+    second = bake(_lid_scene(0.8), s, lights=lamp, cache=cache)
+    fresh = bake(_lid_scene(0.8), s, lights=lamp)
+    assert first.elements.see_through is not None
+    np.testing.assert_allclose(second.corner_values(), fresh.corner_values(), rtol=1e-6, atol=1e-9)
