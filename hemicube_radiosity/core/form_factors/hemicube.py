@@ -21,11 +21,14 @@ Frames and pixel order are the ones :mod:`.embree` casts its rays with.
 
 See-through patches (``PatchSet.see_through``: alpha cut-outs, transparent shaders) pass what
 lies behind them: each receiver draws a second item buffer without them (:func:`_behind`), and
-a pixel whose nearest item is a see-through patch (or cluster) of mean transmittance t gives its
-weight to that patch, as before (its reflectance in the solve already carries its opacity
-1 - t), and t of it to the item of the second buffer there, or to the sky. One layer: a second
-see-through surface behind the first passes all of it; a see-through patch seen from behind
-(a closed mesh's, whose faces have no backs) still blocks.
+a pixel whose nearest item is a see-through patch (or cluster) of mean transmittance t gives
+1 - t of its weight to that patch and t to the item of the second buffer there, or to the sky.
+Rows then still sum to 1 at most. F so made reads the see-through patches' light over their
+solid part (their colour, not their mean over the holes): ``meta['passes']`` (n,) holds each
+receiver's t, and the solve (:mod:`..solve.stage`) solves for that light, its reflectance its
+colour (the solve's reflectance over 1 - t), and takes each patch's mean back. One layer: a
+second see-through surface behind the first passes all of it; a see-through patch seen from
+behind (a closed mesh's, whose faces have no backs) still blocks.
 """
 from __future__ import annotations
 
@@ -269,11 +272,12 @@ def _resolve(keys, weights, n, item_of=None):
 
 
 def _pass_through(scene, keys, ids, frames, n, rows, sky):
-    """Add to ``rows`` (B, n) and ``sky`` (B,) of receivers ``ids`` (B,) what the see-through
+    """Move in ``rows`` (B, n) and ``sky`` (B,) of receivers ``ids`` (B,) what the see-through
     items of their item buffers ``keys`` (B, 3 R^2) pass: at each pixel whose item passes t of
-    the light (``scene.passes``), t times its weight to the item there in an item buffer of
-    ``scene.behind``, drawn only for the receivers that see such an item."""
-    t = np.concatenate([scene.passes, [0.0, 0.0]])[_receiver_items(keys, scene.n, n, scene.item_of)]
+    the light (``scene.passes``), t times its weight from that item to the item there in an item
+    buffer of ``scene.behind``, drawn only for the receivers that see such an item."""
+    front = _receiver_items(keys, scene.n, n, scene.item_of)
+    t = np.concatenate([scene.passes, [0.0, 0.0]])[front]
     see = np.flatnonzero((t > 0).any(axis=1))
     if not see.size:
         return
@@ -281,9 +285,13 @@ def _pass_through(scene, keys, ids, frames, n, rows, sky):
     t = t[see]
     b, p = np.nonzero(t > 0)
     back = _receiver_items(behind[b, p], scene.behind.n, n, scene.behind.item_of)
-    got = np.bincount(b * (n + 2) + back, weights=t[b, p] * scene.weights[p], minlength=see.size * (n + 2))
+    w = t[b, p] * scene.weights[p]
+    got = np.bincount(b * (n + 2) + back, weights=w, minlength=see.size * (n + 2)) \
+        - np.bincount(b * (n + 2) + front[see][b, p], weights=w, minlength=see.size * (n + 2))
     got = got.reshape(see.size, n + 2)
-    rows[see] += got[:, :n]
+    moved = rows[see] + got[:, :n]
+    moved[np.abs(moved) < 1e-12] = 0.0               # an item wholly passed: no entry left
+    rows[see] = moved
     sky[see] += got[:, n + 1]
 
 
@@ -371,6 +379,8 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     with closing(ordered_map(rows_of, batches, workers, processes=True)) as results:
         indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
+    if scene.passes is not None:
+        meta["passes"] = scene.passes
     return CSR(indptr, indices, data, (n, n), meta, sky)
 
 

@@ -19,10 +19,12 @@ The final gather's rays pass them too (:mod:`..output.through`): a gather ray ta
 a see-through surface it lands on, read at the face's colour (the solve's reflectance over its
 mean opacity, ``SeeThrough.opacity``), and goes on with t for what lies behind. So do the
 hemi-cube's form factors (:mod:`..form_factors.hemicube`, the default method): a pixel that sees
-a see-through patch of mean transmittance t (``SeeThrough.passes``) gives its whole weight to it,
-whose reflectance already carries its opacity (Cycles' albedo carries the alpha,
-:mod:`...blender.read.shading`), and t of it to what lies behind, one layer deep. The Embree
-form-factor methods still see a see-through patch as a surface that hides what is behind it.
+a see-through patch of mean transmittance t (``SeeThrough.passes``) gives 1 - t of its weight to
+it and t to what lies behind, one layer deep, and the solve solves for the light of the patch's
+solid part, its reflectance (Cycles' albedo, which carries the alpha,
+:mod:`...blender.read.shading`) over 1 - t (:func:`..solve.stage.see_through_system`). The
+Embree form-factor methods still see a see-through patch as a surface that hides what is
+behind it.
 Direct light (lamps, emitting faces, the world) and the world's light through the sky rays pass.
 Transmittance is one value for the three bands (a coloured Transparent BSDF passes its mean).
 """
