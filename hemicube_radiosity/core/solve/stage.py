@@ -58,8 +58,10 @@ def see_through_system(F, rho, source, areas):
         return rho, source, areas, None
     solid = 1.0 - np.asarray(t, dtype=np.float64)
     over = np.where(solid > 0, 1.0 / np.where(solid > 0, solid, 1.0), 0.0)[:, None]
-    rho = np.minimum(np.asarray(rho, dtype=np.float64) * over, RHO_CAP)
-    return rho, np.asarray(source, dtype=np.float64) * over, np.asarray(areas, dtype=np.float64) * np.maximum(solid, 1e-6), solid
+    rho = np.asarray(rho, dtype=np.float64)
+    rho = np.where(solid[:, None] < 1, np.minimum(rho * over, RHO_CAP), rho)
+    areas = np.asarray(areas, dtype=np.float64) * np.maximum(solid, 1e-6)
+    return rho, np.asarray(source, dtype=np.float64) * over, areas, solid
 
 
 #: The most a see-through patch's colour reflects in the solve (its reflectance over its opacity
