@@ -18,10 +18,22 @@ stacked), which amortises the interpreter overhead; batches of receivers go to w
 back in receiver order (F is bit-identical for any worker count) and are assembled into a
 :class:`~.sparse.CSR`.
 Frames and pixel order are the ones :mod:`.embree` casts its rays with.
+
+See-through patches (``PatchSet.see_through``: alpha cut-outs, transparent shaders) pass what
+lies behind them: each receiver draws a second item buffer without them (:func:`_behind`), and
+a pixel whose nearest item is a see-through patch (or cluster) of mean transmittance t gives
+1 - t of its weight to that patch and t to the item of the second buffer there, or to the sky.
+Rows then still sum to 1 at most. F so made reads the see-through patches' light over their
+solid part (their colour, not their mean over the holes): ``meta['passes']`` (n,) holds each
+receiver's t, and the solve (:mod:`..solve.stage`) solves for that light, its reflectance its
+colour (the solve's reflectance over 1 - t), and takes each patch's mean back. One layer: a
+second see-through surface behind the first passes all of it; a see-through patch seen from
+behind (a closed mesh's, whose faces have no backs) still blocks.
 """
 from __future__ import annotations
 
 from contextlib import closing
+from dataclasses import replace
 from functools import partial
 
 import numpy as np
@@ -72,7 +84,7 @@ class _Scene:
     patch is its own receiver (K = N).
     """
 
-    def __init__(self, patches, resolution, clusters=None):
+    def __init__(self, patches, resolution, clusters=None, eyes=None):
         verts = np.asarray(patches.verts, dtype=np.float64)
         lo, hi = verts.min(axis=0), verts.max(axis=0)
         origin = 0.5 * (lo + hi)
@@ -90,12 +102,40 @@ class _Scene:
         self.corners_t = np.ascontiguousarray(self.corner_ids.T)         # (4, N)
         self.normals = np.asarray(drawn.normals, dtype=np.float64)
         self.plane = np.einsum("ij,ij->i", self.normals, drawn.centers - origin)
-        rc, rn = (patches.centers, patches.normals) if clusters is None else (clusters.centers, clusters.normals)
-        lift = ray_offsets(patches, owner=patches.owner if clusters is None else clusters.owner)
-        lift = np.maximum(lift, 64 * 2.0 ** -23 * np.abs(rc - origin).max(axis=1, initial=0.0))
-        self.eyes = rc - origin + lift[:, None] * np.asarray(rn, dtype=np.float64)
+        self.eyes = eyes
+        if eyes is None:
+            rc, rn = (patches.centers, patches.normals) if clusters is None else (clusters.centers, clusters.normals)
+            lift = ray_offsets(patches, owner=patches.owner if clusters is None else clusters.owner)
+            lift = np.maximum(lift, 64 * 2.0 ** -23 * np.abs(rc - origin).max(axis=1, initial=0.0))
+            self.eyes = rc - origin + lift[:, None] * np.asarray(rn, dtype=np.float64)
         self.near = np.float32(NEAR * scale)
         self.weights = pixel_weights(resolution)
+        self.behind = self.passes = None          # see-through patches: :func:`_behind`
+
+
+def _behind(scene, patches, clusters):
+    """Give ``scene`` (a :class:`_Scene` of ``patches``) what its see-through patches pass:
+    ``passes`` (n,) the mean transmittance of each receiver (patch, or cluster: its pieces'
+    area-weighted mean), and ``behind``, a :class:`_Scene` of the other patches (every piece of a
+    cluster that passes any light left out) seen from the same eyes, its items numbered as the
+    receivers. Nothing when no patch passes light."""
+    st = getattr(patches, "see_through", None)
+    if st is None:
+        return
+    t = st.patch_transmit(patches)
+    if clusters is not None:
+        t = clusters.mean(t, patches.areas)
+    keep = ~(t > 0) if clusters is None else ~(t > 0)[np.asarray(clusters.of, np.int64)]
+    if keep.all() or not keep.any():           # (every patch see-through: they block, as before)
+        return
+    sub = PatchSet(patches.verts, patches.polys[keep], patches.centers[keep], patches.normals[keep],
+                   patches.areas[keep], patches.rho[keep], patches.emission[keep], patches.owner[keep],
+                   patches.source_face[keep], list(patches.object_names))
+    behind = _Scene(sub, scene.resolution, None if clusters is None else replace(clusters, of=clusters.of[keep]),
+                    eyes=scene.eyes)
+    if clusters is None:
+        behind.item_of = np.flatnonzero(keep)
+    scene.behind, scene.passes = behind, t
 
 
 def _batch_item_buffer(scene, recv, frames, eyes):
@@ -231,6 +271,39 @@ def _resolve(keys, weights, n, item_of=None):
     return rows[:, :n], rows[:, n + 1]
 
 
+def _pass_through(scene, keys, ids, frames, n, rows, sky):
+    """Move in ``rows`` (B, n) and ``sky`` (B,) of receivers ``ids`` (B,) what the see-through
+    items of their item buffers ``keys`` (B, 3 R^2) pass: at each pixel whose item passes t of
+    the light (``scene.passes``), t times its weight from that item to the item there in an item
+    buffer of ``scene.behind``, drawn only for the receivers that see such an item."""
+    front = _receiver_items(keys, scene.n, n, scene.item_of)
+    t = np.concatenate([scene.passes, [0.0, 0.0]])[front]
+    see = np.flatnonzero((t > 0).any(axis=1))
+    if not see.size:
+        return
+    behind = _batch_item_buffer(scene.behind, ids[see], frames, scene.eyes)
+    t = t[see]
+    b, p = np.nonzero(t > 0)
+    back = _receiver_items(behind[b, p], scene.behind.n, n, scene.behind.item_of)
+    w = t[b, p] * scene.weights[p]
+    got = np.bincount(b * (n + 2) + back, weights=w, minlength=see.size * (n + 2)) \
+        - np.bincount(b * (n + 2) + front[see][b, p], weights=w, minlength=see.size * (n + 2))
+    got = got.reshape(see.size, n + 2)
+    moved = rows[see] + got[:, :n]
+    moved[np.abs(moved) < 1e-12] = 0.0               # an item wholly passed: no entry left
+    rows[see] = moved
+    sky[see] += got[:, n + 1]
+
+
+def _receiver_items(keys, N, n, item_of):
+    """The receivers (of n; n: a back face, n + 1: the sky) that item-buffer ``keys`` of a
+    scene of N drawn items show."""
+    ids = keys & ID_MASK
+    if item_of is None:
+        return ids
+    return np.concatenate([item_of, [n, n + 1]])[ids]
+
+
 def receiver_ids(n, receivers):
     """Sorted unique receiver ids (all patches when None); ValueError when out of range."""
     if receivers is None:
@@ -293,6 +366,7 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     n = len(patches) if clusters is None else len(clusters)
     recv = receiver_ids(n, receivers)
     scene = _Scene(patches, R, clusters)
+    _behind(scene, patches, clusters)
     frames = receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
     workers = resolve_workers(workers)
     # with several batches drawn at once, smaller ones: the peak memory stays that of one worker
@@ -305,6 +379,8 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     with closing(ordered_map(rows_of, batches, workers, processes=True)) as results:
         indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
+    if scene.passes is not None:
+        meta["passes"] = scene.passes
     return CSR(indptr, indices, data, (n, n), meta, sky)
 
 
@@ -317,6 +393,8 @@ def _batch_rows(scene, frames, n, ids):
     """
     keys = _batch_item_buffer(scene, ids, frames, scene.eyes)
     rows, sky_b = _resolve(keys, scene.weights, n, scene.item_of)
+    if scene.behind is not None:
+        _pass_through(scene, keys, ids, frames, n, rows, sky_b)
     r, c = np.nonzero(rows)
     return ids, np.bincount(r, minlength=ids.size), c.astype(np.int32), \
         rows[r, c].astype(np.float32), sky_b

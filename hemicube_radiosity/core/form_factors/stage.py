@@ -50,7 +50,9 @@ def form_factor_stage(ctx) -> None:
     if cache is not None:
         grouping = b"" if ctx.clusters is None else np.ascontiguousarray(ctx.clusters.of).tobytes()
         # the patches' key hashed once per geometry (a relight's patches share their cached arrays)
-        key = cache_key(geometry_key(patches) + grouping, ctx.settings.form_factor_key())
+        st = getattr(patches, "see_through", None)             # what see-through patches pass
+        key = cache_key(geometry_key(patches) + grouping + (b"" if st is None else st.key()),
+                        ctx.settings.form_factor_key())
     F = cache.get(key) if cache is not None else None
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:

@@ -15,11 +15,17 @@ triangles (fans of each face's corners, with their UVs), which faces of which me
 :func:`..rays.occluder`), and each see-through triangle a ray crosses multiplies its throughput
 by the transmittance at the crossing, up to :data:`LAYERS` of them.
 
-What the solve sees is not changed here: a see-through patch still hides what is behind it from
-the hemi-cube and the final gather, and reflects its diffuse albedo (Cycles' albedo already
-carries the alpha, :mod:`...blender.read.shading`), so light reflected by surfaces behind a
-cut-out reaches the surfaces in front of it only through the cut-out's own reflection. Direct
-light (lamps, emitting faces, the world) and the world's light through the sky rays pass.
+The final gather's rays pass them too (:mod:`..output.through`): a gather ray takes (1 - t) of
+a see-through surface it lands on, read at the face's colour (the solve's reflectance over its
+mean opacity, ``SeeThrough.opacity``), and goes on with t for what lies behind. So do the
+hemi-cube's form factors (:mod:`..form_factors.hemicube`, the default method): a pixel that sees
+a see-through patch of mean transmittance t (``SeeThrough.passes``) gives 1 - t of its weight to
+it and t to what lies behind, one layer deep, and the solve solves for the light of the patch's
+solid part, its reflectance (Cycles' albedo, which carries the alpha,
+:mod:`...blender.read.shading`) over 1 - t (:func:`..solve.stage.see_through_system`). The
+Embree form-factor methods still see a see-through patch as a surface that hides what is
+behind it.
+Direct light (lamps, emitting faces, the world) and the world's light through the sky rays pass.
 Transmittance is one value for the three bands (a coloured Transparent BSDF passes its mean).
 """
 from __future__ import annotations
@@ -130,6 +136,10 @@ class SeeThrough:
     image:     (T,) int64 index into ``images`` or -1.
     images:    list of :class:`AlphaImage`.
     faces:     per mesh of the bake, (F,) bool, its see-through faces (a back's with its front's).
+    opacity:   (T,) float64 the mean opacity of each triangle's face (:meth:`Transmit.opacity`:
+               what the solve's reflectance carries), or None (read as 1).
+    passes:    per mesh of the bake, (F,) float64, each face's mean transmittance (1 - its mean
+               opacity; 0 where opaque; a back's its front's), or None (unknown: read as 0).
     """
 
     tris: np.ndarray
@@ -138,6 +148,8 @@ class SeeThrough:
     image: np.ndarray
     images: list
     faces: list
+    opacity: np.ndarray | None = None
+    passes: list | None = None
     _key: bytes | None = field(default=None, repr=False, compare=False)
 
     def key(self) -> bytes:
@@ -161,6 +173,18 @@ class SeeThrough:
         ok = owner < len(self.faces)
         out = np.zeros(len(owner), bool)
         out[ok] = flags[base[owner[ok]] + np.asarray(patches.source_face, np.int64)[ok]]
+        return out
+
+    def patch_transmit(self, patches) -> np.ndarray:
+        """(N,) float64: the mean transmittance of each patch's face (0 where opaque)."""
+        owner = np.asarray(patches.owner, np.int64)
+        out = np.zeros(len(owner))
+        if self.passes is None:
+            return out
+        flat = np.concatenate([np.asarray(p, float) for p in self.passes] + [np.zeros(0)])
+        base = np.concatenate([[0], np.cumsum([len(p) for p in self.passes])]).astype(np.int64)
+        ok = owner < len(self.passes)
+        out[ok] = flat[base[owner[ok]] + np.asarray(patches.source_face, np.int64)[ok]]
         return out
 
     def at(self, prim, u, v) -> np.ndarray:
@@ -191,19 +215,25 @@ def see_through(meshes) -> SeeThrough | None:
             front = flags[m.back_of] if m.back_of >= 0 else None
             flags[i] = front[np.asarray(m.back_faces)] if front is not None \
                 else np.zeros(len(m.face_offsets) - 1, bool)
-    parts, images = [], []
+    parts, images, passes = [], [], [np.zeros(len(f)) for f in flags]
     for i, m in enumerate(meshes):
         if m.back_of >= 0 or not flags[i].any():
             continue
-        parts.append(_fans(m, np.flatnonzero(flags[i]), len(images)))
+        opacity = m.transmit.opacity(m.face_offsets)
+        passes[i] = np.where(flags[i], 1.0 - opacity, 0.0)
+        parts.append(_fans(m, np.flatnonzero(flags[i]), len(images), opacity))
         images += list(m.transmit.images)
-    cat = [np.concatenate([p[k] for p in parts]) for k in range(4)]
-    return SeeThrough(*cat, images=images, faces=flags)
+    for i, m in enumerate(meshes):
+        if m.back_of >= 0:
+            passes[i] = passes[m.back_of][np.asarray(m.back_faces, np.int64)]
+    cat = [np.concatenate([p[k] for p in parts]) for k in range(5)]
+    return SeeThrough(*cat[:4], images=images, faces=flags, opacity=cat[4], passes=passes)
 
 
-def _fans(mesh, faces, image_base):
-    """(tris (T,3,3), uv (T,3,2), transmit (T,), image (T,)) of ``faces`` of ``mesh``, each a fan
-    from its first corner."""
+def _fans(mesh, faces, image_base, opacity):
+    """(tris (T,3,3), uv (T,3,2), transmit (T,), image (T,), opacity (T,)) of ``faces`` of
+    ``mesh``, each a fan from its first corner; ``opacity`` (F,): the faces' mean opacity
+    (:meth:`Transmit.opacity`)."""
     tr = mesh.transmit
     off = np.asarray(mesh.face_offsets, np.int64)
     n = off[faces + 1] - off[faces]
@@ -216,7 +246,7 @@ def _fans(mesh, faces, image_base):
     image = np.full(face.size, -1, np.int64) if tr.face_image is None \
         else np.asarray(tr.face_image, np.int64)[face]
     image = np.where(image >= 0, image + image_base, -1)
-    return verts, uv, np.asarray(tr.face_transmit, float)[face], image
+    return verts, uv, np.asarray(tr.face_transmit, float)[face], image, np.asarray(opacity, float)[face]
 
 
 class SeeThroughScene:

@@ -24,6 +24,7 @@ from ..mesh.patches import PatchSet
 from ..rays import cosine_lattice, ray_offsets
 from ..util.sparse import CSR
 from ..util.unique import unique_ints
+from .through import Through, cast_through
 
 #: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
 #: with more than one worker (:mod:`.parallel`); below, threads (None: always threads). On
@@ -102,21 +103,25 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
 
     ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
     point: one cosine pattern (:func:`.rays.cosine_lattice`, seeded) shared by every point, in
-    the point's normal frame. A ray that hits the back of a patch sees nothing. G depends on
-    geometry only: a relight reuses it. ``workers``: workers casting chunks of points at once (0 = every
-    core, 1 = serial): threads, or forked processes from :data:`PROCESS_RAYS` rays on (only the
-    chunk starts go out, each chunk's rows come back); G is bit-identical for any count.
+    the point's normal frame. A ray that hits the back of a patch sees nothing. A ray that hits
+    a see-through patch (``patches.see_through``) reads part of it and goes on past it
+    (:mod:`.through`). G depends on geometry (and what passes) only: a relight reuses it.
+    ``workers``: workers casting chunks of points at once (0 = every core, 1 = serial): threads,
+    or forked processes from :data:`PROCESS_RAYS` rays on (only the chunk starts go out, each
+    chunk's rows come back); G is bit-identical for any count.
     ``chunk_rays``: rays cast and summed at once (65,536: smaller chunks' temporaries fit the
     caches better, about twice as fast as chunks of a million; and a forked worker faults every
     page of its first chunk's temporaries in fresh, zeroed by the kernel, so smaller chunks
     also cost fewer page faults and less system time). ``hits``: also return the rays' hit
     points, ``(G, sky, H)`` with H (h, 5) float32 rows
     ``(point id, patch id, x, y, z)`` of every front hit, in point order (for
-    :func:`correct_hits`; each hit carries weight ``1 / rays`` in G). ``background``: return a
-    :class:`.background.Background` whose ``result()`` is what the call returns, so the caller can
-    go on with other work while the workers cast (only when the chunks run on forked processes:
-    otherwise the result is made before the call returns); ``ticker`` is then used only before
-    the call returns: poll cancellation with ``result(cancelled)``.
+    :func:`correct_hits`; each hit carries weight ``1 / rays`` in G; where the rays pass
+    see-through patches, (h, 6) rows with the hit's weight last, carrying ``weight / rays``).
+    ``background``: return a :class:`.background.Background` whose ``result()`` is what the call
+    returns, so the caller can go on with other work while the workers cast (only when the
+    chunks run on forked processes: otherwise the result is made before the call returns);
+    ``ticker`` is then used only before the call returns: poll cancellation with
+    ``result(cancelled)``.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -136,11 +141,17 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     if workers > 1:        # a few chunks a worker, so they end together (rows never span chunks:
         step = max(1, min(step, -(-P // (4 * workers))))      # G is the same for any chunking)
     forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
+    through = Through.of(patches) if P else None                # None: every patch opaque
     # forked workers write their rows and hits into shared memory, each chunk of points at its
-    # own place (at most 4 entries and one hit per ray), and send back only how many
-    out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches))) if forked else None
+    # own place (at most 4 entries and one hit per ray), and send back only how many (rays
+    # through see-through patches make more: their rows come back as they are)
+    out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches))) if forked and through is None else None
     eps = ray_offsets(patches, points, normals, scene=scene)[:, None]    # the rays' start offsets
-    cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step, hits, out)
+    if through is None:
+        cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step, hits, out)
+    else:
+        cast = partial(cast_through, through, surface_weights, _hit_dtype(P, len(patches)), patches,
+                       patch_parameters(patches), scene, points, normals, eps, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
     starts = range(0, P, step)
@@ -276,9 +287,11 @@ def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.nd
     H = H[select[H[:, 1].astype(np.int64)]]
     if not len(H):
         return out
-    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:].astype(np.float64)
+    row, pid, y = H[:, 0].astype(np.int64), H[:, 1].astype(np.int64), H[:, 2:5].astype(np.float64)
     d = np.asarray(exact(y, pid), dtype=np.float64) - surface_values(patch_parameters(patches), patches.polys,
                                                                       vertex_values, pid, y)
+    if H.shape[1] > 5:                          # rays through see-through patches: their weights
+        d *= H[:, 5:6].astype(np.float64)
     for c in range(k):
         out[:, c] = np.bincount(row, weights=d[:, c], minlength=G.shape[0])
     return out / G.meta["rays"]
@@ -325,11 +338,15 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
         return tuple(np.concatenate([r[j] for r in runs]) for j in (0, 1))
 
     def run(h):
-        row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:].astype(np.float64)
+        row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:5].astype(np.float64)
         ids, w = surface_weights(params, patches.polys, pid, y)
+        if h.shape[1] > 5:                      # rays through see-through patches: their weights
+            w = w * h[:, 5:6].astype(np.float64)
         rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
         if read is not None and len(h):
             c, r = read(y, pid)
+            if h.shape[1] > 5:
+                r = np.asarray(r, np.float64) * h[:, 5:6].astype(np.float64)
             rows.append(np.repeat(row, c.shape[1]))
             cols.append(V + np.asarray(c, np.int64).ravel())
             vals.append(np.asarray(r, np.float64).ravel())

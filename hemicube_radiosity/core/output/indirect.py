@@ -25,6 +25,7 @@ from .gather import apply_gather, correction_matrix, gather_matrix, product
 from .interpolate import interpolate_corners, located_corners, locate
 from .shine import HOT, hot_elements, mean_light, shine
 from .sides import open_elements, sided_mesh
+from .through import through_key
 
 __all__ = ["GATHER_PASSES", "element_indirect", "start_gather"]
 
@@ -149,7 +150,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # the hits' correction as a matrix: it depends on geometry and on what was chosen (on the
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
-    key = cache_key(geometry_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
+    key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
@@ -163,7 +164,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
 
 
 def _gather_key(ctx, elements):
-    return cache_key(geometry_key(elements), ("gather-elements", ctx.settings.gather_rays))
+    return cache_key(geometry_key(elements) + through_key(elements), ("gather-elements", ctx.settings.gather_rays))
 
 
 def start_gather(ctx, elements, xv, nv):

@@ -69,7 +69,7 @@ def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:
     n = int(code[0])
     polys, origin = code[1:1 + n].reshape(mesh.polys.shape), code[1 + n:]
     out = PatchSet(mesh.verts[origin], polys, mesh.centers, mesh.normals, mesh.areas, mesh.rho,
-                   mesh.emission, mesh.owner, mesh.source_face, list(mesh.object_names))
+                   mesh.emission, mesh.owner, mesh.source_face, list(mesh.object_names), mesh.see_through)
     # the elements are the same: what is known of them carries over (no second ray cast)
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     if ctx.cache is not None:

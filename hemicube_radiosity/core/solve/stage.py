@@ -26,9 +26,12 @@ def solve_stage(ctx) -> None:
     computed = np.zeros(len(p), bool)
     computed[receivers_needed(p)] = True
     ctx.say(0.0, s.solver)
-    sol = solve(ctx.form_factors, p.rho, ctx.source, s.solver, s.tolerance, s.max_iterations,
-                areas=p.areas, cancelled=ctx.cancelled, computed=computed,
+    rho, source, areas, solid = see_through_system(ctx.form_factors, p.rho, ctx.source, p.areas)
+    sol = solve(ctx.form_factors, rho, source, s.solver, s.tolerance, s.max_iterations,
+                areas=areas, cancelled=ctx.cancelled, computed=computed,
                 progress=lambda fr: ctx.say(fr, ""))
+    if solid is not None:                             # each see-through patch's mean
+        sol = replace(sol, B=sol.B * solid[:, None])
     bound = sol.error_bound
     ctx.say(1.0, f"{sol.iterations} iterations, residual {sol.residual:.2e}, error below {bound:.1e}"
             + ("" if sol.converged else " (NOT converged: raise max iterations)"))
@@ -41,6 +44,29 @@ def solve_stage(ctx) -> None:
         ctx.reflected = sol.B
         sol = replace(sol, B=sol.B + p.emission, extra={**sol.extra, "reflected_only": True})
     ctx.solution = replace(sol, energy=energy)
+
+
+def see_through_system(F, rho, source, areas):
+    """(rho, source, areas, solid) to solve with F: where F's ``meta['passes']`` (n,) holds
+    see-through patches' transmittances t (:mod:`..form_factors.hemicube`), F reads their light
+    over their solid part, 1 - t of them (``solid``): the solve then solves for it, their
+    reflectance and source over ``solid`` (their colour), their areas times it (the energy
+    balance counts what they absorb on it); B is the solution times ``solid``. Else the inputs
+    as they are and ``solid`` None."""
+    t = F.meta.get("passes") if F.meta else None
+    if t is None:
+        return rho, source, areas, None
+    solid = 1.0 - np.asarray(t, dtype=np.float64)
+    over = np.where(solid > 0, 1.0 / np.where(solid > 0, solid, 1.0), 0.0)[:, None]
+    rho = np.asarray(rho, dtype=np.float64)
+    rho = np.where(solid[:, None] < 1, np.minimum(rho * over, RHO_CAP), rho)
+    areas = np.asarray(areas, dtype=np.float64) * np.maximum(solid, 1e-6)
+    return rho, np.asarray(source, dtype=np.float64) * over, areas, solid
+
+
+#: The most a see-through patch's colour reflects in the solve (its reflectance over its opacity
+#: stays below the input's own bound, rounding aside)
+RHO_CAP = 0.999
 
 
 def lamp_power(light) -> np.ndarray:
