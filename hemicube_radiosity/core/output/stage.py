@@ -25,6 +25,7 @@ from ..mesh.elements import cut_elements
 from ..rays import embree_available
 from ..runtime.cache import array_key
 from .corners import corner_values, vertex_mean
+from .covered import covered_light
 from .crease import corner_light
 from .normals import shading_normals
 from .indirect import element_indirect, start_gather
@@ -116,7 +117,10 @@ def vertex_stage(ctx) -> None:
     if side is not None:                                # what a buried vertex gathered: the inside
         rest_v = side.spread(rest_v)
     # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
-    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, None if side is None else side.count > 0)
+    buried = None if side is None else side.count > 0
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried)
+    # where another surface lies between a corner and its vertex's rays, the corner's own light
+    creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried)
     _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v
