@@ -11,22 +11,25 @@ millimetres under a road, the ground ring under the town's grass), Cycles' rays 
 the corner is dark, and the light around it is what a render shows there; ours started above
 it and read the open room or the sun.
 
-Here every element corner is baked where Cycles bakes it (:func:`bake_points`: a corner of its
-source face on the first of Blender's triangles holding it, moved toward that triangle's
-centre; any other toward its element's), and a bake point is *covered* where another face lies over it,
-along its triangle's normal, within its object's ray offset, or between it and where its
-vertex's rays start (:func:`covered_corners`; two rays per point). A covered point is lit on its
-own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half way to
-the face over it): its direct light found again there (cosine to its shading normal, nothing
-from below its triangle's plane), and its vertex's light reflected more than once scaled by
-how much of the open scene it sees against how much the vertex's start did
-(:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back face
-lend nothing; in a crack they only meet its dark walls). Faces within :data:`TIE_ULPS` float32 steps of the point (a duplicate face:
-either may be drawn) cover nothing, nor do backs of open surfaces (:mod:`..mesh.backs`), which
-Cycles has not. Corners of elements the scene does not see at a vertex of one it sees (they
-count in that vertex's mean) and of buried vertices (:func:`.sides.buried_side`) keep the open side's
-light, which interpolation carries over the open part of their face. Geometry only, cached: a
-relight casts no ray. World units.
+Here every element corner is baked where Cycles bakes it (:func:`bake_points`: a corner of
+its source face on the first of Blender's triangles holding it, moved toward that triangle's
+centre; any other toward its element's), and a bake point is *covered* where another face lies
+over it, along its triangle's normal, within its object's ray offset, or between it and where
+its vertex's rays start (:func:`covered_corners`; two rays per point). A covered point is lit
+on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
+way to the face over it): its direct light found again there (cosine to its shading normal,
+nothing from below its triangle's plane), and its vertex's light reflected more than once
+scaled by how much of the open scene it sees against how much the vertex's start did
+(:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
+face lend nothing; in a crack they only meet its dark walls). Faces within :data:`TIE_ULPS`
+float32 steps of the point (a duplicate face: either may be drawn) cover nothing, nor do backs
+of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene
+does not see at a vertex of one it sees (they count in that vertex's mean) and of buried
+vertices (:func:`.sides.buried_side`) keep their vertex's light; a buried vertex's is the light
+where its edge from the open side meets what buries it, and the rays from that point start no
+further off it than half way to a face over it (:func:`start_offsets`): the point lies against
+the burying surface, and rays started past a lip over it read the sun. Geometry only, cached:
+a relight casts no ray. World units.
 """
 from __future__ import annotations
 
@@ -40,7 +43,7 @@ from .crease import corner_normals
 from .lift import BAKE_NUDGE, face_corners
 from .normals import corner_shading_normals
 
-__all__ = ["TIE_ULPS", "covered_corners", "covered_light"]
+__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
 
 #: Float32 steps of a point's largest coordinate within which a surface counts as coincident
 #: with it (a duplicate face), not as covering it.
@@ -190,7 +193,8 @@ def _first_triangles(elements, meshes, p, x):
                 hold = (face == row[0]) & np.any(row[1:] == j[:, None], axis=1)
                 tri[hold] = row[1:]
         ok = np.flatnonzero(tri[:, 0] >= 0)
-        V = np.asarray(m.verts, dtype=np.float64)[np.asarray(m.face_indices, dtype=np.int64)[off[face[ok]][:, None] + tri[ok]]]
+        idx = np.asarray(m.face_indices, dtype=np.int64)
+        V = np.asarray(m.verts, dtype=np.float64)[idx[off[face[ok]][:, None] + tri[ok]]]
         # a triangle of no area (a quad with two corners at one point) has no centre to move to
         area2 = np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=1)
         edge2 = np.max([np.sum((V[:, i] - V[:, (i + 1) % 3]) ** 2, axis=1) for i in range(3)], axis=0)
@@ -258,3 +262,24 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
         out[p, c] = value
         out[p[tri], 3] = value[tri]
     return light, keep
+
+
+def start_offsets(ctx, elements, points, normals) -> np.ndarray:
+    """(P,) how far rays from ``points`` (P, 3) on the surfaces of ``elements`` start along
+    their unit ``normals``: their object's ray offset (:meth:`.light.stage.DirectLight.offsets`),
+    but half the way to a face over the point when one lies nearer (at least :data:`LIFT_ULPS`
+    float32 steps), as :func:`covered_light` starts a covered corner's: the point where a buried
+    vertex's edge meets what buries it (:func:`.sides.buried_side`) lies against that surface,
+    and rays started past a face over it read the open side. Geometry only, cached."""
+    eps = np.asarray(ctx.direct.offsets(points, normals), dtype=np.float64)
+    if not embree_available() or not len(points):
+        return eps
+
+    def make():
+        _, scene = _fronts(ctx, elements)
+        tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(points).max(axis=1), 1.0)
+        hit, t = scene.intersect(points + tie[:, None] * normals, normals, eps)
+        gap = np.where(np.asarray(hit) >= 0, tie + np.asarray(t, dtype=np.float64), np.inf)
+        return np.minimum(eps, np.maximum(0.5 * gap, LIFT_ULPS * tie / TIE_ULPS))
+    key = cache_key(geometry_key(elements) + array_key(points) + array_key(normals), ("start-offsets",))
+    return cached(ctx.cache, key, make)

@@ -65,3 +65,33 @@ def test_a_coincident_board_is_a_tie_and_covers_nothing():
     pos, val, _ = _floor_corners(gap=0.0)
     assert TIE_ULPS >= 1
     np.testing.assert_allclose(val, OPEN, rtol=1e-6)
+
+
+def _block_with_lip(gap=2e-5):
+    """A closed block on the floor from x = 0.95, and in front of it a lip: a single plane
+    facing up, ``gap`` over the floor, from x = 0.8 to the block."""
+    from hemicube_radiosity.core.builtin_scenes import box
+    lip = MeshInput.from_faces([(0.8, -2.0, gap), (0.95, -2.0, gap), (0.95, 2.0, gap), (0.8, 2.0, gap)],
+                               [(0, 1, 2, 3)], rho=(RHO,) * 3, name="lip")
+    return [box((0.95, -2.0, 0.0), (1.95, 2.0, 0.3), (RHO,) * 3, name="block"), lip]
+
+
+def test_a_buried_corner_s_open_side_under_a_lip_is_lit_from_under_it():
+    """The floor's vertices at x = 1 are buried in a block standing at x = 0.95: they take the
+    light where their edge from x = 0 meets the block (core/output/sides.py), a point under a
+    lip 20 um over the floor, within the floor's ray offset. Rays started at that offset read the
+    sun over the lip; Cycles' rays from the point, and ours started half way to the lip
+    (covered.start_offsets), meet it: no sun."""
+    r = bake([_floor()] + _block_with_lip(), BakeSettings(patch_size=2.0, element_size=2.0,
+                                                             two_sided_reflection=False, gather_rays=64),
+             lights=[SunLight((0.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    own = np.flatnonzero((E.owner == 0) & (np.abs(E.centers[:, 0] - 0.5) < 1e-9))      # the faces x in [0, 1]
+    pos = E.verts[E.corner_ids()[own]].reshape(-1, 3)
+    val = r.corner_values()[own].reshape(-1, 3)
+    at_block = np.abs(pos[:, 0] - 1.0) < 1e-9
+    open_end = np.abs(pos[:, 0]) < 1e-9
+    assert at_block.sum() == 8 and open_end.sum() == 8
+    np.testing.assert_allclose(val[open_end], OPEN, rtol=0.01)     # and a little light off the block
+    D = r.corner_parts()[2][own].reshape(-1, 3)
+    assert D[at_block].max() < 1e-3 * SUN / np.pi                # no sun under the lip
