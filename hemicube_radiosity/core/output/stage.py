@@ -25,6 +25,7 @@ from ..mesh.elements import cut_elements
 from ..rays import embree_available
 from ..runtime.cache import array_key
 from .corners import corner_values, vertex_mean
+from .covered import covered_light, start_offsets
 from .crease import corner_light
 from .normals import shading_normals
 from .indirect import element_indirect, start_gather
@@ -97,7 +98,8 @@ def vertex_stage(ctx) -> None:
             D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
             side = buried_side(ctx, ctx.elements, xv, nv)
             if side is not None:                            # before the gather: its rays read it
-                D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
+                eps = start_offsets(ctx, ctx.elements, side.points, side.normals)
+                D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side", eps=eps))
             rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side,
                                       pending)
         finally:
@@ -112,11 +114,15 @@ def vertex_stage(ctx) -> None:
         D_vert = ctx.direct.at(xv, nv, "vertices")
         side = buried_side(ctx, sided, xv, nv)
         if side is not None:
-            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side"))
+            eps = start_offsets(ctx, sided, side.points, side.normals)
+            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side", eps=eps))
     if side is not None:                                # what a buried vertex gathered: the inside
         rest_v = side.spread(rest_v)
     # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
-    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, None if side is None else side.count > 0)
+    buried = None if side is None else side.count > 0
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried)
+    # where another surface lies between a corner and its vertex's rays, the corner's own light
+    creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried)
     _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v

@@ -1,0 +1,97 @@
+"""Corners under a surface closer over them than our rays start (core/output/covered.py), against
+closed forms: a 4 x 4 m floor of 1 m quads under a sun from straight above, with a 2 x 2 m board
+over its middle. Cycles' rays start on the floor and meet the board however close it is, so the
+floor's corners under the board see no sun; in the open a corner has rho E / pi."""
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.light.lamps import SunLight
+from hemicube_radiosity.core.mesh.patches import MeshInput
+from hemicube_radiosity.core.output.covered import TIE_ULPS
+from hemicube_radiosity.core.pipeline import BakeSettings, bake
+from hemicube_radiosity.core.rays import embree_available, mesh_offsets
+
+pytestmark = pytest.mark.skipif(not embree_available(), reason="the corners' rays need Embree")
+
+RHO, SUN = 0.5, 3.0
+OPEN = RHO * SUN / np.pi
+
+
+def _floor():
+    xs = np.arange(-2.0, 2.5, 1.0)
+    verts = [(x, y, 0.0) for y in xs for x in xs]
+    faces = [(j * 5 + i, j * 5 + i + 1, (j + 1) * 5 + i + 1, (j + 1) * 5 + i) for j in range(4) for i in range(4)]
+    return MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="floor")
+
+
+def _board(gap):
+    return MeshInput.from_faces([(-1.2, -1.2, gap), (1.2, -1.2, gap), (1.2, 1.2, gap), (-1.2, 1.2, gap)],
+                                [(0, 1, 2, 3)], rho=(RHO,) * 3, name="board")
+
+
+def _floor_corners(gap):
+    """(positions (n, 3), values (n, 3)) at the floor's face corners, baked with the board at
+    ``gap`` above it, and the floor's ray offset."""
+    r = bake([_floor(), _board(gap)], BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False,
+                                                     gather_rays=64),
+             lights=[SunLight((0.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    own = np.flatnonzero(E.owner == 0)
+    pos = E.verts[E.corner_ids()[own]].reshape(-1, 3)
+    return pos, r.corner_values()[own].reshape(-1, 3), mesh_offsets(r.patches)[0]
+
+
+def test_floor_corners_under_a_board_within_the_ray_offset_get_no_sun():
+    pos, val, eps = _floor_corners(gap=1e-5)
+    assert 1e-5 < 0.5 * eps                       # the board is within the floor's ray offset
+    under = np.all(np.abs(pos[:, :2]) < 1.2, axis=1)
+    assert under.sum() == 4 * 9                     # 9 vertices under the board, 4 faces each
+    # the sun is blocked there; what the board's underside sends is its own dark (< 1% of the sun)
+    assert val[under].max() < 0.01 * OPEN
+    # in the open the sun (and a little reflected from the board's top: none reaches the floor)
+    np.testing.assert_allclose(val[~under], OPEN, rtol=1e-6)
+
+
+def test_a_board_above_the_ray_offset_was_already_seen():
+    # the corners under a board 5 cm up were dark before covered.py: the same dark now
+    pos, val, _ = _floor_corners(gap=0.05)
+    under = np.all(np.abs(pos[:, :2]) < 1.2, axis=1)
+    assert val[under, 0].max() < 0.1 * OPEN
+
+
+def test_a_coincident_board_is_a_tie_and_covers_nothing():
+    # a board in the floor's plane (z-fighting): neither covers the other; the floor's corners
+    # keep the sun, as before (Cycles: either may be drawn)
+    pos, val, _ = _floor_corners(gap=0.0)
+    assert TIE_ULPS >= 1
+    np.testing.assert_allclose(val, OPEN, rtol=1e-6)
+
+
+def _block_with_lip(gap=2e-5):
+    """A closed block on the floor from x = 0.95, and in front of it a lip: a single plane
+    facing up, ``gap`` over the floor, from x = 0.8 to the block."""
+    from hemicube_radiosity.core.builtin_scenes import box
+    lip = MeshInput.from_faces([(0.8, -2.0, gap), (0.95, -2.0, gap), (0.95, 2.0, gap), (0.8, 2.0, gap)],
+                               [(0, 1, 2, 3)], rho=(RHO,) * 3, name="lip")
+    return [box((0.95, -2.0, 0.0), (1.95, 2.0, 0.3), (RHO,) * 3, name="block"), lip]
+
+
+def test_a_buried_corner_s_open_side_under_a_lip_is_lit_from_under_it():
+    """The floor's vertices at x = 1 are buried in a block standing at x = 0.95: they take the
+    light where their edge from x = 0 meets the block (core/output/sides.py), a point under a
+    lip 20 um over the floor, within the floor's ray offset. Rays started at that offset read the
+    sun over the lip; Cycles' rays from the point, and ours started half way to the lip
+    (covered.start_offsets), meet it: no sun."""
+    r = bake([_floor()] + _block_with_lip(), BakeSettings(patch_size=2.0, element_size=2.0,
+                                                             two_sided_reflection=False, gather_rays=64),
+             lights=[SunLight((0.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    own = np.flatnonzero((E.owner == 0) & (np.abs(E.centers[:, 0] - 0.5) < 1e-9))      # the faces x in [0, 1]
+    pos = E.verts[E.corner_ids()[own]].reshape(-1, 3)
+    val = r.corner_values()[own].reshape(-1, 3)
+    at_block = np.abs(pos[:, 0] - 1.0) < 1e-9
+    open_end = np.abs(pos[:, 0]) < 1e-9
+    assert at_block.sum() == 8 and open_end.sum() == 8
+    np.testing.assert_allclose(val[open_end], OPEN, rtol=0.01)     # and a little light off the block
+    D = r.corner_parts()[2][own].reshape(-1, 3)
+    assert D[at_block].max() < 1e-3 * SUN / np.pi                # no sun under the lip
