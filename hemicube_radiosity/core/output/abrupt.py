@@ -173,7 +173,9 @@ class AbruptGrid:
         (the plain mean where none is seen). Each cell's jitter is drawn from where it is
         (:func:`_place_uniforms`): a cell's mean depends neither on which others there are nor
         on their order, and the cells along a lamp's edge do not all sample its glow at the same
-        distance (one pattern for every cell made a room's walls 3.7% too bright)."""
+        distance (one pattern for every cell made a room's walls 3.7% too bright). The sky's
+        rays are shared out among a cell's points (:func:`..rays.sky_fraction`'s ``split``): the
+        cell's mean casts the pattern once, as one point does, not SPIKE^2 times."""
         S = self.SPIKE
 
         def points():               # geometry, cached on the cells (a relight finds them)
@@ -195,8 +197,10 @@ class AbruptGrid:
                         ("abrupt-cells", ctx.settings.patch_size, ctx.settings.element_size, self.SPIKE,
                          self.inset))
         x, el, nrm, w = cached(ctx.cache, key, points)
-        # one shadow ray per emitting patch and point: the mean over the points is what counts
-        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
+        # one shadow ray per emitting patch and point, and the sky's rays shared out among a
+        # cell's points: the mean over the points is what counts
+        split = S * S if ctx.direct.sky_rays % (S * S) == 0 else 1
+        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1, split=split)
         D = D.reshape(loc.size, S * S, 3)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)
