@@ -157,7 +157,7 @@ def _corner_rays(ctx, elements, xv, nv, opened, buried):
     sun = _strongest_sun(ctx)
     mk += b"" if sun is None else np.asarray(sun, np.float64).tobytes()
     mk += b"".join(b"-" if a is None else array_key(np.asarray(a)) for a in (xv, nv, opened, buried))
-    key = cache_key(geometry_key(elements) + geometry_key(ctx.patches) + mk, ("crease-rays", CREASE_ANGLE, INSET))
+    key = cache_key(geometry_key(elements) + geometry_key(ctx.patches) + mk, ("crease-rays-same", CREASE_ANGLE, INSET))
     return cached(ctx.cache, key, lambda: _make_corner_rays(ctx, elements, xv, nv, opened, buried))
 
 
