@@ -82,6 +82,8 @@ class AbruptGrid:
 
     CELLS = 4
     SPIKE = 4
+    #: The grid's points share the sky's rays out in 2 x 2 blocks (:meth:`_sky_parts`).
+    SKY_SPLIT = 4
 
     def __init__(self, ctx, elements, ids, floor, bar, ratio=4.0, inset=1e-2):
         size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
@@ -93,7 +95,8 @@ class AbruptGrid:
         (self.n, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
          loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
         n = self.n
-        light = ctx.direct.at(x, nrm, "abrupt-grid")
+        split = self.SKY_SPLIT if ctx.direct.sky_rays % self.SKY_SPLIT == 0 else 1
+        light = ctx.direct.at(x, nrm, "abrupt-grid", split=split, part=self._sky_parts(len(x)) if split > 1 else None)
         self.values = elements.rho.take(owner, axis=0) * light     # take: rows 3x as fast as [owner]
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
         Yc = Y[k.T]
@@ -145,6 +148,15 @@ class AbruptGrid:
         k = np.stack(self._corner_ids(loc, i, j))
         return (n, self.offset, self.cell_offset, local, corners, x, owner, nrm, seen, loc, i, j, k,
                 seen[k.T])
+
+    def _sky_parts(self, count) -> np.ndarray:
+        """(X,) which quarter of the sky's rays each grid point casts (:func:`..rays.sky_fraction`'s
+        ``part``): (row % 2) * 2 + column % 2, so every cell's four corners cast all of them
+        once and a gather ray landing in a cell reads about what one point's full pattern
+        would (the sky's part of the grid, a quarter of the rays)."""
+        side = np.repeat(self.n + 1, (self.n + 1) ** 2)
+        r = np.arange(count) - np.repeat(self.offset, (self.n + 1) ** 2)
+        return (r // side % 2) * 2 + r % side % 2
 
     def hot_cells(self):
         """The cells that shine: (elements (c,), corners (c, 4, 3), radiance (c, 3)). A cell is the
