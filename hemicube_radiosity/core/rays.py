@@ -436,7 +436,7 @@ def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
 
 
 def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 16, *,
-                 eps, facing=None, workers: int = 1) -> np.ndarray:
+                 eps, facing=None, workers: int = 1, split: int = 1, part=None) -> np.ndarray:
     """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
     surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
     anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
@@ -444,7 +444,10 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
     cast parallel rays, so the estimate varies smoothly over a surface. ``facing`` (P, 3) or
     None: rays with a negative or zero component along it count as hitting a surface (below a
-    point's own triangle, :func:`.light.lamps.direct_irradiance`).
+    point's own triangle, :func:`.light.lamps.direct_irradiance`). ``split``: the points share
+    the pattern out, point p casting rays ``part[p]``, ``part[p] + split``, ... (``rays / split``
+    each); ``part`` (P,) in [0, split), default runs of ``split`` points (a cell's, whose mean
+    is what is read: it casts every ray of the pattern once).
 
     ``chunk_rays``: rays cast at once (65,536: their temporaries stay in the caches); ``workers``
     (0 = every core): threads casting chunks of points (Embree lets go of the GIL while it
@@ -453,10 +456,11 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     local = cosine_lattice(rays, seed)                                             # (R, 3)
-    R = len(local)
+    R = len(local) // split
     eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(points),))[:, None]
     out = np.empty(len(points))
     step = max(1, chunk_rays // R)
+    part = np.arange(len(points)) % split if part is None else np.asarray(part, dtype=np.int64)
     workers = resolve_workers(workers) if len(points) > step else 1
     see_through = getattr(scene, "see_through", False)
     if workers > 1 and not see_through:
@@ -467,7 +471,12 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
 
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
-        d = in_frames(local, tangent_frames(n), np.float32 if single else np.float64).reshape(-1, 3)
+        f, dt = tangent_frames(n), np.float32 if single else np.float64
+        d = in_frames(local, f, dt) if split == 1 else np.empty((len(x), R, 3), dt)
+        for k in range(split if split > 1 else 0):
+            m = part[s:s + step] == k
+            d[m] = in_frames(local[k::split], f[m], dt)
+        d = d.reshape(-1, 3)
         o = x + eps[s:s + step] * n
         o = np.repeat(o.astype(np.float32) if single else o, R, axis=0)
         below = None if facing is None else np.einsum("ij,ij->i", d, np.repeat(facing[s:s + step], R, axis=0)) <= 0

@@ -160,18 +160,19 @@ class DirectLight:
             return T
         return cached(self.cache if key else None, key and key + "-t", lambda: transposed_transport(T), disk=False)
 
-    def world_at(self, points, normals, where: str, eps=None, facing=None) -> np.ndarray:
+    def world_at(self, points, normals, where: str, eps=None, facing=None, split=1, part=None) -> np.ndarray:
         """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
         fraction of the hemisphere where rays find no surface (:func:`.rays.sky_fraction`,
         ``sky_rays`` per point; geometry only, cached). ``eps`` (P,): the rays' start offsets
-        (default :meth:`offsets`); ``facing`` (P, 3): as :meth:`at`."""
+        (default :meth:`offsets`); ``facing`` (P, 3), ``split``, ``part``: as :meth:`at`."""
         own = b"" if eps is None else array_key(np.asarray(eps, dtype=np.float64))
         own += b"" if facing is None else array_key(np.asarray(facing, dtype=np.float64))
-        key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays))
+        own += b"" if part is None else array_key(np.asarray(part, dtype=np.int64))
+        key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays, split))
         eps = self.offsets(points, normals) if eps is None else eps
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
                                                          normals, self.sky_rays, eps=eps, facing=facing,
-                                                         workers=self.workers))
+                                                         workers=self.workers, split=split, part=part))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str) -> np.ndarray:
@@ -240,7 +241,8 @@ class DirectLight:
             self._scene = occluder(self.patches, "auto")
         return self._scene
 
-    def at(self, points, normals, where: str, samples=None, eps=None, facing=None) -> np.ndarray:
+    def at(self, points, normals, where: str, samples=None, eps=None, facing=None, split=1,
+           part=None) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
@@ -248,14 +250,18 @@ class DirectLight:
         rays start off ``points`` along ``normals`` (default :meth:`offsets`; 0 where the points
         are the rays' starts already, :mod:`..output.crease`). ``facing`` (P, 3) or None: the
         lamps' and the world's light only from directions on its side (a corner's own
-        triangle's normal, :mod:`..output.crease`); the emitters' is not limited by it."""
+        triangle's normal, :mod:`..output.crease`); the emitters' is not limited by it.
+        ``split``: the points come in runs of that many whose mean is what is read (an abrupt
+        cell's, :mod:`..output.abrupt`): each casts ``sky_rays / split`` of the sky's rays, the
+        run all of them once; ``part`` (P,): which share each point casts instead
+        (:func:`.rays.sky_fraction`)."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
             D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True, eps=eps),
                                    self.emitted(), transposed=True)
         if self.world is not None:
-            D += self.world_at(points, normals, where, eps=eps, facing=facing)
+            D += self.world_at(points, normals, where, eps=eps, facing=facing, split=split, part=part)
         if self.lights:
             D += lamp_irradiance(self.patches, self.lights, self.cache, points=points, normals=normals,
                                  eps=self.offsets(points, normals) if eps is None else eps,

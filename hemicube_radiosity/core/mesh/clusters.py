@@ -28,6 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .patches import PatchSet
+from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_ints, unique_rows
 
 __all__ = ["Clusters", "group_pieces", "piece_materials", "welded", "DEFAULT_MAX_ANGLE"]
@@ -35,6 +36,7 @@ __all__ = ["Clusters", "group_pieces", "piece_materials", "welded", "DEFAULT_MAX
 DEFAULT_MAX_ANGLE = 30.0       # degrees: normal spread allowed within one cluster
 
 
+@storable
 @dataclass
 class Clusters:
     """K solve patches made of P pieces (a :class:`PatchSet`).

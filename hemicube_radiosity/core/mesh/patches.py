@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from ..runtime.cache import Memo
+from ..runtime.stored import storable
 from ..runtime.errors import RadiosityError
 from ..light.transmit import see_through
 
@@ -119,6 +120,7 @@ def meshes_key(meshes) -> bytes:
     return h.digest()
 
 
+@storable
 @dataclass
 class PatchSet:
     """N patches (triangles or quads) as a structure of arrays.

@@ -82,6 +82,8 @@ class AbruptGrid:
 
     CELLS = 4
     SPIKE = 4
+    #: The grid's points share the sky's rays out in 2 x 2 blocks (:meth:`_sky_parts`).
+    SKY_SPLIT = 4
 
     def __init__(self, ctx, elements, ids, floor, bar, ratio=4.0, inset=1e-2):
         size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
@@ -93,7 +95,8 @@ class AbruptGrid:
         (self.n, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
          loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset))
         n = self.n
-        light = ctx.direct.at(x, nrm, "abrupt-grid")
+        split = self.SKY_SPLIT if ctx.direct.sky_rays % self.SKY_SPLIT == 0 else 1
+        light = ctx.direct.at(x, nrm, "abrupt-grid", split=split, part=self._sky_parts(len(x)) if split > 1 else None)
         self.values = elements.rho.take(owner, axis=0) * light     # take: rows 3x as fast as [owner]
         Y = light @ LUMA                      # decisions on the light arriving (a relight keeps them)
         Yc = Y[k.T]
@@ -146,6 +149,15 @@ class AbruptGrid:
         return (n, self.offset, self.cell_offset, local, corners, x, owner, nrm, seen, loc, i, j, k,
                 seen[k.T])
 
+    def _sky_parts(self, count) -> np.ndarray:
+        """(X,) which quarter of the sky's rays each grid point casts (:func:`..rays.sky_fraction`'s
+        ``part``): (row % 2) * 2 + column % 2, so every cell's four corners cast all of them
+        once and a gather ray landing in a cell reads about what one point's full pattern
+        would (the sky's part of the grid, a quarter of the rays)."""
+        side = np.repeat(self.n + 1, (self.n + 1) ** 2)
+        r = np.arange(count) - np.repeat(self.offset, (self.n + 1) ** 2)
+        return (r // side % 2) * 2 + r % side % 2
+
     def hot_cells(self):
         """The cells that shine: (elements (c,), corners (c, 4, 3), radiance (c, 3)). A cell is the
         part of its element's bilinear map between (i, j) / n and (i + 1, j + 1) / n, corners
@@ -173,7 +185,9 @@ class AbruptGrid:
         (the plain mean where none is seen). Each cell's jitter is drawn from where it is
         (:func:`_place_uniforms`): a cell's mean depends neither on which others there are nor
         on their order, and the cells along a lamp's edge do not all sample its glow at the same
-        distance (one pattern for every cell made a room's walls 3.7% too bright)."""
+        distance (one pattern for every cell made a room's walls 3.7% too bright). The sky's
+        rays are shared out among a cell's points (:func:`..rays.sky_fraction`'s ``split``): the
+        cell's mean casts the pattern once, as one point does, not SPIKE^2 times."""
         S = self.SPIKE
 
         def points():               # geometry, cached on the cells (a relight finds them)
@@ -195,8 +209,10 @@ class AbruptGrid:
                         ("abrupt-cells", ctx.settings.patch_size, ctx.settings.element_size, self.SPIKE,
                          self.inset))
         x, el, nrm, w = cached(ctx.cache, key, points)
-        # one shadow ray per emitting patch and point: the mean over the points is what counts
-        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1)
+        # one shadow ray per emitting patch and point, and the sky's rays shared out among a
+        # cell's points: the mean over the points is what counts
+        split = S * S if ctx.direct.sky_rays % (S * S) == 0 else 1
+        D = self.elements.rho.take(el, axis=0) * ctx.direct.at(x, nrm, "abrupt-cells", samples=1, split=split)
         D = D.reshape(loc.size, S * S, 3)
         seen = w.mean(axis=1)
         w = np.where(w.sum(axis=1, keepdims=True) > 0, w, 1.0)

@@ -14,11 +14,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..light.emitters import vertex_frames
-from ..mesh.contact import open_side
+from ..mesh.contact import OpenSide, open_side
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
+
+storable(OpenSide)          # cached on disk: a relight in a new process finds it (:func:`buried_side`)
 
 __all__ = ["open_elements", "sided_mesh", "seen_fraction", "seen_vertices", "buried_side"]
 

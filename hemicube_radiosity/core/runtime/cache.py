@@ -18,6 +18,7 @@ from collections import OrderedDict
 import numpy as np
 
 from ..util.sparse import CSR
+from .stored import LAYOUT, pack, unpack
 
 __all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key"]
 
@@ -172,7 +173,10 @@ class FormFactorCache:
             return self._mem[key]
         if self.directory and os.path.exists(self._path(key)):
             with np.load(self._path(key), allow_pickle=False) as z:
-                item = z["array"] if "array" in z.files else None
+                packed = LAYOUT in z.files
+                item = z["array"] if "array" in z.files else unpack(z) if packed else None
+            if packed and item is None:
+                return None                     # a class this process does not know
             if item is None:
                 item = CSR.load(self._path(key))
             self._remember(key, item)
@@ -181,16 +185,23 @@ class FormFactorCache:
 
     def put(self, key: str, item, disk=True) -> None:
         """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
-        (unless ``disk`` is False) on disk; anything else (e.g. an output element mesh) in memory
-        only."""
+        (unless ``disk`` is False) on disk, and so any structure of them :func:`.stored.pack`
+        can hold (an output element mesh, a point set's located patches: what a relight in a
+        new process would otherwise make again); anything else in memory only."""
         self._remember(key, item)
-        if disk and self.directory and isinstance(item, (CSR, np.ndarray)):
-            tmp = self._path(key) + ".tmp.npz"
-            if isinstance(item, CSR):
-                item.save(tmp)
-            else:
-                np.savez_compressed(tmp, array=np.asarray(item))
-            os.replace(tmp, self._path(key))
+        if not (disk and self.directory):
+            return
+        packed = None if isinstance(item, (CSR, np.ndarray)) else pack(item)
+        if packed is None and not isinstance(item, (CSR, np.ndarray)):
+            return
+        tmp = self._path(key) + ".tmp.npz"
+        if isinstance(item, CSR):
+            item.save(tmp)
+        elif packed is not None:
+            np.savez(tmp, **packed)             # geometry: read back fast, not compressed
+        else:
+            np.savez_compressed(tmp, array=np.asarray(item))
+        os.replace(tmp, self._path(key))
 
     def _remember(self, key, F):
         self._mem[key] = F

@@ -12,11 +12,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..runtime.stored import storable
 from .unique import unique_ints
 
 __all__ = ["CSR"]
 
 
+@storable
 @dataclass
 class CSR:
     indptr: np.ndarray   # (N+1,) int64

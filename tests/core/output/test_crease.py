@@ -111,3 +111,42 @@ def test_a_lip_s_slope_corner_is_blocked_where_cycles_lifted_ray_meets_the_slope
     # the plateau's corners on the lip see the sun above their plane: nothing to block
     np.testing.assert_array_equal(blocked_share(m, np.array([3, 4, 5]), np.array([3, 3, 3]), to_sun,
                                                 lambda x, d: np.ones(len(x), bool)), 0.0)
+
+
+def test_a_corner_lit_as_its_vertex_takes_the_vertexs_light_and_casts_no_ray(monkeypatch):
+    """A smooth step on a floor under a sun and the world: the lip's and the slope's corners
+    lean more than 15 degrees off their faces, but their shading normal is the vertex's and
+    their rays start where the vertex's do, so they take the vertex's light (no ray of their
+    own; here 72 of the 108 corners lit on their own). Lighting every one of them again
+    instead gives the same corners, to rounding."""
+    from hemicube_radiosity.core.builtin_scenes import quad
+    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.output import crease
+
+    m, _ = _step(((-1.0, 0.6), (-0.5, 0.6), (0.0, 0.6), (0.15, 0.3), (0.3, 0.0)))
+    floor = quad([(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], name="floor")
+    sun = SunLight(direction=(0.3, -0.5, -0.8), strength=3.0)
+    world = np.array([0.35, 0.45, 0.6])
+    real, seen, lit = crease._make_corner_rays, [], []
+
+    def spy(*a, force=False):
+        out = real(*a)
+        seen.append(out)
+        return out[:-1] + (np.zeros_like(out[-1]),) if force else out
+    real_at = DirectLight.at
+
+    def at(self, points, *a, **k):
+        if a and a[1] == "corners" or k.get("where") == "corners":
+            lit.append(len(points))
+        return real_at(self, points, *a, **k)
+    monkeypatch.setattr(DirectLight, "at", at)
+    monkeypatch.setattr(crease, "_make_corner_rays", spy)
+    s = _settings()
+    shared = bake([m, floor], s, lights=[sun], world=world)
+    same = seen[-1][-1]
+    assert same.sum() >= len(same) // 2 and sum(lit) == (~same).sum()
+    monkeypatch.setattr(crease, "_make_corner_rays", lambda *a: spy(*a, force=True))
+    lit.clear()
+    own = bake([m, floor], s, lights=[sun], world=world)
+    assert sum(lit) == len(same)
+    np.testing.assert_allclose(shared.corner_values(), own.corner_values(), rtol=1e-9, atol=1e-12)

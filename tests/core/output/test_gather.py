@@ -194,3 +194,97 @@ def test_directions_rounded_to_float32_once_are_the_float64_ones_cast():
     d32 = in_frames(local, frames, np.float32)
     assert d32.dtype == np.float32
     np.testing.assert_array_equal(d32, in_frames(local, frames).astype(np.float32))
+
+
+class _Counting:
+    """A scene that counts the rays cast through it."""
+
+    def __init__(self, scene):
+        self.scene, self.rays = scene, 0
+
+    def occluded(self, o, d, *a):
+        self.rays += len(o)
+        return self.scene.occluded(o, d, *a)
+
+
+def test_a_cells_points_sharing_the_sky_rays_read_its_mean_within_one_points_noise():
+    """An abrupt cell's mean sky fraction (:meth:`.abrupt.AbruptGrid._means`) from its 16
+    jittered points each casting 16 of the 256 rays (``split``), against each casting all 256:
+    cells 4 cm square on a floor row under the edge of a 1 m plate 0.5 m up, the truth the mean
+    of the plate's closed-form form factor at the 16 points. The shared-out mean differs from
+    the 16 x 256 one by less than 1 sigma of one point's 256-ray estimate (binomial; measured:
+    at most 0.59 sigma, 1.1% of the hemisphere), and is as close to the truth as one 256-ray
+    point reads its own (the test above: RMS < 0.6%; measured 0.49%, the 16 x 256 mean's
+    0.26%); it casts 256 rays a cell, not 4,096."""
+    plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
+    floor = quad([(-2, -2, 0), (3, -2, 0), (3, 3, 0), (-2, 3, 0)], name="Floor")
+    ps = build_patches([plate, floor], 0.25)
+    rng = np.random.default_rng(7)
+    centres = np.linspace(-0.6, 0.6, 61)
+    a, b = (g.ravel() for g in np.meshgrid(np.arange(4), np.arange(4), indexing="ij"))
+    jit = (np.stack([a, b], 1)[None] + rng.uniform(size=(len(centres), 16, 2))) / 4 - 0.5     # (C, 16, 2)
+    xy = jit * 0.04 + np.column_stack([centres, np.full_like(centres, 0.37)])[:, None]
+    pts = np.column_stack([xy.reshape(-1, 2), np.zeros(xy.size // 2)])
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    truth = 1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5).reshape(-1, 16).mean(1)
+    scene = _Counting(embree_scene(ps))
+    eps = ray_offsets(ps, pts, up)
+    full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 16).mean(1)
+    assert scene.rays == 256 * len(pts)
+    scene.rays = 0
+    shared = sky_fraction(scene, pts, up, 256, eps=eps, split=16, chunk_rays=1000).reshape(-1, 16).mean(1)
+    assert scene.rays == 16 * len(pts)
+    sigma = np.sqrt(truth * (1 - truth) / 256)
+    assert np.all(np.abs(shared - full) <= sigma + 1e-12)
+    assert np.sqrt(np.mean((shared - truth) ** 2)) < 0.006
+    assert np.sqrt(np.mean((full - truth) ** 2)) < 0.006
+    # the same for any chunking (a chunk holds whole cells)
+    np.testing.assert_array_equal(sky_fraction(scene, pts, up, 256, eps=eps, split=16).reshape(-1, 16).mean(1),
+                                  shared)
+
+
+def test_a_grid_whose_2x2_blocks_share_the_sky_rays_reads_each_cells_middle_within_one_points_noise():
+    """The abrupt grid's points (:class:`.abrupt.AbruptGrid`) cast a quarter of the 256 sky rays
+    each, by (row % 2) * 2 + column % 2 (:meth:`~.abrupt.AbruptGrid._sky_parts`): every cell's
+    four corners cast the pattern once. Cells 5 cm square on a floor row under the edge of a
+    1 m plate 0.5 m up, read at their middle (the mean of the corners, as a gather ray landing
+    there reads them): within 1 sigma of one point's 256-ray estimate of the same read with
+    all 256 rays at every corner (measured: at most 0.61 sigma), and against the closed-form
+    truth an RMS under 0.8% and under twice one 256-ray point's at each middle (measured
+    0.67%; all rays at every corner 0.26%, one point 0.42%)."""
+    from hemicube_radiosity.core.output.abrupt import AbruptGrid
+
+    grid = AbruptGrid.__new__(AbruptGrid)                 # its layout only: elements of n x n cells
+    grid.n = np.array([3, 2, 1])
+    grid.offset = np.concatenate([[0], np.cumsum((grid.n + 1) ** 2)[:-1]])
+    part = grid._sky_parts(int(((grid.n + 1) ** 2).sum()))
+    for m, n in enumerate(grid.n):                        # every cell's corners: all four parts
+        p = part[grid.offset[m]:grid.offset[m] + (n + 1) ** 2].reshape(n + 1, n + 1)
+        for i in range(n):
+            for j in range(n):
+                assert sorted(p[i:i + 2, j:j + 2].ravel()) == [0, 1, 2, 3]
+    plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
+    floor = quad([(-2, -2, 0), (3, -2, 0), (3, 3, 0), (-2, 3, 0)], name="Floor")
+    ps = build_patches([plate, floor], 0.25)
+    centres = np.linspace(-0.6, 0.6, 49)
+    grid.n = np.ones(len(centres), np.int64)              # one cell an element, corner i * 2 + j
+    grid.offset = 4 * np.arange(len(centres))
+    a, b = (g.ravel() for g in np.meshgrid([-0.025, 0.025], [-0.025, 0.025], indexing="ij"))
+    pts = np.column_stack([(centres[:, None] + a).ravel(), (0.37 + b[None] + 0 * centres[:, None]).ravel(),
+                           np.zeros(4 * len(centres))])
+    up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    truth = (1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5)).reshape(-1, 4).mean(1)
+    scene = _Counting(embree_scene(ps))
+    eps = ray_offsets(ps, pts, up)
+    full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 4).mean(1)
+    scene.rays = 0
+    shared = sky_fraction(scene, pts, up, 256, eps=eps, split=4, part=grid._sky_parts(len(pts))).reshape(-1, 4).mean(1)
+    assert scene.rays == 64 * len(pts)
+    sigma = np.sqrt(truth * (1 - truth) / 256)
+    assert np.all(np.abs(shared - full) <= sigma + 1e-12)
+    # one point at each cell's middle with all 256 rays, against its own truth
+    mid = np.column_stack([centres, np.full_like(centres, 0.37), np.zeros_like(centres)])
+    one = sky_fraction(scene, mid, up[:len(mid)], 256, eps=ray_offsets(ps, mid, up[:len(mid)]))
+    one_truth = 1 - _rectangle_above(-centres, 1 - centres, -0.37, 0.63, 0.5)
+    rms = np.sqrt(np.mean((shared - truth) ** 2))
+    assert rms < 0.008 and rms < 2 * np.sqrt(np.mean((one - one_truth) ** 2))
