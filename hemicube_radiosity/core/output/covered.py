@@ -39,7 +39,7 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .crease import corner_normals
+from .crease import corner_edges, corner_normals
 from .lift import BAKE_NUDGE, face_corners
 from .normals import corner_shading_normals
 
@@ -145,12 +145,7 @@ def _within(elements, p, c, towards) -> np.ndarray:
     """(K,) bool: the direction from corner ``c`` (K,) of element ``p`` (K,) to ``towards``
     (K, 3) runs into the element or along one of its two edges at the corner (in its plane):
     not so for the elements of a face's other triangles at that corner (an n-gon's fan)."""
-    polys = elements.polys
-    k = np.where(polys[p, 3] >= 0, 4, 3)
-    X = elements.verts
-    x = X[polys[p, c]]
-    nxt = X[polys[p, (c + 1) % k]] - x
-    prv = X[polys[p, (c - 1) % k]] - x
+    x, nxt, prv = corner_edges(elements, p, c)
     d = towards - x
     n = elements.normals[p]
     size = np.linalg.norm(nxt, axis=1) * np.linalg.norm(d, axis=1)
