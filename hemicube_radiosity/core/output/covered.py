@@ -155,6 +155,25 @@ def _within(elements, p, c, towards) -> np.ndarray:
     return (a >= -tol) & (b >= -tol) & (np.linalg.norm(d, axis=1) > 0)
 
 
+def _first_row_holding(ft, face, j) -> np.ndarray:
+    """(K,) for each face ``face`` (K,) and its corner ``j`` (K,), the first row of the loop
+    triangles ``ft`` (T, 4: face, three corners of it) of that face holding that corner; -1
+    where none does."""
+    rows = np.repeat(np.arange(len(ft)), 3)
+    kf, kc = np.repeat(ft[:, 0], 3), ft[:, 1:].reshape(-1)
+    order = np.lexsort((rows, kc, kf))                 # by face, corner, then row: first wins
+    kf, kc, rows = kf[order], kc[order], rows[order]
+    first = np.ones(len(kf), bool)
+    first[1:] = (kf[1:] != kf[:-1]) | (kc[1:] != kc[:-1])
+    span = int(max(kc.max(initial=0), np.max(j, initial=0))) + 2
+    table = kf[first] * span + kc[first]
+    rows = rows[first]
+    query = face * span + j
+    at = np.minimum(np.searchsorted(table, query), max(len(table) - 1, 0))
+    hit = (j >= 0) & (len(table) > 0) & (table[at] == query) if len(table) else np.zeros(len(face), bool)
+    return np.where(hit, rows[at] if len(table) else -1, -1)
+
+
 def _first_triangles(elements, meshes, p, x):
     """(k (R,) rows of ``p``, centre (R, 3)): for the element corners at ``x`` (K, 3) that are
     corners of their source face, the centre of the first of Blender's loop triangles of the
@@ -184,9 +203,8 @@ def _first_triangles(elements, meshes, p, x):
             listed = np.zeros(len(off) - 1, bool)
             listed[ft[:, 0]] = True
             tri[listed[face]] = -1
-            for row in ft[np.isin(ft[:, 0], face)][::-1]:      # the first row holding it wins
-                hold = (face == row[0]) & np.any(row[1:] == j[:, None], axis=1)
-                tri[hold] = row[1:]
+            row = _first_row_holding(ft, face, j)
+            tri[row >= 0] = ft[row[row >= 0], 1:]
         ok = np.flatnonzero(tri[:, 0] >= 0)
         idx = np.asarray(m.face_indices, dtype=np.int64)
         V = np.asarray(m.verts, dtype=np.float64)[idx[off[face[ok]][:, None] + tri[ok]]]

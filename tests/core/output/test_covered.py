@@ -95,3 +95,21 @@ def test_a_buried_corner_s_open_side_under_a_lip_is_lit_from_under_it():
     np.testing.assert_allclose(val[open_end], OPEN, rtol=0.01)     # and a little light off the block
     D = r.corner_parts()[2][own].reshape(-1, 3)
     assert D[at_block].max() < 1e-3 * SUN / np.pi                # no sun under the lip
+
+
+def test_the_first_loop_triangle_holding_a_corner_wins():
+    """covered._first_row_holding against the plain rule: of a face's loop triangles (rows of
+    (face, three of its corners)), the first row that holds the corner; -1 where none does."""
+    from hemicube_radiosity.core.output.covered import _first_row_holding
+
+    rng = np.random.default_rng(5)
+    ft = np.concatenate([np.stack([np.full(4, f), *rng.permutation(np.tile(np.arange(6), 2))[:12].reshape(3, 4)], 1)
+                         for f in (0, 2, 3)])
+    face = rng.integers(0, 5, 400)
+    j = rng.integers(-1, 7, 400)
+    want = np.array([next((r for r, row in enumerate(ft) if row[0] == f and c in row[1:]), -1) if c >= 0 else -1
+                     for f, c in zip(face, j)])
+    got = _first_row_holding(ft, face, j)
+    assert (want >= 0).sum() > 100 and (want < 0).sum() > 50        # both kinds drawn
+    np.testing.assert_array_equal(got, want)
+    assert (_first_row_holding(ft[:0], face, j) == -1).all()
