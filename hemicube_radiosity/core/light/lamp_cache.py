@@ -44,12 +44,14 @@ def _shape_key(light) -> str:
 
 
 def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples=16, seed=0, points=None,
-                    normals=None, eps=None, facing=None, progress=None, cancelled=None, workers=1) -> np.ndarray:
+                    normals=None, eps=None, facing=None, progress=None, cancelled=None, workers=1,
+                    index=0) -> np.ndarray:
     """Incident irradiance (P, 3) W/m^2 from ``lights``, as :func:`.lamps.direct_irradiance`
     with the same arguments gives it (at the patch centres, or at ``points`` (P, 3) with unit
     ``normals`` (P, 3); ``eps`` (P,) the rays' start offsets; ``facing`` (P, 3) or None;
     ``workers``: threads, the same result for any count), each lamp's unit transport (P,) kept
-    in ``cache`` (None: nothing kept). Equal to
+    in ``cache`` (None: nothing kept); ``index``: the first lamp's place among the bake's lamps
+    (its random stream: one lamp of a list lit apart draws what it draws in the list). Equal to
     ``direct_irradiance`` up to rounding: each lamp's light is its unit light times its
     strength."""
     lights = list(lights)
@@ -64,8 +66,8 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
     kw = dict(shadows=shadows, samples=samples, seed=seed, points=points, normals=normals, eps=eps,
               facing=facing, workers=workers)
     ticker = Ticker(progress, cancelled)
-    for i, light in enumerate(lights):
-        ticker.tick(i, len(lights), force=True)
+    for i, light in enumerate(lights, start=index):
+        ticker.tick(i - index, len(lights), force=True)
         scale = SCALE.get(type(light))
         if scale is None:                      # an environment map: its own colours, not kept
             E = light_irradiance(patches, light, _index=i, **kw)

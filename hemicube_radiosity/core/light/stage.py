@@ -23,7 +23,6 @@ from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
-from .lamps import light_irradiance
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
@@ -219,10 +218,10 @@ class DirectLight:
                     out[:, j] = T[:, owner == o].astype(np.float64) @ L[owner == o]
         for i, lamp in enumerate(self.lights):
             if want[len(owners) + i]:
-                E = light_irradiance(self.patches, lamp, samples=min(samples or self.light_samples, self.light_samples),
-                                     seed=self.light_seed, points=x, normals=normals, eps=eps, _occ=self.scene(),
-                                     _index=i)
-                out[:, len(owners) + i] = (E if E.ndim == 2 else E[:, None]) * lamp.color / np.pi
+                out[:, len(owners) + i] = lamp_irradiance(
+                    self.patches, [lamp], self.cache, points=x, normals=normals, eps=eps, index=i,
+                    samples=min(samples or self.light_samples, self.light_samples), seed=self.light_seed,
+                    cancelled=self.cancelled, workers=self.workers) / np.pi
         if self.world is not None and want[-1]:
             out[:, -1] = self.world_at(x, normals, where)
         return out

@@ -1,5 +1,7 @@
 """Lamps' light kept for a relight (core/light/lamp_cache.py): the same light as
 direct_irradiance gives, and a relight of a lamp's strength or colour casts no ray again."""
+from dataclasses import replace
+
 import numpy as np
 
 from hemicube_radiosity.core import builtin_scenes as scenes
@@ -41,6 +43,10 @@ def test_unit_lamps_scaled_equal_the_direct_light_and_a_relight_casts_no_ray(mon
     cache = FormFactorCache()
     got = lamp_cache.lamp_irradiance(p, lamps, cache, samples=8, seed=3)
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * want.max())
+    # one lamp lit apart at its place in the list draws the list's random stream for it
+    alone = [replace(li, **{lamp_cache.SCALE[type(li)]: 0.0}) if k != 2 else li for k, li in enumerate(lamps)]
+    np.testing.assert_allclose(lamp_cache.lamp_irradiance(p, [lamps[2]], None, samples=8, seed=3, index=2),
+                               direct_irradiance(p, alone, samples=8, seed=3), rtol=1e-12, atol=1e-12 * want.max())
     # a relight: every lamp 1.7x and tinted; no lamp's light is computed again
     calls = []
     real = lamp_cache.light_irradiance
