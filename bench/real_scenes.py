@@ -695,7 +695,8 @@ def run_scene(spec, args):
     for label, asked in runs:
         out = base + f"_{label}"
         st, rss, wall = run_child(["--ours-child", spec.folder, cyc_npz if have_ref else "", out + ".npy",
-                                   json.dumps(asked), "1" if label == "defaults" else "0", out + ".json"],
+                                   json.dumps(asked), "1" if label == "defaults" and not args.bake_only else "0",
+                                   out + ".json"],
                                   out + ".log", args.timeout)
         rec = dict(_child_result(st, out + ".log", out + ".json", args.timeout), wall_seconds=wall, max_rss_mb=rss)
         if have_ref and not failed(rec) and os.path.exists(out + ".npy"):
@@ -704,11 +705,11 @@ def run_scene(spec, args):
             if label == "defaults":
                 row["cycles"].update(error=c, compared=n)
         row[label] = rec
-        if label == "defaults" and not failed(rec):
+        if label == "defaults" and not failed(rec) and not args.bake_only:
             row["relight_cache"] = relight_through_cache(spec, args, base, asked)
         brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "peak_mb", "max_rss_mb", "relight")}
         log(f"{label}: {json.dumps(brief, default=float)[:500]}")
-        if label == "defaults":
+        if label == "defaults" and not args.bake_only:
             coarser = coarser_settings(rec, cyc_npz if have_ref else None)
             if coarser:
                 runs.append(("coarser", {**given, **coarser}))
@@ -876,6 +877,8 @@ def main(argv=None):
                     help="the Cycles references' glossy bounces (0: none, and no caustics)")
     ap.add_argument("--set", default="{}", help="settings of ours as JSON, e.g. "
                     "'{\"specular_bounce\": false}' (default: the defaults)")
+    ap.add_argument("--bake-only", action="store_true",
+                    help="only the defaults' bake (or --set's): no relights, no coarser run (for trials)")
     ap.add_argument("--levels", action="store_true",
                     help="also bake at every quality level but Production (the defaults)")
     args, _ = ap.parse_known_args(argv)   # make bench passes its own flags through
