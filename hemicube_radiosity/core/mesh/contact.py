@@ -19,6 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .contact_lines import face_pieces, pieces_segments, split_polygon
 from .patches import PatchSet, poly_geometry
 from ..util.unique import unique_ints, unique_rows
 from ..rays import ray_offsets
@@ -115,86 +116,6 @@ def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
 # Cutting output elements along contact lines
 
 
-def _pair_segments(origin, n, cutters, face, eps):
-    """Where P cutters meet the planes of P faces, clipped to the faces: the plane through
-    ``origin`` (P, 3) with unit normal ``n`` (P, 3), the cutters' corners (P, 4, 3) (a triangle
-    repeats its last corner: a wall standing on the face, a block's side through it), the
-    faces' corners (P, 4, 3). Returns (segments (P, 2, 3), kept (P,) bool): a segment is the
-    two farthest apart of the cutter's corners on the plane and its edges' crossings of it,
-    clipped to the face with its border widened by ``eps``; kept when the cutter reaches the
-    plane and more than ``eps`` of the segment is on the face. Cutters parallel to the face
-    are left out by the caller. All pairs at once: pair by pair in a loop this was most of a
-    dense mesh's cut."""
-    P = len(origin)
-    h = np.einsum("pkj,pj->pk", cutters - origin[:, None], n)              # (P, 4) heights
-    pts = np.zeros((P, 8, 3))
-    valid = np.zeros((P, 8), bool)
-    valid[:, :4] = np.abs(h) <= eps                                      # corners on the plane
-    pts[:, :4] = cutters
-    for i in range(4):                                                   # edges through it
-        j = (i + 1) % 4
-        hi, hj = h[:, i], h[:, j]
-        go = ((hi < -eps) & (hj > eps)) | ((hi > eps) & (hj < -eps))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = hi / (hi - hj)
-            pts[:, 4 + i] = cutters[:, i] + t[:, None] * (cutters[:, j] - cutters[:, i])
-        valid[:, 4 + i] = go
-    pts = pts - np.einsum("pk,pj->pkj", np.einsum("pkj,pj->pk", pts - origin[:, None], n), n)
-    d2 = ((pts[:, :, None] - pts[:, None]) ** 2).sum(-1)
-    d2 = np.where(valid[:, :, None] & valid[:, None], d2, -1.0).reshape(P, 64)
-    best = d2.argmax(axis=1)
-    a, b = pts[np.arange(P), best // 8], pts[np.arange(P), best % 8]
-    ok = (h.min(axis=1) < eps) & (h.max(axis=1) > -eps) & (valid.sum(axis=1) >= 2) & \
-        (np.linalg.norm(b - a, axis=1) > eps) & np.isfinite(n).all(axis=1)
-    # clipped to the face, its border widened by eps (a triangle repeats its last corner)
-    real = np.concatenate([np.ones((P, 1), bool), np.linalg.norm(np.diff(face, axis=1), axis=2) > 0], 1)
-    centre = (face * real[:, :, None]).sum(axis=1) / real.sum(axis=1)[:, None]
-    t0, t1 = np.zeros(P), np.ones(P)
-    for i in range(4):
-        p, q = face[:, i], face[:, (i + 1) % 4]
-        m = np.cross(n, q - p)
-        L = np.linalg.norm(m, axis=1)
-        edge = L > 0
-        m = m / np.where(edge, L, 1.0)[:, None]
-        m = np.where((np.einsum("pj,pj->p", centre - p, m) < 0)[:, None], -m, m)     # inward
-        fa = np.einsum("pj,pj->p", a - p, m) + eps
-        fb = np.einsum("pj,pj->p", b - p, m) + eps
-        with np.errstate(divide="ignore", invalid="ignore"):
-            t = fa / (fa - fb)
-        enter = edge & (fa < 0) & (fb >= 0)
-        leave = edge & (fa >= 0) & (fb < 0)
-        out = edge & (fa < 0) & (fb < 0)
-        t0 = np.where(enter, np.maximum(t0, t), t0)
-        t1 = np.where(leave, np.minimum(t1, t), t1)
-        t1 = np.where(out, -1.0, t1)
-    d = b - a
-    ok &= (t1 - t0) * np.linalg.norm(d, axis=1) > eps
-    return np.stack([a + t0[:, None] * d, a + t1[:, None] * d], axis=1), ok
-
-
-def _split(poly, a, m, tol):
-    """A convex polygon (k, 3) split by the line through ``a`` with in-plane unit normal ``m``:
-    (positive side, negative side), each None when the polygon lies on the other side (corners
-    within ``tol`` of the line count as on it)."""
-    h = (poly - a) @ m
-    if h.max() <= tol or h.min() >= -tol:
-        return None
-    pos, neg = [], []
-    k = len(poly)
-    for i in range(k):
-        j = (i + 1) % k
-        p, hp, hq = poly[i], h[i], h[j]
-        if hp >= -tol:
-            pos.append(p)
-        if hp <= tol:
-            neg.append(p)
-        if (hp > tol and hq < -tol) or (hp < -tol and hq > tol):
-            x = p + (hp / (hp - hq)) * (poly[j] - p)
-            pos.append(x)
-            neg.append(x)
-    return np.array(pos), np.array(neg)
-
-
 def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_rel=1e-3, cuts=None) -> PatchSet:
     """``elements`` cut along the lines where other surfaces (``faces``: the scene's faces, e.g.
     :func:`.subdivide.build_patches` with no size) stand on or pass through them, with the
@@ -209,7 +130,9 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     corners = elements.corners()
     cut_corners = faces.corners()
     lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
-    key = np.stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64)], 1)
+    # a group: the elements of one plane of a source face (a warped quad's two triangles are two)
+    plane = np.round(np.asarray(elements.normals, dtype=np.float64) * 1e3).astype(np.int64)
+    key = np.column_stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64), plane])
     groups, inv, count = unique_rows(key, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
     order = np.argsort(inv, kind="stable")
@@ -218,6 +141,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     g_lo = np.minimum.reduceat(flat.min(axis=1)[order], start[:-1]) - eps
     g_hi = np.maximum.reduceat(flat.max(axis=1)[order], start[:-1]) + eps
     g_n = elements.normals[order[start[:-1]]]
+    g_pieces, g_piece_at, g_face = face_pieces(elements, order[start[:-1]], g_n, faces)
     # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
     # both sides of, or on, the group's plane
     gi_all, ci_all = _crossing_candidates(g_lo, g_hi, g_n, lo, hi, faces.normals)
@@ -230,7 +154,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     gi_all, ci_all = gi_all[keep], ci_all[keep]
     # a face sharing an edge with the group's face (two corners at the same places) meets it at
     # its border: nothing to cut (the faces of a tessellated box along its edges)
-    src = _face_corners(elements, order[start[gi_all]], faces)
+    src = cut_corners[g_face[gi_all]]
     same = np.abs(src[:, :, None, :] - cut_corners[ci_all][:, None, :, :]).max(axis=-1) <= eps
     shared = same.any(axis=1)[:, :3].sum(axis=1) + (same.any(axis=1)[:, 3] & ~tri[keep])
     # nor does a face of the same object sharing a corner: the mesh going on (a subdivided
@@ -242,9 +166,8 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     by = np.argsort(gi_all, kind="stable")
     gi_all, ci_all = gi_all[by], ci_all[by]
     pieces = {}                       # element -> list of (polygon, tags)
-    own_face = _face_corners(elements, order[start[:-1]], faces)          # (groups, 4, 3)
     # where each cutter meets its group's plane, and the part of that segment on the group's
-    # own face (a cutter that crosses the face's plane beside the face, a curved mesh's
+    # own face, any of its pieces (a cutter that crosses the face's plane beside the face, a curved mesh's
     # diagonal neighbour sharing one corner, meets it at that corner at most and cuts
     # nothing): every pair at once, in chunks
     seg_all = np.zeros((len(gi_all), 2, 3))
@@ -252,8 +175,8 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     for c0 in range(0, len(gi_all), 1 << 14):
         sl = slice(c0, c0 + (1 << 14))
         g = gi_all[sl]
-        seg_all[sl], kept_all[sl] = _pair_segments(flat[order[start[g]], 0], g_n[g], cut_corners[ci_all[sl]],
-                                                   own_face[g], eps)
+        seg_all[sl], kept_all[sl] = pieces_segments(flat[order[start[g]], 0], g_n[g], cut_corners[ci_all[sl]], g,
+                                                    (g_pieces, g_piece_at), cut_corners, eps)
     gi_all, ci_all, seg_all = gi_all[kept_all], ci_all[kept_all], seg_all[kept_all]
     bounds = np.r_[0, np.flatnonzero(np.diff(gi_all)) + 1, len(gi_all)] if len(gi_all) else [0]
     for k0, k1 in zip(bounds[:-1], bounds[1:]):
@@ -292,7 +215,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
                     if t.max() <= line[3] or t.min() >= length - line[3]:
                         out.append((poly, tags))          # this piece lies beyond the segment
                         continue
-                    sp = _split(poly, a, m, line[3])
+                    sp = split_polygon(poly, a, m, line[3])
                     if sp is None:
                         hs = (poly - a) @ m
                         out.append((poly, tags + ((line, 1 if hs.sum() >= 0 else -1),)))
@@ -302,17 +225,6 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     if not pieces:
         return elements
     return _assemble(elements, pieces, eps)
-
-
-def _face_corners(elements, ids, faces):
-    """(P, 4, 3) corners of the faces (of ``faces``: the scene's faces as patches) that elements
-    ``ids`` were cut from: the face of the same object and source face whose plane holds them
-    (an n-gon split into several: any of its pieces; a triangle repeats its last corner)."""
-    key = faces.owner.astype(np.int64) * (1 << 32) + faces.source_face.astype(np.int64)
-    want = elements.owner[ids].astype(np.int64) * (1 << 32) + elements.source_face[ids].astype(np.int64)
-    order = np.argsort(key, kind="stable")
-    at = order[np.minimum(np.searchsorted(key[order], want), len(order) - 1)]
-    return faces.corners(at)
 
 
 def _direction_keys(normals) -> np.ndarray:
