@@ -6,9 +6,12 @@ that is where a bake must not refine everywhere. Deterministic (the Cycles cache
 
 * ``Ground``: a ``SIZE`` m square of ``N`` x ``N`` quads, smooth-shaded, heights a sum of three
   sine waves (about 25 m from trough to crest over 1 km), one material of grey 0.35;
-* five box buildings (``BUILDINGS``: centre x, y, width, depth, height in metres), flat-shaded,
-  standing on the ground at its height under their centre and sunk 2 m into it, one material of
-  grey 0.6.
+* five box buildings (``BUILDINGS``: centre x, y, width, depth, height in metres above their
+  base), flat-shaded, one material of grey 0.6, each standing on the ground everywhere under it:
+  its base 1 m below the lowest ground under its footprint (a base at the ground's height under
+  its centre left caves up to 1.1 m high under the buildings' downhill sides, which the bake
+  lit through its coarse elements where Cycles has them dark: 45% of the squared error, on
+  ground nobody sees).
 
 The sun and the sky are real_scenes.py's ``sun_sky``.
 """
@@ -64,7 +67,8 @@ def build():
     _object(bpy, "Ground", verts, faces, _material(bpy, "Ground", 0.35), True)
     wall = _material(bpy, "Building", 0.6)
     for k, (cx, cy, w, d, h) in enumerate(BUILDINGS):
-        z0 = float(height(cx, cy)) - 2.0
+        fx, fy = np.meshgrid(np.linspace(cx - w / 2, cx + w / 2, 65), np.linspace(cy - d / 2, cy + d / 2, 65))
+        z0 = float(height(fx, fy).min()) - 1.0
         lo, hi = np.array([cx - w / 2, cy - d / 2, z0]), np.array([cx + w / 2, cy + d / 2, z0 + h])
         corners = np.array([[(lo, hi)[b >> 0 & 1][0], (lo, hi)[b >> 1 & 1][1], (lo, hi)[b >> 2 & 1][2]]
                             for b in range(8)])
