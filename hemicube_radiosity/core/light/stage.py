@@ -174,9 +174,10 @@ class DirectLight:
                                                          workers=self.workers, split=split, part=part))
         return f[:, None] * self.world[None, :]
 
-    def sources_at(self, points, normals, where: str) -> np.ndarray:
+    def sources_at(self, points, normals, where: str, world: bool = True) -> np.ndarray:
         """(P, S) luminance arriving directly at ``points`` from each source apart: every
-        emitting object (its faces together), every lamp, the world. A source's column scales with its
+        emitting object (its faces together), every lamp, the world (not with ``world`` False:
+        its rays are the costliest). A source's column scales with its
         strength and (its luminance) with its colour, so what depends only on each column's
         shape, not its scale, is the same after a relight."""
         cols = []
@@ -190,7 +191,7 @@ class DirectLight:
                                         eps=self.offsets(points, normals),
                                         cancelled=self.cancelled, samples=self.light_samples,
                                         seed=self.light_seed, workers=self.workers) @ LUMA)
-        if self.world is not None:
+        if self.world is not None and world:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 

@@ -19,7 +19,7 @@ from .corners import corner_columns
 from .interpolate import inverse_bilinear
 from .sides import seen_fraction
 
-__all__ = ["abrupt_elements", "AbruptGrid"]
+__all__ = ["abrupt_elements", "shadowed_inside", "AbruptGrid"]
 
 
 def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02, cache=None) -> np.ndarray:
@@ -34,6 +34,46 @@ def abrupt_elements(elements: PatchSet, values_v, ratio=2.0, floor=0.02, cache=N
     hi = np.maximum(np.maximum(c[0], c[1]), np.maximum(c[2], c[3]))
     lo = np.minimum(np.minimum(c[0], c[1]), np.minimum(c[2], c[3]))
     return (hi > ratio * lo) & (hi - lo > floor * max(float(Y.mean()), 1e-300))
+
+
+#: At most this many cells a side where :func:`shadowed_inside` looks inside an element.
+INSIDE_CELLS = 8
+
+
+def shadowed_inside(ctx, elements, xv, nv, light_v, select, opened=None, ratio=2.0, floor=0.02) -> np.ndarray:
+    """(N,) bool: elements whose corners agree but whose centre's light from the lamps and
+    emitters does not (more than ``ratio`` times above their largest or below their smallest,
+    and by more than ``floor`` of the mean light arriving ``light_v`` (V, 3)): a shadow or a
+    pool of light that lies inside an element and reaches none of its corners (the ground under
+    a bridge in the middle of a 70 m triangle, sunlit at all three corners), which
+    :func:`abrupt_elements` cannot see. Elements already in ``select`` (N,) and those the scene
+    does not see (``opened`` 0) are left out. Looked for at the centre of each element, or of
+    n x n cells of an element n detail sizes across; the world's light is not cast again (it
+    changes slowly); the lamps' rays are cached, so a relight casts none."""
+    out = np.zeros(len(elements), bool)
+    if ctx.direct is None or not (ctx.direct.lights or ctx.direct.emitters.size):
+        return out
+    ask = ~np.asarray(select, bool) if opened is None else ~np.asarray(select, bool) & (np.asarray(opened) > 0)
+    ids = np.flatnonzero(ask)
+    if not ids.size:
+        return out
+    # the centres of n x n cells of each element's bilinear map, n its side over the detail size
+    # (1 to INSIDE_CELLS: the large elements of a large object, whose detail size is scaled up)
+    size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
+    n = np.clip(np.round(np.sqrt(elements.areas[ids]) / size), 1, INSIDE_CELLS).astype(np.int64)
+    at = np.repeat(np.arange(ids.size), n * n)
+    k = np.arange(at.size) - np.repeat(np.cumsum(n * n) - n * n, n * n)
+    u, v = ((k % n[at]) + 0.5) / n[at], ((k // n[at]) + 0.5) / n[at]
+    x = bilinear(elements.corners()[ids[at]], u[:, None], v[:, None])
+    inside = ctx.direct.sources_at(x, elements.normals[ids[at]], "element-inside", world=False).sum(1)
+    at_v = ctx.direct.sources_at(xv, nv, "vertices", world=False).sum(1)
+    c = at_v.take(corner_columns(elements, ctx.cache)[0][:, ids])   # (4, M): a triangle's 4th is its 1st
+    hi = np.maximum(np.maximum(c[0], c[1]), np.maximum(c[2], c[3]))[at]
+    lo = np.minimum(np.minimum(c[0], c[1]), np.minimum(c[2], c[3]))[at]
+    bar = floor * max(float((np.asarray(light_v, dtype=np.float64) @ LUMA).mean()), 1e-300)
+    off = ((inside > ratio * hi) | (inside * ratio < lo)) & (np.abs(inside - c.mean(axis=0)[at]) > bar)
+    out[ids[np.unique(at[off])]] = True
+    return out
 
 
 def _place_uniforms(points, verts, count) -> np.ndarray:

@@ -20,7 +20,7 @@ from ..runtime.parallel import resolve_workers
 from ..runtime.progress import Ticker
 from ..util.geometry import bilinear
 from ..util.unique import unique_ints
-from .abrupt import AbruptGrid, abrupt_elements
+from .abrupt import AbruptGrid, abrupt_elements, shadowed_inside
 from .gather import apply_gather, correction_matrix, gather_matrix, product
 from .interpolate import interpolate_corners, located_corners, locate
 from .shine import HOT, hot_elements, mean_light, shine
@@ -130,6 +130,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # their grids and shine in the cache (no ray)
     select = abrupt_elements(elements, light_v, cache=ctx.cache)
     opened = open_elements(ctx, elements)
+    select |= shadowed_inside(ctx, elements, xv, nv, light_v, select, opened)
     bar = HOT * mean_light(elements, light_v, opened, ctx.cache)
     hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened)
     if not (select.any() or hot.any()):
