@@ -87,8 +87,9 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
 
     Two elements seen by the scene that share a vertex are parted there when the segment
     between points a hair inside each (``inset`` of the way from the vertex to their centres,
-    as the vertices are evaluated), lifted off the surface along their mean normal by a hundredth
-    of the two insets' length, crosses another surface. Each element is tested against the first at its
+    as the vertices are evaluated), lifted off the surface along their mean normal (by the two
+    insets' length times a hundredth plus the sine of half the angle between their normals),
+    crosses another surface. Each element is tested against the first at its
     vertex; where one is parted, every pair there (elements refined on one side meet the other
     side's at a corner, not an edge), and the corners are grouped by the pairs not parted, one
     vertex a group (a buried element's corner is a group of its own)."""
@@ -114,10 +115,13 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         d1, d2 = inset * (mesh.centers[e1] - x), inset * (mesh.centers[e2] - x)
         n = mesh.normals[e1] + mesh.normals[e2]
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        # a hundredth of the insets (at least a ray's start offset): a surface crossing at a
-        # grazing angle (a terrain sloping into a house's base) parts them too, where a lift
-        # of the insets' whole length passed under it beyond 45 degrees
-        lift = np.maximum(0.01 * (np.linalg.norm(d1, axis=1) + np.linalg.norm(d2, axis=1)),
+        # over a convex crease the segment dips below the edge by about an inset times
+        # sin(half the angle between the normals): lifted twice that, plus a hundredth of the
+        # insets (at least a ray's start offset) where the two lie in one plane, so that a
+        # surface crossing that plane at a grazing angle (a terrain sloping into a house's base)
+        # parts them too, where a lift of the insets' whole length passed under it
+        half = np.sqrt(np.clip((1.0 - np.einsum("ij,ij->i", mesh.normals[e1], mesh.normals[e2])) / 2, 0.0, 1.0))
+        lift = np.maximum((0.01 + half) * (np.linalg.norm(d1, axis=1) + np.linalg.norm(d2, axis=1)),
                           ray_offsets(mesh, owner=mesh.owner[e1]))[:, None] * n
         p1, p2 = x + d1 + lift, x + d2 + lift
         out = scene.occluded(p1, p2 - p1, np.ones(len(p1))) if len(p1) else np.zeros(0, bool)
