@@ -45,10 +45,11 @@ from .face_emission import face_means
 from .materials import corner_materials
 from .transparency import material_transmit, mesh_transmit, see_through_note, solve_rho
 from .ngon_triangles import bent_ngon_triangles, reversed_rings
+from .split_normals import cycles_corner_normals
 from .visibility import render_notes, world_matrix
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
-           "GEOMETRY_TYPES", "check_writable", "instancers_only"]
+           "GEOMETRY_TYPES", "check_writable", "instancers_only", "mesh_corner_normals"]
 
 COPLANAR_COS = float(np.cos(1e-3))
 # a face is of zero area below this fraction of the object's squared size (its bounding box
@@ -226,6 +227,16 @@ def corner_normals(me, smooth):
     return n.reshape(-1, 3).astype(np.float64)
 
 
+def mesh_corner_normals(me) -> np.ndarray:
+    """(L, 3) the normal Cycles shades every corner of mesh ``me`` with, in its local space
+    (:func:`.split_normals.cycles_corner_normals` of its own arrays): a lightmap's texels."""
+    _, lv, le, ps, pt, _, sm, sh = _mesh_arrays(me)
+    n = np.empty(len(me.loops) * 3)
+    if len(n):
+        me.corner_normals.foreach_get("vector", n)
+    return cycles_corner_normals(me, n.reshape(-1, 3), lv, le, ps, pt, sm, sh)
+
+
 def _normals_in_world(n, M):
     """Unit normals ``n`` (L, 3) in local space carried to world space by ``M`` (4, 4): the inverse
     transpose, so they stay on the side of the surface they were on (a mirror included)."""
@@ -301,7 +312,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     try:
         co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
         counts = (len(me.vertices), len(me.loops), len(me.polygons))
-        cn = corner_normals(me, sm)
+        cn = cycles_corner_normals(me, corner_normals(me, sm), lv, le, ps, pt, sm, sh)
         tris = bent_ngon_triangles(me, co, lv, ps, pt)
         mats = [s.material for s in ob_eval.material_slots] or [None]
         per_slot, see_notes = material_transmit(mats, me, _caustics(depsgraph))
