@@ -9,9 +9,14 @@ vertex, and averages radiosity there). Every face corner starts as its own verte
 faces that share an edge are welded at both ends of that edge when the faces use the same
 material and either
 
-* both faces are smooth-shaded and the edge is not marked sharp, or
+* both faces are smooth-shaded, the edge is not marked sharp and no other face shares it, or
 * the faces are coplanar (normals within 1e-3 rad), so a wall cut into several faces stays one
   surface even when it is flat-shaded or its edges are marked sharp.
+
+An edge three or more faces share (a wall standing on a floor along the edge of a face behind
+it, the partition between two solids of a game level) parts its faces but coplanar ones, as
+Blender's corner normals do: welded, a floor's corner at the wall's foot and the wall's shared a
+vertex whose point lay in front of neither (godot_zdm2: 16.0% RMS against Cycles, 14.1% parted).
 
 Everything else (flat-shaded corners of a box, sharp edges between smooth faces, material
 borders) is a hard edge: each side gets its own vertex copies and colours do not bleed across.
@@ -152,14 +157,22 @@ def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, fa
     nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
     order = np.argsort(loop_edge, kind="stable")
     es = loop_edge[order]
-    first = order[np.searchsorted(es, es, side="left")]
-    l1, l2 = first, order
+    start = np.searchsorted(es, es, side="left")
+    count = np.searchsorted(es, es, side="right") - start      # the faces on each loop's edge
+    # each loop with its edge's first; on an edge more faces share, with every earlier one too
+    # (coplanar pairs weld there, wherever they are in the edge's list)
+    rep = np.where(count > 2, np.arange(L) - start - 1, 0).clip(0)
+    k = np.repeat(np.arange(L), rep)
+    a = 1 + np.arange(k.size) - np.repeat(np.cumsum(rep) - rep, rep)
+    l1 = np.concatenate([order[start], order[start[k] + a]])
+    l2 = np.concatenate([order, order[k]])
+    count = np.concatenate([count, count[k]])
     keep = l1 != l2
-    l1, l2 = l1[keep], l2[keep]
+    l1, l2, count = l1[keep], l2[keep], count[keep]
     f1, f2 = loop_face[l1], loop_face[l2]
     e = loop_edge[l2]
     coplanar = np.einsum("ij,ij->i", face_normal[f1], face_normal[f2]) > COPLANAR_COS
-    smooth = face_smooth[f1] & face_smooth[f2] & ~edge_sharp[e]
+    smooth = face_smooth[f1] & face_smooth[f2] & ~edge_sharp[e] & (count == 2)
     weld = (face_material[f1] == face_material[f2]) & (smooth | coplanar)
     l1, l2 = l1[weld], l2[weld]
     same = loop_vert[l1] == loop_vert[l2]
