@@ -54,6 +54,7 @@ import numpy as np
 from ..core.formats.gltf import LIGHTING_NOTE, srgb_encode
 from ..core.output import lightmap as core_lightmap
 from . import textures, write
+from .read.scene import mesh_corner_normals
 
 __all__ = ["write_lightmaps", "LIGHTMAP_UV", "MATERIAL_KEY", "LIGHTING_KEY", "lightmap_folder",
            "albedo_scale_of"]
@@ -113,13 +114,11 @@ def _triangle_faces(me):
 def _corner_normals(me, matrix):
     """(T, 3, 3) the shading normals at the corners of mesh ``me``'s loop triangles (as
     :func:`_world_triangles` made them) in world space (``matrix`` 4x4), unit length: what
-    Cycles shades with (smooth faces, custom normals)."""
+    Cycles shades with (smooth faces, custom normals; :mod:`.read.split_normals`)."""
     tl = np.empty(len(me.loop_triangles) * 3, np.int64)
     me.loop_triangles.foreach_get("loops", tl)
-    n = np.empty(len(me.loops) * 3)
-    me.corner_normals.foreach_get("vector", n)
     N = np.linalg.inv(np.asarray(matrix, dtype=np.float64)[:3, :3]).T
-    n = n.reshape(-1, 3)[tl] @ N.T
+    n = mesh_corner_normals(me)[tl] @ N.T
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
     return n.reshape(-1, 3, 3)
 

@@ -9,9 +9,14 @@ vertex, and averages radiosity there). Every face corner starts as its own verte
 faces that share an edge are welded at both ends of that edge when the faces use the same
 material and either
 
-* both faces are smooth-shaded and the edge is not marked sharp, or
+* both faces are smooth-shaded, the edge is not marked sharp and no other face shares it, or
 * the faces are coplanar (normals within 1e-3 rad), so a wall cut into several faces stays one
   surface even when it is flat-shaded or its edges are marked sharp.
+
+An edge three or more faces share (a wall standing on a floor along the edge of a face behind
+it, the partition between two solids of a game level) parts its faces but coplanar ones, as
+Blender's corner normals do: welded, a floor's corner at the wall's foot and the wall's shared a
+vertex whose point lay in front of neither (godot_zdm2: 16.0% RMS against Cycles, 14.1% parted).
 
 Everything else (flat-shaded corners of a box, sharp edges between smooth faces, material
 borders) is a hard edge: each side gets its own vertex copies and colours do not bleed across.
@@ -45,10 +50,11 @@ from .face_emission import face_means
 from .materials import corner_materials
 from .transparency import material_transmit, mesh_transmit, see_through_note, solve_rho
 from .ngon_triangles import bent_ngon_triangles, reversed_rings
+from .split_normals import cycles_corner_normals
 from .visibility import render_notes, world_matrix
 
 __all__ = ["ReadError", "ObjectSource", "SceneInput", "read_object", "read_scene", "weld_corners",
-           "GEOMETRY_TYPES", "check_writable", "instancers_only"]
+           "GEOMETRY_TYPES", "check_writable", "instancers_only", "mesh_corner_normals"]
 
 COPLANAR_COS = float(np.cos(1e-3))
 # a face is of zero area below this fraction of the object's squared size (its bounding box
@@ -151,14 +157,22 @@ def weld_corners(loop_vert, loop_edge, poly_start, poly_total, face_material, fa
     nxt = np.where(pos == poly_total[loop_face] - 1, poly_start[loop_face], np.arange(L) + 1)
     order = np.argsort(loop_edge, kind="stable")
     es = loop_edge[order]
-    first = order[np.searchsorted(es, es, side="left")]
-    l1, l2 = first, order
+    start = np.searchsorted(es, es, side="left")
+    count = np.searchsorted(es, es, side="right") - start      # the faces on each loop's edge
+    # each loop with its edge's first; on an edge more faces share, with every earlier one too
+    # (coplanar pairs weld there, wherever they are in the edge's list)
+    rep = np.where(count > 2, np.arange(L) - start - 1, 0).clip(0)
+    k = np.repeat(np.arange(L), rep)
+    a = 1 + np.arange(k.size) - np.repeat(np.cumsum(rep) - rep, rep)
+    l1 = np.concatenate([order[start], order[start[k] + a]])
+    l2 = np.concatenate([order, order[k]])
+    count = np.concatenate([count, count[k]])
     keep = l1 != l2
-    l1, l2 = l1[keep], l2[keep]
+    l1, l2, count = l1[keep], l2[keep], count[keep]
     f1, f2 = loop_face[l1], loop_face[l2]
     e = loop_edge[l2]
     coplanar = np.einsum("ij,ij->i", face_normal[f1], face_normal[f2]) > COPLANAR_COS
-    smooth = face_smooth[f1] & face_smooth[f2] & ~edge_sharp[e]
+    smooth = face_smooth[f1] & face_smooth[f2] & ~edge_sharp[e] & (count == 2)
     weld = (face_material[f1] == face_material[f2]) & (smooth | coplanar)
     l1, l2 = l1[weld], l2[weld]
     same = loop_vert[l1] == loop_vert[l2]
@@ -224,6 +238,16 @@ def corner_normals(me, smooth):
     if len(n):
         me.corner_normals.foreach_get("vector", n)
     return n.reshape(-1, 3).astype(np.float64)
+
+
+def mesh_corner_normals(me) -> np.ndarray:
+    """(L, 3) the normal Cycles shades every corner of mesh ``me`` with, in its local space
+    (:func:`.split_normals.cycles_corner_normals` of its own arrays): a lightmap's texels."""
+    _, lv, le, ps, pt, _, sm, sh = _mesh_arrays(me)
+    n = np.empty(len(me.loops) * 3)
+    if len(n):
+        me.corner_normals.foreach_get("vector", n)
+    return cycles_corner_normals(me, n.reshape(-1, 3), lv, le, ps, pt, sm, sh)
 
 
 def _normals_in_world(n, M):
@@ -301,7 +325,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     try:
         co, lv, le, ps, pt, mi, sm, sh = _mesh_arrays(me)
         counts = (len(me.vertices), len(me.loops), len(me.polygons))
-        cn = corner_normals(me, sm)
+        cn = cycles_corner_normals(me, corner_normals(me, sm), lv, le, ps, pt, sm, sh)
         tris = bent_ngon_triangles(me, co, lv, ps, pt)
         mats = [s.material for s in ob_eval.material_slots] or [None]
         per_slot, see_notes = material_transmit(mats, me, _caustics(depsgraph))

@@ -46,10 +46,10 @@ from ..rays import occluder, ray_offsets
 from ..light.lamps import SunLight
 from ..mesh.patches import meshes_key
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .lift import blocked_share, face_corners
+from .lift import bake_points, blocked_share, corner_edges, corner_normals, face_corners
 from .normals import corner_shading_normals
 
-__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "corner_edges", "corner_normals"]
+__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light"]
 
 #: Degrees: a corner's shading normal leaning this far off its triangle's normal, or off its
 #: vertex's normal, gets the corner its own direct light. Truck town: 5 degrees lit 63,204 of
@@ -57,6 +57,14 @@ __all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "corner_ed
 CREASE_ANGLE = 15.0
 #: How far toward its element's centre a corner is lit (as :func:`.emitters.vertex_frames`' points).
 INSET = 1e-2
+#: A corner whose shading normal's cosine to its triangle's normal is smaller than this (in
+#: magnitude) is turned around or not as its normal at Cycles' bake point says (:func:`_turned`),
+#: and its rays start off the plane along the two normals' bisector.
+NEAR_PERPENDICULAR = 0.05
+#: A normal at the bake point within this cosine of its triangle's plane is not turned around:
+#: along the plane to rounding, Cycles shades its front (godot_zdm2: of the 1,911 corners whose
+#: normal lies within 1e-6 of their plane, Cycles' NORMAL bake turns 7%).
+TIE = 1e-6
 
 
 def crease_corners(elements, meshes, nv, opened=None, buried=None):
@@ -85,33 +93,27 @@ def crease_corners(elements, meshes, nv, opened=None, buried=None):
     if not fire.any():
         return None
     p, c, v, shade, geo, facing = p[fire], c[fire], v[fire], shade[fire], geo[fire], facing[fire]
-    turn = np.where(facing < 0, -1.0, 1.0)[:, None]
+    turned = _turned(elements, meshes, p, c, geo, facing)
+    turn = np.where(turned, -1.0, 1.0)[:, None]
     x = elements.verts[v] + INSET * (elements.centers[p] - elements.verts[v])
-    return p, c, x, shade * turn, geo * turn, facing < 0
+    return p, c, x, shade * turn, geo * turn, turned
 
 
-def corner_edges(elements, p, c):
-    """(position (K, 3), edge to the next corner (K, 3), edge to the previous corner (K, 3)) of
-    each corner ``c`` (K,) of element ``p`` (K,) (a triangle's corners cycle over 3, a quad's 4)."""
-    polys = elements.polys
-    k = np.where(polys[p, 3] >= 0, 4, 3)
-    X = elements.verts
-    here = X[polys[p, c]]
-    return here, X[polys[p, (c + 1) % k]] - here, X[polys[p, (c - 1) % k]] - here
-
-
-def corner_normals(elements, p, c) -> np.ndarray:
-    """(K, 3) unit normal of the triangle each corner ``c`` (K,) of element ``p`` (K,) makes with
-    its two neighbouring corners, turned to the element's side; the element's own normal where
-    that triangle has no area."""
-    _, nxt, prv = corner_edges(elements, p, c)
-    n = np.cross(nxt, prv)
-    length = np.linalg.norm(n, axis=1)
-    own = elements.normals[p]
-    scale = np.linalg.norm(nxt, axis=1) * np.linalg.norm(prv, axis=1)
-    flat = ~(length > 1e-9 * scale)
-    n = np.where(flat[:, None], own, n / np.where(flat, 1.0, length)[:, None])
-    return np.where((np.einsum("ij,ij->i", n, own) < 0)[:, None], -n, n)
+def _turned(elements, meshes, p, c, geo, facing) -> np.ndarray:
+    """(K,) bool: Cycles turns corner ``c`` (K,) of element ``p`` (K,) around, its shading normal
+    at its bake point (:func:`.lift.bake_points`, where the smooth normal is interpolated from
+    the triangle's other corners too) facing away from its triangle's normal ``geo`` (K, 3) by
+    more than :data:`TIE`.
+    ``facing`` (K,): the corner's own normal's cosine to ``geo``, which says it where the two
+    are not near perpendicular (a normal written over a vertex by another face,
+    :mod:`..mesh.cycles_normals`, often is: a wall's corner shaded with the floor's)."""
+    turned = facing < 0
+    near = np.flatnonzero(np.abs(facing) < NEAR_PERPENDICULAR)
+    if near.size:
+        at = bake_points(elements, meshes, p[near], c[near])
+        n, has = corner_shading_normals(elements, meshes, p[near], c[near], at)
+        turned[near[has]] = np.einsum("ij,ij->i", n[has], geo[near[has]]) < -TIE
+    return turned
 
 
 def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
@@ -181,9 +183,12 @@ def _make_corner_rays(ctx, elements, xv, nv, opened, buried):
     eps = ray_offsets(ctx.patches, owner=elements.owner[p])
     # where the light below the plane is not cut, Cycles' ray leaves the corner itself, over
     # the edges that meet there: from the vertex's own point (on the front of all its
-    # elements, :func:`.emitters.vertex_frames`) along the corner's shading normal
+    # elements, :func:`.emitters.vertex_frames`) along the corner's shading normal, or the
+    # bisector where that normal lies along the plane (off it along the normal, a hair behind
+    # the plane, the ray met the corner's own face: Cycles' skips it)
     v = elements.polys[p, c]
-    start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * shade)
+    along = np.where((np.einsum("ij,ij->i", shade, geo) < NEAR_PERPENDICULAR)[:, None], up, shade)
+    start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * along)
     own = ctx.direct.offsets(xv, nv)[v]         # the vertex's rays' (a hit: it was lit with them)
     same = ~cut & (np.abs(shade - nv[v]).max(axis=1) <= 1e-9) & (np.abs(eps - own) <= 1e-6 * own)
     return p, c, start, shade, geo, np.where(cut[:, None], geo, shade), same

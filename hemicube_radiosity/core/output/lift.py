@@ -21,7 +21,8 @@ import numpy as np
 
 from ..util.geometry import barycentric
 
-__all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners"]
+__all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners", "bake_points",
+           "corner_edges", "corner_normals"]
 
 #: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
 TERMINATOR_OFFSET = 0.1
@@ -121,3 +122,129 @@ def face_corners(mesh, face, points, tol) -> np.ndarray:
         j = np.argmin(d, axis=1)
         out[rows] = np.where(d[np.arange(len(rows)), j] <= tol, j, -1)
     return out
+
+
+def corner_edges(elements, p, c):
+    """(position (K, 3), edge to the next corner (K, 3), edge to the previous corner (K, 3)) of
+    each corner ``c`` (K,) of element ``p`` (K,) (a triangle's corners cycle over 3, a quad's 4)."""
+    polys = elements.polys
+    k = np.where(polys[p, 3] >= 0, 4, 3)
+    X = elements.verts
+    here = X[polys[p, c]]
+    return here, X[polys[p, (c + 1) % k]] - here, X[polys[p, (c - 1) % k]] - here
+
+
+def corner_normals(elements, p, c) -> np.ndarray:
+    """(K, 3) unit normal of the triangle each corner ``c`` (K,) of element ``p`` (K,) makes with
+    its two neighbouring corners, turned to the element's side; the element's own normal where
+    that triangle has no area."""
+    _, nxt, prv = corner_edges(elements, p, c)
+    n = np.cross(nxt, prv)
+    length = np.linalg.norm(n, axis=1)
+    own = elements.normals[p]
+    scale = np.linalg.norm(nxt, axis=1) * np.linalg.norm(prv, axis=1)
+    flat = ~(length > 1e-9 * scale)
+    n = np.where(flat[:, None], own, n / np.where(flat, 1.0, length)[:, None])
+    return np.where((np.einsum("ij,ij->i", n, own) < 0)[:, None], -n, n)
+
+
+def bake_points(elements, meshes, p, c):
+    """(K, 3) where Cycles bakes corner ``c`` (K,) of element ``p`` (K,). Blender gives a face
+    corner one bake point, on the first of its loop triangles holding it (``object_bake_api.cc``
+    ``bake_targets_populate_pixels_color_attributes``: "first triangle wins"), and Cycles moves it
+    toward that triangle's centre by :data:`BAKE_NUDGE` of its largest coordinate (at least
+    that of 1; at most the distance). An element corner at a corner of its source face is moved
+    so (:func:`_first_triangles`); any other (a vertex cut inside a face, a corner of an n-gon
+    Blender splits its own way) toward its element's centre, at most half way."""
+    x = elements.verts[elements.polys[p, c]]
+    big = np.maximum(np.abs(x).max(axis=1), 1.0)
+    centre = np.array(elements.centers[p], dtype=np.float64)
+    most = 0.5 * np.linalg.norm(centre - x, axis=1)
+    found = _first_triangles(elements, meshes, p, x)
+    if found is not None:
+        k, tri_centre = found
+        inside = _within(elements, p[k], c[k], tri_centre)
+        k, tri_centre = k[inside], tri_centre[inside]
+        centre[k] = tri_centre
+        most[k] = np.linalg.norm(tri_centre - x[k], axis=1)
+    to = centre - x
+    dist = np.linalg.norm(to, axis=1)
+    return x + to * (np.minimum(most, BAKE_NUDGE * big) / np.maximum(dist, 1e-300))[:, None]
+
+
+def _within(elements, p, c, towards) -> np.ndarray:
+    """(K,) bool: the direction from corner ``c`` (K,) of element ``p`` (K,) to ``towards``
+    (K, 3) runs into the element or along one of its two edges at the corner (in its plane):
+    not so for the elements of a face's other triangles at that corner (an n-gon's fan)."""
+    x, nxt, prv = corner_edges(elements, p, c)
+    d = towards - x
+    n = elements.normals[p]
+    size = np.linalg.norm(nxt, axis=1) * np.linalg.norm(d, axis=1)
+    tol = 1e-9 * np.maximum(size, 1e-300)
+    a = np.einsum("ij,ij->i", np.cross(nxt, d), n)
+    b = np.einsum("ij,ij->i", np.cross(d, prv), n)
+    return (a >= -tol) & (b >= -tol) & (np.linalg.norm(d, axis=1) > 0)
+
+
+def _first_row_holding(ft, face, j) -> np.ndarray:
+    """(K,) for each face ``face`` (K,) and its corner ``j`` (K,), the first row of the loop
+    triangles ``ft`` (T, 4: face, three corners of it) of that face holding that corner; -1
+    where none does."""
+    rows = np.repeat(np.arange(len(ft)), 3)
+    kf, kc = np.repeat(ft[:, 0], 3), ft[:, 1:].reshape(-1)
+    order = np.lexsort((rows, kc, kf))                 # by face, corner, then row: first wins
+    kf, kc, rows = kf[order], kc[order], rows[order]
+    first = np.ones(len(kf), bool)
+    first[1:] = (kf[1:] != kf[:-1]) | (kc[1:] != kc[:-1])
+    span = int(max(kc.max(initial=0), np.max(j, initial=0))) + 2
+    table = kf[first] * span + kc[first]
+    rows = rows[first]
+    query = face * span + j
+    at = np.minimum(np.searchsorted(table, query), max(len(table) - 1, 0))
+    hit = (j >= 0) & (len(table) > 0) & (table[at] == query) if len(table) else np.zeros(len(face), bool)
+    return np.where(hit, rows[at] if len(table) else -1, -1)
+
+
+def _first_triangles(elements, meshes, p, x):
+    """(k (R,) rows of ``p``, centre (R, 3)): for the element corners at ``x`` (K, 3) that are
+    corners of their source face, the centre of the first of Blender's loop triangles of the
+    face holding it: a triangle's own, a quad's (0, 1, 2) for corners 0-2 and (0, 2, 3) for
+    corner 3, or the first row of the mesh's ``face_triangles`` holding it, where that triangle
+    has an area; None when there are none."""
+    if not meshes:
+        return None
+    ks, cs = [], []
+    size = float(np.linalg.norm(np.ptp(elements.verts, axis=0))) if len(elements.verts) else 1.0
+    owner = elements.owner[p]
+    for oi, m in enumerate(meshes):
+        rows = np.flatnonzero(owner == oi)
+        if not rows.size:
+            continue
+        face = elements.source_face[p[rows]].astype(np.int64)
+        j = face_corners(m, face, x[rows], 1e-9 * size)
+        off = np.asarray(m.face_offsets, dtype=np.int64)
+        n = off[face + 1] - off[face]
+        tri = np.full((len(rows), 3), -1, dtype=np.int64)
+        tri[(n == 3) & (j >= 0)] = (0, 1, 2)
+        tri[(n == 4) & (j >= 0) & (j < 3)] = (0, 1, 2)
+        tri[(n == 4) & (j == 3)] = (0, 2, 3)
+        ft = getattr(m, "face_triangles", None)
+        if ft is not None and len(ft):
+            ft = np.asarray(ft, dtype=np.int64)
+            listed = np.zeros(len(off) - 1, bool)
+            listed[ft[:, 0]] = True
+            tri[listed[face]] = -1
+            row = _first_row_holding(ft, face, j)
+            tri[row >= 0] = ft[row[row >= 0], 1:]
+        ok = np.flatnonzero(tri[:, 0] >= 0)
+        idx = np.asarray(m.face_indices, dtype=np.int64)
+        V = np.asarray(m.verts, dtype=np.float64)[idx[off[face[ok]][:, None] + tri[ok]]]
+        # a triangle of no area (a quad with two corners at one point) has no centre to move to
+        area2 = np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=1)
+        edge2 = np.max([np.sum((V[:, i] - V[:, (i + 1) % 3]) ** 2, axis=1) for i in range(3)], axis=0)
+        flat = area2 <= 1e-9 * edge2
+        ks.append(rows[ok[~flat]])
+        cs.append(V[~flat].mean(axis=1))
+    if not ks:
+        return None
+    return np.concatenate(ks), np.concatenate(cs)

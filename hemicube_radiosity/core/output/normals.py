@@ -61,11 +61,11 @@ def shading_normals(elements: PatchSet, meshes, normals) -> np.ndarray:
     return out
 
 
-def corner_shading_normals(elements: PatchSet, meshes, p, c):
+def corner_shading_normals(elements: PatchSet, meshes, p, c, at=None):
     """(shading (K, 3), has (K,) bool) at corners ``c`` (K,) of elements ``p`` (K,): each corner's
-    own source face's corner normals interpolated at its vertex (unit; Cycles shades that face's
-    triangles with them), ``has`` False (and the row 0) where the element's mesh has no corner
-    normals; (None, None) when no mesh has any."""
+    own source face's corner normals interpolated at its vertex, or at the points ``at`` (K, 3)
+    on the face (unit; Cycles shades that face's triangles with them), ``has`` False (and the row
+    0) where the element's mesh has no corner normals; (None, None) when no mesh has any."""
     if meshes is None or all(getattr(m, "corner_normal", None) is None for m in meshes):
         return None, None
     p = np.asarray(p, dtype=np.int64)
@@ -77,7 +77,7 @@ def corner_shading_normals(elements: PatchSet, meshes, p, c):
         rows = np.flatnonzero(owner == oi) if cn is not None else ()
         if not len(rows):
             continue
-        x = elements.verts[elements.polys[p[rows], np.asarray(c)[rows]]]
+        x = elements.verts[elements.polys[p[rows], np.asarray(c)[rows]]] if at is None else np.asarray(at)[rows]
         n = _at(m, np.asarray(cn, dtype=np.float64), elements.source_face[p[rows]].astype(np.int64), x)
         length = np.linalg.norm(n, axis=1)
         ok = length > 1e-12

@@ -98,9 +98,9 @@ def test_a_buried_corner_s_open_side_under_a_lip_is_lit_from_under_it():
 
 
 def test_the_first_loop_triangle_holding_a_corner_wins():
-    """covered._first_row_holding against the plain rule: of a face's loop triangles (rows of
+    """lift._first_row_holding against the plain rule: of a face's loop triangles (rows of
     (face, three of its corners)), the first row that holds the corner; -1 where none does."""
-    from hemicube_radiosity.core.output.covered import _first_row_holding
+    from hemicube_radiosity.core.output.lift import _first_row_holding
 
     rng = np.random.default_rng(5)
     ft = np.concatenate([np.stack([np.full(4, f), *rng.permutation(np.tile(np.arange(6), 2))[:12].reshape(3, 4)], 1)

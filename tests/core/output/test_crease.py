@@ -150,3 +150,30 @@ def test_a_corner_lit_as_its_vertex_takes_the_vertexs_light_and_casts_no_ray(mon
     own = bake([m, floor], s, lights=[sun], world=world)
     assert sum(lit) == len(same)
     np.testing.assert_allclose(shared.corner_values(), own.corner_values(), rtol=1e-9, atol=1e-12)
+
+
+def test_a_corner_normal_a_hair_behind_its_face_is_turned_as_at_cycles_bake_point(monkeypatch):
+    """A 1 m square facing up whose corner normals along x = 0 lie along the face, a millionth
+    behind it ((-1, 0, -1e-6): a wall's foot shaded with the floor's normal, Cycles' per-vertex
+    normals, core/mesh/cycles_normals.py), the other two +z. Cycles turns a triangle around by
+    its normal at the bake point, 1e-4 in toward the triangle's centre, where the +z corners
+    already tip it in front: those corners are not turned, and a sun from -x lights them by
+    rho E (N . L) / pi, their rays starting off the face along the two normals' bisector. Turned
+    by their own normal's sign, or with their rays started along that normal (a hair behind the
+    face, they meet it), as before, they read 0."""
+    n = np.array([-1.0, 0.0, -1e-6]) / np.linalg.norm([-1.0, 0.0, -1e-6])
+    m = MeshInput.from_faces([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], [(0, 1, 2, 3)],
+                             rho=(RHO, RHO, RHO), name="floor")
+    m.corner_normal = np.array([n, (0, 0, 1), (0, 0, 1), n], dtype=np.float64)
+    el = np.radians(30.0)
+    to_sun = np.array([-np.cos(el), 0.0, np.sin(el)])
+    r = bake([m], _settings(), lights=[SunLight(-to_sun, strength=3.0)])
+    E = r.elements
+    at_edge = E.verts[E.polys][..., 0] == 0.0               # (N, 4) element corners on x = 0
+    got = r.corner_values()[at_edge & (E.polys >= 0)]
+    assert len(got) == 8                                     # 4 elements along the edge, 2 corners each
+    np.testing.assert_allclose(got, RHO * 3.0 * float(n @ to_sun) / np.pi, rtol=1e-6)
+    import hemicube_radiosity.core.output.crease as crease
+    monkeypatch.setattr(crease, "NEAR_PERPENDICULAR", 0.0)
+    before = bake([m], _settings(), lights=[SunLight(-to_sun, strength=3.0)])
+    np.testing.assert_array_equal(before.corner_values()[at_edge & (E.polys >= 0)], 0.0)

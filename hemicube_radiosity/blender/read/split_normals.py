@@ -1,0 +1,38 @@
+# SPDX-License-Identifier: GPL-3.0-or-later
+"""The shading normal Cycles gives each face corner (:mod:`...core.mesh.cycles_normals`): Blender's
+corner normals as Cycles of this Blender stores them, read with the mesh's vertex normals and loop
+triangles."""
+from __future__ import annotations
+
+import numpy as np
+
+from ...core.mesh.cycles_normals import shading_normals
+
+__all__ = ["cycles_corner_normals", "CYCLES_SPLITS_VERTICES"]
+
+#: From this Blender on Cycles reads Blender's corner normals as they are (up to 5.0 it stores
+#: one normal per vertex: :mod:`...core.mesh.cycles_normals`).
+CYCLES_SPLITS_VERTICES = (5, 1, 0)
+
+
+def cycles_corner_normals(me, normals, loop_vert, loop_edge, poly_start, poly_total, face_smooth,
+                          edge_sharp, version=None) -> np.ndarray:
+    """Blender's corner ``normals`` (L, 3) of the evaluated mesh ``me`` as Cycles of this Blender
+    (``version``: ``bpy.app.version`` unless given) shades them: :func:`shading_normals` with
+    ``me``'s vertex normals and loop triangles before :data:`CYCLES_SPLITS_VERTICES`, as they are
+    from it on."""
+    if version is None:
+        import bpy
+
+        version = bpy.app.version
+    if tuple(version) >= CYCLES_SPLITS_VERTICES or normals is None:
+        return normals
+    tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+    if len(tl):
+        me.loop_triangles.foreach_get("loops", tl)
+    vn = np.empty(len(me.vertices) * 3, np.float32)
+    if len(vn):
+        me.vertices.foreach_get("normal", vn)
+    return shading_normals(normals, vn.reshape(-1, 3), loop_vert, loop_edge, poly_start, poly_total,
+                           face_smooth, edge_sharp, tl.reshape(-1, 3),
+                           custom=bool(getattr(me, "has_custom_normals", False)))
