@@ -118,7 +118,7 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
     (new strengths, colours, reflectivities) splits the same patches and reuses the form
     factors. A patch smaller than ``min_area`` or ``frozen`` (N,) bool (emitters, grouped faces)
     stays. Returns the refined PatchSet and ``parent`` (N',) into the patches given."""
-    parent = np.arange(len(patches))
+    parent = None                         # (the identity) kept as the same array for the same splits
     frozen = np.zeros(len(patches), bool) if frozen is None else np.asarray(frozen, bool)
     check = ~frozen & (patches.areas > min_area)
     absolute = None
@@ -146,9 +146,9 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         if not hit.any():
             break
         patches, p = split_patches(patches, hit)
-        parent = parent[p]
+        parent = p if parent is None else _SPLIT.of((parent, p), lambda: parent[p])
         check = hit[p] & (patches.areas > min_area)
-    return patches, parent
+    return patches, np.arange(len(patches)) if parent is None else parent
 
 
 def _crossing(patches, cache=None):
