@@ -419,6 +419,7 @@ def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user
         if "material_index" in me.attributes:
             me.attributes.remove(me.attributes["material_index"])
         me.materials.clear()
+        me.update_tag()                       # (its colours change: drawn again)
     else:
         me = bpy.data.meshes.new(f"{src.name}.radiosity")
         me.vertices.add(len(local))
