@@ -179,8 +179,12 @@ def _back_geometry(mesh, faces):
     remap = np.full(len(mesh.verts), -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
     verts = np.asarray(mesh.verts, dtype=np.float64)[used] - offset(mesh.verts) * normals[used]
-    return (verts, new_offsets, remap[indices[corner]], corner, sel,
-            _back_triangles(getattr(mesh, "face_triangles", None), sel, counts))
+    out = (verts, new_offsets, remap[indices[corner]], corner, sel,
+           _back_triangles(getattr(mesh, "face_triangles", None), sel, counts))
+    for a in out:
+        if a is not None:
+            a.flags.writeable = False
+    return out
 
 
 def _back_triangles(rows, sel, counts):

@@ -22,7 +22,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .patches import MeshInput
+from .patches import MeshInput, read_only
 from ..runtime.cache import Memo
 
 _SPANS = Memo(64, max_bytes=256 << 20)     # a mesh's arrays -> face_spans (the last bakes')
@@ -38,8 +38,12 @@ def face_spans(mesh: MeshInput):
     """Per face of ``mesh``: (areas (F,), sides (F, 2) the longer of each pair of opposite sides
     of a quad, the longest edge twice for a triangle or an n-gon, corners (F,) int).
     Areas from the face's corners (Newell's formula: n-gons, non-planar quads). Made once per
-    mesh's arrays (a bake counts at several sizes); read only."""
-    return _SPANS.of((mesh.verts, mesh.face_offsets, mesh.face_indices), lambda: _face_spans(mesh))
+    mesh's read-only arrays (a bake counts at several sizes; a relight reads the same arrays);
+    read only."""
+    arrays = (mesh.verts, mesh.face_offsets, mesh.face_indices)
+    if not all(read_only(a) for a in arrays):          # may change in place: made every time
+        return _face_spans(mesh)
+    return _SPANS.of(arrays, lambda: _face_spans(mesh))
 
 
 def _face_spans(mesh: MeshInput):
