@@ -43,6 +43,8 @@ __all__ = ["WriteError", "COLLECTION_NAME", "SOURCE_KEY", "write_copies",
 COLLECTION_NAME = "Radiosity"
 SOURCE_KEY = "radiosity_source"
 MESH_KIND_KEY = "radiosity_mesh"     # on a copy: "source" (the user's topology) or "elements"
+LAYOUT_KEY = "radiosity_layout"      # on an element mesh: what its geometry and UVs were made from
+WRITTEN_KEY = "radiosity_written"    # ... and its attributes' names when written
 MATERIAL_PREFIX = "Radiosity Bake"
 
 
@@ -93,12 +95,13 @@ def copies_of(names):
     return [o for o in bpy.data.objects if o.get(SOURCE_KEY) in names]
 
 
-def remove_bakes(names, unhide=False):
-    """Delete the baked copies of objects ``names`` (and their meshes); optionally unhide sources."""
+def remove_bakes(names, unhide=False, keep=()):
+    """Delete the baked copies of objects ``names`` (and their meshes, but those named in
+    ``keep``); optionally unhide sources."""
     for ob in copies_of(names):
         me = ob.data
         bpy.data.objects.remove(ob, do_unlink=True)
-        if me is not None and me.users == 0:
+        if me is not None and me.users == 0 and me.name not in keep:
             bpy.data.meshes.remove(me)
     if unhide:
         for n in names:
@@ -160,7 +163,8 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
     a textured object's copy shows its texture times the light (:mod:`.textures`)."""
     scene = context.scene
     baked = [s for s in scene_input.objects if s.bake]
-    remove_bakes([s.name for s in baked])
+    kept = _element_meshes([s.name for s in baked])      # a relight may write into them again
+    remove_bakes([s.name for s in baked], keep={me.name for me in kept.values()})
     coll = copies_collection(scene)
     scale = 2.0 ** float(exposure)
     depsgraph = context.evaluated_depsgraph_get()
@@ -179,13 +183,62 @@ def write_copies(context, scene_input, result, attribute_name="Radiosity", expos
             copy = _source_topology_copy(depsgraph, result, corners, oi, src, attribute_name, scale, mat) \
                 if owners.size == 1 else None
             if copy is None:
-                copy = _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user)
+                copy = _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user,
+                                     kept.pop(src.name, None))
             if oi in textured:
                 _show_textures(copy, user, corners, lighting, attribute_name, scale, scales, owners.size > 1)
             _keep_see_through(copy, user)
+            if copy.kind == "elements":
+                copy.me[WRITTEN_KEY] = _attribute_names(copy.me)
         out.append(place_copy(coll, src, copy.me, copy.kind))
+    for me in kept.values():                 # not written again: gone, as with every old copy
+        if me.users == 0:
+            bpy.data.meshes.remove(me)
     select_copies(context, out)
     return out
+
+
+def _element_meshes(names) -> dict:
+    """{source name: the element mesh of its baked copy} for the copies of ``names`` whose mesh
+    only that copy uses: a relight keeps a mesh whose geometry and UVs are still those it would
+    make (:func:`_element_mesh`) and writes only its colours."""
+    out = {}
+    for ob in copies_of(names):
+        me = ob.data
+        if me is not None and ob.get(MESH_KIND_KEY) == "elements" and me.users == 1 and LAYOUT_KEY in me:
+            out[ob[SOURCE_KEY]] = me
+    return out
+
+
+def _attribute_names(me) -> str:
+    return "\n".join(sorted(a.name for a in me.attributes))
+
+
+def _layout_key(local, loop_vert, starts, loop_face, user_mesh) -> str:
+    """What an element mesh's geometry and UV maps are made from: its vertices, loops and
+    polygons, each loop's face of the user's mesh, and (``user_mesh``, or None: no UV maps)
+    that mesh's vertices, loops, polygons and UV maps."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for a in (local.astype(np.float32), loop_vert.astype(np.int32), starts.astype(np.int32),
+              loop_face.astype(np.int64)):
+        h.update(str(a.shape).encode() + a.tobytes())
+    if user_mesh is not None:
+        me = user_mesh
+        co = np.empty(len(me.vertices) * 3, np.float32)
+        me.vertices.foreach_get("co", co)
+        lv = np.empty(len(me.loops), np.int32)
+        me.loops.foreach_get("vertex_index", lv)
+        tot = np.empty(len(me.polygons), np.int32)
+        me.polygons.foreach_get("loop_total", tot)
+        for a in (co, lv, tot):
+            h.update(str(a.shape).encode() + a.tobytes())
+        for layer in me.uv_layers:
+            uv = np.empty(len(me.loops) * 2, np.float32)
+            layer.data.foreach_get("uv", uv)
+            h.update(layer.name.encode() + b"\0" + uv.tobytes())
+    return h.hexdigest()
 
 
 def place_copy(coll, src, me, kind):
@@ -347,24 +400,39 @@ def _element_faces(result, sel):
     return faces
 
 
-def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user) -> _Copy:
+def _element_mesh(result, corners, owners, src, attribute_name, scale, mat, user, old=None) -> _Copy:
     """A new mesh of the output elements of ``owners`` (an object, and its back) in the object's
     local space, with the attribute, and the user's UV maps at its corners
-    (:func:`.textures.element_uvs`; ``user``: the :class:`_UserMesh`)."""
+    (:func:`.textures.element_uvs`; ``user``: the :class:`_UserMesh`). ``old``: the element
+    mesh of the object's previous copy, or None; where it was made from the same geometry and
+    UV maps (:func:`_layout_key`) and has the same attributes as written then, it is used
+    again with its colours, materials and slots cleared (a relight writes only its colours)."""
     local, loop_vert, starts, take, sel = _element_layout(result.elements, owners, src.matrix_world, src.flipped)
-    me = bpy.data.meshes.new(f"{src.name}.radiosity")
-    me.vertices.add(len(local))
-    me.vertices.foreach_set("co", local.astype(np.float32).ravel())
-    me.loops.add(len(loop_vert))
-    me.loops.foreach_set("vertex_index", loop_vert.astype(np.int32))
-    me.polygons.add(len(starts))
-    me.polygons.foreach_set("loop_start", starts.astype(np.int32))
-    me.update(calc_edges=True)
-    set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[take] * scale)
-    me.materials.append(mat)
     faces = _element_faces(result, sel)
     loop_face = np.repeat(faces, np.diff(np.append(starts, len(loop_vert))))
-    if user.ob_eval is not None and len(user.mesh.uv_layers) and len(user.mesh.polygons) == src.eval_counts[2]:
+    uvs = user.ob_eval is not None and len(user.mesh.uv_layers) and len(user.mesh.polygons) == src.eval_counts[2]
+    key = _layout_key(local, loop_vert, starts, loop_face, user.mesh if uvs else None)
+    if old is not None and old.get(LAYOUT_KEY) == key and old.get(WRITTEN_KEY) == _attribute_names(old):
+        me = old
+        for name in [a.name for a in me.color_attributes]:     # by name: removing moves the others
+            me.color_attributes.remove(me.color_attributes[name])
+        if "material_index" in me.attributes:
+            me.attributes.remove(me.attributes["material_index"])
+        me.materials.clear()
+        me.update_tag()                       # (its colours change: drawn again)
+    else:
+        me = bpy.data.meshes.new(f"{src.name}.radiosity")
+        me.vertices.add(len(local))
+        me.vertices.foreach_set("co", local.astype(np.float32).ravel())
+        me.loops.add(len(loop_vert))
+        me.loops.foreach_set("vertex_index", loop_vert.astype(np.int32))
+        me.polygons.add(len(starts))
+        me.polygons.foreach_set("loop_start", starts.astype(np.int32))
+        me.update(calc_edges=True)
+        me[LAYOUT_KEY] = key
+    set_color_attribute(me, attribute_name, corners.reshape(-1, 3)[take] * scale)
+    me.materials.append(mat)
+    if uvs and me is not old:
         for name, uv in textures.element_uvs(user.mesh, local[loop_vert], loop_face).items():
             me.uv_layers.new(name=name).data.foreach_set("uv", uv.ravel())
     return _Copy(me, "elements", take, loop_face, faces)

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.mesh.patches import MeshInput
+from ...core.runtime.cache import Memo
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.notes import Note, note, subject_and_kind
 from . import instances as inst_reader
@@ -311,6 +312,38 @@ def _in_world(obj, depsgraph, co, lv):
     return co @ M[:3, :3].T + M[:3, 3], used, M, det < 0
 
 
+_WELDED = Memo(64)       # digest of a mesh's arrays in world space -> _welded's (a relight reads them again)
+
+
+def _welded(verts_w, used, flipped, lv, le, ps, pt, mi, sm, sh):
+    """(face normals (F, 3), areas (F,), the used vertices' extent (3,), corner vertex (L,),
+    source vertex (V',), face offsets (F + 1,), each corner's loop (L,), the mesh's vertices
+    (V', 3) and face indices (L,)) of a mesh's world positions and arrays (:func:`_newell`,
+    :func:`weld_corners`), kept for the last meshes read by their arrays' values: a relight
+    reads the same meshes again and gets the same arrays (read only), so what the bake keys on
+    them is found without hashing them again."""
+    import hashlib
+
+    h = hashlib.sha256(b"flipped" if flipped else b"")
+    for a in (verts_w, used, lv, le, ps, pt, mi, sm, sh):
+        h.update(str((a.dtype, a.shape)).encode() + np.ascontiguousarray(a).tobytes())
+
+    def make():
+        normals, areas = _newell(verts_w, lv, ps, pt)
+        normals *= -1.0 if flipped else 1.0
+        corner_vertex, src_vertex = weld_corners(lv, le, ps, pt, mi, sm, sh, normals)
+        # face rings in face order; reversed per face when the matrix mirrors
+        loop_face = np.repeat(np.arange(ps.size), pt)
+        pos = np.arange(lv.size) - ps[loop_face]
+        corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
+        out = (normals, areas, np.ptp(verts_w[used], axis=0), corner_vertex, src_vertex,
+               np.concatenate([[0], np.cumsum(pt)]), corner_loop, verts_w[src_vertex], corner_vertex[corner_loop])
+        for a in out:
+            a.flags.writeable = False
+        return out
+    return _WELDED.get(h.digest(), make)
+
+
 def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     """One mesh object, evaluated (modifiers applied), in world space. ``shaded``: the
     :func:`.shading.shade` batch that holds this object's Cycles evaluations (None: evaluate this
@@ -335,18 +368,11 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
         raise ReadError(f"'{obj.name}' has no faces" + _no_faces_why(obj))
     verts_w, used, M, flipped = _in_world(obj, depsgraph, co, lv)
     mi = np.clip(mi, 0, len(mats) - 1)
-    normals, areas = _newell(verts_w, lv, ps, pt)
-    span = np.ptp(verts_w[used], axis=0)
+    normals, areas, span, corner_vertex, src_vertex, offsets, corner_loop, verts, indices = _welded(
+        verts_w, used, flipped, lv, le, ps, pt, mi, sm, sh)
     if not np.any(areas > ZERO_AREA * float(span @ span)):
         raise ReadError(f"'{obj.name}': every face has zero area")
-    normals *= -1.0 if flipped else 1.0
-    corner_vertex, src_vertex = weld_corners(lv, le, ps, pt, mi, sm, sh, normals)
-    # face rings in face order; reversed per face when the matrix mirrors
-    F = ps.size
-    loop_face = np.repeat(np.arange(F), pt)
-    pos = np.arange(lv.size) - ps[loop_face]
-    corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
-    offsets = np.concatenate([[0], np.cumsum(pt)])
+    loop_face = np.repeat(np.arange(ps.size), pt)
     if shaded is None:
         shaded = shading.shade([obj], depsgraph)
     notes = render_notes(obj, ob_eval)
@@ -357,7 +383,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     em = np.add.reduceat(corner_em, offsets[:-1], axis=0) / pt[:, None]
     em = face_means(shaded, obj.name, em, corner_loop, offsets, mats, mi)   # emission over the face
     glossy = np.add.reduceat(corner_glossy, offsets[:-1], axis=0) / pt[:, None]
-    mesh = MeshInput(verts_w[src_vertex], offsets, corner_vertex[corner_loop], rho, em, obj.name,
+    mesh = MeshInput(verts, offsets, indices, rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi],
                      corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],

@@ -60,6 +60,9 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
     H = np.zeros((len(x), 3))
     if not lights:
         return H
+    if eps is None and points is not None:      # found by probe rays: kept as DirectLight.offsets keeps them
+        eps = cached(cache, cache_key(geometry_key(patches) + array_key(patches.owner) + array_key(x) + array_key(n),
+                                      ("ray-offsets",)), lambda: ray_offsets(patches, points, normals))
     eps = ray_offsets(patches, points, normals) if eps is None else np.asarray(eps, np.float64)
     base = shadow_key(patches) + array_key(x) + array_key(n) + array_key(eps)
     base += b"" if facing is None else array_key(np.asarray(facing, np.float64))

@@ -110,8 +110,14 @@ class DirectLight:
 
     def offsets(self, points, normals) -> np.ndarray:
         """(P,) how far rays from ``points`` start off their surfaces (:func:`.rays.ray_offsets`:
-        their own objects', found by a probe ray), made once per point array."""
-        return _OFFSETS.of((self.patches.verts, points, normals), lambda: ray_offsets(self.patches, points, normals))
+        their own objects', found by a probe ray), made once per point array and kept in the cache
+        under the geometry and the points' values (a relight's normals are new arrays of the same
+        values: it casts no probe ray)."""
+        def make():
+            key = cache_key(geometry_key(self.patches) + array_key(self.patches.owner) + array_key(points)
+                            + array_key(normals), ("ray-offsets",))
+            return cached(self.cache, key, lambda: ray_offsets(self.patches, points, normals))
+        return _OFFSETS.of((self.patches.verts, points, normals), make)
 
     def _transport(self, points, normals, samples=None, eps=None):
         """The emitters' transport to ``points``: their fronts, plus their backs when two-sided

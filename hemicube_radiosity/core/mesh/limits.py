@@ -22,7 +22,10 @@ from dataclasses import replace
 
 import numpy as np
 
-from .patches import MeshInput
+from .patches import MeshInput, read_only
+from ..runtime.cache import Memo
+
+_SPANS = Memo(64, max_bytes=256 << 20)     # a mesh's arrays -> face_spans (the last bakes')
 
 __all__ = ["face_spans", "pieces_at_least", "patches_about", "CLUSTER_SPAN", "passing_size"]
 
@@ -34,7 +37,16 @@ CLUSTER_SPAN = 6.0
 def face_spans(mesh: MeshInput):
     """Per face of ``mesh``: (areas (F,), sides (F, 2) the longer of each pair of opposite sides
     of a quad, the longest edge twice for a triangle or an n-gon, corners (F,) int).
-    Areas from the face's corners (Newell's formula: n-gons, non-planar quads)."""
+    Areas from the face's corners (Newell's formula: n-gons, non-planar quads). Made once per
+    mesh's read-only arrays (a bake counts at several sizes; a relight reads the same arrays);
+    read only."""
+    arrays = (mesh.verts, mesh.face_offsets, mesh.face_indices)
+    if not all(read_only(a) for a in arrays):          # may change in place: made every time
+        return _face_spans(mesh)
+    return _SPANS.of(arrays, lambda: _face_spans(mesh))
+
+
+def _face_spans(mesh: MeshInput):
     v = np.asarray(mesh.verts, dtype=np.float64)
     off = np.asarray(mesh.face_offsets, dtype=np.int64)
     idx = np.asarray(mesh.face_indices, dtype=np.int64)
@@ -44,17 +56,21 @@ def face_spans(mesh: MeshInput):
     nxt = np.arange(1, idx.size + 1)
     nxt[off[1:] - 1] = off[:-1]
     a, b = v[idx], v[idx[nxt]]
-    cross = np.zeros((F, 3))
-    np.add.at(cross, face, np.cross(a, b))
+    c = np.cross(a, b)       # summed by bincount: np.add.at's sums in its order, bit for bit
+    cross = np.stack([np.bincount(face, c[:, j], F) for j in range(3)], 1)
     areas = 0.5 * np.linalg.norm(cross, axis=1)
     length = np.linalg.norm(b - a, axis=1)
     longest = np.zeros(F)
-    np.maximum.at(longest, face, length)
+    some = k > 0
+    if some.any():
+        longest[some] = np.maximum.reduceat(length, off[:-1][some])
     sides = np.stack([longest, longest], 1)
     quad = np.flatnonzero(k == 4)
     if quad.size:
         q = length[off[quad][:, None] + np.arange(4)]
         sides[quad] = np.stack([np.maximum(q[:, 0], q[:, 2]), np.maximum(q[:, 1], q[:, 3])], 1)
+    for x in (areas, sides, k):
+        x.flags.writeable = False
     return areas, sides, k
 
 

@@ -105,7 +105,27 @@ class MeshInput:
 
 
 def meshes_key(meshes) -> bytes:
-    """Bytes that change exactly when the source meshes' geometry changes (not materials)."""
+    """Bytes that change exactly when the source meshes' geometry changes (not materials).
+    Hashed once per set of read-only arrays (a relight's meshes, read again, are the same
+    arrays: ``blender/read/scene.py``); arrays that may change in place, every time."""
+    meshes = list(meshes)
+    objs = tuple(a for m in meshes for a in (m.verts, m.face_offsets, m.face_indices, getattr(m, "face_triangles", None)))
+    if not all(read_only(a) for a in objs):
+        return _meshes_key(meshes)
+    scales = tuple(float(getattr(m, "size_scale", 1.0)) for m in meshes)
+    return _MESHES_KEY.of(objs, lambda: _meshes_key(meshes), scales)
+
+
+def read_only(a) -> bool:
+    """Whether ``a`` is None or an array that cannot change in place (what a memo may key on
+    by identity)."""
+    return a is None or isinstance(a, np.ndarray) and not a.flags.writeable
+
+
+_MESHES_KEY = Memo(16)         # the meshes' arrays -> meshes_key
+
+
+def _meshes_key(meshes) -> bytes:
     h = hashlib.sha256()
     for m in meshes:
         for a in (m.verts, m.face_offsets, m.face_indices):

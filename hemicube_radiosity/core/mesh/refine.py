@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from .clusters import make_clusters
 from ..light.points import grid_of
 from ..light.stage import LUMA, DirectLight
@@ -25,6 +25,9 @@ from ..rays import embree_available, embree_scene
 from ..util.unique import unique_ints
 
 __all__ = ["LUMA", "split_patches", "abrupt", "refine", "refine_stage"]
+
+_SPLIT = Memo(8)         # (patches' geometry arrays, selection) -> the split geometry
+_REGROUP = Memo(8)       # (clusters' grouping, parents, refined geometry) -> the refined clusters
 
 
 
@@ -44,10 +47,24 @@ def split_patches(patches: PatchSet, select) -> tuple[PatchSet, np.ndarray]:
     Midpoints are shared between neighbours split together; a neighbour left whole keeps its
     edge (a T-junction: the surface stays closed, only values may differ along the edge)."""
     select = np.asarray(select, bool)
+    if not select.any():
+        return patches, np.arange(len(patches))
+    # the geometry kept for the patches' arrays and the selection: a relight splits the same
+    # patches of the same (cached) arrays and gets the same arrays back, which every later
+    # stage has hashed and keyed its products on already
+    verts, polys, centers, normals, areas, owner, face, parent = _SPLIT.of(
+        (patches.verts, patches.polys, patches.normals, patches.owner, patches.source_face),
+        lambda: _split_geometry(patches, select), key=np.packbits(select).tobytes())
+    out = PatchSet(verts, polys, centers, normals, areas, patches.rho[parent], patches.emission[parent],
+                   owner, face, list(patches.object_names), patches.see_through)
+    return out, parent
+
+
+def _split_geometry(patches: PatchSet, select):
+    """The geometry of :func:`split_patches` (read only): verts, polys, centres, normals, areas,
+    owner, source face and parent of the new patches."""
     keep = np.flatnonzero(~select)
     sel = np.flatnonzero(select)
-    if sel.size == 0:
-        return patches, np.arange(len(patches))
     P = patches.polys[sel]
     tri = P[:, 3] < 0
     k = np.where(tri, 3, 4)
@@ -77,10 +94,10 @@ def split_patches(patches: PatchSet, select) -> tuple[PatchSet, np.ndarray]:
     polys = np.concatenate([patches.polys[keep], children])
     centers, normals, areas = poly_geometry(verts, polys)
     normals = patches.normals[parent]            # children lie in their parent's plane
-    out = PatchSet(verts, polys, centers, normals, areas, patches.rho[parent], patches.emission[parent],
-                   patches.owner[parent], patches.source_face[parent], list(patches.object_names),
-                   patches.see_through)
-    return out, parent
+    out = (verts, polys, centers, normals, areas, patches.owner[parent], patches.source_face[parent], parent)
+    for a in out:
+        a.flags.writeable = False
+    return out
 
 
 def _subset(patches: PatchSet, ids) -> PatchSet:
@@ -101,7 +118,7 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
     (new strengths, colours, reflectivities) splits the same patches and reuses the form
     factors. A patch smaller than ``min_area`` or ``frozen`` (N,) bool (emitters, grouped faces)
     stays. Returns the refined PatchSet and ``parent`` (N',) into the patches given."""
-    parent = np.arange(len(patches))
+    parent = None                         # (the identity) kept as the same array for the same splits
     frozen = np.zeros(len(patches), bool) if frozen is None else np.asarray(frozen, bool)
     check = ~frozen & (patches.areas > min_area)
     absolute = None
@@ -129,9 +146,9 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         if not hit.any():
             break
         patches, p = split_patches(patches, hit)
-        parent = parent[p]
+        parent = p if parent is None else _SPLIT.of((parent, p), lambda: parent[p])
         check = hit[p] & (patches.areas > min_area)
-    return patches, parent
+    return patches, np.arange(len(patches)) if parent is None else parent
 
 
 def _crossing(patches, cache=None):
@@ -171,6 +188,22 @@ def _crossing(patches, cache=None):
     return crossed
 
 
+def _regrouped(of, parent, refined: PatchSet, before: int):
+    """The clusters of the ``refined`` patches: each piece in its parent's cluster (``of``), each
+    child of a split patch a cluster of its own. Their grouping and geometry are kept for the
+    arrays they are made from (a relight splits the same patches: the same arrays, which later
+    stages key their products on), their materials read from ``refined``."""
+    def make():
+        out = of[parent]
+        child = np.flatnonzero(np.bincount(parent, minlength=before)[parent] > 1)
+        out[child] = out.max() + 1 + np.arange(child.size)
+        grouped = make_clusters(refined, unique_ints(out, return_inverse=True)[1].reshape(-1))
+        for a in (grouped.of, grouped.centers, grouped.normals, grouped.areas, grouped.owner):
+            a.flags.writeable = False
+        return grouped
+    return _REGROUP.of((of, parent, refined.verts, refined.areas), make).with_materials(refined)
+
+
 def refine_stage(ctx) -> None:
     """Split ``ctx.patches`` (and regroup ``ctx.clusters``) where the exact direct light changes
     abruptly, ``settings.refine_levels`` times at most. Emitters and faces grouped into clusters
@@ -199,10 +232,7 @@ def refine_stage(ctx) -> None:
         return
     clusters = None
     if ctx.clusters is not None:
-        of = ctx.clusters.of[parent]
-        child = np.flatnonzero(np.bincount(parent, minlength=len(p))[parent] > 1)
-        of[child] = of.max() + 1 + np.arange(child.size)
-        clusters = make_clusters(refined, unique_ints(of, return_inverse=True)[1].reshape(-1))
+        clusters = _regrouped(ctx.clusters.of, parent, refined, len(p))
     before = len(ctx.unknowns)
     after = len(refined if clusters is None else clusters)
     if after > s.max_patches or form_factor_gb(after, s) > s.max_memory_gb:

@@ -84,14 +84,14 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
         rest_e = side.spread(rest_e)
     light_v = ctx.direct.at(xv, nv, "vertices") if light_v is None else light_v
     direct_e = rho_v * light_v
-    got = []
+    got = {}
 
-    def rays():                   # G and H, once, when first read
-        if not got:
-            got.append(_gather_rays(ctx, elements, xv, nv, pending))
-        return got[0]
+    def rays(hits=True):          # G (and with ``hits`` H), once, when first read
+        if "G" not in got or (hits and got["H"] is None):
+            got["G"], got["H"] = _gather_rays(ctx, elements, xv, nv, pending, hits)
+        return got["G"], got["H"]
     corrections = _corrections(ctx, elements, rays, xv, nv, light_v, direct_e)
-    G, H = rays()
+    G = rays(hits=False)[0]       # a relight whose corrections are cached reads no hits
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += corrections
@@ -178,21 +178,23 @@ def start_gather(ctx, elements, xv, nv):
         return None
     if ctx.cache is not None:
         key = _gather_key(ctx, elements)
-        if ctx.cache.get(key) is not None and ctx.cache.get(key + "-hits") is not None:
+        if ctx.cache.has(key) and ctx.cache.has(key + "-hits"):     # (not read here: a relight may need neither)
             return None
     return gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
                          ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
                          hits=True, background=True)
 
 
-def _gather_rays(ctx, elements, xv, nv, pending=None):
+def _gather_rays(ctx, elements, xv, nv, pending=None, hits=True):
     """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
     H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only.
-    ``pending``: the gather started by :func:`start_gather` (its result is taken here)."""
+    ``pending``: the gather started by :func:`start_gather` (its result is taken here).
+    ``hits`` False: H only if it is made now, else None (read from the cache only when asked:
+    it is the largest item of a bake, and only a new correction matrix reads it)."""
     key = _gather_key(ctx, elements)
     G = ctx.cache.get(key) if ctx.cache is not None else None
-    H = ctx.cache.get(key + "-hits") if ctx.cache is not None else None
-    if G is None or H is None:
+    H = ctx.cache.get(key + "-hits") if ctx.cache is not None and (hits or G is None) else None
+    if G is None or (hits and H is None):
         if pending is not None:
             G, sky, H = pending.result(ctx.cancelled)
         else:

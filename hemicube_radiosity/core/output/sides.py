@@ -17,10 +17,11 @@ from ..light.emitters import vertex_frames
 from ..mesh.contact import OpenSide, open_side
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
-from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
 
+_SIDED = Memo(8)            # (verts, polys, split code) -> the sided mesh's (verts, polys)
 storable(OpenSide)          # cached on disk: a relight in a new process finds it (:func:`buried_side`)
 
 __all__ = ["open_elements", "sided_mesh", "seen_fraction", "seen_vertices", "buried_side"]
@@ -69,16 +70,21 @@ def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:
     code = cached(ctx.cache, cache_key(geometry_key(mesh), ("sides",)), split)
     if code.size == 0:
         return mesh
-    n = int(code[0])
-    polys, origin = code[1:1 + n].reshape(mesh.polys.shape), code[1 + n:]
-    out = PatchSet(mesh.verts[origin], polys, mesh.centers, mesh.normals, mesh.areas, mesh.rho,
+
+    def geometry():                           # the same arrays every relight: memos keyed on them hit
+        n = int(code[0])
+        return mesh.verts[code[1 + n:]], code[1:1 + n].reshape(mesh.polys.shape)
+    verts, polys = _SIDED.of((mesh.verts, mesh.polys, code), geometry)
+    out = PatchSet(verts, polys, mesh.centers, mesh.normals, mesh.areas, mesh.rho,
                    mesh.emission, mesh.owner, mesh.source_face, list(mesh.object_names), mesh.see_through)
     # the elements are the same: what is known of them carries over (no second ray cast)
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     if ctx.cache is not None:
-        seen = ctx.cache.get(cache_key(geometry_key(mesh), ("open-centres", reach)))
+        mine = cache_key(geometry_key(out), ("open-centres", reach))
+        seen = None if ctx.cache.get(mine) is not None else \
+            ctx.cache.get(cache_key(geometry_key(mesh), ("open-centres", reach)))
         if seen is not None:
-            ctx.cache.put(cache_key(geometry_key(out), ("open-centres", reach)), seen)
+            ctx.cache.put(mine, seen)
     return out
 
 

@@ -183,6 +183,10 @@ class FormFactorCache:
             return item
         return None
 
+    def has(self, key: str) -> bool:
+        """Whether an item is stored under ``key`` (in memory or on disk), without reading it."""
+        return key in self._mem or bool(self.directory and os.path.exists(self._path(key)))
+
     def put(self, key: str, item, disk=True) -> None:
         """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
         (unless ``disk`` is False) on disk, and so any structure of them :func:`.stored.pack`
@@ -199,8 +203,8 @@ class FormFactorCache:
             item.save(tmp)
         elif packed is not None:
             np.savez(tmp, **packed)             # geometry: read back fast, not compressed
-        else:
-            np.savez_compressed(tmp, array=np.asarray(item))
+        else:                                   # nor a transport (inflating was most of reading it)
+            np.savez(tmp, array=np.asarray(item))
         os.replace(tmp, self._path(key))
 
     def _remember(self, key, F):

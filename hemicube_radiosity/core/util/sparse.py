@@ -107,8 +107,10 @@ class CSR:
 
     def save(self, path) -> None:
         extra = {} if self.sky is None else {"sky": self.sky}
-        np.savez_compressed(path, indptr=self.indptr, indices=self.indices, data=self.data,
-                            shape=np.array(self.shape), meta=np.array(repr(self.meta)), **extra)
+        # not compressed: a relight in a new process reads a dense mesh's gather matrix (hundreds
+        # of megabytes) several times faster than it inflates it
+        np.savez(path, indptr=self.indptr, indices=self.indices, data=self.data,
+                 shape=np.array(self.shape), meta=np.array(repr(self.meta)), **extra)
 
     @classmethod
     def load(cls, path) -> "CSR":
