@@ -23,8 +23,15 @@ from .stored import LAYOUT, pack, unpack
 __all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key"]
 
 
+#: In every key: a cache folder written by a version that computed some entry differently (how
+#: vertices are told apart per side, where contacts cut) is not read as this version's. Changed
+#: with any change to what a cached entry holds for the same inputs.
+COMPUTED = b"2026-12-06: contact cut on every piece, sides lifted by the crease angle"
+
+
 def cache_key(geometry_key: bytes, settings_key) -> str:
-    h = hashlib.sha256(geometry_key)
+    h = hashlib.sha256(COMPUTED)
+    h.update(geometry_key)
     h.update(repr(settings_key).encode())
     return h.hexdigest()
 
