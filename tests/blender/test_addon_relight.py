@@ -6,7 +6,7 @@ import importlib
 import numpy as np
 import pytest
 
-from tests.support.addon import select
+from tests.support.addon import lit_cornell_box, select
 from tests.support.scene import corner_data
 
 pytestmark = pytest.mark.blender
@@ -20,13 +20,7 @@ def test_relight_in_the_session_reuses_form_factors(addon, empty_scene, monkeypa
     bake_mod = importlib.import_module(f"{addon.__name__}.blender.bake")
     form_factors = importlib.import_module(f"{addon.__name__}.core.form_factors.stage")
     write = importlib.import_module(f"{addon.__name__}.blender.write")
-    demo = importlib.import_module(f"{addon.__name__}.blender.demo")
-    bake_mod.clear_session_cache()
-    objs = demo.build_cornell_box(bpy.context)
-    bpy.ops.object.light_add(type="POINT", location=(1.0, 0.7, 1.2))
-    lamp = bpy.context.active_object
-    lamp.data.energy = 30.0
-    names = [o.name for o in objs]
+    objs, lamp, names = lit_cornell_box(addon, bpy)
     calls = []
     real = form_factors.compute_form_factors
     monkeypatch.setattr(form_factors, "compute_form_factors", lambda *a, **k: calls.append(1) or real(*a, **k))

@@ -8,7 +8,7 @@ import importlib
 import numpy as np
 import pytest
 
-from tests.support.addon import select
+from tests.support.addon import lit_cornell_box, select
 from tests.support.scene import corner_data
 
 pytestmark = pytest.mark.blender
@@ -21,13 +21,7 @@ def test_relight_equals_a_fresh_bake_after_each_change(addon, empty_scene):
     bpy = empty_scene
     bake_mod = importlib.import_module(f"{addon.__name__}.blender.bake")
     write = importlib.import_module(f"{addon.__name__}.blender.write")
-    demo = importlib.import_module(f"{addon.__name__}.blender.demo")
-    bake_mod.clear_session_cache()
-    objs = demo.build_cornell_box(bpy.context)
-    bpy.ops.object.light_add(type="POINT", location=(1.0, 0.7, 1.2))
-    lamp = bpy.context.active_object
-    lamp.data.energy = 30.0
-    names = [o.name for o in objs]
+    objs, lamp, names = lit_cornell_box(addon, bpy)
 
     def bake():
         copies = write.copies_of(names)

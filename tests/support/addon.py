@@ -49,6 +49,17 @@ def sub(addon, name):
     return importlib.import_module(f"{addon.__name__}.{name}")
 
 
+def lit_cornell_box(addon, bpy):
+    """The demo's Cornell box with a 30 W point lamp at (1, 0.7, 1.2), the session's cache cleared
+    (what a relight test starts from): (objects, lamp object, their names)."""
+    sub(addon, "blender.bake").clear_session_cache()
+    objs = sub(addon, "blender.demo").build_cornell_box(bpy.context)
+    bpy.ops.object.light_add(type="POINT", location=(1.0, 0.7, 1.2))
+    lamp = bpy.context.active_object
+    lamp.data.energy = 30.0
+    return objs, lamp, [o.name for o in objs]
+
+
 def select(bpy, objs):
     """Select exactly ``objs``, the first one active (none active when empty)."""
     for o in bpy.context.view_layer.objects:
