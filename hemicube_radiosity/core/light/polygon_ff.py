@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..util.unique import run_positions
 from .outline import GroupOutline
 
 __all__ = ["polygon_form_factor", "distant_form_factor", "polygon_form_factors", "front_polygon_sum",
@@ -188,7 +189,7 @@ def _contours_flat(points, normals, o, front, F, below):
         return
     k = o.edge_count[gi]
     pair = np.repeat(np.arange(pi.size), k)
-    e = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k) + np.repeat(o.edge_start[gi], k)
+    e = run_positions(k) + np.repeat(o.edge_start[gi], k)
     # by components (3 arrays of the pairs' edges): NumPy's cross and norm of (N, 3) rows
     # cost more than the arithmetic; each a contiguous column read with ``take`` (indexing the
     # (.., 3) arrays with index arrays cost twice as much)

@@ -21,7 +21,7 @@ import numpy as np
 
 from .contact_lines import face_pieces, pieces_segments, split_polygon
 from .patches import PatchSet, poly_geometry
-from ..util.unique import unique_ints, unique_rows
+from ..util.unique import run_positions, unique_ints, unique_rows
 from ..rays import ray_offsets
 
 __all__ = ["OpenSide", "open_side"]
@@ -285,7 +285,7 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         dims = (i1 - i0 + 1)[ids]
         n = np.prod(dims, axis=1)
         own = np.repeat(ids, n)
-        off = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)   # (no ids: empty)
+        off = run_positions(n)                                 # (no ids: empty)
         d = dims[np.repeat(np.arange(len(ids)), n)]
         g = i0[own] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
         return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own

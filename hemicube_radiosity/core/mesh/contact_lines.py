@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..util.unique import run_positions
+
 __all__ = ["face_pieces", "pair_segments", "pieces_segments", "split_polygon"]
 
 
@@ -22,7 +24,7 @@ def face_pieces(elements, ids, normals, faces):
     lo = np.searchsorted(key[order], want, "left")
     cnt = np.searchsorted(key[order], want, "right") - lo
     gi = np.repeat(np.arange(len(ids)), cnt)
-    fi = order[np.repeat(lo, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+    fi = order[np.repeat(lo, cnt) + run_positions(cnt)]
     dot = np.einsum("kj,kj->k", faces.normals[fi], normals[gi])
     nearest = np.full(len(ids), -1.0)
     np.maximum.at(nearest, gi, dot)
@@ -44,7 +46,7 @@ def pieces_segments(origin, n, cutters, pairs_group, group_pieces, piece_corners
     first = np.searchsorted(gk, pairs_group, "left")
     cnt = np.searchsorted(gk, pairs_group, "right") - first
     row = np.repeat(np.arange(len(pairs_group)), cnt)
-    at = np.repeat(first, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+    at = np.repeat(first, cnt) + run_positions(cnt)
     seg, ok = pair_segments(origin[row], n[row], cutters[row], piece_corners[pk[at]], eps)
     if np.array_equal(cnt, np.ones_like(cnt)):
         return seg, ok
@@ -54,16 +56,18 @@ def pieces_segments(origin, n, cutters, pairs_group, group_pieces, piece_corners
     out = np.zeros((len(pairs_group), 2, 3))
     if not len(row):
         return out, kept
-    start = np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
-    a = seg[start, 0][np.searchsorted(start, np.arange(len(row)), "right") - 1]
-    d = seg[start, 1] - seg[start, 0]
-    d /= np.linalg.norm(d, axis=1)[:, None]
-    d = d[np.searchsorted(start, np.arange(len(row)), "right") - 1]
+    first_part = np.r_[True, row[1:] != row[:-1]]
+    start = np.flatnonzero(first_part)
+    pair = np.cumsum(first_part) - 1                 # each part's pair, as a place in ``start``
+    a0 = seg[start, 0]                               # measured from the pair's first part, along it
+    d0 = seg[start, 1] - a0
+    d0 /= np.linalg.norm(d0, axis=1)[:, None]
+    a, d = a0[pair], d0[pair]
     t0 = np.einsum("kj,kj->k", seg[:, 0] - a, d)
     t1 = np.einsum("kj,kj->k", seg[:, 1] - a, d)
     lo = np.minimum.reduceat(np.minimum(t0, t1), start)
     hi = np.maximum.reduceat(np.maximum(t0, t1), start)
-    r, a0, d0 = row[start], seg[start, 0], d[start]
+    r = row[start]
     out[r, 0] = a0 + lo[:, None] * d0
     out[r, 1] = a0 + hi[:, None] * d0
     return out, kept

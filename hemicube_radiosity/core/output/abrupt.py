@@ -15,6 +15,7 @@ from ..mesh.patches import PatchSet
 from ..mesh.refine import LUMA
 from ..runtime.cache import cache_key, cached, geometry_key
 from ..util.geometry import bilinear
+from ..util.unique import run_positions
 from .corners import corner_columns
 from .interpolate import inverse_bilinear
 from .sides import seen_fraction
@@ -62,7 +63,7 @@ def shadowed_inside(ctx, elements, xv, nv, light_v, select, opened=None, ratio=2
     size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
     n = np.clip(np.round(np.sqrt(elements.areas[ids]) / size), 1, INSIDE_CELLS).astype(np.int64)
     at = np.repeat(np.arange(ids.size), n * n)
-    k = np.arange(at.size) - np.repeat(np.cumsum(n * n) - n * n, n * n)
+    k = run_positions(n * n)
     u, v = ((k % n[at]) + 0.5) / n[at], ((k // n[at]) + 0.5) / n[at]
     x = bilinear(elements.corners()[ids[at]], u[:, None], v[:, None])
     inside = ctx.direct.sources_at(x, elements.normals[ids[at]], "element-inside", world=False).sum(1)

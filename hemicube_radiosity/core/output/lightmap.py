@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh.patches import PatchSet
+from ..util.unique import run_positions
 from .interpolate import interpolate_corner_values, locate
 from .texels import LUMA, by_source
 
@@ -140,7 +141,7 @@ def rasterize(uv, width, height, reach=REACH):
         if n.sum() == 0:
             continue
         t = np.repeat(ids, n)
-        k = np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)
+        k = run_positions(n)
         col = lo[t, 0] + k % nx[t]
         row = lo[t, 1] + k // nx[t]
         centre = np.stack([col + 0.5, row + 0.5], 1)

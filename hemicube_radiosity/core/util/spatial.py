@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .unique import unique_ints
+from .unique import run_positions, unique_ints
 
 __all__ = ["Grid", "k_nearest", "morton_codes", "morton_order", "sq_dist"]
 
@@ -121,7 +121,7 @@ class _Level:
         nz = cnt > 0
         cnt, st = cnt[nz], self.start[pos].ravel()[nz]
         row = np.repeat(np.repeat(np.arange(m), nb.shape[1])[nz], cnt)
-        within = np.arange(row.size) - np.repeat(np.cumsum(cnt) - cnt, cnt)
+        within = run_positions(cnt)
         site = self.order[np.repeat(st, cnt) + within]
         d2 = sq_dist(p[row], sites[site])
         s, d, n = _select(row, site, d2, m, k)

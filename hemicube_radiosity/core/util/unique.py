@@ -14,7 +14,7 @@ import math
 
 import numpy as np
 
-__all__ = ["linked_labels", "unique_ints", "unique_rows"]
+__all__ = ["linked_labels", "run_positions", "unique_ints", "unique_rows"]
 
 
 def unique_rows(a, return_inverse=False, return_counts=False):
@@ -140,3 +140,11 @@ def linked_labels(n, a, b) -> np.ndarray:
             break
         label = new
     return label
+
+
+def run_positions(counts) -> np.ndarray:
+    """(counts.sum(),) int64: each entry's place in its run, for runs of ``counts`` (R,) entries
+    laid end to end (0 .. counts[0] - 1, then 0 .. counts[1] - 1, ...): how a ragged list is
+    walked without a loop, ``np.repeat(starts, counts) + run_positions(counts)`` its indices."""
+    counts = np.asarray(counts, dtype=np.int64)
+    return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)

@@ -4,7 +4,7 @@ bools, floats with ties and signed zeros, one column and many."""
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.util.unique import unique_ints, unique_rows
+from hemicube_radiosity.core.util.unique import run_positions, unique_ints, unique_rows
 
 
 def _cases():
@@ -68,3 +68,11 @@ def test_unique_ints_is_numpys_unique(case, grouped):
         assert np.array_equal(g, np.asarray(w).reshape(-1))
     assert np.array_equal(unique_ints(x, grouped=grouped), want[0])
     assert np.array_equal(unique_ints(x, return_inverse=True, grouped=grouped)[1], np.asarray(want[2]).reshape(-1))
+
+
+def test_run_positions_walk_each_run_from_zero():
+    np.testing.assert_array_equal(run_positions([3, 0, 1, 2]), [0, 1, 2, 0, 0, 1])
+    assert run_positions(np.zeros(0, np.int32)).size == 0
+    counts = np.random.default_rng(3).integers(0, 6, 200)
+    want = np.concatenate([np.arange(c) for c in counts])
+    np.testing.assert_array_equal(run_positions(counts.astype(np.int32)), want)
