@@ -181,9 +181,10 @@ class DirectLight:
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str, world: bool = True) -> np.ndarray:
-        """(P, S) luminance arriving directly at ``points`` from each source apart: every
-        emitting object (its faces together), every lamp, the world (not with ``world`` False:
-        its rays are the costliest). A source's column scales with its
+        """(P, S) luminance arriving directly at ``points`` from each source apart, in
+        :meth:`split_at`'s units (summed, :meth:`at`'s luminance): every emitting object (its
+        faces together), every lamp, the world (not with ``world`` False: its rays are the
+        costliest). A source's column scales with its
         strength and (its luminance) with its colour, so what depends only on each column's
         shape, not its scale, is the same after a relight."""
         cols = []
@@ -192,11 +193,11 @@ class DirectLight:
             Y = self.emitted() @ LUMA
             owner = _unit_owner(self)
             cols += [T[:, owner == o].astype(np.float64) @ Y[owner == o] for o in np.unique(owner)]
-        for lamp in self.lights:
+        for i, lamp in enumerate(self.lights):      # lamp i's own random stream, as split_at draws it
             cols.append(lamp_irradiance(self.patches, [lamp], self.cache, points=points, normals=normals,
-                                        eps=self.offsets(points, normals),
+                                        eps=self.offsets(points, normals), index=i,
                                         cancelled=self.cancelled, samples=self.light_samples,
-                                        seed=self.light_seed, workers=self.workers) @ LUMA)
+                                        seed=self.light_seed, workers=self.workers) @ LUMA / np.pi)
         if self.world is not None and world:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
