@@ -35,6 +35,7 @@ from __future__ import annotations
 from contextlib import closing
 from dataclasses import replace
 from functools import partial
+from time import perf_counter
 
 import numpy as np
 
@@ -48,7 +49,7 @@ from .pixels import pixel_weights, receiver_frames
 from .raster import ID_MASK, can_cover, empty_key, rasterise
 from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
-from ..runtime.progress import Ticker
+from ..runtime.progress import Cancelled, Ticker
 from ..rays import ray_offsets
 from ..util.sparse import CSR
 
@@ -71,6 +72,12 @@ PATCHES_PER_BATCH = 1 << 20
 #: Bound on receivers x hemi-cube pixels per batch (8-byte item-buffer keys): 85 receivers at
 #: R = 32. Scenes of few polygons are bound by this; larger batches of them ran slower.
 PIXELS_PER_BATCH = 1 << 18
+#: The forecast's sample (``probe``): batches of receivers spread evenly through those asked for,
+#: drawn first and timed, until this many seconds or this share of the receivers; not done
+#: below ``PROBE_MIN_BATCHES`` batches' worth of receivers (the whole is as quick).
+PROBE_SECONDS = 0.3
+PROBE_SHARE = 0.02
+PROBE_MIN_BATCHES = 16
 
 
 class _Scene:
@@ -323,7 +330,8 @@ def _batch_size(n, resolution, requested):
 
 
 def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None, receivers=None,
-                          progress=None, cancelled=None, batch=None, clusters=None, workers=1) -> CSR:
+                          progress=None, cancelled=None, batch=None, clusters=None, workers=1,
+                          probe=None) -> CSR:
     """Form-factor matrix F by the hemi-cube, one rasterised hemi-cube per receiver.
 
     Parameters
@@ -353,6 +361,11 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
         core, 1 = in the calling thread): forked processes on Linux, threads elsewhere
         (:func:`.parallel.ordered_map`). Batches are assembled in receiver order, so F is
         bit-identical for any count; ``progress`` and ``cancelled`` stay on the calling thread.
+    probe : callable(float or None) or None
+        Called once before the hemi-cubes are drawn with the seconds one receiver took on one
+        worker in a sample drawn first (:func:`_probe`: up to ``PROBE_SECONDS``, its rows thrown
+        away, F unchanged), or None where there are too few receivers to sample: the forecast's
+        measure of this scene (:mod:`..runtime.forecast`).
 
     Returns
     -------
@@ -372,16 +385,36 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     # with several batches drawn at once, smaller ones: the peak memory stays that of one worker
     B = _batch_size(scene.n, R, batch) if batch is not None else max(1, _batch_size(scene.n, R, None) // workers)
     ticker = Ticker(progress, cancelled)
+    rows_of = partial(_batch_rows, scene, frames, n)
+    if probe is not None:
+        probe(_probe(rows_of, recv, B, cancelled))
     ticker.tick(0, recv.size, force=True)
     batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
     # batches in receiver order whatever the worker count: F is bit-identical
-    rows_of = partial(_batch_rows, scene, frames, n)
     with closing(ordered_map(rows_of, batches, workers, processes=True)) as results:
         indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
     meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
     if scene.passes is not None:
         meta["passes"] = scene.passes
     return CSR(indptr, indices, data, (n, n), meta, sky)
+
+
+def _probe(rows_of, recv, B, cancelled):
+    """Seconds per receiver of ``rows_of`` on this thread, over batches of ``B`` of ``recv``
+    spread evenly through it (one receiver of every ``recv.size / (PROBE_MIN_BATCHES B)``),
+    until ``PROBE_SECONDS`` or ``PROBE_SHARE`` of them; None below ``PROBE_MIN_BATCHES`` batches'
+    worth. ``cancelled``: polled between batches."""
+    if recv.size < PROBE_MIN_BATCHES * B:
+        return None
+    sample = recv[::recv.size // (PROBE_MIN_BATCHES * B)]
+    most = max(B, int(PROBE_SHARE * recv.size))
+    start, done = perf_counter(), 0
+    while done < min(most, sample.size) and (done == 0 or perf_counter() - start < PROBE_SECONDS):
+        if cancelled is not None and cancelled():
+            raise Cancelled("cancelled")
+        rows_of(sample[done:done + B])
+        done += len(sample[done:done + B])
+    return (perf_counter() - start) / done
 
 
 def _batch_rows(scene, frames, n, ids):

@@ -27,15 +27,20 @@ def receivers_needed(patches) -> np.ndarray:
 
 
 def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progress=None,
-                         cancelled=None, clusters=None) -> CSR:
+                         cancelled=None, clusters=None, probe=None) -> CSR:
     """F for ``patches`` (or their ``clusters``, every patch drawn) by ``settings.method`` (rows
     only for ``receivers``, default all), with ``settings.workers`` workers (the same F for any
     count): the hemi-cube on forked processes where there are any, Embree on threads
-    (:mod:`.parallel`)."""
+    (:mod:`.parallel`). ``probe``: called once before the long work with the seconds a
+    hemi-cube took in a sample (the hemi-cube's, :func:`.hemicube.hemicube_form_factors`),
+    or None (a method or a count of receivers that is not sampled)."""
     kw = dict(receivers=receivers, progress=progress, cancelled=cancelled, clusters=clusters,
               workers=getattr(settings, "workers", 1))
     if settings.method == "hemicube":
-        return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed, **kw)
+        return hemicube_form_factors(patches, settings.resolution, rotate_seed=settings.rotate_seed,
+                                     probe=probe, **kw)
+    if probe is not None:
+        probe(None)
     if settings.method == "embree":
         return embree_ff.embree_hemicube_form_factors(patches, settings.resolution,
                                                       rotate_seed=settings.rotate_seed, **kw)
@@ -57,8 +62,14 @@ def form_factor_stage(ctx) -> None:
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:
         recv = receivers_needed(ctx.unknowns)
-        ctx.forecast = _forecast(ctx, recv)
-        ctx.say(0.0, ctx.forecast.describe())
+        ahead = output_vertices_ahead(ctx)
+
+        def said(per_receiver):             # the forecast, with the sample's time when there is one
+            from ..runtime.forecast import forecast
+            ctx.forecast = forecast(ctx, recv, ahead, per_receiver)
+            ctx.say(0.0, ctx.forecast.describe())
+            nonlocal started
+            started = time.perf_counter()
         started = time.perf_counter()
 
         def progress(fr):
@@ -67,18 +78,9 @@ def form_factor_stage(ctx) -> None:
             ctx.say(fr, f"{100 * fr:.0f}%  ETA {eta:.1f} s")
 
         F = compute_form_factors(patches, ctx.settings, receivers=recv, progress=progress,
-                                 cancelled=ctx.cancelled, clusters=ctx.clusters)
+                                 cancelled=ctx.cancelled, clusters=ctx.clusters, probe=said)
         F.meta.setdefault("receivers", int(recv.size))
         if cache is not None:
             cache.put(key, F)
     ctx.form_factors = F
     ctx.say(1.0, f"{ctx.form_factor_source}: {F.nnz} nonzeros, {F.nbytes / 1e6:.1f} MB")
-
-
-def _forecast(ctx, receivers):
-    """:func:`.forecast.forecast` of this bake, before its form factors (``receivers``: the ids of
-    the unknowns that draw a hemi-cube), for about as many
-    output vertices as it will have (:func:`.elements.output_vertices_ahead`: the elements before
-    their cut along contacts, which is made meanwhile on a process of its own)."""
-    from ..runtime.forecast import forecast
-    return forecast(ctx, receivers, output_vertices_ahead(ctx))

@@ -2,16 +2,21 @@
 :func:`..mesh.stage.form_factor_gb`'s, said by the patch stage).
 
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
-receiver (one hemi-cube each) and per polygon drawn in it (:func:`polygons_seen`: those in
-front of it and facing it, a flat cluster as its outline, whatever it is cut into), and the
-output, per output vertex (the final gather's rays, the exact direct light and what shines;
-less where no emitting face lights the scene, :data:`PER_VERTEX_LAMPS`). The rates below were
+receiver (one hemi-cube each), and the output, per output vertex (the final gather's rays, the
+exact direct light and what shines; less where no emitting face lights the scene,
+:data:`PER_VERTEX_LAMPS`). The form factors' are measured: the hemi-cube draws a sample of its
+receivers first, spread through the scene, and times them (up to 0.3 s or 2% of them:
+:func:`..form_factors.hemicube._probe`); where there are too few to sample (or another method
+makes them) they are counted, per receiver and per polygon drawn in its hemi-cube
+(:func:`polygons_seen`). A hemi-cube's cost varies fourfold with the scene at the same count
+of polygons seen (1.6 ms in the living room, 1.9 ms on the terrain, 3.3 ms in the truck town
+and the bunny, 6.7 ms in zdm2), which the count alone put 0.6-2x off. The output's rates were
 measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
 ``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
-subdivided: the time taken came out between about 0.6 and 1.8 times the forecast, hence the
-range :data:`SPREAD` (the Cornell box's lamp makes more of its output shine than the rate
-assumes; a dense mesh's output is cheaper per vertex). A faster or slower machine scales all
-of it. It is said once the patches are known and before the form factors, with the
+subdivided, and fitted to the real scenes' sun and sky: the output is the stage least sure,
+from 0.8x (the bunny) to 4.5x (zdm2, a shadow's edge across most of its rooms) of its forecast,
+and :meth:`Forecast.describe` says so. The whole bake came out between about 0.6 and 1.8 times
+the forecast, hence the range :data:`SPREAD`. It is said once the patches are known and before the form factors, with the
 output elements cut already (cached: the vertex stage finds them), and kept on the result
 (``BakeResult.forecast``, the report's 'forecast'); a bake whose form factors come from the
 cache (a relight) has nothing long to forecast.
@@ -65,7 +70,8 @@ class Forecast:
     """Seconds expected for a bake: ``form_factors`` and ``output`` (the vertex stage) on
     ``workers`` workers, ``seconds`` in all; for ``receivers`` hemi-cubes with ``curved``
     pieces drawn one by one and about ``seen`` polygons drawn in each (:func:`polygons_seen`),
-    and ``vertices`` output vertices."""
+    and ``vertices`` output vertices; ``per_receiver``: the seconds a hemi-cube took in the
+    sample drawn first (None: none drawn, the form factors counted)."""
 
     seconds: float
     form_factors: float
@@ -75,12 +81,14 @@ class Forecast:
     vertices: int
     workers: int
     seen: float = 0.0
+    per_receiver: float | None = None
 
     def describe(self) -> str:
         lo, hi = (_seconds(self.seconds * k) for k in SPREAD)
         return (f"{SAID} {_seconds(self.seconds)} s ({lo}-{hi} s) on {self.workers} worker"
                 f"{'s' if self.workers > 1 else ''} (form factors {self.form_factors:.1f} s for "
-                f"{self.receivers} hemi-cubes, output {self.output:.1f} s for {self.vertices} vertices)")
+                f"{self.receivers} hemi-cubes{', timed on a sample' if self.per_receiver else ''}, output {self.output:.1f} s for {self.vertices} vertices, "
+                f"the least sure)")
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
@@ -134,10 +142,13 @@ def curved_pieces(patches, clusters) -> int:
     return int(_bent(patches, of)[of].sum())
 
 
-def forecast(ctx, receivers, output_vertices: int) -> Forecast:
+def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecast:
     """The :class:`Forecast` of the bake of ``ctx`` (after its patch stage) with ``receivers``
     hemi-cubes to draw (their ids among ``ctx.unknowns``, or how many: then looked at from all
-    of them) and ``output_vertices`` to evaluate."""
+    of them) and ``output_vertices`` to evaluate. ``per_receiver``: the seconds a hemi-cube
+    took on one worker in a sample of this scene's (:func:`..form_factors.hemicube._probe`),
+    which the form factors' forecast then is; None: the rates :data:`PER_RECEIVER` and
+    :data:`PER_SEEN`."""
     s = ctx.settings
     workers = resolve_workers(s.workers)
     speed = 1.0 + PER_EXTRA_WORKER * (workers - 1)
@@ -145,12 +156,12 @@ def forecast(ctx, receivers, output_vertices: int) -> Forecast:
     ids = np.arange(int(receivers)) if np.ndim(receivers) == 0 else np.asarray(receivers, np.int64)
     ids = ids[ids < len(u.centers)]
     seen = polygons_seen(ctx.patches, ctx.clusters, u.centers[ids], u.normals[ids])
-    ff = len(ids) * (PER_RECEIVER + PER_SEEN * seen) / speed
+    ff = len(ids) * (PER_RECEIVER + PER_SEEN * seen if per_receiver is None else per_receiver) / speed
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
     rate = PER_VERTEX if ctx.patches.emitting().any() else PER_VERTEX_LAMPS
     out = output_vertices * rate * rays / 128 / speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
-                    int(output_vertices), workers, float(seen))
+                    int(output_vertices), workers, float(seen), per_receiver)
 
 
 def _seconds(x: float) -> str:

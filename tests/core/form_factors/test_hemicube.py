@@ -272,3 +272,23 @@ def test_progress_and_cancel():
     calls = []
     with pytest.raises(Cancelled):
         hemicube_form_factors(p, 16, batch=10, cancelled=lambda: calls.append(1) or len(calls) > 2)
+
+
+def test_the_forecasts_sample_times_receivers_and_leaves_f_as_it_was():
+    """``probe`` gets the seconds one hemi-cube took in a sample drawn before the others (its
+    rows thrown away: F bit for bit as without it), and None where there are too few
+    receivers to sample; a cancel during the sample stops the whole."""
+    from hemicube_radiosity.core.form_factors import hemicube
+    p = build_patches(scenes.closed_box(), 0.25)
+    said = []
+    F = hemicube_form_factors(p, 16, batch=2, probe=said.append)
+    assert len(said) == 1 and 0 < said[0] < 1
+    plain = hemicube_form_factors(p, 16, batch=2)
+    np.testing.assert_array_equal(F.to_dense(), plain.to_dense())
+    np.testing.assert_array_equal(F.sky, plain.sky)
+    few = []
+    hemicube_form_factors(p, 16, batch=len(p) // hemicube.PROBE_MIN_BATCHES + 1, probe=few.append)
+    assert few == [None]
+    with pytest.raises(Cancelled):
+        hemicube_form_factors(p, 16, batch=2, probe=said.append, cancelled=lambda: True)
+    assert len(said) == 1

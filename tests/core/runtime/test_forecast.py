@@ -80,3 +80,20 @@ def test_polygons_seen_are_those_in_front_and_facing():
     assert np.isclose(polygons_seen(room, clusters, room.centers[floor], room.normals[floor]), 5 * 2)
     ball = build_patches([sphere(16)], None)
     assert len(ball) == 512 and polygons_seen(ball, None, ball.centers, ball.normals) < 1   # (round-off at the poles)
+
+
+def test_the_form_factors_forecast_is_the_time_of_a_sample_where_one_is_drawn(monkeypatch):
+    """Where the hemi-cube draws a sample first (here with fewer receivers than a real scene
+    needs), the form factors' forecast is its time per receiver times the receivers, over the
+    workers' speed-up; said once, before the progress, and saying so."""
+    from hemicube_radiosity.core.form_factors import hemicube
+    from hemicube_radiosity.core.runtime.forecast import PER_EXTRA_WORKER
+    monkeypatch.setattr(hemicube, "PROBE_MIN_BATCHES", 1)
+    said = []
+    r = bake(scenes.cornell_box(), BakeSettings(workers=2, **SMALL),
+             progress=lambda stage, fr, msg: said.append((stage, msg)))
+    f = r.forecast
+    assert f.per_receiver is not None and 0 < f.per_receiver < 1
+    assert np.isclose(f.form_factors, f.receivers * f.per_receiver / (1 + PER_EXTRA_WORKER))
+    ff = [m for st, m in said if st == "form_factors" and m]
+    assert sum(m.startswith("expected about") for m in ff) == 1 and "timed on a sample" in ff[0]
