@@ -341,9 +341,10 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     m = np.broadcast_to(-to_sun, x.shape)
     dr = np.full(len(x), np.tan(h))
     # the disk at the same offsets from every receiver: its form factor in closed form where it
-    # is wholly above the horizon, clipped to it only where it is not (:func:`.distant_form_factor`)
-    F, whole = distant_form_factor(n, disk_polygons(to_sun[None], -to_sun[None], np.full(1, np.tan(h)))[0])
-    cut = np.flatnonzero(~whole)
+    # is wholly above the horizon (0 wholly below), clipped to it only where it crosses it
+    # (:func:`.distant_form_factor`)
+    F, settled = distant_form_factor(n, disk_polygons(to_sun[None], -to_sun[None], np.full(1, np.tan(h)))[0])
+    cut = np.flatnonzero(~settled)
     if cut.size:
         F[cut] = polygon_form_factor(x[cut], n[cut], disk_polygons(dc[cut], m[cut], dr[cut]))
     E0 = L * np.pi * F

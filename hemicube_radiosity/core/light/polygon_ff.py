@@ -73,8 +73,10 @@ def distant_form_factor(n, rel, margin=1e-9):
     ``F = |n . V| / (2 pi)`` with ``V = sum_k angle(a_k, a_k+1) unit(a_k x a_k+1)``, one vector
     for every receiver, instead of a (N, 2K, 3) contour each. The same sum as
     :func:`polygon_form_factor` to round-off (its per-receiver offsets ``poly - x`` carry
-    the receivers' coordinates' rounding, which this does not); elsewhere (the polygon
-    crosses the horizon) F is 0 and the mask False: the caller clips those."""
+    the receivers' coordinates' rounding, which this does not). Where every corner lies as far
+    below it, F is 0, as the clipped contour gives it (the receivers facing away from the sun:
+    about half of a scene's), and the mask True too; elsewhere (the polygon crosses the
+    horizon) F is 0 and the mask False: the caller clips those."""
     n = np.asarray(n, np.float64)
     rel = np.asarray(rel, np.float64)
     nxt = np.roll(rel, -1, axis=0)
@@ -83,8 +85,10 @@ def distant_form_factor(n, rel, margin=1e-9):
     theta = np.arctan2(cn, np.einsum("kc,kc->k", rel, nxt))
     V = (theta * np.where(cn > 0, 1.0 / np.where(cn > 0, cn, 1.0), 0.0)) @ c
     scale = float(np.sqrt(np.einsum("kc,kc->k", rel, rel).max(initial=0.0)))
-    whole = (n @ rel.T).min(axis=1, initial=np.inf) > margin * scale
-    return np.where(whole, np.abs(n @ V) / (2 * np.pi), 0.0), whole
+    h = n @ rel.T
+    whole = h.min(axis=1, initial=np.inf) > margin * scale
+    below = h.max(axis=1, initial=-np.inf) < -margin * scale
+    return np.where(whole, np.abs(n @ V) / (2 * np.pi), 0.0), whole | below
 
 
 def polygon_form_factors(points, normals, polys, poly_normals=None):

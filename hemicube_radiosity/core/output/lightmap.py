@@ -387,7 +387,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     pts, nrm, shading = _lit_points(world, normals, t, b, flip)
     pitch = _pitch(uv, world, width, height)[t]
     own = None if faces is None else faces[t]
-    Ds = by_source(lambda ids, samples: split(pts[ids], shading[ids], samples), covered,
+    Ds = by_source(lambda ids, samples, which=None: split(pts[ids], shading[ids], samples, which), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
     E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)

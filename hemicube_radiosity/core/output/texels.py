@@ -122,8 +122,9 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     row-major order): exact at the anchors and where the light needs it, bilinear between
     anchors elsewhere (module docstring). Also (n,) bool: the texels lit exactly.
 
-    ``split(ids, samples) -> (m, S, 3)`` the exact light at texels ``ids`` (with ``samples``
-    shadow rays per emitter and lamp: None the bake's, 1 the probe); ``points``, ``normals`` (n, 3),
+    ``split(ids, samples, which=None) -> (m, S, 3)`` the exact light at texels ``ids`` (with
+    ``samples`` shadow rays per emitter and lamp: None the bake's, 1 the probe; ``which`` (S,)
+    bool or None: only those sources, the others 0); ``points``, ``normals`` (n, 3),
     ``faces`` (n,) each texel's mesh face, ``pitch`` (n,) its side in world units; ``probed``
     (S,) bool: the sources a one-ray probe stands for (emitters and lamps; not the world), None
     for none; ``inside`` (n,) bool or None: texels whose centre lies inside their triangle (the
@@ -174,8 +175,8 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
                            axis=1)
         interp = np.einsum("mk,mksc->msc", w, value[corners])
         if probed is not None and np.any(probed):
-            if probe is None:
-                probe = split(np.arange(n), 1) @ LUMA                     # (n, S)
+            if probe is None:           # the probed sources only: the world's rays are the costliest
+                probe = split(np.arange(n), 1, np.asarray(probed, bool)) @ LUMA        # (n, S)
             off = ~np.all(_agree(probe[ids][:, probed], interp[:, probed] @ LUMA, floor[probed]), axis=1)
             keep &= ~_near(ids[off], rows, cols, (H, W), MARGIN)[rows[ids], cols[ids]]
         value[ids[keep]] = interp[keep]

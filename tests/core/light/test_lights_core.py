@@ -322,7 +322,8 @@ def test_the_suns_disk_in_closed_form_is_its_clipped_contour_and_the_exact_disk(
     receiver by receiver (:func:`polygon_form_factor`, what the sun used) and the exact disk,
     ``sin^2(h) cos(theta)``, for receivers that see it whole: to 1e-8 relative (the contour's
     own round-off, from offsets ``poly - x`` taken at coordinates of 300 m, is about 1e-9 where
-    the sun grazes the receiver); receivers it crosses the horizon of are left to the caller."""
+    the sun grazes the receiver); 0 as the contour's for receivers wholly below it; receivers
+    it crosses the horizon of are left to the caller."""
     from hemicube_radiosity.core.light.polygon_ff import distant_form_factor
     from hemicube_radiosity.core.util.geometry import disk_polygons
     rng = np.random.default_rng(5)
@@ -332,16 +333,18 @@ def test_the_suns_disk_in_closed_form_is_its_clipped_contour_and_the_exact_disk(
     to_sun = np.array([0.3, 0.4, 0.8]) / np.linalg.norm([0.3, 0.4, 0.8])
     for h in (0.5 * np.radians(0.526), np.radians(5.0)):
         rel = disk_polygons(to_sun[None], -to_sun[None], np.full(1, np.tan(h)))[0]
-        F, whole = distant_form_factor(n, rel)
+        F, settled = distant_form_factor(n, rel)
         clipped = polygon_form_factor(x, n, disk_polygons(x + to_sun, np.broadcast_to(-to_sun, x.shape),
                                                           np.full(len(x), np.tan(h))))
         cos = n @ to_sun
-        assert 0.4 < whole.mean() < 0.55 and np.all(cos[whole] > 0)
+        whole, below = settled & (cos > 0), settled & (cos <= 0)
+        assert 0.4 < whole.mean() < 0.55 and 0.4 < below.mean() < 0.55
+        assert np.all(F[below] == 0) and np.all(clipped[below] == 0)
         np.testing.assert_allclose(F[whole], clipped[whole], rtol=1e-8)
         exact = np.sin(h) ** 2 * cos[whole]
         # the 64-gon of the disk's area: its vector form factor is the disk's to (sides / 2 pi)^-2 h^2
         np.testing.assert_allclose(F[whole], exact, rtol=1e-8 + 2 * h ** 2)
-        assert np.all(F[~whole] == 0) and np.all(cos[~whole] < 1.01 * np.sin(h))
+        assert np.all(F[~settled] == 0) and np.all(np.abs(cos[~settled]) < 1.01 * np.sin(h))
 
 
 def test_lamps_on_two_threads_light_as_on_one_bit_for_bit():

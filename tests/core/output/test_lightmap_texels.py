@@ -47,17 +47,34 @@ def light(p, lamp=1.0, world=1.0):
     return out
 
 
-def run(lamp=1.0, world=1.0):
+def run(lamp=1.0, world=1.0, probes=None):
     covered, points, normals, faces, pitch = island()
     lit = []
 
-    def split(ids, samples):
+    def split(ids, samples, which=None):
         if samples is None:
             lit.append(ids)
-        return light(points[ids], lamp, world)         # a point lamp: one ray is exact
+        elif probes is not None:
+            probes.append(which)
+        out = light(points[ids], lamp, world)          # a point lamp: one ray is exact
+        if which is not None:
+            out[:, ~np.asarray(which, bool)] = 0.0
+        return out
     value, exact = texels.by_source(split, covered, points, normals, faces, pitch,
                                     probed=np.array([True, False]))
     return value, exact, points, np.concatenate(lit)
+
+
+def test_the_probe_casts_toward_the_probed_sources_only():
+    """The one-ray probe at every texel asks for the lamp alone: the world's rays (hundreds a
+    point) are not cast at every texel, and the result is the same as with them."""
+    probes = []
+    value = run(probes=probes)[0]
+    assert len(probes) == 1 and probes[0].tolist() == [True, False]
+    covered, points, normals, faces, pitch = island()
+    every = texels.by_source(lambda ids, samples, which=None: light(points[ids]), covered, points, normals,
+                             faces, pitch, probed=np.array([True, False]))[0]
+    np.testing.assert_array_equal(value, every)
 
 
 def test_interpolated_where_smooth_exact_at_every_shadow_texel():
