@@ -227,29 +227,27 @@ def dilate(image, known, passes=MARGIN):
     """``image`` (H, W, C) with the texels not ``known`` (H, W) bool filled from their known
     neighbours, ``passes`` times: each pass gives every unknown texel with a known one among its
     8 neighbours the mean of those. Returns (image, known) as new arrays."""
-    img = np.where(known[..., None], image, 0.0).astype(np.float64)
+    img = np.where(known[..., None], image, 0.0).astype(np.float64)    # 0 where unknown: sums skip them
     known = known.copy()
-    H, W = known.shape
     for _ in range(int(passes)):
         if known.all():
             break
-        pk = np.pad(known, 1).astype(np.float64)
-        pv = np.pad(img, ((1, 1), (1, 1), (0, 0)))
-        total = np.zeros_like(img)
-        count = np.zeros((H, W))
-        for dr in (-1, 0, 1):
-            for dc in (-1, 0, 1):
-                if dr == 0 and dc == 0:
-                    continue
-                k = pk[1 + dr:1 + dr + H, 1 + dc:1 + dc + W]
-                total += pv[1 + dr:1 + dr + H, 1 + dc:1 + dc + W] * k[..., None]
-                count += k
+        count = _box3(known.astype(np.float64))             # the unknown texel's own is 0 in both
         new = ~known & (count > 0)
         if not new.any():
             break
-        img[new] = total[new] / count[new][:, None]
+        img[new] = _box3(img)[new] / count[new][:, None]
         known = known | new
     return img, known
+
+
+def _box3(a):
+    """(H, W, ...) the sum of ``a`` over each texel's 3 x 3 block (zero beyond the border): along
+    the rows, then the columns."""
+    p = np.pad(a, ((1, 1), (0, 0)) + ((0, 0),) * (a.ndim - 2))
+    rows = p[:-2] + p[1:-1] + p[2:]
+    p = np.pad(rows, ((0, 0), (1, 1)) + ((0, 0),) * (a.ndim - 2))
+    return p[:, :-2] + p[:, 1:-1] + p[:, 2:]
 
 
 def texel_light(elements, parts, points, normals, owner, D, faces=None):
