@@ -20,7 +20,10 @@ The grids run from coarse to fine (8 texels, 4, then 2); on the 8- and 4-texel g
 middle is lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
 corners must agree, or the light must run straight across it (its second differences through
 the anchors beyond it, over 8, within the same bound: a linear ramp of the sky toward a window
-is interpolated exactly). A texel no grid settles is lit exactly.
+is interpolated exactly). A texel no grid settles is lit exactly. Each source is settled
+apart: a texel lit exactly in a lamp's light at its shadow's edge takes the world's
+interpolation where the world's own light is smooth (its hundreds of rays a point are cast at
+its anchors and where it bends: a tenth of a lit floor's texels, not a third).
 Both tests compare each source with itself, relative to its own scale: a relight of new
 strengths or colours picks the same texels (and finds their rays cached). Smooth light (the
 sky on a wall, a lamp's falloff, the sun on a lit floor) costs the anchors; shadow edges,
@@ -78,8 +81,8 @@ def _bend(value, done, faces, index, rows, cols, s, face):
     """(m, S) the interpolation's error the light's bend suggests across each texel's cell of
     stride ``s``: the largest second difference of each source's luminance along the cell's
     two rows and two columns, through the texels ``s`` beyond it on either side (on ``face``
-    and ``done``; one side where the other has none), over 8 (a quadratic's error at a cell's
-    middle); inf where neither side has one."""
+    and ``done`` (n, S) in that source; one side where the other has none), over 8 (a
+    quadratic's error at a cell's middle); inf where neither side has one."""
     H, W = index.shape
     r0, c0 = rows // s * s, cols // s * s
     out = np.zeros((len(rows), value.shape[1]))
@@ -89,8 +92,9 @@ def _bend(value, done, faces, index, rows, cols, s, face):
         i = np.full(len(r), -1, np.int64)
         i[ok] = index[r[ok], c[ok]]
         ok = i >= 0
-        ok[ok] = done[i[ok]] & (faces[i[ok]] == face[ok])
-        return np.where(ok[:, None], value[np.maximum(i, 0)] @ LUMA, np.nan)
+        ok[ok] = faces[i[ok]] == face[ok]
+        ok = ok[:, None] & done[np.maximum(i, 0)]
+        return np.where(ok, value[np.maximum(i, 0)] @ LUMA, np.nan)
     for r, c, dr, dc in ((r0, c0, 0, s), (r0 + s, c0, 0, s), (r0, c0, s, 0), (r0, c0 + s, s, 0)):
         a, b, c1, d = (at(r + k * dr, c + k * dc) for k in (-1, 0, 1, 2))
         both = np.fmax(np.abs(a - 2 * b + c1), np.abs(b - 2 * c1 + d))       # either side where one lacks
@@ -119,8 +123,10 @@ def _agree(a, b, floor):
 
 def by_source(split, covered, points, normals, faces, pitch, probed=None, inside=None, strides=STRIDES):
     """(n, S, 3) the direct light of each source at the n covered texels (``covered`` (H, W),
-    row-major order): exact at the anchors and where the light needs it, bilinear between
-    anchors elsewhere (module docstring). Also (n,) bool: the texels lit exactly.
+    row-major order): exact at the anchors and where that source's light needs it, bilinear
+    between anchors elsewhere (module docstring), each source apart: the world is not cast at a
+    lamp's shadow edge where its own light is smooth. Also (n, S) bool: the texels lit exactly
+    in each source.
 
     ``split(ids, samples, which=None) -> (m, S, 3)`` the exact light at texels ``ids`` (with
     ``samples`` shadow rays per emitter and lamp: None the bake's, 1 the probe; ``which`` (S,)
@@ -135,69 +141,101 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     index = np.full((H, W), -1, np.int64)
     index[covered] = np.arange(n)
     rows, cols = np.nonzero(covered)
-    value, exact = None, np.zeros(n, bool)
-    done = np.zeros(n, bool)
+    state = {}
     floor = probe = None
 
-    def light(ids):
-        nonlocal value
-        ids = ids[~exact[ids]]
-        if ids.size:
+    def light(ids, need=None):
+        """Light texels ``ids`` exactly in the sources ``need`` (len(ids), S) bool (None: all)
+        they are not lit in yet, one call per set of sources."""
+        if not ids.size:
+            return
+        if "value" not in state:               # the first call: every source, to learn S
             v = split(ids, None)
-            if value is None:
-                value = np.zeros((n,) + v.shape[1:])
-            value[ids] = v
-            exact[ids] = done[ids] = True
+            S = v.shape[1]
+            state.update(value=np.zeros((n,) + v.shape[1:]), exact=np.zeros((n, S), bool),
+                         done=np.zeros((n, S), bool))
+            state["value"][ids] = v
+            state["exact"][ids] = state["done"][ids] = True
+            return
+        exact = state["exact"]
+        need = ~exact[ids] if need is None else need & ~exact[ids]
+        sets, of = np.unique(need, axis=0, return_inverse=True)
+        for k, which in enumerate(sets):
+            if not which.any():
+                continue
+            sel = ids[of.ravel() == k]
+            v = split(sel, None, None if which.all() else which)
+            state["value"][sel[:, None], np.flatnonzero(which)[None]] = v[:, which]
+            exact[sel[:, None], np.flatnonzero(which)[None]] = True
+            state["done"][sel[:, None], np.flatnonzero(which)[None]] = True
 
     for s in strides:
-        ids = np.flatnonzero(~done)
+        done = state.get("done")
+        ids = np.arange(n) if done is None else np.flatnonzero(~done.all(axis=1))
         if ids.size == 0:
             break
         corners, w = _corners(index, rows[ids], cols[ids], s)
         mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
         ok = np.all(corners >= 0, axis=1) & (mid >= 0)
         ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
-        light(np.unique(np.concatenate([corners[ok].ravel(), mid[ok]])))
-        if floor is None and value is not None:
-            floor = AGREE_FLOOR * np.percentile(value[exact] @ LUMA, 99, axis=0)
-        ok &= ~done[ids]
+        anchors = np.column_stack([corners[ok], mid[ok]])
+        if done is None:
+            light(np.unique(anchors))
+        else:        # each anchor in the sources its cells' texels still want
+            want = np.zeros(done.shape, bool)
+            np.logical_or.at(want, anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0))
+            a = np.unique(anchors)
+            light(a, want[a])
+        if "value" not in state:
+            continue
+        value, exact, done = state["value"], state["exact"], state["done"]
+        if floor is None:
+            floor = AGREE_FLOOR * np.array([np.percentile(value[exact[:, k], k] @ LUMA, 99) if exact[:, k].any()
+                                            else 0.0 for k in range(value.shape[1])])
         ids, corners, w, mid = ids[ok], corners[ok], w[ok], mid[ok]
         if ids.size == 0:
             continue
-        keep = _affine(points, corners, w, ids, pitch)
+        keep = _affine(points, corners, w, ids, pitch)[:, None] & ~done[ids]            # (m, S)
+        keep &= done[corners].all(axis=1) & done[mid]
         Y = value[corners] @ LUMA                                         # (m, 4, S)
         if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
-            keep &= _affine(points, corners, 0.25, mid, pitch)
-            keep &= np.all(_agree(Y.mean(axis=1), value[mid] @ LUMA, floor), axis=1)
+            keep &= _affine(points, corners, 0.25, mid, pitch)[:, None]
+            keep &= _agree(Y.mean(axis=1), value[mid] @ LUMA, floor)
         else:          # a cell two texels wide: its corners agree, or the light is straight across it
             bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
-            keep &= np.all(_agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor),
-                           axis=1)
+            keep &= _agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor)
         interp = np.einsum("mk,mksc->msc", w, value[corners])
         if probed is not None and np.any(probed):
             if probe is None:           # the probed sources only: the world's rays are the costliest
                 probe = split(np.arange(n), 1, np.asarray(probed, bool)) @ LUMA        # (n, S)
-            off = ~np.all(_agree(probe[ids][:, probed], interp[:, probed] @ LUMA, floor[probed]), axis=1)
-            keep &= ~_near(ids[off], rows, cols, (H, W), MARGIN)[rows[ids], cols[ids]]
-        value[ids[keep]] = interp[keep]
-        done[ids[keep]] = True
+            for k in np.flatnonzero(probed):
+                off = ~_agree(probe[ids, k], interp[:, k] @ LUMA, floor[k])
+                keep[:, k] &= ~_near(ids[off], rows, cols, (H, W), MARGIN)[rows[ids], cols[ids]]
+        m, k = np.nonzero(keep)
+        value[ids[m], k] = interp[m, k]
+        done[ids[m], k] = True
+    if "value" not in state:                    # no cell anywhere: every texel exact
+        light(np.arange(n))
     if inside is not None:
-        light(np.flatnonzero(~done & inside))
-        _rim(value, done, inside, faces, index, rows, cols)
-    light(np.flatnonzero(~done))
-    return value, exact
+        left = np.flatnonzero(~state["done"].all(axis=1) & inside)
+        light(left, ~state["done"][left])
+        _rim(state["value"], state["done"], inside, faces, index, rows, cols)
+    left = np.flatnonzero(~state["done"].all(axis=1))
+    light(left, ~state["done"][left])
+    return state["value"], state["exact"]
 
 
 def _rim(value, done, inside, faces, index, rows, cols):
-    """Texels not ``done`` whose centre lies outside their triangle (an island's rim, read
-    clamped onto it) take the mean of their 8 neighbours inside on the same face, as Cycles'
-    bake margin extends an island from its texels; ``value`` and ``done`` updated in place."""
-    rim = np.flatnonzero(~done & ~inside)
+    """Texels not ``done`` (n, S) in a source whose centre lies outside their triangle (an
+    island's rim, read clamped onto it) take that source's mean over their 8 neighbours inside
+    on the same face, as Cycles' bake margin extends an island from its texels; ``value`` and
+    ``done`` updated in place."""
+    rim = np.flatnonzero(~done.all(axis=1) & ~inside)
     if rim.size == 0 or value is None:
         return
     H, W = index.shape
     total = np.zeros((rim.size,) + value.shape[1:])
-    count = np.zeros(rim.size)
+    count = np.zeros((rim.size, value.shape[1]))
     for dr in (-1, 0, 1):
         for dc in (-1, 0, 1):
             r, c = rows[rim] + dr, cols[rim] + dc
@@ -205,9 +243,11 @@ def _rim(value, done, inside, faces, index, rows, cols):
             ok = (r >= 0) & (r < H) & (c >= 0) & (c < W) & ((dr != 0) | (dc != 0))
             nb[ok] = index[r[ok], c[ok]]
             ok = nb >= 0
-            ok[ok] = inside[nb[ok]] & done[nb[ok]] & (faces[nb[ok]] == faces[rim[ok]])
-            total[ok] += value[nb[ok]]
-            count[ok] += 1
-    got = count > 0
-    value[rim[got]] = total[got] / count[got][:, None, None]
-    done[rim[got]] = True
+            ok[ok] = inside[nb[ok]] & (faces[nb[ok]] == faces[rim[ok]])
+            use = ok[:, None] & done[np.maximum(nb, 0)]                          # (r, S)
+            total += np.where(use[..., None], value[np.maximum(nb, 0)], 0.0)
+            count += use
+    got = (count > 0) & ~done[rim]
+    r, k = np.nonzero(got)
+    value[rim[r], k] = total[r, k] / count[r, k][:, None]
+    done[rim[r], k] = True
