@@ -124,18 +124,27 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
         out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
         return tied
 
-    for o in np.unique(owner):
+    # objects of at most ``candidates`` patches (a face's few elements, when keyed by face): every
+    # patch a candidate, in index order, for all the objects of one count at once
+    groups, count = np.unique(powner, return_counts=True)
+    order = np.argsort(powner, kind="stable")                  # each object's patches, ascending
+    start = np.concatenate([[0], np.cumsum(count)[:-1]])
+    g = np.searchsorted(groups, owner)
+    g = np.minimum(g, max(len(groups) - 1, 0))
+    known = (g < len(groups)) & (groups[g] == owner) if len(groups) else np.zeros(P, bool)
+    if not known.all():
+        raise ValueError(f"no patches belong to object {int(owner[~known][0])}")
+    few = count[g] <= candidates
+    for N in np.unique(count[g[few]]):
+        pts_ids = np.flatnonzero(few & (count[g] == N))
+        cand = order[start[g[pts_ids]][:, None] + np.arange(N)[None]]
+        for s in range(0, pts_ids.size, chunk):
+            settle(pts_ids[s:s + chunk], cand[s:s + chunk])
+    for o in np.unique(owner[~few]):
         pts_ids = np.flatnonzero(owner == o)
         cand_all = np.flatnonzero(powner == o)
-        if cand_all.size == 0:
-            raise ValueError(f"no patches belong to object {int(o)}")
         N = cand_all.size
         k = min(candidates, N)
-        if k == N:                       # every patch a candidate, in index order (as before)
-            for s in range(0, pts_ids.size, chunk):
-                ids = pts_ids[s:s + chunk]
-                settle(ids, np.broadcast_to(cand_all, (ids.size, k)))
-            continue
         cc = patches.centers[cand_all]
         if N <= _BRUTE:
             redo = pts_ids

@@ -257,3 +257,24 @@ def test_inverse_bilinear_is_the_vector_gauss_newton_bit_for_bit():
             * (0.5 + 0.5 * rng.random((h, 1, 1))) + rng.normal(0, 0.002, (h, 4, 3)))
     u, v = inverse_bilinear(good, _bilinear(good, u0, v0))
     assert np.abs(u - u0).max() < 1e-9 and np.abs(v - v0).max() < 1e-9
+
+
+def test_many_small_objects_are_located_together_as_one_by_one():
+    """Objects of at most ``candidates`` patches (a face's elements, when texels are keyed by
+    face) are settled all at once per patch count: the same patch and (u, v), to the bit, as
+    each object searched alone by the brute force, ties and points off the surfaces included."""
+    from dataclasses import replace
+    rng = np.random.default_rng(8)
+    for ps in _mixed_scene():
+        sizes = rng.integers(1, 12, len(ps))                   # 1 to 11 patches a key: both ways
+        group = np.repeat(np.arange(len(ps)), sizes)[:len(ps)]
+        key = ps.owner.astype(np.int64) * 10_000 + group
+        small = replace(ps, owner=key)
+        pts, _, nrm = _points(ps, rng)
+        src = np.argmin(((pts[:, None, :] - ps.centers[None]) ** 2).sum(-1), axis=1)
+        idx, uv = locate(small, pts, key[src], nrm, chunk=97)
+        for k in np.unique(key[src]):
+            at = np.flatnonzero(key[src] == k)
+            ref_idx, ref_uv = _brute_locate(small, pts[at], key[src][at], nrm[at])
+            np.testing.assert_array_equal(idx[at], ref_idx)
+            np.testing.assert_array_equal(uv[at], ref_uv)
