@@ -52,17 +52,22 @@ DIFFUSE bake we compare with, use normal incidence).
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from ...core.runtime.notes import warning
 from .face_emission import sample_faces
+from .shading_key import KEPT, evaluation_key
 from .materials import follow, uses_nodes
 from .visibility import world_matrix
 
 __all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate", "object_independent",
            "missing_images", "output_node"]
+
+# the last evaluations of this session, by :func:`.shading_key.evaluation_key`
+_EVALUATED: OrderedDict = OrderedDict()
 
 ATTRIBUTE = "_hr_shading"
 SCENE = "_hr_shading"
@@ -599,9 +604,21 @@ def _matrix(M):
     return Matrix([list(map(float, row)) for row in M])
 
 
+def _copied(evaluated):
+    """(corners, materials, face emission) with every array copied: what is kept is never what
+    a reader holds."""
+    def copy(v):
+        return {k: copy(x) for k, x in v.items()} if isinstance(v, dict) else \
+            tuple(np.array(x) for x in v) if isinstance(v, tuple) else np.array(v)
+    return tuple(copy(v) for v in evaluated)
+
+
 def shade(objects, depsgraph) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
-    ones that need it, in one batch. Never raises for a Cycles problem: ``failed`` says why."""
+    ones that need it, in one batch, unless nothing that depends on changed since one of the
+    last :data:`.shading_key.KEPT` evaluations in this session (:func:`.shading_key.evaluation_key`:
+    a relight of new lamps asks Cycles nothing). Never raises for a Cycles problem: ``failed``
+    says why."""
     import bpy
 
     out = Shaded()
@@ -640,8 +657,17 @@ def shade(objects, depsgraph) -> Shaded:
         if not need and not constants:
             return out
         try:
+            key = evaluation_key(need, depsgraph, constants.values(), emit, stand_ins, sampled)
+            if key is not None and key in _EVALUATED:       # nothing it depends on changed
+                _EVALUATED.move_to_end(key)
+                out.corners, out.materials, out.face_emission = _copied(_EVALUATED[key])
+                return out
             out.corners, out.materials, out.seconds, out.face_emission = evaluate(
                 need, depsgraph, constants.values(), emit, stand_ins, sampled)
+            if key is not None:
+                _EVALUATED[key] = _copied((out.corners, out.materials, out.face_emission))
+                while len(_EVALUATED) > KEPT:
+                    _EVALUATED.popitem(last=False)
         except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
             out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
         return out
