@@ -182,8 +182,8 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         if done is None:
             light(np.unique(anchors))
         else:        # each anchor in the sources its cells' texels still want
-            want = np.zeros(done.shape, bool)
-            np.logical_or.at(want, anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0))
+            at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
+            want = np.stack([np.bincount(at, weights=left[:, k], minlength=n) > 0 for k in range(done.shape[1])], 1)
             a = np.unique(anchors)
             light(a, want[a])
         if "value" not in state:
