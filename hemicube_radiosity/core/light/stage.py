@@ -249,7 +249,7 @@ class DirectLight:
         return self._scene
 
     def at(self, points, normals, where: str, samples=None, eps=None, facing=None, split=1,
-           part=None) -> np.ndarray:
+           part=None, sky=None) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
@@ -261,13 +261,16 @@ class DirectLight:
         ``split``: the points come in runs of that many whose mean is what is read (an abrupt
         cell's, :mod:`..output.abrupt`): each casts ``sky_rays / split`` of the sky's rays, the
         run all of them once; ``part`` (P,): which share each point casts instead
-        (:func:`.rays.sky_fraction`)."""
+        (:func:`.rays.sky_fraction`). ``sky``: None, or a function that returns the world's
+        share (P,) of each point's hemisphere, found by other rays (the final gather's,
+        :func:`..output.indirect.gathered_sky`): no sky rays are cast, and it is asked for
+        last (the gather casts while the rest is found)."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
             D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True, eps=eps),
                                    self.emitted(), transposed=True)
-        if self.world is not None:
+        if self.world is not None and sky is None:
             D += self.world_at(points, normals, where, eps=eps, facing=facing, split=split, part=part)
         if self.lights:
             D += lamp_irradiance(self.patches, self.lights, self.cache, points=points, normals=normals,
@@ -275,6 +278,8 @@ class DirectLight:
                                  cancelled=self.cancelled, facing=facing,
                                  samples=min(samples or self.light_samples, self.light_samples),
                                  seed=self.light_seed, workers=self.workers) / np.pi
+        if self.world is not None and sky is not None:
+            D += np.asarray(sky(), dtype=np.float64)[:, None] * self.world[None, :]
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)

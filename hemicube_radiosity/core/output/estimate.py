@@ -122,8 +122,9 @@ def estimate_stage(ctx) -> None:
     ctx.say(0.0, "estimating the error: sampling noise")
     noise = detail = 0.0
     if s.gather_rays >= 2 and embree_available():
-        # two independent gathers, of n and n / 2 rays: var(X_n - X_n/2) = 3 var(X_n)
-        _, Y = _again(ctx, gather_rays=s.gather_rays // 2)
+        # two independent gathers, of n and n / 2 rays: var(X_n - X_n/2) = 3 var(X_n) (the sky's
+        # rays halved too: where the gather finds the world they are its rays, :mod:`.indirect`)
+        _, Y = _again(ctx, gather_rays=s.gather_rays // 2, sky_rays=max(1, s.sky_rays // 2))
         noise = relative_rms(Y, X, mask) / np.sqrt(3.0)
     method = "rays"
     ctx.say(0.5, "estimating the error: the output at twice the detail size")

@@ -27,7 +27,7 @@ from .shine import HOT, hot_elements, mean_light, shine
 from .sides import open_elements, sided_mesh
 from .through import through_key
 
-__all__ = ["GATHER_PASSES", "element_indirect", "start_gather"]
+__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "start_gather"]
 
 
 #: Passes of :func:`_bounce_again`. Measured against Cycles (raw RMS / bias): one pass, yard
@@ -35,6 +35,10 @@ __all__ = ["GATHER_PASSES", "element_indirect", "start_gather"]
 #: 1.10% and 3.18% with the room's bias at -0.55%: at the elements' level each bounce loses a
 #: little more (rays through the cracks of touching objects) than the patch solution does.
 GATHER_PASSES = 1
+
+#: The most sky rays per gather ray for which the gather's rays find the world as well
+#: (:func:`gather_finds_world`).
+SKY_PER_GATHER = 2
 
 
 def element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None,
@@ -152,7 +156,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
-                    ("gather-correction", s.gather_rays, s.element_size, s.patch_size))
+                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size))
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
         shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
@@ -165,7 +169,43 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
 
 
 def _gather_key(ctx, elements):
-    return cache_key(geometry_key(elements) + through_key(elements), ("gather-elements", ctx.settings.gather_rays))
+    return cache_key(geometry_key(elements) + through_key(elements), ("gather-elements", gather_count(ctx)))
+
+
+def gather_finds_world(ctx) -> bool:
+    """Whether the gather's rays also find the constant world's light at the element vertices:
+    the gather runs (a detail size, gather rays, Embree) and the world is direct light
+    (``ctx.direct.world``). Its rays that hit nothing are then what the vertices' sky rays would
+    be (cosine rays from the same points: :func:`.rays.sky_fraction`), so the vertices cast
+    no sky rays of their own (:func:`gathered_sky`) and the gather casts the sky's count
+    (:func:`gather_count`). Not where the sky asks for more than :data:`SKY_PER_GATHER` times
+    the gather's rays (the quality levels ask twice): the gather's matrix and hits grow with its
+    rays, the sky's rays cost no memory."""
+    s = ctx.settings
+    return (s.uses_elements() and 0 < s.gather_rays and s.sky_rays <= SKY_PER_GATHER * s.gather_rays
+            and embree_available()
+            and getattr(ctx, "direct", None) is not None and ctx.direct.world is not None)
+
+
+def gather_count(ctx) -> int:
+    """Rays per vertex of the gather: ``gather_rays``, or ``sky_rays`` where more and the gather
+    finds the world (:func:`gather_finds_world`). On the bench's bunny (sun and sky), its 128
+    gather rays made 0.77% of its 1.28% RMS against Cycles as noise (another ray pattern moved
+    the light reflected once by 10%) and its 256 sky rays about a third of its bake: 256 rays
+    that do both took it to 1.02%, the terrain from 0.32% to 0.20%, in as much CPU time. The
+    same rays make the sky's and the gather's errors cancel: a ray that finds a wall instead
+    of the sky reads the wall (the terrain's noise went from 0.24% to 0.05%)."""
+    s = ctx.settings
+    return max(int(s.gather_rays), int(s.sky_rays)) if gather_finds_world(ctx) else int(s.gather_rays)
+
+
+def gathered_sky(ctx, elements, xv, nv, pending=None):
+    """(sky (V,), got): the cosine-weighted share of each element vertex's hemisphere where the
+    gather's rays hit nothing (``G.sky``), waiting for the gather (``pending``, from
+    :func:`start_gather`) if it is casting; ``got`` is what :func:`element_indirect` takes as
+    its ``pending`` then (the gather collected)."""
+    G, H = _gather_rays(ctx, elements, xv, nv, pending, hits=False)
+    return np.asarray(G.sky, dtype=np.float64), (G, H)
 
 
 def start_gather(ctx, elements, xv, nv):
@@ -180,7 +220,7 @@ def start_gather(ctx, elements, xv, nv):
         key = _gather_key(ctx, elements)
         if ctx.cache.has(key) and ctx.cache.has(key + "-hits"):     # (not read here: a relight may need neither)
             return None
-    return gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
+    return gather_matrix(elements, xv, nv, embree_scene(elements), rays=gather_count(ctx),
                          ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
                          hits=True, background=True)
 
@@ -188,9 +228,14 @@ def start_gather(ctx, elements, xv, nv):
 def _gather_rays(ctx, elements, xv, nv, pending=None, hits=True):
     """The gather matrix G (with ``G.sky``) of ``elements`` at points ``xv`` and its rays' hits
     H (see :func:`.gather.gather_matrix`), cached together: both depend on geometry only.
-    ``pending``: the gather started by :func:`start_gather` (its result is taken here).
+    ``pending``: the gather started by :func:`start_gather` (its result is taken here), or
+    (G, H) collected already (:func:`gathered_sky`).
     ``hits`` False: H only if it is made now, else None (read from the cache only when asked:
     it is the largest item of a bake, and only a new correction matrix reads it)."""
+    if isinstance(pending, tuple):
+        if pending[1] is not None or not hits:
+            return pending
+        pending = None                            # H was not made: from the cache (G came from it)
     key = _gather_key(ctx, elements)
     G = ctx.cache.get(key) if ctx.cache is not None else None
     H = ctx.cache.get(key + "-hits") if ctx.cache is not None and (hits or G is None) else None
@@ -198,7 +243,7 @@ def _gather_rays(ctx, elements, xv, nv, pending=None, hits=True):
         if pending is not None:
             G, sky, H = pending.result(ctx.cancelled)
         else:
-            G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=ctx.settings.gather_rays,
+            G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=gather_count(ctx),
                                       ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
                                       hits=True)
         G.sky = sky

@@ -28,7 +28,7 @@ from .corners import corner_values, vertex_mean
 from .covered import covered_light, start_offsets
 from .crease import corner_light
 from .normals import shading_normals
-from .indirect import element_indirect, start_gather
+from .indirect import element_indirect, gather_finds_world, gathered_sky, start_gather
 from .sides import buried_side, open_elements, sided_mesh
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
 
@@ -94,14 +94,23 @@ def vertex_stage(ctx) -> None:
         # the gather's rays (geometry only) cast on the workers while this thread finds the
         # direct light, the open side and what shines (else a core idles through them)
         pending = start_gather(ctx, ctx.elements, xv, nv)
+        got = [pending]       # what the gather's reader takes: the gather, or (G, H) once collected
+
+        def sky():            # the gather's rays that hit nothing find the world: no sky rays
+            found, got[0] = gathered_sky(ctx, ctx.elements, xv, nv, pending)
+            return found
         try:
-            D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
             side = buried_side(ctx, ctx.elements, xv, nv)
             if side is not None:                            # before the gather: its rays read it
                 eps = start_offsets(ctx, ctx.elements, side.points, side.normals)
-                D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side", eps=eps))
-            rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side,
-                                      pending)
+                open_D = ctx.direct.at(side.points, side.normals, "open-side", eps=eps)
+            if gather_finds_world(ctx):       # the sky last: it waits for the gather's rays
+                D_vert = ctx.direct.at(xv, nv, "vertices", sky=sky)
+            else:
+                D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
+            if side is not None:
+                D_vert = side.spread(D_vert, open_D)
+            rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side, got[0])
         finally:
             if pending is not None:                     # stopped early: the workers with it
                 pending.close()

@@ -4,7 +4,9 @@ Truth here is the same bake converged: output elements a third the size and 512 
 interpolated to the default bake's vertices (Cycles' version of this check, on the bench scenes,
 is in ``bench/speed_vs_error.py``: Targets). Measured (bench-like relative RMS over the open
 vertices that do not emit, the scene sees and are not buried under a block): the open box
-under a uniform sky, estimated 0.75% against 0.80% measured; the one-sided Cornell box 1.3%
+under a uniform sky, estimated 0.33% against 0.48% measured (0.75% against 0.82% while its
+vertices cast sky rays of their own beside a gather of half as many rays: the gather's rays
+find the sky now, core/output/indirect.py); the one-sided Cornell box 1.3%
 against 1.5% (it was 3.2% against 1.6% while the output elements straddled the blocks' outlines:
 the coarser output read their buried corners); with its lamp lighting the ceiling from its
 back, 1.2% against 2.1%. The detail term leaves out what lies in a coarse element whose
@@ -54,7 +56,7 @@ def test_estimated_error_is_within_a_factor_two_of_the_measured(case):
     e = r.error_estimate
     assert e.method == "detail" and e.noise > 0 and e.detail > 0
     assert e.error == pytest.approx(np.hypot(e.noise, e.detail))
-    assert 0.005 < measured < 0.1                         # a real error to estimate
+    assert 0.003 < measured < 0.1                         # a real error to estimate
     assert 0.5 <= e.error / measured <= 2.0, (e.error, measured)
     assert e.describe().startswith("estimated error")        # said in the summary, not as a note
     assert not any(n.startswith("estimated error") for n in r.notes)
