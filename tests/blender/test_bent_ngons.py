@@ -120,7 +120,8 @@ def test_a_folded_10_gon_shadows_the_floor_as_in_cycles():
 def test_a_mirrored_or_planar_ngon_is_cut_as_blender_or_as_before():
     """Under a negative scale (its rings reversed by the reader) the crown's patches are still
     Blender's triangles in world space, facing as its face does; a planar 10-gon gets no
-    triangles and keeps the cut about its centre (10 quads)."""
+    triangles and keeps the cut about its centre (10 quads). Read twice, the crown's triangles are
+    the same read-only rows."""
     cr.new_empty_scene()
     crown = _crown()
     crown.scale = (-1.0, 1.0, 1.0)
@@ -129,6 +130,10 @@ def test_a_mirrored_or_planar_ngon_is_cut_as_blender_or_as_before():
     dg = bpy.context.evaluated_depsgraph_get()
     meshes = reader.read_scene(dg, [crown, flat]).meshes
     assert meshes[1].face_triangles is None
+    # read again (a relight): the same read-only rows, which what is kept per mesh keys on
+    again = reader.read_scene(dg, [crown, flat]).meshes
+    assert again[0].face_triangles is meshes[0].face_triangles
+    assert not meshes[0].face_triangles.flags.writeable
     P = build_patches(meshes, None)
     assert _same_triangles(P, 0, _world_triangles(crown))
     assert np.all(P.normals[P.owner == 0] @ [0.0, 0.0, 1.0] > 0.5)     # mirrored in x: still up

@@ -9,11 +9,29 @@ on. Which are bent is decided in the object's own space: a transform keeps a pla
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ...core.mesh.ngons import bent_faces
+from ...core.runtime.cache import Memo
 
 __all__ = ["bent_ngon_triangles", "reversed_rings"]
+
+_ROWS = Memo(64)       # the rows' values -> the same read-only array (a relight reads them again)
+
+
+def _kept(rows):
+    """``rows`` (T, 4) int64 as a read-only array, the same object for the same values as the
+    last meshes read: what the core memoises by the mesh's arrays (their n-gons' split, the
+    meshes' key) takes ``face_triangles`` with the rest, by identity, and only read-only."""
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    key = hashlib.sha256(str(rows.shape).encode() + rows.tobytes()).digest()
+
+    def make():
+        rows.flags.writeable = False
+        return rows
+    return _ROWS.get(key, make)
 
 
 def bent_ngon_triangles(me, co, loop_vertex, poly_start, poly_total):
@@ -34,7 +52,7 @@ def bent_ngon_triangles(me, co, loop_vertex, poly_start, poly_total):
     me.loop_triangles.foreach_get("polygon_index", face)
     take = bent[face]
     face, loops = face[take], loops.reshape(-1, 3)[take]
-    return np.column_stack([face, loops - poly_start[face][:, None]])
+    return _kept(np.column_stack([face, loops - poly_start[face][:, None]]))
 
 
 def reversed_rings(rows, counts):
@@ -44,4 +62,4 @@ def reversed_rings(rows, counts):
     if rows is None:
         return None
     n = np.asarray(counts, dtype=np.int64)[rows[:, 0]][:, None]
-    return np.column_stack([rows[:, 0], (n - 1 - rows[:, 1:])[:, ::-1]])
+    return _kept(np.column_stack([rows[:, 0], (n - 1 - rows[:, 1:])[:, ::-1]]))

@@ -348,11 +348,20 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     if cut.size:
         F[cut] = polygon_form_factor(x[cut], n[cut], disk_polygons(dc[cut], m[cut], dr[cut]))
     E0 = L * np.pi * F
-    pts = disk_samples(stratified_unit_square(rng, len(x), samples), dc, m, dr)
-    w = _area_weights(x, n, pts, m)
-    dirs = pts - x[:, None]
-    dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-    return _shade(x, n, E0, dirs, w, None, occ, eps, infinite=True, facing=facing)
+    u = stratified_unit_square(rng, len(x), samples)     # every row's draws, lit or not: the same stream
+    # the disk's samples only where it is above the horizon: a row with E0 = 0 casts no ray and
+    # is 0 (exactly what _shade makes of it); half a scene's receivers face away from the sun
+    lit = np.flatnonzero(E0 > 0)
+    out = np.zeros(len(x))
+    if lit.size:
+        x, n, m = x[lit], n[lit], m[lit]
+        pts = disk_samples(u[lit], dc[lit], m, dr[lit])
+        w = _area_weights(x, n, pts, m)
+        dirs = pts - x[:, None]
+        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        out[lit] = _shade(x, n, E0[lit], dirs, w, None, occ, eps[lit], infinite=True,
+                          facing=None if facing is None else facing[lit])
+    return out
 
 
 def _area(light, x, n, rng, samples, occ, eps, facing=None):

@@ -41,6 +41,14 @@ def polygon_form_factor(x, n, poly):
     K = poly.shape[1]
     rel = poly - x[:, None, :]
     h = np.einsum("nkc,nc->nk", rel, n)
+    up = (h > 0).any(axis=1)
+    if not up.all():
+        # wholly below the horizon (the sun or a lamp behind a surface: half the receivers of
+        # a scene): no corner kept, F is 0 exactly, as the contour of those rows would make it
+        F = np.zeros(N)
+        if up.any():
+            F[up] = polygon_form_factor(x[up], n[up], poly[up])
+        return F
     rel_n, h_n = np.roll(rel, -1, axis=1), np.roll(h, -1, axis=1)
     inside = h > 0
     crosses = inside != (h_n > 0)

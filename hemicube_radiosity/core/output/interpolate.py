@@ -18,6 +18,7 @@ __all__ = ["interpolate_located", "locate", "interpolate_at", "located_corners",
 
 _CELL = 2.0     # locate's grid cells, in median patch sizes: the 8 nearest centres mostly in the 27 cells around
 _BRUTE = 512   # objects of at most so many patches: every centre for every point (cheaper than a grid)
+_PRUNE = 8     # _pick fits every candidate up to so many, beyond only those that can win
 
 
 def inverse_bilinear(c, p, iterations=8):
@@ -70,21 +71,57 @@ def _dot(x, y):
 
 def _pick(patches, corners, size, cand, p, normals):
     """The best of each point's candidate patches ``cand`` (m, k) for the points ``p`` (m, 3):
-    (m,) position in ``cand`` (the first of equal scores), clamped (u, v) (m, k) each, and (m,)
-    True where another candidate scores the same."""
-    c = corners[cand]                                            # (m, k, 4, 3)
-    pp = np.broadcast_to(p[:, None, :], cand.shape + (3,))
+    (m,) position in ``cand`` (the first of equal scores), clamped (u, v) (m, k) each (read at
+    the best only), and (m,) True where another candidate scores the same.
+
+    With more than :data:`_PRUNE` candidates (the search farther out, 64), only those that can
+    score as well as the best of the :data:`_PRUNE` likeliest are fitted: a candidate's score is
+    at least its distance beyond its corners' sphere, over its size (the clamped point lies in
+    the corners' hull), plus the facing penalty; one whose bound exceeds a score found cannot
+    be the first of the best, nor tie with it. The scores fitted are the same numbers (each
+    pair's fit is its own), so the choice is the same, bit for bit; a third of the fits."""
+    m, k = cand.shape
+    facing = None if normals is None else np.einsum("mkj,mj->mk", patches.normals[cand], normals)
+    if k <= _PRUNE or not m:
+        score, uc, vc = _scores(corners, size, cand, np.broadcast_to(p[:, None, :], cand.shape + (3,)), facing)
+    else:
+        centres = patches.centers[cand]                                # (m, k, 3)
+        reach = np.sqrt(sq_dist(corners[cand], centres[:, :, None, :]).max(axis=2))
+        bound = np.maximum(np.sqrt(sq_dist(p[:, None, :], centres)) - reach, 0.0) / size[cand] - 1e-6
+        if facing is not None:
+            bound = bound + 10.0 * (facing < 0.5)
+        rows = np.repeat(np.arange(m), _PRUNE)
+        likely = np.argpartition(bound, _PRUNE - 1, axis=1)[:, :_PRUNE].ravel()
+        first = np.full((m, k), np.inf)
+        first[rows, likely] = _scores(corners, size, cand[rows, likely], p[rows], _at(facing, rows, likely))[0]
+        best = first.min(axis=1)
+        need = (bound <= best[:, None]) | np.isfinite(first)
+        need[~np.isfinite(best) | ~np.isfinite(bound).all(axis=1)] = True   # (NaN: every candidate, as before)
+        r, j = np.nonzero(need)
+        score, uc, vc = np.full((m, k), np.inf), np.zeros((m, k)), np.zeros((m, k))
+        score[r, j], uc[r, j], vc[r, j] = _scores(corners, size, cand[r, j], p[r], _at(facing, r, j))
+    best = np.argmin(score, axis=1)
+    tied = (score == score[np.arange(len(cand)), best][:, None]).sum(1) > 1
+    return best, uc, vc, tied
+
+
+def _at(a, r, j):
+    return None if a is None else a[r, j]
+
+
+def _scores(corners, size, cand, pp, facing):
+    """(score, u, v), each of ``cand``'s shape, of points ``pp`` (..., 3) in their candidate
+    patches: how far outside the patch the fit lies plus the gap to it over the patch's size
+    (+10 facing away); u, v clamped to the patch. Each pair's own arithmetic, whatever the shape."""
+    c = corners[cand]                                            # (..., 4, 3)
     u, v = inverse_bilinear(c, pp)
     outside = np.maximum.reduce([np.zeros_like(u), -u, u - 1, -v, v - 1])
     uc, vc = np.clip(u, 0, 1), np.clip(v, 0, 1)
     gap = np.linalg.norm(bilinear(c, uc[..., None], vc[..., None]) - pp, axis=-1) / size[cand]
     score = outside + gap
-    if normals is not None:
-        facing = np.einsum("mkj,mj->mk", patches.normals[cand], normals)
+    if facing is not None:
         score = score + 10.0 * (facing < 0.5)
-    best = np.argmin(score, axis=1)
-    tied = (score == score[np.arange(len(cand)), best][:, None]).sum(1) > 1
-    return best, uc, vc, tied
+    return score, uc, vc
 
 
 def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, chunk=2048):

@@ -181,3 +181,24 @@ def test_a_bakes_transports_outline_each_emitter_set_once(monkeypatch):
     again = bake(meshes, s)
     assert len(made) > len(set(made))
     assert np.array_equal(kept.vertex_radiosity, again.vertex_radiosity)
+
+
+def test_receivers_a_polygon_lies_wholly_below_get_exactly_0_the_others_as_alone():
+    """polygon_form_factor leaves out the contour of receivers that see no corner above their
+    tangent plane (the sun behind a wall: half a scene): 0 there, as the contour made it; every
+    other receiver gets what it gets on its own."""
+    from hemicube_radiosity.core.light.polygon_ff import polygon_form_factor
+
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-1.0, 1.0, (60, 3))
+    n = rng.normal(size=(60, 3))
+    n /= np.linalg.norm(n, axis=1)[:, None]
+    for poly in (SQ[0] + [0.0, 0.0, 1.0], SQ[0][None] + rng.uniform(-0.5, 0.5, (60, 1, 3))):
+        F = polygon_form_factor(x, n, poly)
+        per = np.broadcast_to(poly, (60,) + poly.shape[-2:])
+        h = np.einsum("nkc,nc->nk", per - x[:, None], n)
+        below = ~(h > 0).any(axis=1)
+        assert below.any() and not below.all()
+        assert np.all(F[below] == 0.0)
+        alone = [polygon_form_factor(x[i:i + 1], n[i:i + 1], per[i:i + 1])[0] for i in np.flatnonzero(~below)]
+        np.testing.assert_allclose(F[~below], alone, rtol=1e-14, atol=0)

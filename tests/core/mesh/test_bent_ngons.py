@@ -166,3 +166,27 @@ def test_backs_carry_the_triangles_turned_around_and_the_key_follows_them():
     nf = ps.normals[ps.owner == 0]
     nb = ps.normals[ps.owner == 1]
     np.testing.assert_allclose(np.sort(nf @ [0, 0, 1]), np.sort(-(nb @ [0, 0, 1])), atol=1e-6)
+
+
+def test_a_mesh_s_ngons_are_split_once_for_its_read_only_arrays():
+    """to_tris_and_quads keeps its split per mesh arrays that cannot change in place (a bake
+    cuts the same meshes at several sizes), read only; writable arrays are split every call."""
+    from hemicube_radiosity.core.mesh.ngons import to_tris_and_quads
+
+    m = MeshInput.from_faces(_octagon(), [range(8)])
+    m.face_triangles = np.column_stack([np.zeros(6, np.int64), STRIP])
+    first = to_tris_and_quads(m)
+    assert to_tris_and_quads(m) is not first
+    for a in (m.verts, m.face_offsets, m.face_indices):
+        a.flags.writeable = False
+    assert to_tris_and_quads(m) is not to_tris_and_quads(m)      # the triangles still writable
+    m.face_triangles.flags.writeable = False
+    kept = to_tris_and_quads(m)
+    assert to_tris_and_quads(m) is kept and not any(a.flags.writeable for a in kept)
+    for a, b in zip(first, kept):
+        np.testing.assert_array_equal(a, b)
+    # a plain n-gon (no triangles given): the same, its fan's new vertices included
+    p = MeshInput.from_faces(_octagon(0.0), [range(8)])
+    for a in (p.verts, p.face_offsets, p.face_indices):
+        a.flags.writeable = False
+    assert to_tris_and_quads(p) is to_tris_and_quads(p) and len(to_tris_and_quads(p)[0]) == 8 + 1 + 8

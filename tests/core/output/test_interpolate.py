@@ -134,7 +134,7 @@ def test_locate_equals_a_brute_force_search(monkeypatch, brute):
     for ps in _mixed_scene():
         pts, owner, nrm = _points(ps, rng)
         for args in ((owner, nrm), (owner, None), (None, None), (None, nrm)):
-            for candidates in (8, 3):
+            for candidates in (8, 3, 64):      # 64: the far search, its fits pruned (_PRUNE)
                 idx, uv = locate(ps, pts, *args, candidates=candidates, chunk=97)
                 ref_idx, ref_uv = _brute_locate(ps, pts, *args, candidates=candidates)
                 np.testing.assert_array_equal(idx, ref_idx)
