@@ -69,5 +69,13 @@ def test_the_gather_casts_the_skys_count_where_it_finds_the_world():
     ctx.settings = replace(ctx.settings, sky_rays=64 * indirect.SKY_PER_GATHER + 1)
     assert not indirect.gather_finds_world(ctx) and indirect.gather_count(ctx) == 64
     ctx.settings = replace(ctx.settings, sky_rays=128)
+
+    class F:
+        sky = np.full(10, 0.5)
+    ctx.form_factors = F()
+    assert indirect.gather_finds_world(ctx)                     # half the sky seen: shared
+    F.sky = np.full(10, 0.9 * indirect.SKY_SHARE_OPEN)          # closed rooms: hits to read, not sky
+    assert not indirect.gather_finds_world(ctx) and indirect.gather_count(ctx) == 64
+    F.sky = np.full(10, 0.5)
     ctx.direct.world = None                                     # a black world: nothing to find
     assert not indirect.gather_finds_world(ctx) and indirect.gather_count(ctx) == 64
