@@ -141,7 +141,10 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     index = np.full((H, W), -1, np.int64)
     index[covered] = np.arange(n)
     rows, cols = np.nonzero(covered)
-    state = {}
+    v = split(np.zeros(0, np.int64), None)            # no texel: the sources' count and shape
+    value = np.zeros((n,) + v.shape[1:])
+    exact = np.zeros(value.shape[:2], bool)
+    done = np.zeros(value.shape[:2], bool)
     floor = probe = None
 
     def light(ids, need=None):
@@ -149,47 +152,30 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         they are not lit in yet, one call per set of sources."""
         if not ids.size:
             return
-        if "value" not in state:               # the first call: every source, to learn S
-            v = split(ids, None)
-            S = v.shape[1]
-            state.update(value=np.zeros((n,) + v.shape[1:]), exact=np.zeros((n, S), bool),
-                         done=np.zeros((n, S), bool))
-            state["value"][ids] = v
-            state["exact"][ids] = state["done"][ids] = True
-            return
-        exact = state["exact"]
         need = ~exact[ids] if need is None else need & ~exact[ids]
         sets, of = np.unique(need, axis=0, return_inverse=True)
         for k, which in enumerate(sets):
             if not which.any():
                 continue
-            sel = ids[of.ravel() == k]
-            v = split(sel, None, None if which.all() else which)
-            state["value"][sel[:, None], np.flatnonzero(which)[None]] = v[:, which]
-            exact[sel[:, None], np.flatnonzero(which)[None]] = True
-            state["done"][sel[:, None], np.flatnonzero(which)[None]] = True
+            sel, src = ids[of.ravel() == k, None], np.flatnonzero(which)[None]
+            value[sel, src] = split(sel[:, 0], None, None if which.all() else which)[:, which]
+            exact[sel, src] = done[sel, src] = True
 
     for s in strides:
-        done = state.get("done")
-        ids = np.arange(n) if done is None else np.flatnonzero(~done.all(axis=1))
+        ids = np.flatnonzero(~done.all(axis=1))
         if ids.size == 0:
             break
         corners, w = _corners(index, rows[ids], cols[ids], s)
         mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
         ok = np.all(corners >= 0, axis=1) & (mid >= 0)
         ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
+        # each anchor in the sources its cells' texels still want
         anchors = np.column_stack([corners[ok], mid[ok]])
-        if done is None:
-            light(np.unique(anchors))
-        else:        # each anchor in the sources its cells' texels still want
-            at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
-            want = np.stack([np.bincount(at, weights=left[:, k], minlength=n) > 0 for k in range(done.shape[1])], 1)
-            a = np.unique(anchors)
-            light(a, want[a])
-        if "value" not in state:
-            continue
-        value, exact, done = state["value"], state["exact"], state["done"]
-        if floor is None:
+        at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
+        want = np.stack([np.bincount(at, weights=left[:, k], minlength=n) > 0 for k in range(done.shape[1])], 1)
+        a = np.unique(anchors)
+        light(a, want[a])
+        if floor is None and exact.any():
             floor = AGREE_FLOOR * np.array([np.percentile(value[exact[:, k], k] @ LUMA, 99) if exact[:, k].any()
                                             else 0.0 for k in range(value.shape[1])])
         ids, corners, w, mid = ids[ok], corners[ok], w[ok], mid[ok]
@@ -214,15 +200,15 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         m, k = np.nonzero(keep)
         value[ids[m], k] = interp[m, k]
         done[ids[m], k] = True
-    if "value" not in state:                    # no cell anywhere: every texel exact
+    if not exact.any():                         # no cell anywhere: every texel exact
         light(np.arange(n))
     if inside is not None:
-        left = np.flatnonzero(~state["done"].all(axis=1) & inside)
-        light(left, ~state["done"][left])
-        _rim(state["value"], state["done"], inside, faces, index, rows, cols)
-    left = np.flatnonzero(~state["done"].all(axis=1))
-    light(left, ~state["done"][left])
-    return state["value"], state["exact"]
+        left = np.flatnonzero(~done.all(axis=1) & inside)
+        light(left, ~done[left])
+        _rim(value, done, inside, faces, index, rows, cols)
+    left = np.flatnonzero(~done.all(axis=1))
+    light(left, ~done[left])
+    return value, exact
 
 
 def _rim(value, done, inside, faces, index, rows, cols):
@@ -231,7 +217,7 @@ def _rim(value, done, inside, faces, index, rows, cols):
     on the same face, as Cycles' bake margin extends an island from its texels; ``value`` and
     ``done`` updated in place."""
     rim = np.flatnonzero(~done.all(axis=1) & ~inside)
-    if rim.size == 0 or value is None:
+    if rim.size == 0:
         return
     H, W = index.shape
     total = np.zeros((rim.size,) + value.shape[1:])
