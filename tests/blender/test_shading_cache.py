@@ -21,13 +21,8 @@ pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 def counted(monkeypatch):
     """A fresh session's kept evaluations, and a list that grows by one per Cycles evaluation."""
     monkeypatch.setattr(shading, "_EVALUATED", type(shading._EVALUATED)())
-    calls = []
-    evaluate = shading.evaluate
-
-    def count(*a, **k):
-        calls.append(1)
-        return evaluate(*a, **k)
-    monkeypatch.setattr(shading, "evaluate", count)
+    calls, real = [], shading.evaluate
+    monkeypatch.setattr(shading, "evaluate", lambda *a, **k: calls.append(1) or real(*a, **k))
     return calls
 
 

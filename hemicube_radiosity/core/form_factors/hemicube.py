@@ -412,8 +412,9 @@ def _probe(rows_of, recv, B, cancelled):
     while done < min(most, sample.size) and (done == 0 or perf_counter() - start < PROBE_SECONDS):
         if cancelled is not None and cancelled():
             raise Cancelled("cancelled")
-        rows_of(sample[done:done + B])
-        done += len(sample[done:done + B])
+        batch = sample[done:done + B]
+        rows_of(batch)
+        done += batch.size
     return (perf_counter() - start) / done
 
 

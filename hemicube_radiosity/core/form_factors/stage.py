@@ -63,14 +63,14 @@ def form_factor_stage(ctx) -> None:
     if F is None:
         recv = receivers_needed(ctx.unknowns)
         ahead = output_vertices_ahead(ctx)
+        started = time.perf_counter()
 
         def said(per_receiver):             # the forecast, with the sample's time when there is one
             from ..runtime.forecast import forecast
+            nonlocal started
             ctx.forecast = forecast(ctx, recv, ahead, per_receiver)
             ctx.say(0.0, ctx.forecast.describe())
-            nonlocal started
-            started = time.perf_counter()
-        started = time.perf_counter()
+            started = time.perf_counter()       # the ETA counts from here, not the sample
 
         def progress(fr):
             el = time.perf_counter() - started
