@@ -80,6 +80,7 @@ def test_a_change_that_can_move_a_colour_asks_cycles_again(counted, change):
         v = np.empty(len(b.data.loops) * 2, np.float32)
         uv.data.foreach_get("uv", v)
         uv.data.foreach_set("uv", (v * 0.5).astype(np.float32))
+        b.data.update()                             # as an edit in the UV editor tags it (4.2 needs it)
     elif change == "move":
         a.location.z = 0.5
     elif change == "material":
