@@ -17,6 +17,12 @@ from ..light.lamp_cache import lamp_irradiance
 from ..light.lamps import UNBOUNDED, SpotLight
 from ..light.points import patch_average
 from .solvers import solve
+from ..form_factors.glossy import solve_matrix
+
+#: At most this many solves more for coloured glossy patches: the solve takes F^s at the bands'
+#: mean albedo, each pass adds what the bands' own albedos change (a defect correction; its
+#: change shrinks by rho g F each pass)
+COLOUR_PASSES = 8
 
 
 def solve_stage(ctx) -> None:
@@ -26,10 +32,18 @@ def solve_stage(ctx) -> None:
     computed = np.zeros(len(p), bool)
     computed[receivers_needed(p)] = True
     ctx.say(0.0, s.solver)
-    rho, source, areas, solid = see_through_system(ctx.form_factors, p.rho, ctx.source, p.areas)
-    sol = solve(ctx.form_factors, rho, source, s.solver, s.tolerance, s.max_iterations,
+    F, coloured = solve_matrix(ctx, ctx.form_factors)     # with the light glossy patches mirror
+    rho, source, areas, solid = see_through_system(F, p.rho, ctx.source, p.areas)
+    sol = solve(F, rho, source, s.solver, s.tolerance, s.max_iterations,
                 areas=areas, cancelled=ctx.cancelled, computed=computed,
                 progress=lambda fr: ctx.say(fr, ""))
+    for _ in range(COLOUR_PASSES if coloured is not None else 0):   # a coloured metal's own bands
+        B = sol.B if solid is None else sol.B * solid[:, None]
+        last = sol.B
+        sol = solve(F, rho, source + coloured(B), s.solver, s.tolerance, s.max_iterations,
+                    areas=areas, cancelled=ctx.cancelled, computed=computed)
+        if np.max(np.abs(sol.B - last)) <= s.tolerance * max(np.max(np.abs(sol.B)), 1e-300):
+            break
     if solid is not None:                             # each see-through patch's mean
         sol = replace(sol, B=sol.B * solid[:, None])
     bound = sol.error_bound
