@@ -175,6 +175,7 @@ class BakeContext:
     source: np.ndarray | None = None         # (N, 3) the solve's source term
     glossy: np.ndarray | None = None         # (N, 3) glossy albedo of the patches that mirror (form factors)
     specular: object = None                  # form_factors.glossy.Specular: what they mirror, or None
+    lamps_mirrored: np.ndarray | None = None # (K, 3) lamps' light arriving off glossy patches (direct)
     reflected: np.ndarray | None = None      # (N, 3) exact path: the solve's reflected-only B
     solution: Solution | None = None
     elements: PatchSet | None = None

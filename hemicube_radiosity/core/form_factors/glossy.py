@@ -37,6 +37,7 @@ from ..util.geometry import tangent_frames
 from ..util.sampling import cosine_directions, stratified_unit_square
 from ..runtime.stored import storable
 from ..util.sparse import CSR
+from ..util.unique import unique_ints
 
 __all__ = ["Specular", "specular_transport", "GLOSSY_MIN"]
 
@@ -195,8 +196,14 @@ def _summed(rows, cols, via, w, n, N):
         z = np.zeros(0, np.int64)
         return z, z, z, np.zeros(0)
     pair = np.asarray(rows, np.int64) * n + cols
+    via = np.asarray(via, np.int64)
+    if n * n * N < 2 ** 62:                  # one integer key: a hash-free sort of it
+        uk, inv = unique_ints(pair * N + via, return_inverse=True)
+        s = np.bincount(inv.reshape(-1), weights=w, minlength=uk.size)
+        pair, via = uk // N, uk % N
+        return pair // n, pair % n, via, s
     order = np.lexsort((via, pair))
-    pair, via = pair[order], np.asarray(via, np.int64)[order]
+    pair, via = pair[order], via[order]
     new = np.ones(len(pair), bool)
     new[1:] = (pair[1:] != pair[:-1]) | (via[1:] != via[:-1])
     starts = np.flatnonzero(new)
@@ -208,6 +215,8 @@ def _merge(parts, n, N):
     if not parts:
         z = np.zeros(0, np.int64)
         return z, z, z, np.zeros(0)
+    if len(parts) == 1:                      # one batch: summed already
+        return parts[0]
     return _summed(*(np.concatenate([p[i] for p in parts]) for i in range(4)), n, N)
 
 
@@ -238,14 +247,42 @@ def specular_stage(ctx) -> None:
         workers=s.workers, cancelled=ctx.cancelled))
 
 
+def lamps_in_mirrors(ctx) -> np.ndarray | None:
+    """(K, 3) radiance arriving at the unknowns from the lamps' light (points, spots, area lights,
+    suns, an environment map) that glossy patches reflect, spread as diffuse light: F (g D_lamps)
+    with D_lamps the lamps' light arriving at each glossy patch's centre. A lamp is a point or a
+    direction the rays of :func:`specular_transport` never meet, so its mirrored light keeps its
+    energy, not its direction (:mod:`..mesh.specular`'s spread). None without a glossy patch
+    or a lamp."""
+    if ctx.specular is None or not ctx.lights:
+        return None
+    p, s, gl = ctx.patches, ctx.settings, ctx.specular.glossy
+    if ctx.direct is None:                     # the paper's path: the lamps at the patch centres
+        D = np.asarray(ctx.irradiance, dtype=np.float64)[gl] / np.pi
+    else:
+        from ..light.lamp_cache import lamp_irradiance
+        x, n = p.centers[gl], p.normals[gl]
+        D = lamp_irradiance(p, ctx.lights, ctx.cache, points=x, normals=n, eps=ctx.direct.offsets(x, n),
+                            samples=s.light_samples, seed=s.light_seed, cancelled=ctx.cancelled,
+                            workers=s.workers) / np.pi
+    L = np.zeros((len(p), 3))
+    L[gl] = ctx.glossy[gl] * np.maximum(D, 0.0)
+    return ctx.form_factors.matvec(ctx.to_unknowns(L))
+
+
 def mirrored_source(ctx, emitted, world) -> np.ndarray | None:
     """(K, 3) what the unknowns reflect of the light ``emitted`` (K, 3) by the unknowns and of
     the ``world`` (3,) radiance or None, arriving by way of a glossy patch: rho F^s E + rho
-    sky^s L_world; None without a glossy patch."""
+    sky^s L_world, plus the lamps' (``ctx.lamps_mirrored``, :func:`lamps_in_mirrors`); None
+    without a glossy patch. Fills ``ctx.lamps_mirrored``."""
     u = ctx.unknowns
+    ctx.lamps_mirrored = None
     if ctx.specular is None:
         return None
     arriving = ctx.specular.apply(ctx.glossy, emitted)
+    ctx.lamps_mirrored = lamps_in_mirrors(ctx)
+    if ctx.lamps_mirrored is not None:
+        arriving += ctx.lamps_mirrored
     if world is not None and np.any(np.asarray(world) > 0):
         arriving += ctx.specular.sky(ctx.glossy) * np.asarray(world, dtype=np.float64)[None, :]
     return u.rho * arriving
@@ -253,9 +290,12 @@ def mirrored_source(ctx, emitted, world) -> np.ndarray | None:
 
 def mirrored_arrival(ctx) -> np.ndarray:
     """(K, 3) radiance arriving at the unknowns by way of a glossy patch once the solve is done:
-    F^s B (B with the emitters' light) plus the world seen in a mirror."""
+    F^s B (B with the emitters' light) plus the world seen in a mirror and the lamps' light off
+    mirrors (:func:`lamps_in_mirrors`)."""
     B = np.asarray(ctx.solution.B, dtype=np.float64)
     out = ctx.specular.apply(ctx.glossy, B)
+    if ctx.lamps_mirrored is not None:
+        out += ctx.lamps_mirrored
     world = ctx.direct.world if ctx.direct is not None else ctx.world
     if world is not None and np.any(np.asarray(world) > 0):
         out += ctx.specular.sky(ctx.glossy) * np.asarray(world, dtype=np.float64)[None, :]
