@@ -78,9 +78,9 @@ class Specular:
 
     def matrix(self, g, band=None) -> CSR:
         """F^s (n, n) for glossy albedos ``g`` (N, 3) per patch: band ``band`` (0..2), or their
-        mean (None)."""
+        least (None)."""
         gv = np.asarray(g, dtype=np.float64)
-        gj = gv.mean(axis=1) if band is None else gv[:, band]
+        gj = gv.min(axis=1) if band is None else gv[:, band]
         return CSR.from_coo(self.rows, self.cols, self.weight * gj[self.via], (self.n, self.n),
                             {"method": "glossy", "rays": self.rays})
 
@@ -303,28 +303,35 @@ def mirrored_arrival(ctx) -> np.ndarray:
 
 
 def solve_matrix(ctx, F):
-    """(F + F^s, correction) for the solve: F^s over the bands' mean albedo added to F (one
-    matrix, as the solvers take), and ``correction(B) -> (K, 3)`` what the bands' own albedos
-    add to rho F^s B beside it (None where every glossy patch is grey). ``F`` as it is
-    without a glossy patch.
+    """(F + F^s, d, correction) for the solve, or (F, None, None) without a glossy patch.
 
-    F's columns of unknowns whose radiosity in the solve is 0 (no diffuse reflectance, and no
-    emission or the exact direct path, which carries it apart) are left out: they read nothing,
-    but the solvers' convergence test (rho times the row sum below 1) would count them beside
-    F^s, which hands on the same directions' light again (a wall at a metal floor's edge sees
-    half its hemisphere in the floor: 0.8 x (1 + 0.8 x 0.5) > 1)."""
+    F^s at the least of the bands' albedos is added to F (one matrix, as the solvers take);
+    ``correction(B) -> (K, 3)`` is what the bands' own albedos add to rho F^s B beside it, never
+    negative (None where every glossy patch is grey). ``d`` (K,) scales the unknowns for the solvers: a glossy
+    unknown's radiosity (its diffuse part) is solved for as B / d, d = rho / (rho + g) (its
+    largest band; 0 for a metal, whose B is 0, or 1 - g for an emitting one on the paper's
+    direct path). F + F^s counts a direction that meets a glossy
+    patch twice, in F for its diffuse part and in F^s for its mirror image, so rho times its row
+    sum may pass 1 (a wall at a metal floor's edge sees half its hemisphere in the floor: 0.8 x
+    (1 + 0.8 x 0.5) > 1) although the light it hands on does not grow: in the scaled unknowns
+    each such direction counts d + g <= 1 (as rho + g <= 1), and the solvers' test of
+    convergence (rho times the row sum below 1) holds."""
     if ctx.specular is None:
-        return F, None
-    u = ctx.unknowns
-    dark = (np.asarray(u.rho).max(axis=1) <= 0) & ((ctx.direct is not None) | (np.asarray(u.emission).max(axis=1) <= 0))
-    keep = ~dark[F.indices]
+        return F, None, None
     Fs = ctx.specular.matrix(ctx.glossy)
-    both = CSR.from_coo(np.concatenate([F.row_ids()[keep], Fs.row_ids()]), np.concatenate([F.indices[keep], Fs.indices]),
-                        np.concatenate([F.data[keep].astype(np.float64), Fs.data.astype(np.float64)]), F.shape, F.meta)
+    both = CSR.from_coo(np.concatenate([F.row_ids(), Fs.row_ids()]), np.concatenate([F.indices, Fs.indices]),
+                        np.concatenate([F.data.astype(np.float64), Fs.data.astype(np.float64)]), F.shape, F.meta)
     both.sky = F.sky
+    u = ctx.unknowns
+    rho, gu = np.asarray(u.rho, dtype=np.float64), ctx.to_unknowns(ctx.glossy)
+    total = rho + gu
+    d = np.where(total > 0, rho / np.where(total > 0, total, 1.0), 0.0).max(axis=1)
+    d = np.where(gu.max(axis=1) > 0, d, 1.0)
+    if ctx.direct is None:       # the paper's path: a metal emitter's B is its emission, not 0
+        lit = (d <= 0) & (np.asarray(u.emission).max(axis=1) > 0)
+        d = np.where(lit, 1.0 - gu.max(axis=1), d)
     g = ctx.glossy
-    grey = np.repeat(g.mean(axis=1, keepdims=True), g.shape[1], axis=1)
+    grey = np.repeat(g.min(axis=1, keepdims=True), g.shape[1], axis=1)
     if np.allclose(g, grey, rtol=0, atol=1e-6):
-        return both, None
-    rho = ctx.unknowns.rho
-    return both, lambda B: rho * ctx.specular.apply(g - grey, B)
+        return both, d, None
+    return both, d, lambda B: rho * ctx.specular.apply(g - grey, np.maximum(B, 0.0))

@@ -83,3 +83,27 @@ def test_an_emitter_seen_in_a_mirror_lights_as_its_image():
     np.testing.assert_allclose(mean, exact, rtol=0.03)
     # the mirror shows only its diffuse part: black
     assert np.abs(res.solution.B[p.owner == 2]).max() == 0.0
+
+
+@needs_embree
+@pytest.mark.parametrize("direct", ["exact", "hemicube"])
+def test_the_furnace_with_a_coloured_mirror_floor(direct):
+    """A closed 2 x 2 x 1 room where every surface emits E = 1 and reflects rho = (0.9, 0.7, 0.5)
+    in all: walls and ceiling diffusely, the floor 0.3 diffusely and (0.6, 0.4, 0.2) as a mirror.
+    The radiance is E / (1 - rho) everywhere, whatever goes where (the furnace): the walls show
+    (10, 3.33, 2), the floor its diffuse part E + 0.3 E / (1 - rho). Checks that the mirror hands
+    on what it receives, no more and no less, band by band (a coloured metal's own bands), with
+    a diffuse part that makes rho F + F^s count its floor twice (walls at 0.9 x (1 + 0.6 x 0.4))."""
+    rho = np.array([0.9, 0.7, 0.5])
+    g = np.array([0.6, 0.4, 0.2])
+    room = scenes.box((0, 0, 0), (2, 2, 1), tuple(rho), (1.0, 1.0, 1.0), inward=True, bottom=False, name="room")
+    floor = replace(_quad([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)], "floor", rho=0.3, emission=1.0),
+                    face_glossy=g[None, :])
+    s = BakeSettings(patch_size=0.25, element_size=None, method="embree", resolution=64, direct=direct)
+    res = bake([room, floor], s)
+    p, B = res.patches, res.solution.B
+    walls, fl = p.owner == 0, p.owner == 1
+    furnace = 1.0 / (1.0 - rho)
+    mean = lambda m: (p.areas[m, None] * B[m]).sum(0) / p.areas[m].sum()    # noqa: E731
+    np.testing.assert_allclose(mean(walls), furnace, rtol=0.02)
+    np.testing.assert_allclose(mean(fl), 1.0 + 0.3 * furnace, rtol=0.02)
