@@ -97,11 +97,15 @@ class CyclesBake:
     cached: bool = False
 
 
-def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2, glossy=0):
+def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2, glossy=0, filter_glossy=None):
     """Cycles on CPU, fixed samples and seed, no denoising/adaptivity/clamping/light threshold.
     ``glossy`` 0: no glossy bounces and no caustics (light reaches a surface only off diffuse
     ones: the paper's model); n > 0: n glossy bounces and reflective caustics, as a user's render
-    has them (Blender's defaults: 4, on), so light off metal and glossy layers reaches the walls."""
+    has them (Blender's defaults: 4, on), so light off metal and glossy layers reaches the walls.
+    ``filter_glossy``: Cycles' Filter Glossy (None: Blender's default, 1.0; 0: off, unbiased).
+    It blurs glossy surfaces met after a diffuse bounce, and loses light doing so: the walls of
+    a room with a metal floor (tests/blender/test_specular_bounce.py) show 0.53 with it, 0.68
+    without, as an independent path tracer gives (docs/lighting.md)."""
     scene.render.engine = "CYCLES"
     cy = scene.cycles
     cy.device = "CPU"
@@ -121,6 +125,8 @@ def configure_cycles(scene, samples=256, seed=0, bounces=32, threads=2, glossy=0
     cy.transparent_max_bounces = 8
     cy.min_light_bounces = 0
     cy.caustics_reflective = glossy > 0
+    if filter_glossy is not None:
+        cy.blur_glossy = float(filter_glossy)
     cy.caustics_refractive = False
     if threads:
         scene.render.threads_mode = "FIXED"
@@ -145,7 +151,7 @@ def _point_from_corner(me, corner):
 
 
 def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounces=32, threads=2,
-                         scene=None, glossy=0) -> CyclesBake:
+                         scene=None, glossy=0, filter_glossy=None) -> CyclesBake:
     """Bake Cycles radiance at the corners/vertices of mesh ``objects`` (all in one bake call).
 
     Objects must be mesh objects linked to ``scene`` (default: the context scene). Their meshes
@@ -158,7 +164,7 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     if mode not in PASS_FILTERS:
         raise ValueError(f"mode must be one of {sorted(PASS_FILTERS)}")
     scene = scene or bpy.context.scene
-    configure_cycles(scene, samples, seed, bounces, threads, glossy)
+    configure_cycles(scene, samples, seed, bounces, threads, glossy, filter_glossy)
     objects = list(objects)
     if not objects:
         raise ValueError("no objects to bake")
@@ -203,6 +209,8 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     settings = dict(samples=int(samples), seed=int(seed), mode=mode, bounces=int(bounces))
     if glossy:                  # keys of the references baked without glossy bounces unchanged
         settings["glossy"] = int(glossy)
+    if filter_glossy is not None:
+        settings["filter_glossy"] = float(filter_glossy)
     return CyclesBake(point, corner, seconds, settings)
 
 

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .form_factors.glossy import GLOSSY_MIN
 from .form_factors.stage import compute_form_factors, form_factor_stage, receivers_needed
 from .light.stage import DirectLight, direct_stage, source_term
 from .mesh.backs import with_backs
@@ -29,6 +30,7 @@ from .output.estimate import estimate_stage
 from .output.stage import vertex_stage
 from .runtime.cache import FormFactorCache
 from .runtime.errors import SettingsError
+from .rays import embree_available
 from .runtime.native import kept_heap, one_blas_thread
 from .runtime.progress import Cancelled
 from .settings import BakeSettings
@@ -171,6 +173,9 @@ class BakeContext:
     given: bool = False                      # patches handed in ready: used as they are (not refined)
     sky_patch: np.ndarray | None = None      # (N, 3) the world's part of direct_patch (exact path)
     source: np.ndarray | None = None         # (N, 3) the solve's source term
+    glossy: np.ndarray | None = None         # (N, 3) glossy albedo of the patches that mirror (form factors)
+    specular: object = None                  # form_factors.glossy.Specular: what they mirror, or None
+    lamps_mirrored: np.ndarray | None = None # (K, 3) lamps' light arriving off glossy patches (direct)
     reflected: np.ndarray | None = None      # (N, 3) exact path: the solve's reflected-only B
     solution: Solution | None = None
     elements: PatchSet | None = None
@@ -287,6 +292,18 @@ def small_pages():
             switch(before)
 
 
+def _specular(meshes, notes) -> list:
+    """``meshes`` ready for the specular bounce (:mod:`.mesh.specular`): metal and lacquer faces
+    mirror their light through Embree's rays (:mod:`.form_factors.glossy`), or without Embree
+    spread it as diffuse light, said in ``notes``."""
+    directional = embree_available()
+    if not directional and any(m.face_glossy is not None and np.max(m.face_glossy, initial=0) >= GLOSSY_MIN
+                               for m in meshes):
+        notes.append("Embree is not available: light off metal and glossy faces is spread as "
+                     "diffuse light, without its direction")
+    return with_specular_bounce(meshes, directional, GLOSSY_MIN)
+
+
 def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancelled=None,
          lights=(), world=None, cache: FormFactorCache | None = None,
          patches: PatchSet | None = None) -> BakeResult:
@@ -297,9 +314,10 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     patches refined: a relight hands back the refined patches of a first bake)."""
     settings = (settings or BakeSettings()).with_quality()
     settings.validate()
+    notes = []
     if meshes is not None:
-        if settings.specular_bounce:             # light off metal reaches the rest, as diffuse
-            meshes = with_specular_bounce(meshes)
+        if settings.specular_bounce:             # light off metal reaches the rest
+            meshes = _specular(meshes, notes)
         if settings.patch_size:                  # a ground plane around the scene: its own size
             meshes = with_auto_scales(meshes, settings.patches_per_diagonal(),
                                       None if settings.patch_size == "auto" else float(settings.patch_size))
@@ -316,6 +334,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     # geometry-only work (the direct light at the output vertices) do it once
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
                       progress, cancelled, patches=patches, given=patches is not None)
+    ctx.notes.extend(notes)
     t0 = time.perf_counter()
     with small_pages(), one_blas_thread(), kept_heap():   # (runtime/native.py says why)
         ctx.check()

@@ -290,10 +290,10 @@ def test_principled_specular_layer_metallic_and_transmission():
     src = reader.read_object(bpy.data.objects["floor"], bpy.context.evaluated_depsgraph_get())
     # Blender's default Principled BSDF keeps 96% of its colour: nothing to say; glass passes no
     # shadow ray (as in Cycles with refractive caustics off, as here: nothing to say either);
-    # metal's light is spread as diffuse light (core/mesh/specular.py): one note
+    # metal mirrors its light (core/form_factors/glossy.py), its roughness not read: one note
     assert not any("'Default'" in n for n in src.notes), src.notes
     assert not any("leaves out" in n for n in src.notes), src.notes
-    spread = [n for n in src.notes if "spread as diffuse light" in n]
+    spread = [n for n in src.notes if "sharp mirror" in n]
     assert {n.subject for n in spread} == {"material 'Metal'"}, src.notes
     assert not any("ignored" in n for n in src.notes), src.notes
 

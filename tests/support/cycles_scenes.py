@@ -71,9 +71,11 @@ def textured_floor(cuts=1):
 class Comparison:
     """Cycles and our radiance at every face corner of the baked objects."""
 
-    def __init__(self, objects, samples, bounces=32, mode="COMBINED", glossy=0, settings=None):
+    def __init__(self, objects, samples, bounces=32, mode="COMBINED", glossy=0, settings=None,
+                 filter_glossy=None):
         self.objects = objects
-        ref = cr.bake_vertex_radiance(objects, samples=samples, bounces=bounces, mode=mode, glossy=glossy)
+        ref = cr.bake_vertex_radiance(objects, samples=samples, bounces=bounces, mode=mode, glossy=glossy,
+                                      filter_glossy=filter_glossy)
         self.cycles_seconds = ref.seconds
         dg = bpy.context.evaluated_depsgraph_get()
         scene_input = reader.read_scene(dg, objects)

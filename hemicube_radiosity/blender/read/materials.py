@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...core.mesh.patches import RHO_MAX       # the core needs reflectivity < 1 in every band
+from ...core.form_factors.glossy import GLOSSY_MIN    # glossy albedo a face mirrors from
 from ...core.runtime.notes import Note, note
 
 __all__ = ["RHO_MAX", "rgb", "follow", "image_pixels", "uses_nodes", "material_rho_emission", "corner_materials"]
@@ -30,11 +31,13 @@ __all__ = ["RHO_MAX", "rgb", "follow", "image_pixels", "uses_nodes", "material_r
 # layer other than diffuse and specular takes light the bake leaves out; glass has its own line);
 # Blender's default Principled BSDF (specular IOR level 0.5, IOR 1.5) keeps its colour
 UNBAKED_SHARE = 0.10
-# a specular or metallic layer reflecting more than this is light the solve spreads as diffuse
-# light (core/mesh/specular.py): worth a note; the default material's 0.037 is not
-SPREAD_SHARE = 0.10
-SPREAD_NOTE = ("its specular or metallic layer's light reaches other surfaces spread as diffuse "
-               "light (its energy, not its direction: no mirror image, no caustic)")
+# a specular or metallic layer reflecting this much or more mirrors its light with its direction
+# (core/form_factors/glossy.py: Embree's rays; without Embree the bake spreads it as diffuse light
+# and says so): worth a note; the default material's 0.037 is spread, and says nothing
+SPREAD_SHARE = GLOSSY_MIN
+SPREAD_NOTE = ("its specular or metallic layer mirrors light onto other surfaces as a sharp "
+               "mirror does (its roughness is not read; lamps' light off it is spread as diffuse "
+               "light, light mirrored twice is not followed)")
 DEFAULT_RHO = (0.8, 0.8, 0.8)
 
 
@@ -301,7 +304,7 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
                 n.append(note(label, "a layer other than diffuse and specular (sheen, subsurface, "
                               "...) takes light this bake leaves out (10% of the colour or more; "
                               "Cycles' diffuse and glossy reflectance are baked)"))
-            if np.any(c_glossy > SPREAD_SHARE):
+            if np.any(c_glossy >= SPREAD_SHARE):
                 n.append(note(label, SPREAD_NOTE))
             rho, em = _clean(c_rho, c_em, label, n)
             corner_glossy[sel] = _glossy(c_glossy)
@@ -311,7 +314,7 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
             r, e = _clean(baked[0][corner_loop[sel]], baked[1][corner_loop[sel]], label, n)
             corner_rho[sel], corner_em[sel] = r, e
             corner_glossy[sel] = _glossy(baked[2][corner_loop[sel]])
-            if np.any(corner_glossy[sel] > SPREAD_SHARE):
+            if np.any(corner_glossy[sel] >= SPREAD_SHARE):
                 n.append(note(label, SPREAD_NOTE))
             if k in used:
                 notes += [s for s in n if s not in notes]

@@ -12,6 +12,7 @@ import numpy as np
 
 from . import embree as embree_ff
 from ..runtime.cache import cache_key, geometry_key
+from .glossy import specular_stage
 from .hemicube import hemicube_form_factors
 from ..mesh.elements import output_vertices_ahead
 from ..mesh.patches import PatchSet
@@ -83,4 +84,5 @@ def form_factor_stage(ctx) -> None:
         if cache is not None:
             cache.put(key, F)
     ctx.form_factors = F
+    specular_stage(ctx)                      # light mirrored by glossy patches (F^s)
     ctx.say(1.0, f"{ctx.form_factor_source}: {F.nnz} nonzeros, {F.nbytes / 1e6:.1f} MB")

@@ -20,6 +20,7 @@ import numpy as np
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.notes import warning
 from .emitters import emitter_transport
+from ..form_factors.glossy import mirrored_source
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
@@ -439,6 +440,9 @@ def direct_stage(ctx) -> None:
             ctx.irradiance = lamp_irradiance(p, ctx.lights, ctx.cache, cancelled=ctx.cancelled,
                                              samples=s.light_samples, seed=s.light_seed, workers=s.workers)
         ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
+        mirrored = mirrored_source(ctx, np.zeros_like(u.emission), ctx.world)   # the world in a mirror
+        if mirrored is not None:
+            ctx.source += mirrored
         if ctx.irradiance is not None:
             ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi
             np.maximum(ctx.source, 0.0, out=ctx.source)   # a map's signed variation: as in at()
@@ -470,5 +474,9 @@ def direct_stage(ctx) -> None:
         ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand)
     # the world is in the direct light: the source does not take it again from F's sky
     ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
+    # emitters and the world seen in a mirror: light reflected once already (not direct_source)
+    mirrored = mirrored_source(ctx, u.emission, ctx.direct.world)
+    if mirrored is not None:
+        ctx.source += mirrored
     if not embree_available():
         ctx.notes.append("Embree is not available: shadow rays use the slower NumPy BVH")

@@ -157,7 +157,9 @@ def _back(mesh, index, faces, emit: bool, cache=None, key=b""):
                    corner_normal=None if getattr(mesh, "corner_normal", None) is None
                    else -np.asarray(mesh.corner_normal, dtype=np.float64)[corner],
                    face_material=None if material is None else np.asarray(material)[sel],
-                   face_triangles=triangles, back_of=index, back_faces=sel)
+                   face_triangles=triangles, back_of=index, back_faces=sel,
+                   face_glossy=None if getattr(mesh, "face_glossy", None) is None
+                   else np.asarray(mesh.face_glossy, dtype=np.float64)[sel])
 
 
 def _back_geometry(mesh, faces):

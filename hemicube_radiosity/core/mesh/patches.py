@@ -64,9 +64,10 @@ class MeshInput:
                   not listed are split by :mod:`.ngons`' own rule; None: no face is listed.
     face_glossy:  (F, 3) or None, the reflectance of the faces' specular and metallic layers
                   (Cycles' glossy albedo at normal incidence), in [0, 1): with
-                  ``specular_bounce`` it is added to what the solve bounces, spread as diffuse
-                  light (:func:`.specular.with_specular_bounce`); ``face_rho`` stays the diffuse
-                  colour the output shows. None: no such layer.
+                  ``specular_bounce`` a face mirrors it onto the rest (:mod:`..form_factors.glossy`)
+                  or, a weak layer or without Embree, it is added to what the solve bounces,
+                  spread as diffuse light (:func:`.specular.with_specular_bounce`); ``face_rho``
+                  stays the diffuse colour the output shows. None: no such layer.
     back_of:      -1, or this mesh is the back of mesh ``back_of`` (its open faces turned
                   around, a hair behind: :mod:`.backs`) ...
     back_faces:   ... (F,) int, and its faces are the back of these faces of that mesh.

@@ -48,14 +48,17 @@ SKY_SHARE_OPEN = 0.3
 
 
 def element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=None, side=None,
-                     pending=None):
+                     pending=None, mirror_v=None):
     """Light reflected more than once arriving at element vertices, times their reflectivity
     (with ``in_v``, the patches' incoming indirect light at their vertices: as it arrives, for
     the lighting-only pass): gathered (Embree) or the patch solution's bilinear interpolation.
     ``light_v``: the direct light arriving at ``xv``, when the caller has it. ``pending``: the
-    gather started by :func:`start_gather`."""
+    gather started by :func:`start_gather`. ``mirror_v`` (V', 3) or None: the light arriving
+    by way of glossy patches (:func:`..form_factors.glossy.mirrored_arrival`) at the patches'
+    vertices, which the gather's rays, reading a glossy surface's diffuse part only, miss: added
+    to what they find, interpolated as the patch solution is."""
     if ctx.settings.gather_rays > 0 and embree_available():
-        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v, side, pending)
+        gathered = _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v, side, pending, mirror_v)
         return gathered if in_v is not None else rho_v * gathered
     if ctx.settings.gather_rays > 0:
         ctx.notes.append("Embree is not available: element vertices interpolate the patch solution "
@@ -66,7 +69,7 @@ def element_indirect(ctx, elements, rest_v, xv, nv, rho_v, in_v=None, light_v=No
     return _interpolated(ctx, elements, rest_v, xv, nv)
 
 
-def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pending=None):
+def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pending=None, mirror_v=None):
     """Reflected light R at element vertices by a final gather (the gather's ray hits cached as a
     matrix): (V, 3), before the elements' reflectivity. The rays read the light reflected by the
     output mesh itself: the direct part exact at each of its vertices (as fine as the output, so
@@ -105,6 +108,9 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += corrections
+    if mirror_v is not None:      # what glossy patches mirror: the patch solution's, interpolated
+        mirror_e = mirror_v if elements is ctx.patches else _interpolated(ctx, elements, mirror_v, xv, nv)
+        out += mirror_e if side is None else side.spread(mirror_e)
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
                          spread=None if side is None else side.spread)
 

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..form_factors.glossy import mirrored_arrival
 from ..light.emitters import vertex_frames
 from ..mesh.elements import cut_elements
 from ..rays import embree_available
@@ -110,7 +111,8 @@ def vertex_stage(ctx) -> None:
                 D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
             if side is not None:
                 D_vert = side.spread(D_vert, open_D)
-            rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side, got[0])
+            rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side, got[0],
+                                      _mirrored(ctx, sided, weights))
         finally:
             if pending is not None:                     # stopped early: the workers with it
                 pending.close()
@@ -141,6 +143,14 @@ def vertex_stage(ctx) -> None:
         return
     E_v = vertex_radiosity(ctx.elements, ctx.elements.emission, cache=ctx.cache)
     ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v, creased)
+
+
+def _mirrored(ctx, sided, weights):
+    """(V, 3) at the vertices of ``sided`` the light arriving by way of glossy patches
+    (:func:`..form_factors.glossy.mirrored_arrival`), or None without any (or a gather)."""
+    if ctx.specular is None or not (ctx.settings.gather_rays > 0 and embree_available()):
+        return None
+    return vertex_radiosity(sided, ctx.to_patches(mirrored_arrival(ctx)), weights=weights, cache=ctx.cache)
 
 
 def _keep_light(ctx, D_vert, rest_v, rho_v, creased=None):

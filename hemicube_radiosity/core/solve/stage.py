@@ -16,7 +16,15 @@ from ..runtime.notes import warning
 from ..light.lamp_cache import lamp_irradiance
 from ..light.lamps import UNBOUNDED, SpotLight
 from ..light.points import patch_average
+from .residual import energy_balance
 from .solvers import solve
+from ..util.sparse import CSR
+from ..form_factors.glossy import solve_matrix
+
+#: At most this many solves more for coloured glossy patches: the solve takes F^s at the least
+#: of the bands' albedos, each pass adds what the bands' own albedos add beside it (a defect
+#: correction; its change shrinks by about rho (g - g_least) F each pass)
+COLOUR_PASSES = 8
 
 
 def solve_stage(ctx) -> None:
@@ -26,10 +34,15 @@ def solve_stage(ctx) -> None:
     computed = np.zeros(len(p), bool)
     computed[receivers_needed(p)] = True
     ctx.say(0.0, s.solver)
-    rho, source, areas, solid = see_through_system(ctx.form_factors, p.rho, ctx.source, p.areas)
-    sol = solve(ctx.form_factors, rho, source, s.solver, s.tolerance, s.max_iterations,
-                areas=areas, cancelled=ctx.cancelled, computed=computed,
-                progress=lambda fr: ctx.say(fr, ""))
+    F, d, coloured = solve_matrix(ctx, ctx.form_factors)     # with the light glossy patches mirror
+    rho, source, areas, solid = see_through_system(F, p.rho, ctx.source, p.areas)
+    sol = _solve(F, rho, source, d, s, areas, computed, ctx.cancelled, lambda fr: ctx.say(fr, ""))
+    for _ in range(COLOUR_PASSES if coloured is not None else 0):   # a coloured metal's own bands
+        B = sol.B if solid is None else sol.B * solid[:, None]
+        last = sol.B
+        sol = _solve(F, rho, source + coloured(B), d, s, areas, computed, ctx.cancelled)
+        if np.max(np.abs(sol.B - last)) <= s.tolerance * max(np.max(np.abs(sol.B)), 1e-300):
+            break
     if solid is not None:                             # each see-through patch's mean
         sol = replace(sol, B=sol.B * solid[:, None])
     bound = sol.error_bound
@@ -44,6 +57,24 @@ def solve_stage(ctx) -> None:
         ctx.reflected = sol.B
         sol = replace(sol, B=sol.B + p.emission, extra={**sol.extra, "reflected_only": True})
     ctx.solution = replace(sol, energy=energy)
+
+
+def _solve(F, rho, source, d, s, areas, computed, cancelled, progress=None):
+    """:func:`.solvers.solve` of B = S + rho F B with settings ``s``; with ``d`` (K,) (glossy
+    unknowns, :func:`..form_factors.glossy.solve_matrix`) for B / d, F's columns times d, rho
+    and S over d (0 where d is 0), and B and its energy balance made again in the unscaled
+    unknowns."""
+    kw = dict(areas=areas, cancelled=cancelled, computed=computed, progress=progress)
+    if d is None:
+        return solve(F, rho, source, s.solver, s.tolerance, s.max_iterations, **kw)
+    keep = d[F.indices] > 0
+    Fd = CSR.from_coo(F.row_ids()[keep], F.indices[keep], F.data[keep] * d[F.indices[keep]], F.shape, F.meta)
+    over = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)[:, None]
+    sol = solve(Fd, np.minimum(np.asarray(rho) * over, RHO_CAP), np.asarray(source) * over, s.solver,
+                s.tolerance, s.max_iterations, **kw)
+    B = sol.B * d[:, None]
+    energy = energy_balance(F, rho, source, B, areas, computed=computed) if areas is not None else sol.energy
+    return replace(sol, B=B, energy=energy)
 
 
 def see_through_system(F, rho, source, areas):
@@ -153,6 +184,9 @@ def scene_energy(ctx, solved: dict, computed) -> dict:
     sun = _suns_at(ctx)
     sun = zero if sun is None else (a * sun).sum(axis=0)
     world, recv, absorbed = _world_and_direct(ctx, a, D, computed)
+    if getattr(ctx, "specular", None) is not None:
+        # glossy patches hand their share of the direct light on (F^s, the lamps' spread)
+        absorbed = absorbed - (a * ctx.glossy * D).sum(axis=0)
     if ctx.direct_source is not None:
         # what the parts of patches the scene cannot see reflect (a ceiling above a lamp's back)
         # lands on what encloses them, not in the solve (light/stage.py, _seen_weight)
