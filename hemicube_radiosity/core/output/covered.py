@@ -23,9 +23,13 @@ scaled by how much of the open scene it sees against how much the vertex's start
 (:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
 face lend nothing; in a crack they only meet its dark walls). Faces within :data:`TIE_ULPS`
 float32 steps of the point (a duplicate face: either may be drawn) cover nothing, nor do backs
-of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene
-does not see at a vertex of one it sees (they count in that vertex's mean) and of buried
-vertices (:func:`.sides.buried_side`) keep their vertex's light; a buried vertex's is the light
+of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene does
+not see at a vertex of one it sees (a floor's under a block on it) keep their vertex's light,
+whose mean they are part of, unless they are corners of their source face: Cycles bakes a face
+corner on its own triangle, so where a face folds down from the open under another surface
+(truck town's grass under its ground ring, its road's edge under the grass) the fold's corner is
+dark and the open face's corner beside it lit (:func:`_face_corners`). Corners of buried vertices
+(:func:`.sides.buried_side`) keep their vertex's light; a buried vertex's is the light
 where its edge from the open side meets what buries it, and the rays from that point start no
 further off it than half way to a face over it (:func:`start_offsets`): the point lies against
 the burying surface, and rays started past a lip over it read the sun. Geometry only, cached:
@@ -39,7 +43,7 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .lift import bake_points, corner_normals
+from .lift import bake_points, corner_normals, face_corners
 from .normals import corner_shading_normals
 
 __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
@@ -61,13 +65,14 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     corner triangle's unit normal). ``xv``, ``nv`` (V, 3): where each vertex was lit and
     its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
     vertex of an element it sees (a floor's under a block resting on it) are not looked at,
-    they count in that vertex's mean; nor are the corners of ``buried`` (V,) bool vertices,
-    which take the open side's light (:func:`.sides.buried_side`). None without Embree."""
+    they count in that vertex's mean, unless they are corners of their source face (where
+    Cycles bakes); nor are the corners of ``buried`` (V,) bool vertices, which take the open
+    side's light (:func:`.sides.buried_side`). None without Embree."""
     if not embree_available() or len(elements) == 0:
         return None
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
-                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners",))
+                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 2))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
@@ -84,7 +89,9 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         seen = np.asarray(opened)[p] > 0
         shared = np.zeros(len(elements.verts), bool)
         shared[polys[p[seen], c[seen]]] = True
-        keep &= seen | ~shared[polys[p, c]]
+        left = ~seen & shared[polys[p, c]]
+        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        keep &= ~left
     if buried is not None:
         keep &= ~np.asarray(buried, bool)[polys[p, c]]
     p, c = p[keep], c[keep]
@@ -114,6 +121,22 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
     return np.column_stack([p, c, start, geo])[chosen].astype(np.float64)
+
+
+def _face_corners(elements, meshes, p, c) -> np.ndarray:
+    """(K,) bool: corner ``c`` (K,) of element ``p`` (K,) lies on a corner of its source face
+    (within 1e-9 of the scene's size), where Cycles bakes a value; False without ``meshes``."""
+    out = np.zeros(len(p), bool)
+    if not meshes or not len(p):
+        return out
+    x = elements.verts[elements.polys[p, c]]
+    tol = 1e-9 * float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
+    owner = elements.owner[p]
+    for oi, m in enumerate(meshes):
+        rows = np.flatnonzero(owner == oi)
+        if rows.size:
+            out[rows] = face_corners(m, elements.source_face[p[rows]], x[rows], tol) >= 0
+    return out
 
 
 def _fronts(ctx, elements):

@@ -113,3 +113,37 @@ def test_the_first_loop_triangle_holding_a_corner_wins():
     assert (want >= 0).sum() > 100 and (want < 0).sum() > 50        # both kinds drawn
     np.testing.assert_array_equal(got, want)
     assert (_first_row_holding(ft[:0], face, j) == -1).all()
+
+
+def _slope_under_a_plane(depth=0.1):
+    """Truck town's grass at its ground ring, in small: a strip of 1 m quads, two across, folded
+    at x = 0: flat in the open for x < 0, sloping ``depth`` down under a 2 x 4 m plane at z = 0
+    for x > 0 (the plane's left edge on the fold)."""
+    verts = [(x, y, -depth * max(x, 0.0)) for y in np.arange(-2.0, 2.5) for x in (-1.0, 0.0, 1.0)]
+    faces = [(3 * j + i, 3 * j + i + 1, 3 * j + i + 4, 3 * j + i + 3) for j in range(4) for i in range(2)]
+    strip = MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="strip")
+    plane = MeshInput.from_faces([(0.0, -2.0, 0.0), (2.0, -2.0, 0.0), (2.0, 2.0, 0.0), (0.0, 2.0, 0.0)],
+                                 [(0, 1, 2, 3)], rho=(RHO,) * 3, name="plane")
+    return [strip, plane]
+
+
+def test_the_corners_of_an_unseen_face_at_a_seen_vertex_are_baked_on_their_own_face():
+    """The sloping quad lies under the plane: the scene does not see it (core/output/sides.py
+    open_elements), but its corners on the fold share their vertices with the flat quad in the
+    open. Cycles bakes each face corner on its own triangle, moved toward its centre, under the
+    plane: no sun. Those corners were left their vertex's light (the full sun, 0.41 at truck town's
+    grass corners where Cycles had 0.00); the flat quad's corners there keep the sun."""
+    r = bake(_slope_under_a_plane(), BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False,
+                                                  gather_rays=64),
+             lights=[SunLight((0.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    strip = np.flatnonzero(E.owner == 0)
+    pos = E.verts[E.corner_ids()[strip]]                               # (n, 4, 3)
+    val, D = r.corner_values()[strip], r.corner_parts()[2][strip]
+    on_fold = np.abs(pos[..., 0]) < 1e-9
+    slope = (E.centers[strip, 0] > 0)[:, None] & on_fold
+    flat = (E.centers[strip, 0] < 0)[:, None] & on_fold
+    assert slope.sum() == 8 and flat.sum() == 8          # 5 vertices on the fold, 2 faces each side
+    assert D[slope].max() < 1e-3 * SUN / np.pi                         # the plane over them: no sun
+    assert val[slope].max() < 0.02 * OPEN
+    np.testing.assert_allclose(val[flat], OPEN, rtol=0.02)               # the open side: the sun
