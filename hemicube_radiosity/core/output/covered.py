@@ -21,16 +21,23 @@ way to the face over it): its direct light found again there (cosine to its shad
 nothing from below its triangle's plane), and its vertex's light reflected more than once
 scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
-face lend nothing; in a crack they only meet its dark walls). Faces within :data:`TIE_ULPS`
+face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
+:data:`OPEN_FLOOR`: a vertex whose rays start inside a solid (a bevelled box resting on a
+shelf of the same mesh, its foot's rays starting in the shelf) gathered the light its closed
+rays read there, 0.85 of the shelf's radiance where Cycles' corner on the bevel, a hair over the
+shelf, has 0.05. Faces within :data:`TIE_ULPS`
 float32 steps of the point (a duplicate face: either may be drawn) cover nothing, nor do backs
 of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene does
 not see at a vertex of one it sees (a floor's under a block on it) keep their vertex's light,
 whose mean they are part of, unless they are corners of their source face: Cycles bakes a face
 corner on its own triangle, so where a face folds down from the open under another surface
 (truck town's grass under its ground ring, its road's edge under the grass) the fold's corner is
-dark and the open face's corner beside it lit (:func:`_face_corners`). Corners of buried vertices
-(:func:`.sides.buried_side`) keep their vertex's light; a buried vertex's is the light
-where its edge from the open side meets what buries it, and the rays from that point start no
+dark and the open face's corner beside it lit (:func:`_face_corners`). So are the corners of
+buried vertices (:func:`.sides.buried_side`) that are corners of their source face (a bevel's
+foot on the shelf the bevelled box rests on); their other corners keep their vertex's light. A
+buried vertex's is the light where its edge from the open side meets what buries it (the bevel's
+edge, a little up it: the open room's light, where Cycles' point at the foot sees the shelf a
+hair under it and little else), and the rays from that point start no
 further off it than half way to a face over it (:func:`start_offsets`): the point lies against
 the burying surface, and rays started past a lip over it read the sun. Geometry only, cached:
 a relight casts no ray. World units.
@@ -57,6 +64,10 @@ TIE_ULPS = 1
 LIFT_ULPS = 16
 #: Cosine rays per covered corner for the share of the open scene it sees.
 OPEN_RAYS = 64
+#: The least share of the open scene a covered corner's vertex is taken to see: where fewer of
+#: its rays leave (its start lies inside a solid: a bevel's foot on a shelf), what it gathered is
+#: mostly what those closed rays read, no measure of the open scene's light.
+OPEN_FLOOR = 0.5
 
 
 def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
@@ -65,14 +76,14 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     corner triangle's unit normal). ``xv``, ``nv`` (V, 3): where each vertex was lit and
     its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
     vertex of an element it sees (a floor's under a block resting on it) are not looked at,
-    they count in that vertex's mean, unless they are corners of their source face (where
-    Cycles bakes); nor are the corners of ``buried`` (V,) bool vertices, which take the open
-    side's light (:func:`.sides.buried_side`). None without Embree."""
+    they count in that vertex's mean; nor are the corners of ``buried`` (V,) bool vertices,
+    which take the open side's light (:func:`.sides.buried_side`); either unless it is a
+    corner of its source face, where Cycles bakes. None without Embree."""
     if not embree_available() or len(elements) == 0:
         return None
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
-                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 2))
+                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 3))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
@@ -93,7 +104,9 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
         keep &= ~left
     if buried is not None:
-        keep &= ~np.asarray(buried, bool)[polys[p, c]]
+        left = np.asarray(buried, bool)[polys[p, c]]
+        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        keep &= ~left
     p, c = p[keep], c[keep]
     point = bake_points(elements, ctx.meshes, p, c)
     v = polys[p, c]
@@ -176,14 +189,14 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo)
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     v = elements.polys[p, c]
-    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach))
+    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
 
     def shares():
         scene = embree_scene(elements)
         here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
         there = open_fraction(elements, xv[v], nv[v], scene, reach, rays=OPEN_RAYS,
                               eps=ray_offsets(ctx.patches, owner=elements.owner[p]))
-        return np.minimum(1.0, here / np.maximum(there, 1.0 / OPEN_RAYS))
+        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
     k = cached(ctx.cache, key, shares)
     if creased is None:
         light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]

@@ -147,3 +147,41 @@ def test_the_corners_of_an_unseen_face_at_a_seen_vertex_are_baked_on_their_own_f
     assert D[slope].max() < 1e-3 * SUN / np.pi                         # the plane over them: no sun
     assert val[slope].max() < 0.02 * OPEN
     np.testing.assert_allclose(val[flat], OPEN, rtol=0.02)               # the open side: the sun
+
+
+def _block_on_a_shelf(c=0.1, h=0.04, top=0.5):
+    """One mesh, as the living room's: a closed 4 x 4 x 0.2 m shelf (its top at z = 0) and on it a
+    closed block whose bottom face covers [0, 1] x [-1, 1] of the shelf's top, its long bottom
+    edges chamfered ``c`` out and ``h`` up (22 deg, facing down and out): the chamfers' feet are
+    vertices of the shelf's solid too."""
+    from hemicube_radiosity.core.builtin_scenes import box
+    shelf = box((-2.0, -2.0, -0.2), (2.0, 2.0, 0.0), (RHO,) * 3, name="shelf")
+    off, idx = np.asarray(shelf.face_offsets), np.asarray(shelf.face_indices)
+    faces = [tuple(idx[off[k]:off[k + 1]]) for k in range(len(off) - 1)]
+    verts = [tuple(x) for x in np.asarray(shelf.verts)]
+    sec = [(0.0, 0.0), (1.0, 0.0), (1.0 + c, h), (1.0 + c, top), (-c, top), (-c, h)]
+    n, b = len(sec), len(verts)
+    verts += [(x, -1.0, z) for x, z in sec] + [(x, 1.0, z) for x, z in sec]
+    block = [(n + i, n + (i + 1) % n, (i + 1) % n, i) for i in range(n)]
+    block += [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]          # the two end caps
+    faces += [tuple(b + i for i in q) for q in block]
+    return MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="shelf")
+
+
+def test_a_buried_chamfer_foot_is_baked_at_its_own_point():
+    """The chamfers' feet are buried (core/output/sides.py): their corners took the light where
+    their edge from the open side meets the shelf, a little up the chamfer, where the room is
+    open: 0.15-0.26 against the block's lit top's 0.61. Cycles bakes the corner at the foot, a hair
+    over the shelf, which its rays meet: under a tenth of the lit top (0.04-0.06 of 0.87 in
+    tests/blender/test_covered_corners.py, the same block and shelf as two objects). Those face
+    corners are now lit at their own point as any covered corner is: 0.015-0.03."""
+    r = bake([_block_on_a_shelf()], BakeSettings(patch_size=1.0, element_size=1.0, gather_rays=64),
+             lights=[SunLight((0.3, 0.2, -0.9), strength=SUN)], world=np.array([0.3, 0.35, 0.4]))
+    E = r.elements
+    pos = E.verts[E.corner_ids()]
+    foot = (np.abs(pos[..., 2]) < 1e-9) & (np.abs(np.abs(pos[..., 1]) - 1.0) < 1e-9) & \
+        ((np.abs(E.normals[:, 0]) > 0.3) & (E.normals[:, 2] < 0))[:, None]          # its faces' corners
+    top = (np.abs(pos[..., 2] - 0.5) < 1e-9) & (E.normals[:, 2] > 0.9)[:, None]
+    val = r.corner_values().mean(axis=2)
+    assert foot.sum() >= 4 and top.sum() >= 4
+    assert val[foot].max() < 0.1 * val[top].mean()
