@@ -15,7 +15,9 @@ Here every element corner is baked where Cycles bakes it (:func:`.lift.bake_poin
 its source face on the first of Blender's triangles holding it, moved toward that triangle's
 centre; any other toward its element's), and a bake point is *covered* where another face lies
 over it, along its triangle's normal, within its object's ray offset, or between it and where
-its vertex's rays start (:func:`covered_corners`; two rays per point). A covered point is lit
+its vertex's rays start, or on the ray toward the scene's strongest sun before that ray rises a
+ray offset over the corner's plane (a kerb's lip beside the grass's corner, not over it: our
+sun ray starts over the lip; :func:`covered_corners`; three rays per point). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 nothing from below its triangle's plane), and its vertex's light reflected more than once
@@ -50,6 +52,7 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from .crease import strongest_sun
 from .lift import bake_points, corner_normals, face_corners
 from .normals import corner_shading_normals
 
@@ -64,6 +67,9 @@ TIE_ULPS = 1
 LIFT_ULPS = 16
 #: Cosine rays per covered corner for the share of the open scene it sees.
 OPEN_RAYS = 64
+#: The least rise of the strongest sun over a corner's triangle (the sine of its elevation above
+#: the plane) for which its ray is followed until it rises a ray offset: as high as our rays start.
+SUN_RISE = 0.1
 #: The least share of the open scene a covered corner's vertex is taken to see: where fewer of
 #: its rays leave (its start lies inside a solid: a bevel's foot on a shelf), what it gathered is
 #: mostly what those closed rays read, no measure of the open scene's light.
@@ -83,7 +89,7 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
         return None
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
-                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 3))
+                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 4))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
@@ -130,6 +136,17 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     crossed = (hit >= 0) & (length > 0)
     crossed[crossed] = own[fronts[hit[crossed]]] != own[p[crossed]]
     chosen = crossed | above
+    to_sun = strongest_sun(ctx)
+    if to_sun is not None:
+        # or the strongest sun's ray meets a surface before it rises as high as our rays start
+        rise = geo @ to_sun
+        toward = rise > 0.0
+        reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
+        hit, _ = scene.intersect(origin, np.broadcast_to(to_sun, origin.shape), reach)
+        hit = np.asarray(hit)
+        shaded = toward & (hit >= 0)
+        shaded[shaded] = own[fronts[hit[shaded]]] != own[p[shaded]]
+        chosen |= shaded
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
