@@ -504,24 +504,32 @@ def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
 
 
 def values_at_corners(elements, corner_values, pos, centroid, normal, owner, face=None, nudge=1e-3,
-                      min_facing=0.9):
+                      min_facing=0.9, cap=None):
     """Our values at Cycles' corners, matched by position and normal: (values (L, 3), matched (L,)).
     ``corner_values`` (N, 4, 3): what we write at every element corner (``BakeResult.corner_values``:
     a textured face's corners each with their own colour), interpolated bilinearly in the element.
 
     Each corner is moved ``nudge`` of the way to its face's centroid, so it lies inside its own face
-    and not on the edge it shares with the next face (where the two would tie), then located with
+    and not on the edge it shares with the next face (where the two would tie), but no further than
+    Cycles moves its bake point (``cap`` of the corner's largest coordinate, at least of 1; default
+    :data:`hemicube_radiosity.core.output.lift.BAKE_NUDGE`): a corner of a face 500 m across (truck
+    town's ground ring) is read 6 mm in, where Cycles baked it, not half a metre in, under the grass
+    beside it (which read a lit corner black and a dark one lit). Then it is located with
     ``interpolate_at``'s ``locate`` among the elements of the object of its name (``owner``, -1:
     none), rejecting elements facing another way. ``face`` (L,): each corner's face in the object's
     evaluated mesh (the bake's ``source_face``); a corner found on an element of another face (a
     face folded over or lying on its neighbour) is located again among its own face's elements. A
     corner counts as matched when the element found faces within acos(``min_facing``) of the
-    corner's face and passes within ``nudge`` x the corner-centroid distance (+1e-6 of the scene)
-    of the point; the others are left out."""
+    corner's face and passes within the distance moved (+1e-6 of the scene) of the point; the
+    others are left out."""
     from hemicube_radiosity.core.output.interpolate import interpolate_corner_values, locate
+    from hemicube_radiosity.core.output.lift import BAKE_NUDGE
     from hemicube_radiosity.core.util.geometry import bilinear
 
-    p = pos + nudge * (centroid - pos)
+    cap = BAKE_NUDGE if cap is None else cap
+    span = np.linalg.norm(centroid - pos, axis=1)
+    step = np.minimum(nudge * span, cap * np.maximum(np.abs(pos).max(axis=1), 1.0))
+    p = pos + (step / np.maximum(span, 1e-300))[:, None] * (centroid - pos)
     ok = owner >= 0
     vals = np.full((len(pos), 3), np.nan)
     matched = np.zeros(len(pos), bool)
@@ -534,7 +542,7 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     c = elements.corners()[idx]
     on = bilinear(c, uv[:, :1], uv[:, 1:])
     diag = float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
-    tol = nudge * np.linalg.norm(centroid[ok] - pos[ok], axis=1) + 1e-6 * diag
+    tol = step[ok] + 1e-6 * diag
     facing = np.einsum("ij,ij->i", elements.normals[idx], normal[ok])
     matched[ok] = (facing >= min_facing) & (np.linalg.norm(on - p[ok], axis=1) <= tol)
     return vals, matched

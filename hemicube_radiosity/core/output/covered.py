@@ -15,18 +15,31 @@ Here every element corner is baked where Cycles bakes it (:func:`.lift.bake_poin
 its source face on the first of Blender's triangles holding it, moved toward that triangle's
 centre; any other toward its element's), and a bake point is *covered* where another face lies
 over it, along its triangle's normal, within its object's ray offset, or between it and where
-its vertex's rays start (:func:`covered_corners`; two rays per point). A covered point is lit
+its vertex's rays start, or on the ray toward the scene's strongest sun before that ray rises a
+ray offset over the corner's plane (a kerb's lip beside the grass's corner, not over it: our
+sun ray starts over the lip; :func:`covered_corners`; three rays per point). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 nothing from below its triangle's plane), and its vertex's light reflected more than once
 scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
-face lend nothing; in a crack they only meet its dark walls). Faces within :data:`TIE_ULPS`
+face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
+:data:`OPEN_FLOOR`: a vertex whose rays start inside a solid (a bevelled box resting on a
+shelf of the same mesh, its foot's rays starting in the shelf) gathered the light its closed
+rays read there, 0.85 of the shelf's radiance where Cycles' corner on the bevel, a hair over the
+shelf, has 0.05. Faces within :data:`TIE_ULPS`
 float32 steps of the point (a duplicate face: either may be drawn) cover nothing, nor do backs
-of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene
-does not see at a vertex of one it sees (they count in that vertex's mean) and of buried
-vertices (:func:`.sides.buried_side`) keep their vertex's light; a buried vertex's is the light
-where its edge from the open side meets what buries it, and the rays from that point start no
+of open surfaces (:mod:`..mesh.backs`), which Cycles has not. Corners of elements the scene does
+not see at a vertex of one it sees (a floor's under a block on it) keep their vertex's light,
+whose mean they are part of, unless they are corners of their source face: Cycles bakes a face
+corner on its own triangle, so where a face folds down from the open under another surface
+(truck town's grass under its ground ring, its road's edge under the grass) the fold's corner is
+dark and the open face's corner beside it lit (:func:`_face_corners`). So are the corners of
+buried vertices (:func:`.sides.buried_side`) that are corners of their source face (a bevel's
+foot on the shelf the bevelled box rests on); their other corners keep their vertex's light. A
+buried vertex's is the light where its edge from the open side meets what buries it (the bevel's
+edge, a little up it: the open room's light, where Cycles' point at the foot sees the shelf a
+hair under it and little else), and the rays from that point start no
 further off it than half way to a face over it (:func:`start_offsets`): the point lies against
 the burying surface, and rays started past a lip over it read the sun. Geometry only, cached:
 a relight casts no ray. World units.
@@ -39,7 +52,8 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .lift import bake_points, corner_normals
+from .crease import strongest_sun
+from .lift import bake_points, corner_normals, face_corners
 from .normals import corner_shading_normals
 
 __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
@@ -53,6 +67,13 @@ TIE_ULPS = 1
 LIFT_ULPS = 16
 #: Cosine rays per covered corner for the share of the open scene it sees.
 OPEN_RAYS = 64
+#: The least rise of the strongest sun over a corner's triangle (the sine of its elevation above
+#: the plane) for which its ray is followed until it rises a ray offset: as high as our rays start.
+SUN_RISE = 0.1
+#: The least share of the open scene a covered corner's vertex is taken to see: where fewer of
+#: its rays leave (its start lies inside a solid: a bevel's foot on a shelf), what it gathered is
+#: mostly what those closed rays read, no measure of the open scene's light.
+OPEN_FLOOR = 0.5
 
 
 def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
@@ -62,12 +83,13 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
     vertex of an element it sees (a floor's under a block resting on it) are not looked at,
     they count in that vertex's mean; nor are the corners of ``buried`` (V,) bool vertices,
-    which take the open side's light (:func:`.sides.buried_side`). None without Embree."""
+    which take the open side's light (:func:`.sides.buried_side`); either unless it is a
+    corner of its source face, where Cycles bakes. None without Embree."""
     if not embree_available() or len(elements) == 0:
         return None
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
-                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners",))
+                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 4))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
@@ -84,9 +106,13 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         seen = np.asarray(opened)[p] > 0
         shared = np.zeros(len(elements.verts), bool)
         shared[polys[p[seen], c[seen]]] = True
-        keep &= seen | ~shared[polys[p, c]]
+        left = ~seen & shared[polys[p, c]]
+        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        keep &= ~left
     if buried is not None:
-        keep &= ~np.asarray(buried, bool)[polys[p, c]]
+        left = np.asarray(buried, bool)[polys[p, c]]
+        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        keep &= ~left
     p, c = p[keep], c[keep]
     point = bake_points(elements, ctx.meshes, p, c)
     v = polys[p, c]
@@ -110,10 +136,37 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     crossed = (hit >= 0) & (length > 0)
     crossed[crossed] = own[fronts[hit[crossed]]] != own[p[crossed]]
     chosen = crossed | above
+    to_sun = strongest_sun(ctx)
+    if to_sun is not None:
+        # or the strongest sun's ray meets a surface before it rises as high as our rays start
+        rise = geo @ to_sun
+        toward = rise > 0.0
+        reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
+        hit, _ = scene.intersect(origin, np.broadcast_to(to_sun, origin.shape), reach)
+        hit = np.asarray(hit)
+        shaded = toward & (hit >= 0)
+        shaded[shaded] = own[fronts[hit[shaded]]] != own[p[shaded]]
+        chosen |= shaded
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
     return np.column_stack([p, c, start, geo])[chosen].astype(np.float64)
+
+
+def _face_corners(elements, meshes, p, c) -> np.ndarray:
+    """(K,) bool: corner ``c`` (K,) of element ``p`` (K,) lies on a corner of its source face
+    (within 1e-9 of the scene's size), where Cycles bakes a value; False without ``meshes``."""
+    out = np.zeros(len(p), bool)
+    if not meshes or not len(p):
+        return out
+    x = elements.verts[elements.polys[p, c]]
+    tol = 1e-9 * float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
+    owner = elements.owner[p]
+    for oi, m in enumerate(meshes):
+        rows = np.flatnonzero(owner == oi)
+        if rows.size:
+            out[rows] = face_corners(m, elements.source_face[p[rows]], x[rows], tol) >= 0
+    return out
 
 
 def _fronts(ctx, elements):
@@ -153,14 +206,14 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo)
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     v = elements.polys[p, c]
-    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach))
+    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
 
     def shares():
         scene = embree_scene(elements)
         here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
         there = open_fraction(elements, xv[v], nv[v], scene, reach, rays=OPEN_RAYS,
                               eps=ray_offsets(ctx.patches, owner=elements.owner[p]))
-        return np.minimum(1.0, here / np.maximum(there, 1.0 / OPEN_RAYS))
+        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
     k = cached(ctx.cache, key, shares)
     if creased is None:
         light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]

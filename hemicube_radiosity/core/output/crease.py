@@ -49,7 +49,7 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .lift import bake_points, blocked_share, corner_edges, corner_normals, face_corners
 from .normals import corner_shading_normals
 
-__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light"]
+__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "strongest_sun"]
 
 #: Degrees: a corner's shading normal leaning this far off its triangle's normal, or off its
 #: vertex's normal, gets the corner its own direct light. Truck town: 5 degrees lit 63,204 of
@@ -161,7 +161,7 @@ def _corner_rays(ctx, elements, xv, nv, opened, buried):
         mk += b"|" + repr(getattr(m, "back_of", -1)).encode()
         if getattr(m, "corner_normal", None) is not None:
             mk += array_key(np.asarray(m.corner_normal))
-    sun = _strongest_sun(ctx)
+    sun = strongest_sun(ctx)
     mk += b"" if sun is None else np.asarray(sun, np.float64).tobytes()
     mk += b"".join(b"-" if a is None else array_key(np.asarray(a)) for a in (xv, nv, opened, buried))
     key = cache_key(geometry_key(elements) + geometry_key(ctx.patches) + mk, ("crease-rays-same", CREASE_ANGLE, INSET))
@@ -194,7 +194,7 @@ def _make_corner_rays(ctx, elements, xv, nv, opened, buried):
     return p, c, start, shade, geo, np.where(cut[:, None], geo, shade), same
 
 
-def _strongest_sun(ctx):
+def strongest_sun(ctx):
     """(3,) the direction toward the scene's strongest sun, or None without one."""
     suns = [li for li in ctx.direct.lights if isinstance(li, SunLight) and li.strength > 0]
     if not suns:
@@ -208,7 +208,7 @@ def _sun_blocked(ctx, elements, p, c, turned) -> np.ndarray:
     is blocked below the triangle's plane, from its lifted start (:func:`.lift.blocked_share`):
     their light from below that plane is cut. False elsewhere, and without a sun."""
     out = np.zeros(len(p), bool)
-    to_sun = _strongest_sun(ctx)
+    to_sun = strongest_sun(ctx)
     if to_sun is None:
         return out
     scene = _fronts_scene(ctx)

@@ -113,3 +113,103 @@ def test_the_first_loop_triangle_holding_a_corner_wins():
     assert (want >= 0).sum() > 100 and (want < 0).sum() > 50        # both kinds drawn
     np.testing.assert_array_equal(got, want)
     assert (_first_row_holding(ft[:0], face, j) == -1).all()
+
+
+def _slope_under_a_plane(depth=0.1):
+    """Truck town's grass at its ground ring, in small: a strip of 1 m quads, two across, folded
+    at x = 0: flat in the open for x < 0, sloping ``depth`` down under a 2 x 4 m plane at z = 0
+    for x > 0 (the plane's left edge on the fold)."""
+    verts = [(x, y, -depth * max(x, 0.0)) for y in np.arange(-2.0, 2.5) for x in (-1.0, 0.0, 1.0)]
+    faces = [(3 * j + i, 3 * j + i + 1, 3 * j + i + 4, 3 * j + i + 3) for j in range(4) for i in range(2)]
+    strip = MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="strip")
+    plane = MeshInput.from_faces([(0.0, -2.0, 0.0), (2.0, -2.0, 0.0), (2.0, 2.0, 0.0), (0.0, 2.0, 0.0)],
+                                 [(0, 1, 2, 3)], rho=(RHO,) * 3, name="plane")
+    return [strip, plane]
+
+
+def test_the_corners_of_an_unseen_face_at_a_seen_vertex_are_baked_on_their_own_face():
+    """The sloping quad lies under the plane: the scene does not see it (core/output/sides.py
+    open_elements), but its corners on the fold share their vertices with the flat quad in the
+    open. Cycles bakes each face corner on its own triangle, moved toward its centre, under the
+    plane: no sun. Those corners were left their vertex's light (the full sun, 0.41 at truck town's
+    grass corners where Cycles had 0.00); the flat quad's corners there keep the sun."""
+    r = bake(_slope_under_a_plane(), BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False,
+                                                  gather_rays=64),
+             lights=[SunLight((0.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    strip = np.flatnonzero(E.owner == 0)
+    pos = E.verts[E.corner_ids()[strip]]                               # (n, 4, 3)
+    val, D = r.corner_values()[strip], r.corner_parts()[2][strip]
+    on_fold = np.abs(pos[..., 0]) < 1e-9
+    slope = (E.centers[strip, 0] > 0)[:, None] & on_fold
+    flat = (E.centers[strip, 0] < 0)[:, None] & on_fold
+    assert slope.sum() == 8 and flat.sum() == 8          # 5 vertices on the fold, 2 faces each side
+    assert D[slope].max() < 1e-3 * SUN / np.pi                         # the plane over them: no sun
+    assert val[slope].max() < 0.02 * OPEN
+    np.testing.assert_allclose(val[flat], OPEN, rtol=0.02)               # the open side: the sun
+
+
+def _block_on_a_shelf(c=0.1, h=0.04, top=0.5):
+    """One mesh, as the living room's: a closed 4 x 4 x 0.2 m shelf (its top at z = 0) and on it a
+    closed block whose bottom face covers [0, 1] x [-1, 1] of the shelf's top, its long bottom
+    edges chamfered ``c`` out and ``h`` up (22 deg, facing down and out): the chamfers' feet are
+    vertices of the shelf's solid too."""
+    from hemicube_radiosity.core.builtin_scenes import box
+    shelf = box((-2.0, -2.0, -0.2), (2.0, 2.0, 0.0), (RHO,) * 3, name="shelf")
+    off, idx = np.asarray(shelf.face_offsets), np.asarray(shelf.face_indices)
+    faces = [tuple(idx[off[k]:off[k + 1]]) for k in range(len(off) - 1)]
+    verts = [tuple(x) for x in np.asarray(shelf.verts)]
+    sec = [(0.0, 0.0), (1.0, 0.0), (1.0 + c, h), (1.0 + c, top), (-c, top), (-c, h)]
+    n, b = len(sec), len(verts)
+    verts += [(x, -1.0, z) for x, z in sec] + [(x, 1.0, z) for x, z in sec]
+    block = [(n + i, n + (i + 1) % n, (i + 1) % n, i) for i in range(n)]
+    block += [tuple(range(n)), tuple(range(2 * n - 1, n - 1, -1))]          # the two end caps
+    faces += [tuple(b + i for i in q) for q in block]
+    return MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="shelf")
+
+
+def test_a_buried_chamfer_foot_is_baked_at_its_own_point():
+    """The chamfers' feet are buried (core/output/sides.py): their corners took the light where
+    their edge from the open side meets the shelf, a little up the chamfer, where the room is
+    open: 0.15-0.26 against the block's lit top's 0.61. Cycles bakes the corner at the foot, a hair
+    over the shelf, which its rays meet: under a tenth of the lit top (0.04-0.06 of 0.87 in
+    tests/blender/test_covered_corners.py, the same block and shelf as two objects). Those face
+    corners are now lit at their own point as any covered corner is: 0.015-0.03."""
+    r = bake([_block_on_a_shelf()], BakeSettings(patch_size=1.0, element_size=1.0, gather_rays=64),
+             lights=[SunLight((0.3, 0.2, -0.9), strength=SUN)], world=np.array([0.3, 0.35, 0.4]))
+    E = r.elements
+    pos = E.verts[E.corner_ids()]
+    foot = (np.abs(pos[..., 2]) < 1e-9) & (np.abs(np.abs(pos[..., 1]) - 1.0) < 1e-9) & \
+        ((np.abs(E.normals[:, 0]) > 0.3) & (E.normals[:, 2] < 0))[:, None]          # its faces' corners
+    top = (np.abs(pos[..., 2] - 0.5) < 1e-9) & (E.normals[:, 2] > 0.9)[:, None]
+    val = r.corner_values().mean(axis=2)
+    assert foot.sum() >= 4 and top.sum() >= 4
+    assert val[foot].max() < 0.1 * val[top].mean()
+
+
+def test_a_corner_whose_sun_passes_under_a_lip_beside_it_gets_no_sun():
+    """A 20 x 20 m floor (ray offset 2.8e-4) under a sun 45 deg up toward +x, and a board 1e-4
+    over it from x = 1.5e-4 on, beside the floor's corner at the origin, not over it. Cycles
+    bakes the corner of the face toward +x 7e-5 in (x = y = 7e-5): its ray toward the sun rises
+    8e-5 by the board's edge and meets its underside: no sun; the vertex's rays start 2.8e-4 up,
+    over the board, and read the sun (truck town's grass corners beside a kerb: 0.56 where Cycles
+    has 0.10). The corners of the faces toward -x, 7e-5 the other way, pass over the board's edge:
+    the full sun."""
+    xs = np.array([-10.0, -1.0, 0.0, 1.0, 10.0])
+    verts = [(x, y, 0.0) for y in xs for x in xs]
+    faces = [(j * 5 + i, j * 5 + i + 1, (j + 1) * 5 + i + 1, (j + 1) * 5 + i) for j in range(4) for i in range(4)]
+    floor = MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="floor")
+    board = MeshInput.from_faces([(1.5e-4, -1.0, 1e-4), (1.0, -1.0, 1e-4), (1.0, 1.0, 1e-4), (1.5e-4, 1.0, 1e-4)],
+                                 [(0, 1, 2, 3)], rho=(RHO,) * 3, name="board")
+    r = bake([floor, board], BakeSettings(patch_size=20.0, element_size=20.0, two_sided_reflection=False,
+                                          gather_rays=16),
+             lights=[SunLight((-1.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    assert 1e-4 < 0.5 * mesh_offsets(r.patches)[0]              # the board lies within the ray offset
+    pos, D = E.verts[E.corner_ids()], r.corner_parts()[2]
+    at = np.all(np.abs(pos) < 1e-12, axis=2) & (E.owner == 0)[:, None]
+    east = at & (E.centers[:, 0] > 0)[:, None]
+    west = at & (E.centers[:, 0] < 0)[:, None]
+    assert east.sum() == 2 and west.sum() == 2
+    assert D[east].max() < 1e-3 * SUN / np.pi
+    np.testing.assert_allclose(D[west], SUN * np.cos(np.pi / 4) / np.pi, rtol=1e-3)
