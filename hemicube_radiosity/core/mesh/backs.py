@@ -30,7 +30,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..util.unique import linked_labels, unique_rows
-from .patches import meshes_key
+from .patches import covering_faces, meshes_key
 from ..rays import START_BACKS, START_SHARE, START_ULPS
 
 __all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "cutters", "backs_of_pieces"]
@@ -234,16 +234,19 @@ def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_ray
 
 def _cached_open(meshes, tol, cache, key) -> dict:
     """{mesh index: (F,) bool :func:`open_faces`} of the meshes with an open face, kept in
-    ``cache`` under their geometry ``key`` (a relight reads the same meshes again)."""
+    ``cache`` under their geometry ``key`` (a relight reads the same meshes again). A face of
+    zero area (:func:`.patches.covering_faces`) has no back: it covers nothing, and a back of
+    only such faces was refused as a mesh of nothing (a real room's degenerate slivers)."""
     from ..runtime.cache import cache_key, cached
 
     fronts = [i for i, m in enumerate(meshes)
               if getattr(m, "back_of", -1) < 0 and len(m.verts) and len(m.face_offsets) >= 2]
 
     def make():
-        faces = [open_faces(meshes[i].verts, meshes[i].face_offsets, meshes[i].face_indices, tol) for i in fronts]
+        faces = [open_faces(m.verts, m.face_offsets, m.face_indices, tol)
+                 & covering_faces(m.verts, m.face_offsets, m.face_indices) for m in (meshes[i] for i in fronts)]
         return np.concatenate([np.zeros(0, bool), *faces])
-    flat = np.asarray(cached(cache, cache_key(key, ("open-faces", tol, tuple(fronts))), make), bool)
+    flat = np.asarray(cached(cache, cache_key(key, ("open-covering-faces", tol, tuple(fronts))), make), bool)
     ends = np.cumsum([len(meshes[i].face_offsets) - 1 for i in fronts])
     return {i: f for i, f in zip(fronts, np.split(flat, ends[:-1]) if fronts else ()) if f.any()}
 

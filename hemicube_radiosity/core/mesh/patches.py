@@ -26,9 +26,13 @@ from ..runtime.stored import storable
 from ..runtime.errors import RadiosityError
 from ..light.transmit import see_through
 
-__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key", "RHO_MAX"]
+__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key", "RHO_MAX",
+           "ZERO_AREA", "covering_faces"]
 
 RHO_MAX = 0.999          # the solve needs every band's reflectivity below 1: the most a face takes
+#: A face of an area below this share of its mesh's squared size (bounding-box diagonal) covers
+#: nothing: :func:`.subdivide.build_patches` drops it, and refuses a mesh of nothing else.
+ZERO_AREA = 1e-12
 
 
 class PatchError(RadiosityError, ValueError):
@@ -299,6 +303,20 @@ def poly_geometry(verts, polys):
     with np.errstate(invalid="ignore", divide="ignore"):
         normals = cross / norm[:, None]
     return centers, normals, areas
+
+
+def covering_faces(verts, face_offsets, face_indices) -> np.ndarray:
+    """(F,) bool: the faces whose area (Newell's, of the whole ring) is above :data:`ZERO_AREA`
+    of the mesh's squared size: those that cover something."""
+    v = np.asarray(verts, dtype=np.float64)
+    offsets, idx = np.asarray(face_offsets, dtype=np.int64), np.asarray(face_indices, dtype=np.int64)
+    F = len(offsets) - 1
+    nxt = np.arange(1, len(idx) + 1)
+    nxt[offsets[1:] - 1] = offsets[:-1]
+    cross, face = np.cross(v[idx], v[idx[nxt]]), np.repeat(np.arange(F), np.diff(offsets))
+    area = 0.5 * np.linalg.norm(np.stack([np.bincount(face, cross[:, k], F) for k in range(3)], 1), axis=1)
+    span = np.ptp(v, axis=0) if len(v) else np.zeros(3)
+    return area > ZERO_AREA * float(span @ span)
 
 
 def check_faces(mesh: MeshInput, verts, idx, sizes):

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from ..util.unique import unique_rows
 from .ngons import to_tris_and_quads
-from .patches import MeshInput, PatchError, PatchSet, check_faces, poly_geometry
+from .patches import ZERO_AREA, MeshInput, PatchError, PatchSet, check_faces, poly_geometry
 from ..light.transmit import see_through
 
 __all__ = ["build_patches", "keeps_faces_whole"]
@@ -357,8 +357,8 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
     ``patch_size`` None or <= 0 keeps every triangle/quad as one patch (n-gons are still split).
     Triangles become n*n triangles, quads an nu*nv grid; n-gons are split first (convex: quads
     around the centre; concave: ear clipping). Faces with area below ``min_area`` are dropped;
-    None (default) means 1e-12 of the squared size (bounding-box diagonal) of each mesh, so the
-    same scene in millimetres or kilometres keeps the same patches.
+    None (default) means :data:`.patches.ZERO_AREA` of the squared size (bounding-box diagonal)
+    of each mesh, so the same scene in millimetres or kilometres keeps the same patches.
     Raises :class:`PatchError` naming the object when the input is unusable.
     """
     if isinstance(meshes, MeshInput):
@@ -389,7 +389,7 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
         c, nrm, a = poly_geometry(v, p)
         if min_area is None:
             span = np.ptp(np.asarray(mesh.verts, float), axis=0) if len(mesh.verts) else np.zeros(3)
-            keep = a > 1e-12 * float(span @ span)
+            keep = a > ZERO_AREA * float(span @ span)
         else:
             keep = a > min_area
         if not np.any(keep):

@@ -151,7 +151,7 @@ class _Relaxation:
                 self._set(w)
 
 
-def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None):
+def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, omega=None):
     """Gauss-Seidel sweeps over blocks of rows, over-relaxed (SOR): each block is updated at
     once from the newest values of every block before it (block Gauss-Seidel, a Jacobi step
     inside a block). With ``block=1`` this is the paper's row-by-row Gauss-Seidel; larger blocks
@@ -166,9 +166,11 @@ def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None):
     (:class:`_Relaxation`).
 
     Stops when the error bound is below ``tol``: the change of a sweep bounds the residual
-    (``|r| <= ((omega - 1) / omega + gamma) max|change|``), and the exact residual (one product
+    (``|r| <= ((omega - 1) / omega + gamma) max|change|``, times ``kappa`` for the error:
+    :func:`.residual.amplification`, None: ``1 / (1 - gamma)``), and the exact residual (one product
     with F) confirms it before stopping; if the float32 copy of B that the sweeps read limits the
     residual, the sweeps go on in float64. Returns B, sweeps, converged, omega."""
+    kappa = 1.0 / (1.0 - gamma) if kappa is None else kappa
     relax = _Relaxation(F, rho.max(axis=1), block or max(1, min(256, F.shape[0] // 32)), omega)
     BT = np.ascontiguousarray(S.T).copy()   # (bands, N): contiguous gathers per band
     B32 = BT.astype(np.float32)             # what the gathers read (half the memory traffic)
@@ -183,9 +185,9 @@ def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, block=None, omega=None):
         if scale == 0:
             converged = True
             break
-        cheap = ((w - 1.0) / w + gamma) * change / (1.0 - gamma) / scale
+        cheap = ((w - 1.0) / w + gamma) * change * kappa / scale
         if cheap * calib <= tol:
-            Bc, _, exact = better_of_step(F, rho, S, BT.T, gamma)
+            Bc, _, exact = better_of_step(F, rho, S, BT.T, kappa)
             if exact <= tol:
                 BT = np.ascontiguousarray(Bc.T)
                 converged = True

@@ -12,7 +12,11 @@ compared. All of them stop on a bound on the error, not on the size of the last 
 (``(I - T)^-1 = I + T + T^2 + ...`` has infinity norm <= 1 / (1 - gamma)). At rho near 1 the error
 is ~1 / (1 - rho) times the residual, and a step-size rule stopped 1-10 % short of B*. The
 bound is exact for a closed room of one reflectivity and conservative elsewhere (by about
-(1 - lambda) / (1 - gamma), lambda the spectral radius of T). Inputs that could make the
+(1 - lambda) / (1 - gamma), lambda the spectral radius of T). The solvers use the smaller kappa
+of :func:`.residual.amplification` in place of 1 / (1 - gamma), from the norms of T's powers:
+a few metal patches at rho 0.999 made 1 / (1 - gamma) 1000 in a real room (the grey-white room:
+200 sweeps to a residual of 1.2e-5 and a bound of 1.2e-2, "not converged"), while the light
+they pass on meets duller surfaces at the next bounce. Inputs that could make the
 iteration diverge (reflectivity outside [0, 1), a row of F summing past 1 such that
 rho * rowsum >= 1, negative or non-finite sources) are rejected with a clear error.
 """
@@ -25,7 +29,8 @@ import numpy as np
 from ..runtime.progress import Ticker
 from ..util.sparse import CSR
 from .gauss_seidel import gauss_seidel
-from .residual import check_inputs, energy_balance, error_bound, gain, matvec, residual, residual_vector
+from .residual import (amplification, check_inputs, energy_balance, error_bound, gain, matvec, residual,
+                       residual_vector)
 
 __all__ = ["Solution", "solve", "SOLVERS"]
 
@@ -49,7 +54,7 @@ class Solution:
     error_bound: float = float("nan")
 
 
-def _jacobi(F, rho, S, tol, max_it, ticker, gamma):
+def _jacobi(F, rho, S, tol, max_it, ticker, kappa):
     """Jacobi iteration ``B += alpha r`` on the residual ``r = S + rho F B - B``, with the step
     alpha per band that minimises the next residual (alpha = 1 is plain Jacobi). The residual
     of a Jacobi sweep is dominated by the slowest mode of ``rho F``, for which the best step
@@ -64,10 +69,10 @@ def _jacobi(F, rho, S, tol, max_it, ticker, gamma):
         Tr = rho * F.matvec(r)
         # B + r (a plain Jacobi step) has residual rho F r: stop there when its bound allows
         scale = np.abs(B + r).max()
-        if scale == 0 or np.abs(Tr).max() / (1.0 - gamma) <= tol * scale:
+        if scale == 0 or np.abs(Tr).max() * kappa <= tol * scale:
             B = B + r
             r = residual_vector(F, rho, S, B)          # the carried residual drifts: confirm
-            if scale == 0 or np.abs(r).max() / (1.0 - gamma) <= tol * np.abs(B).max():
+            if scale == 0 or np.abs(r).max() * kappa <= tol * np.abs(B).max():
                 converged = True
                 break
             continue
@@ -75,7 +80,7 @@ def _jacobi(F, rho, S, tol, max_it, ticker, gamma):
         dd = (d * d).sum(axis=0)
         with np.errstate(invalid="ignore", divide="ignore"):
             alpha = (r * d).sum(axis=0) / dd
-        alpha = np.where(np.isfinite(alpha) & (alpha > 0), np.minimum(alpha, 1.0 / (1.0 - gamma)), 1.0)
+        alpha = np.where(np.isfinite(alpha) & (alpha > 0), np.minimum(alpha, kappa), 1.0)
         B = B + alpha * r
         r = r - alpha * d
         if it % 32 == 0:
@@ -83,12 +88,13 @@ def _jacobi(F, rho, S, tol, max_it, ticker, gamma):
     return B, it, converged
 
 
-def _progressive(F, rho, S, tol, max_it, ticker, areas, gamma):
+def _progressive(F, rho, S, tol, max_it, ticker, areas, kappa):
     """Southwell iteration ("shooting"): the patch with the most unshot power distributes it.
 
     Uses the columns of F (F transposed), so it converges to the same B as the gathering solvers
     even when F is not exactly reciprocal. B includes the unshot radiosity u, and the residual
-    of B is ``rho F u`` (so ``max|error| <= gamma max|u| / (1 - gamma)``).
+    of B is ``rho F u`` (so ``max|error| <= (kappa - 1) max|u|``: ``(I - T)^-1 T = (I - T)^-1 - I``,
+    non-negative, of norm kappa - 1).
 
     Every N shots, Cohen et al. (1988)'s ambient term goes into B: a uniform radiosity c per
     band, with the c that leaves the least residual (``(I - rho F) 1 = 1 - rho rowsum``; in a
@@ -107,7 +113,7 @@ def _progressive(F, rho, S, tol, max_it, ticker, areas, gamma):
     leak = 1.0 - rho * F.row_sums()[:, None]          # (I - rho F) applied to a uniform 1
     max_shots = max_it * n
     shots, converged = 0, False
-    limit = tol * (1.0 - gamma) / max(gamma, 1e-300)
+    limit = tol / max(kappa - 1.0, 1e-300)
     while shots < max_shots:
         scale = np.abs(B).max()
         if scale == 0 or np.abs(unshot).max() <= limit * scale or (shots and shots % n == 0):
@@ -122,7 +128,7 @@ def _progressive(F, rho, S, tol, max_it, ticker, areas, gamma):
             unshot = res
             Tr = rho * F.matvec(res)
             scale = np.abs(B).max()
-            if scale == 0 or np.abs(Tr).max() / (1.0 - gamma) <= tol * scale:
+            if scale == 0 or np.abs(Tr).max() * kappa <= tol * scale:
                 converged = True
                 unshot = np.zeros_like(B)
                 break
@@ -151,8 +157,8 @@ def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=2
     method: 'gauss_seidel' (the paper's, over-relaxed), 'jacobi' (with a minimal-residual step
     length), or 'progressive' (Southwell shooting, plus the ambient step every N shots).
     tol: the relative error target. The solve stops when ``max|B - B*| <= tol * max|B|`` is
-    guaranteed by the bound ``residual / (1 - gamma)`` (``gamma = max rho * rowsum``; see the
-    module docstring), so at rho near 1 it iterates further than a step-size rule would.
+    guaranteed by the bound ``residual * kappa`` (kappa <= ``1 / (1 - gamma)``, ``gamma = max rho
+    * rowsum``: :func:`.residual.amplification`; see the module docstring), so at rho near 1 it iterates further than a step-size rule would.
     max_iterations: sweeps (for 'progressive', ``max_iterations * N`` shots); a solve that
     reaches it returns ``converged=False`` with its residual and ``error_bound``, never hangs.
     ``areas`` (N,) enables the energy balance and area-weighted shooting order; ``computed`` is
@@ -165,18 +171,18 @@ def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=2
     rho, S = check_inputs(F, rho, source)
     ticker = Ticker(progress, cancelled)
     rid = F.row_ids()
-    gamma = gain(F, rho)
-    extra = {"gain": gamma}
+    gamma, kappa = gain(F, rho), amplification(F, rho)
+    extra = {"gain": gamma, "amplification": kappa}
     if method == "gauss_seidel":
-        B, it, conv, w = gauss_seidel(F, rho, S, tol, max_iterations, ticker, gamma)
+        B, it, conv, w = gauss_seidel(F, rho, S, tol, max_iterations, ticker, gamma, kappa)
         extra["omega"] = w
     elif method == "jacobi":
-        B, it, conv = _jacobi(F, rho, S, tol, max_iterations, ticker, gamma)
+        B, it, conv = _jacobi(F, rho, S, tol, max_iterations, ticker, kappa)
     else:
-        B, it, conv, more = _progressive(F, rho, S, tol, max_iterations, ticker, areas, gamma)
+        B, it, conv, more = _progressive(F, rho, S, tol, max_iterations, ticker, areas, kappa)
         extra.update(more)
     FB = matvec(F, B)                # once for the residual and the balance (a relight's solve is ms)
     res = residual(F, rho, S, B, rid, FB)
-    bound = error_bound(res, gamma)
+    bound = error_bound(res, kappa)
     energy = energy_balance(F, rho, S, B, areas, rid, computed, FB) if areas is not None else {}
     return Solution(B, it, res, energy, method, bool(conv and bound <= tol), extra, bound)
