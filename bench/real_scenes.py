@@ -18,8 +18,9 @@ and five buildings, the large lit terrain issue 32 names). Without that folder t
    (:func:`drop_missing_images`): Cycles would shade them magenta.
 2. **Light**, the same for Cycles and for us (:func:`light_scene`):
 
-   * ``file``: the light the file has (``bitterli_grey_white_room``: its HDR world, which our reader
-     takes as its mean colour, with a note; ``bitterli_wooden_staircase``: its emissive rectangle);
+   * ``file``: the light the file has (``bitterli_grey_white_room``: its equirectangular HDR world,
+     which our reader takes as an environment light by direction; ``bitterli_wooden_staircase``:
+     its emissive rectangle);
    * ``sun_sky`` (godot_truck_town, godot_zdm2, godot_living_room, stanford_bunny: no light in the
      file): a sun of irradiance ``SUN_STRENGTH`` W/m^2, ``SUN_ELEVATION`` deg high from azimuth
      ``SUN_AZIMUTH`` deg, Blender's default angle, and a constant world colour ``SKY`` (strength 1);
