@@ -27,7 +27,7 @@ a jittered grid of cosine directions). Deterministic for a seed: each patch its 
 from __future__ import annotations
 
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -39,7 +39,7 @@ from ..runtime.stored import storable
 from ..util.sparse import CSR
 from ..util.unique import unique_ints
 
-__all__ = ["Specular", "specular_transport", "GLOSSY_MIN"]
+__all__ = ["Specular", "bounded_by_view", "specular_transport", "GLOSSY_MIN"]
 
 #: Glossy albedo (any band) from which a patch's mirrored light is followed with its direction;
 #: below it, it is spread as diffuse light (:mod:`..mesh.specular`): Blender's default material
@@ -242,9 +242,36 @@ def specular_stage(ctx) -> None:
                     ("specular", int(s.specular_rays), int(s.rotate_seed or 0)))
     ctx.say(0.0, f"light mirrored by {glossy.size} glossy patches")
     ctx.glossy = g
-    ctx.specular = cached(ctx.cache, key, lambda: specular_transport(
+    ctx.specular = bounded_by_view(cached(ctx.cache, key, lambda: specular_transport(
         ctx.patches, glossy, s.specular_rays, seed=int(s.rotate_seed or 0), clusters=ctx.clusters,
-        workers=s.workers, cancelled=ctx.cancelled))
+        workers=s.workers, cancelled=ctx.cancelled)), ctx.form_factors,
+        None if ctx.clusters is None else ctx.clusters.of)
+
+
+def bounded_by_view(spec, F, of=None) -> Specular:
+    """``spec`` with each receiver's entries scaled down, where they pass it, to what the
+    receiver sees of the glossy patches: sum_k (A_j / A_i) P_j(k, i) plus its sky part is an
+    estimate of F_ij from j's rays (module docstring), exact in expectation, but a receiver
+    much smaller than the mirror is met by few of its rays, each weighted A_j / A_i: one hit
+    on a sliver gave a row of F + F^s a sum of 2.2 (rho times it 1.76: a real room's solve
+    refused). F (the unknowns' form factors, the receiver's own hemi-cube) bounds the row's
+    sum over the glossy patches (a row, not each pair: a pair met by a few rays is noisy both
+    ways, and capping each would lose light on average); ``of`` (N,) each patch's unknown
+    (its cluster) or None."""
+    n = spec.n
+    via = np.concatenate([spec.via, spec.sky_via])
+    if not via.size:
+        return spec
+    rows = np.concatenate([spec.rows, spec.sky_rows])
+    est = np.bincount(rows, weights=np.concatenate([spec.weight, spec.sky_weight]), minlength=n)
+    cols = np.zeros(F.shape[1], bool)
+    cols[spec.glossy if of is None else np.asarray(of, np.int64)[spec.glossy]] = True
+    hit = cols[F.indices]
+    view = np.bincount(F.row_ids()[hit], weights=np.asarray(F.data, np.float64)[hit], minlength=n)
+    scale = np.where(est > view, view / np.where(est > 0, est, 1.0), 1.0)
+    if np.all(scale == 1.0):
+        return spec
+    return replace(spec, weight=spec.weight * scale[spec.rows], sky_weight=spec.sky_weight * scale[spec.sky_rows])
 
 
 def lamps_in_mirrors(ctx) -> np.ndarray | None:

@@ -114,3 +114,27 @@ def test_the_furnace_with_a_coloured_mirror_floor(direct):
     mean = lambda m: (p.areas[m, None] * B[m]).sum(0) / p.areas[m].sum()    # noqa: E731
     np.testing.assert_allclose(mean(walls), furnace, rtol=0.02)
     np.testing.assert_allclose(mean(fl), 1.0 + 0.3 * furnace, rtol=0.02)
+
+
+def test_a_receiver_sees_no_more_in_the_mirrors_than_it_sees_of_them():
+    """bounded_by_view caps a receiver's row of F^s (with its sky part) at its own hemi-cube's
+    view of the glossy patches: a 2 cm chip over a 4 m mirror is met by a few of the mirror's
+    rays, each weighted A_j / A_i = 40,000 (here receiver 0: 2.0 + 0.4 through mirror 2 against
+    a view of 0.9), while a receiver within its view (1: 0.5 against 0.6) keeps its entries
+    and one that sees no mirror in F (3) loses them."""
+    from hemicube_radiosity.core.form_factors.glossy import Specular, bounded_by_view
+    from hemicube_radiosity.core.util.sparse import CSR
+
+    i64 = lambda *v: np.array(v, np.int64)
+    S = Specular(rows=i64(0, 0, 1, 3), cols=i64(1, 3, 0, 1), via=i64(2, 2, 2, 2),
+                 weight=np.array([1.5, 0.5, 0.5, 0.2]), sky_rows=i64(0), sky_via=i64(2),
+                 sky_weight=np.array([0.4]), n=4, rays=64, glossy=i64(2))
+    F = CSR.from_coo(i64(0, 0, 1, 1, 3), i64(2, 1, 2, 3, 1), np.array([0.9, 0.1, 0.6, 0.4, 1.0]), (4, 4))
+    B = bounded_by_view(S, F)
+    g = np.zeros((4, 3))
+    g[2] = 1.0
+    row = lambda X: X.matrix(g).to_dense().sum(axis=1) + X.sky(g)[:, 0]
+    np.testing.assert_allclose(row(S), [2.4, 0.5, 0.0, 0.2])
+    np.testing.assert_allclose(row(B), [0.9, 0.5, 0.0, 0.0], rtol=1e-6)
+    # the direction is kept: the chip's entries keep their proportions
+    np.testing.assert_allclose(B.weight[:2] / B.weight[:2].sum(), [0.75, 0.25])
