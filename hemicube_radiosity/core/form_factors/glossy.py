@@ -33,7 +33,7 @@ import numpy as np
 
 from ..rays import embree_scene, import_embreex, ray_offsets
 from ..runtime.parallel import ordered_map, resolve_workers
-from ..util.geometry import tangent_frames
+from ..util.geometry import bilinear, tangent_frames
 from ..util.sampling import cosine_directions, stratified_unit_square
 from ..runtime.stored import storable
 from ..util.sparse import CSR
@@ -110,9 +110,9 @@ def patch_points(corners, u) -> np.ndarray:
     at unit-square points ``u`` (B, K, 2): bilinear on a quad, the square folded onto a
     triangle (uniform by area on a triangle and a parallelogram)."""
     s, t = u[..., 0:1], u[..., 1:2]
-    c0, c1, c2, c3 = (corners[:, None, i] for i in range(4))
+    c0, c1, c2 = (corners[:, None, i] for i in range(3))
     tri = np.all(corners[:, 3] == corners[:, 2], axis=1)[:, None, None]
-    quad = (1 - s) * (1 - t) * c0 + s * (1 - t) * c1 + s * t * c2 + (1 - s) * t * c3
+    quad = bilinear(corners[:, None], s, t)
     fold = s + t > 1                      # the square's far half folded onto the near one
     a, b = np.where(fold, 1 - s, s), np.where(fold, 1 - t, t)
     triangle = c0 + a * (c1 - c0) + b * (c2 - c0)

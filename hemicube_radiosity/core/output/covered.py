@@ -34,7 +34,7 @@ not see at a vertex of one it sees (a floor's under a block on it) keep their ve
 whose mean they are part of, unless they are corners of their source face: Cycles bakes a face
 corner on its own triangle, so where a face folds down from the open under another surface
 (truck town's grass under its ground ring, its road's edge under the grass) the fold's corner is
-dark and the open face's corner beside it lit (:func:`_face_corners`). So are the corners of
+dark and the open face's corner beside it lit (:func:`.lift.source_corners`). So are the corners of
 buried vertices (:func:`.sides.buried_side`) that are corners of their source face (a bevel's
 foot on the shelf the bevelled box rests on); their other corners keep their vertex's light. A
 buried vertex's is the light where its edge from the open side meets what buries it (the bevel's
@@ -53,7 +53,7 @@ import numpy as np
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .crease import strongest_sun
-from .lift import bake_points, corner_normals, face_corners
+from .lift import bake_points, corner_normals, source_corners
 from .normals import corner_shading_normals
 
 __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
@@ -102,16 +102,20 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     polys = elements.polys
     p, c = np.nonzero(polys >= 0)
     keep = np.ones(len(p), bool)
+
+    def inner(left):          # (left,) True at corners that are no corner of their source face
+        k = np.flatnonzero(left)
+        return source_corners(elements, ctx.meshes, p[k], elements.verts[polys[p[k], c[k]]]) < 0
     if opened is not None:
         seen = np.asarray(opened)[p] > 0
         shared = np.zeros(len(elements.verts), bool)
         shared[polys[p[seen], c[seen]]] = True
         left = ~seen & shared[polys[p, c]]
-        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        left[left] = inner(left)
         keep &= ~left
     if buried is not None:
         left = np.asarray(buried, bool)[polys[p, c]]
-        left[left] = ~_face_corners(elements, ctx.meshes, p[left], c[left])
+        left[left] = inner(left)
         keep &= ~left
     p, c = p[keep], c[keep]
     point = bake_points(elements, ctx.meshes, p, c)
@@ -151,22 +155,6 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
     return np.column_stack([p, c, start, geo])[chosen].astype(np.float64)
-
-
-def _face_corners(elements, meshes, p, c) -> np.ndarray:
-    """(K,) bool: corner ``c`` (K,) of element ``p`` (K,) lies on a corner of its source face
-    (within 1e-9 of the scene's size), where Cycles bakes a value; False without ``meshes``."""
-    out = np.zeros(len(p), bool)
-    if not meshes or not len(p):
-        return out
-    x = elements.verts[elements.polys[p, c]]
-    tol = 1e-9 * float(np.linalg.norm(np.ptp(elements.verts, axis=0)))
-    owner = elements.owner[p]
-    for oi, m in enumerate(meshes):
-        rows = np.flatnonzero(owner == oi)
-        if rows.size:
-            out[rows] = face_corners(m, elements.source_face[p[rows]], x[rows], tol) >= 0
-    return out
 
 
 def _fronts(ctx, elements):

@@ -124,6 +124,22 @@ def face_corners(mesh, face, points, tol) -> np.ndarray:
     return out
 
 
+def source_corners(elements, meshes, p, x) -> np.ndarray:
+    """(K,) int64: which corner (0.. in loop order) of its source face the element corner at
+    ``x`` (K, 3) of element ``p`` (K,) is (:func:`face_corners`, within 1e-9 of the elements'
+    size), -1 for one at none, and everywhere without ``meshes``."""
+    out = np.full(len(p), -1, dtype=np.int64)
+    if not meshes or not len(p):
+        return out
+    size = float(np.linalg.norm(np.ptp(elements.verts, axis=0))) if len(elements.verts) else 1.0
+    owner = elements.owner[p]
+    for oi, m in enumerate(meshes):
+        rows = np.flatnonzero(owner == oi)
+        if rows.size:
+            out[rows] = face_corners(m, elements.source_face[p[rows]].astype(np.int64), x[rows], 1e-9 * size)
+    return out
+
+
 def corner_edges(elements, p, c):
     """(position (K, 3), edge to the next corner (K, 3), edge to the previous corner (K, 3)) of
     each corner ``c`` (K,) of element ``p`` (K,) (a triangle's corners cycle over 3, a quad's 4)."""
@@ -214,14 +230,14 @@ def _first_triangles(elements, meshes, p, x):
     if not meshes:
         return None
     ks, cs = [], []
-    size = float(np.linalg.norm(np.ptp(elements.verts, axis=0))) if len(elements.verts) else 1.0
+    corner = source_corners(elements, meshes, p, x)
     owner = elements.owner[p]
     for oi, m in enumerate(meshes):
         rows = np.flatnonzero(owner == oi)
         if not rows.size:
             continue
         face = elements.source_face[p[rows]].astype(np.int64)
-        j = face_corners(m, face, x[rows], 1e-9 * size)
+        j = corner[rows]
         off = np.asarray(m.face_offsets, dtype=np.int64)
         n = off[face + 1] - off[face]
         tri = np.full((len(rows), 3), -1, dtype=np.int64)
