@@ -4,6 +4,7 @@
 the defining module alone leaves every caller on the original: a test that forbids the call
 ("a relight casts no ray") would then check nothing. :func:`everywhere` patches every loaded
 module of the package that holds the same object, and returns how many it patched.
+:func:`counted_points` counts the points a function is called with.
 """
 from __future__ import annotations
 
@@ -23,3 +24,16 @@ def everywhere(monkeypatch, original, replacement, package="hemicube_radiosity")
                 count += 1
     assert count, f"{original!r} is bound in no module of {package}"
     return count
+
+
+def counted_points(monkeypatch, module, name) -> list:
+    """Wrap ``module.name``, a function whose second argument is an array of points, so that
+    each call appends how many points it got to the returned list (undone by ``monkeypatch``)."""
+    calls = []
+    real = getattr(module, name)
+
+    def counting(first, points, *args, **kwargs):
+        calls.append(len(points))
+        return real(first, points, *args, **kwargs)
+    monkeypatch.setattr(module, name, counting)
+    return calls

@@ -11,6 +11,7 @@ from hemicube_radiosity.core.output import indirect, stage as output_stage
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.rays import embree_available
 from hemicube_radiosity.core.settings import BakeSettings
+from tests.support.patching import counted_points
 
 pytestmark = pytest.mark.skipif(not embree_available(), reason="the gather needs Embree")
 
@@ -26,21 +27,9 @@ def _scene():
     return [floor, block, plate]
 
 
-def _counted(monkeypatch):
-    """The points the sky rays are cast from, per call (the light stage's sky_fraction)."""
-    calls = []
-    real = light_stage.sky_fraction
-
-    def counting(scene, points, *args, **kwargs):
-        calls.append(len(points))
-        return real(scene, points, *args, **kwargs)
-    monkeypatch.setattr(light_stage, "sky_fraction", counting)
-    return calls
-
-
 def test_the_gathers_rays_light_the_vertices_as_their_own_sky_rays_of_the_same_count(monkeypatch):
     s = BakeSettings(patch_size=0.5, element_size=0.25, gather_rays=64, sky_rays=128, workers=1)
-    calls = _counted(monkeypatch)
+    calls = counted_points(monkeypatch, light_stage, "sky_fraction")
     new = bake(_scene(), s, world=WORLD)
     cast_new = sum(calls)
     calls.clear()

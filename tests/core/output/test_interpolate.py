@@ -5,6 +5,7 @@ from hemicube_radiosity.core.output.interpolate import interpolate_at, locate
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.builtin_scenes import box
+from tests.support.patching import counted_points
 
 
 def test_bilinear_field_is_exact_on_a_skewed_quad_grid():
@@ -176,13 +177,7 @@ def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
 
     room = cornell_box()
     meshes = room[:7] + tessellate(room[7:], 20)
-    searched = []
-    real = output.locate
-
-    def counting(patches, points, *a, **k):
-        searched.append(len(points))
-        return real(patches, points, *a, **k)
-    monkeypatch.setattr(output, "locate", counting)
+    searched = counted_points(monkeypatch, output, "locate")
     fast = bake(meshes, BakeSettings())
     block = fast.elements.owner == fast.elements.object_names.index("TallBlock")
     on_block = np.unique(fast.elements.polys[block])
