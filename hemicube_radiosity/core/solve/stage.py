@@ -36,11 +36,12 @@ def solve_stage(ctx) -> None:
     ctx.say(0.0, s.solver)
     F, d, coloured = solve_matrix(ctx, ctx.form_factors)     # with the light glossy patches mirror
     rho, source, areas, solid = see_through_system(F, p.rho, ctx.source, p.areas)
-    sol = _solve(F, rho, source, d, s, areas, computed, ctx.cancelled, lambda fr: ctx.say(fr, ""))
+    run = _solver(F, rho, d, s, areas, computed, ctx.cancelled)
+    sol = run(source, lambda fr: ctx.say(fr, ""))
     for _ in range(COLOUR_PASSES if coloured is not None else 0):   # a coloured metal's own bands
         B = sol.B if solid is None else sol.B * solid[:, None]
         last = sol.B
-        sol = _solve(F, rho, source + coloured(B), d, s, areas, computed, ctx.cancelled)
+        sol = run(source + coloured(B))
         if np.max(np.abs(sol.B - last)) <= s.tolerance * max(np.max(np.abs(sol.B)), 1e-300):
             break
     if solid is not None:                             # each see-through patch's mean
@@ -59,22 +60,28 @@ def solve_stage(ctx) -> None:
     ctx.solution = replace(sol, energy=energy)
 
 
-def _solve(F, rho, source, d, s, areas, computed, cancelled, progress=None):
-    """:func:`.solvers.solve` of B = S + rho F B with settings ``s``; with ``d`` (K,) (glossy
-    unknowns, :func:`..form_factors.glossy.solve_matrix`) for B / d, F's columns times d, rho
-    and S over d (0 where d is 0), and B and its energy balance made again in the unscaled
-    unknowns."""
-    kw = dict(areas=areas, cancelled=cancelled, computed=computed, progress=progress)
+def _solver(F, rho, d, s, areas, computed, cancelled):
+    """``run(source, progress=None) -> Solution``: :func:`.solvers.solve` of B = S + rho F B
+    with settings ``s``; with ``d`` (K,) (glossy unknowns,
+    :func:`..form_factors.glossy.solve_matrix`) for B / d, F's columns times d, rho and S over
+    d (0 where d is 0), made once for every source it is run with, and B and its energy
+    balance made again in the unscaled unknowns."""
+    kw = dict(areas=areas, cancelled=cancelled, computed=computed)
     if d is None:
-        return solve(F, rho, source, s.solver, s.tolerance, s.max_iterations, **kw)
+        return lambda source, progress=None: solve(F, rho, source, s.solver, s.tolerance, s.max_iterations,
+                                                   progress=progress, **kw)
     keep = d[F.indices] > 0
     Fd = CSR.from_coo(F.row_ids()[keep], F.indices[keep], F.data[keep] * d[F.indices[keep]], F.shape, F.meta)
     over = np.where(d > 0, 1.0 / np.where(d > 0, d, 1.0), 0.0)[:, None]
-    sol = solve(Fd, np.minimum(np.asarray(rho) * over, RHO_CAP), np.asarray(source) * over, s.solver,
-                s.tolerance, s.max_iterations, **kw)
-    B = sol.B * d[:, None]
-    energy = energy_balance(F, rho, source, B, areas, computed=computed) if areas is not None else sol.energy
-    return replace(sol, B=B, energy=energy)
+    rho_d = np.minimum(np.asarray(rho) * over, RHO_CAP)
+
+    def run(source, progress=None):
+        sol = solve(Fd, rho_d, np.asarray(source) * over, s.solver, s.tolerance, s.max_iterations,
+                    progress=progress, **kw)
+        B = sol.B * d[:, None]
+        energy = energy_balance(F, rho, source, B, areas, computed=computed) if areas is not None else sol.energy
+        return replace(sol, B=B, energy=energy)
+    return run
 
 
 def see_through_system(F, rho, source, areas):
