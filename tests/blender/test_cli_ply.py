@@ -35,9 +35,11 @@ def test_ply_input_bakes_its_geometry(addon, tmp_path):
     assert rc == 0, err.getvalue()
     z = np.load(tmp_path / "p.npz")
     # the box's 10 m2 of walls, every patch Cycles' default surface (no material; Blender's own
-    # default, no note), no light: all dark
+    # default, no note), no light: all dark; its specular layer bounces as diffuse light in
+    # the solve (below the glossy threshold), so the patches reflect the two albedos' sum
     assert float(z["areas"].sum()) == pytest.approx(10.0, rel=1e-9)
-    rho = sub(addon, "blender.read.materials").default_surface_rho()
+    mats = sub(addon, "blender.read.materials")
+    rho = mats.default_surface_rho() + mats.default_surface_glossy()
     np.testing.assert_allclose(z["reflectance"], rho, atol=1e-6)
     assert not z["radiosity"].any()
     assert "no material" not in out.getvalue()

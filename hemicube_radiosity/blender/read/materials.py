@@ -52,8 +52,21 @@ def default_surface_rho() -> float:
     return DEFAULT_SURFACE_RHO.get(bpy.app.version[:2], DEFAULT_SURFACE_RHO[None])
 
 
+def default_surface_glossy() -> float:
+    """The glossy albedo of Cycles' default surface (a Cycles GLOSSY colour bake of a face with
+    no material): Blender 5's Principled BSDF reflects 0.037385 off its specular layer, which the
+    solve bounces as a material's (:mod:`..core.form_factors.glossy`); earlier versions' Diffuse
+    BSDF none. Left out, a level with no material (godot_zdm2) lost it at every bounce and
+    baked 4.1% darker than Cycles."""
+    import bpy
+
+    return DEFAULT_SURFACE_GLOSSY.get(bpy.app.version[:2], DEFAULT_SURFACE_GLOSSY[None])
+
+
 #: Cycles' default surface's diffuse albedo by Blender version (major, minor); None: any other.
 DEFAULT_SURFACE_RHO = {(5, 0): 0.770092, None: 0.8}
+#: ... and its glossy albedo (:func:`default_surface_glossy`).
+DEFAULT_SURFACE_GLOSSY = {(5, 0): 0.037385, None: 0.0}
 
 
 def rgb(v):
@@ -321,6 +334,8 @@ def corner_materials(name, mats, corner_mat, corner_loop, shaded, used):
             continue
         elif kind == "corners":
             n.append(f"{label}: not evaluated by Cycles; its unlinked values used")
+        elif m is None:                       # Cycles' default surface: its specular layer too
+            corner_glossy[sel] = default_surface_glossy()
         corner_rho[sel], corner_em[sel] = rho, em
         if k in used:
             notes += [s for s in n if s not in notes]
