@@ -37,7 +37,9 @@ and five buildings, the large lit terrain issue 32 names). Without that folder t
    and its modifiers applied (a vertex-colour bake writes to the mesh itself), then COMBINED vertex
    bakes (``tools/cycles_reference.py``, 32 bounces, ``GLOSSY`` = 4 glossy bounces with reflective
    caustics as a user's render has them, so light off metal and glossy layers reaches the walls;
-   ``--glossy 0`` for none; 2 threads, no denoising): the reference at
+   ``--glossy 0`` for none; Filter Glossy off, ``FILTER_GLOSSY``: unbiased, as the tests compare,
+   where Blender's default 1.0 loses light that glossy layers hand on after a diffuse bounce,
+   ``--filter-glossy default`` for it; 2 threads, no denoising): the reference at
    ``REF_SPP`` = 256 samples (not the 4,096 of ``speed_vs_error.py``: a 270k-triangle scene takes
    minutes per 64 samples on this 2-core machine) and the candidate at 64 samples with another
    seed, both cached in ``bench/cache`` (key: every mesh, material, light and the world, plus the
@@ -101,6 +103,8 @@ OUT_DIR = os.path.join(ROOT, "bench", "out")
 WORK_DIR = os.path.join(OUT_DIR, "real")
 REF_SPP = 256
 GLOSSY = 4           # the references' glossy bounces (with reflective caustics): a user's render
+FILTER_GLOSSY = 0.0  # ... without Filter Glossy: unbiased (Blender's default 1.0 lost 5.2% of
+                     # godot_zdm2's light, all of it off its default surface's specular layer)
 CAND_SPP = 64
 RELIGHT = 1.5        # the relight after the defaults' bake: every lamp and the world this much brighter
 MEMORY_TARGET_MB = 4096
@@ -380,7 +384,7 @@ def own_evaluated_meshes(objects):
     return out
 
 
-def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY)):
+def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY), filter_glossy=str(FILTER_GLOSSY)):
     import bpy
     import cycles_reference as cr
     from hemicube_radiosity.blender.read.scene import GEOMETRY_TYPES
@@ -398,7 +402,8 @@ def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY)):
                                                                                      seed=sve.CAND_SEED)),
                     ("emit", dict(samples=1, seed=0, mode="EMIT"))):
         t = time.perf_counter()
-        b = cr.cached_bake(objs, CACHE_DIR, bounces=sve.BOUNCES, threads=2, glossy=int(glossy), **kw)
+        b = cr.cached_bake(objs, CACHE_DIR, bounces=sve.BOUNCES, threads=2, glossy=int(glossy),
+                           filter_glossy=None if filter_glossy == "default" else float(filter_glossy), **kw)
         arrays[key] = np.concatenate([b.corner[o.name] for o in objs])
         rec[key] = {"seconds": b.seconds, "cached": b.cached, **b.settings}
         log(f"{name}: {key} {b.settings['samples']} spp {'cached' if b.cached else 'baked'}: {b.seconds:.1f} s"
@@ -694,7 +699,8 @@ def run_scene(spec, args):
     if os.path.exists(cyc_npz):
         os.remove(cyc_npz)
     st, rss, wall = run_child(["--cycles-child", spec.folder, cyc_npz, str(args.ref_spp), str(CAND_SPP),
-                               str(args.glossy), base + "_cycles.json"], base + "_cycles.log", args.cycles_timeout)
+                               str(args.glossy), args.filter_glossy, base + "_cycles.json"], base + "_cycles.log",
+                              args.cycles_timeout)
     row["cycles"] = dict(_child_result(st, base + "_cycles.log", base + "_cycles.json", args.cycles_timeout),
                          wall_seconds=wall, max_rss_mb=rss)
     log(f"cycles: {json.dumps(row['cycles'], default=float)[:400]}")
@@ -884,6 +890,9 @@ def main(argv=None):
     ap.add_argument("--results", default=None)
     ap.add_argument("--glossy", type=int, default=GLOSSY,
                     help="the Cycles references' glossy bounces (0: none, and no caustics)")
+    ap.add_argument("--filter-glossy", default=str(FILTER_GLOSSY),
+                    help="the Cycles references' Filter Glossy ('default': Blender's 1.0, which "
+                         "loses light off glossy layers after a diffuse bounce)")
     ap.add_argument("--set", default="{}", help="settings of ours as JSON, e.g. "
                     "'{\"specular_bounce\": false}' (default: the defaults)")
     ap.add_argument("--bake-only", action="store_true",
@@ -901,7 +910,8 @@ def main(argv=None):
         ap.error(str(exc))
     path = args.results or os.path.join(OUT_DIR, "real_scenes_quick.json" if args.quick else "real_scenes.json")
     res = {"quick": args.quick, "machine": sve.machine_info(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-           "ref_spp": args.ref_spp, "cand_spp": CAND_SPP, "glossy": args.glossy, "command": " ".join(["bench/real_scenes.py", *argv]),
+           "ref_spp": args.ref_spp, "cand_spp": CAND_SPP, "glossy": args.glossy,
+           "filter_glossy": args.filter_glossy, "command": " ".join(["bench/real_scenes.py", *argv]),
            "scenes": []}
     if args.scenes and os.path.exists(path):   # a subset: keep the other scenes' rows of the last run
         with open(path) as f:

@@ -364,7 +364,7 @@ def cache_key(objects, settings: dict, scene=None) -> str:
 
 
 def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bounces=32, threads=2,
-                scene=None, glossy=0) -> CyclesBake:
+                scene=None, glossy=0, filter_glossy=None) -> CyclesBake:
     """:func:`bake_vertex_radiance` through an npz cache in ``cache_dir`` (created if missing).
 
     A hit returns the stored arrays and the stored bake time with ``cached=True``.
@@ -372,6 +372,8 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
     settings = dict(samples=int(samples), seed=int(seed), mode=mode, bounces=int(bounces))
     if glossy:                  # keys of the references baked without glossy bounces unchanged
         settings["glossy"] = int(glossy)
+    if filter_glossy is not None:   # (None: Blender's default, the keys made before it unchanged)
+        settings["filter_glossy"] = float(filter_glossy)
     key = cache_key(objects, settings, scene)
     path = os.path.join(os.fspath(cache_dir), f"cycles_{key}.npz")
     if os.path.exists(path):
@@ -381,7 +383,7 @@ def cached_bake(objects, cache_dir, *, samples=256, seed=0, mode="COMBINED", bou
             corner = {n: z[f"corner_{i}"] for i, n in enumerate(names)}
             return CyclesBake(point, corner, float(z["seconds"]), settings, cached=True)
     res = bake_vertex_radiance(objects, samples=samples, seed=seed, mode=mode, bounces=bounces,
-                               threads=threads, scene=scene, glossy=glossy)
+                               threads=threads, scene=scene, glossy=glossy, filter_glossy=filter_glossy)
     os.makedirs(os.fspath(cache_dir), exist_ok=True)
     names = list(res.point)
     arrays = {"names": np.array(names), "seconds": np.array(res.seconds)}
