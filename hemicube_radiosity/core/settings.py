@@ -38,6 +38,9 @@ AUTO_ELEMENTS_PER_PATCH = 3.0      # 'auto' detail size: a third of the patch si
 AUTO_SWITCH = "auto_size"          # the panel's one switch for every 'auto' size
 
 METHODS = (
+    ("auto", "Automatic", "The hemi-cube rasteriser, or Embree's rays through the same pixels where "
+     "a hemi-cube would draw so many polygons that the rays are faster (large scenes; needs "
+     "embreex, else the rasteriser)"),
     ("hemicube", "Hemi-cube", "Rasterise a hemi-cube per patch in NumPy (the paper's method)"),
     ("embree", "Embree", "Cast rays through the hemi-cube pixel centres with Embree (needs embreex)"),
     ("embree_stochastic", "Embree (stochastic)", "Cosine-weighted random rays with Embree"),
@@ -187,7 +190,7 @@ class BakeSettings:
     max_elements: int = setting(400000, "Max Details", "Stop with an error before cutting more "
                                 "output elements", "patches", min=1, soft_max=4000000)
     # -- form factors
-    method: str = setting("hemicube", "Method", "How form factors are computed", "form_factors",
+    method: str = setting("auto", "Method", "How form factors are computed", "form_factors",
                           choices=METHODS)
     workers: int = setting(0, "Workers", "Cores that compute form factors and per-vertex light "
                            "at once (0: every core, 1: one). On Linux form factors run in worker "

@@ -44,6 +44,12 @@ SAID = "expected about"
 #: (zdm2's form factors 2.4 times their forecast) and 1.6.
 PER_RECEIVER = 6e-4
 PER_SEEN = 5.5e-7
+#: Seconds per receiver and per hemi-cube pixel of Embree's rays through them (method 'embree',
+#: one worker), fitted to the Cornell box cut into 2,529 and 12,672 patches at resolutions 8, 32
+#: and 64: 0.08-0.12, 1.2-1.4 and 4.7-5.0 ms a receiver, where the rasteriser took 0.6-1.1,
+#: 1.4-4.3 and 2.3-6.3 ms (about 1,600 and 8,400 polygons seen; one process, the machine busy).
+PER_RAY_RECEIVER = 5e-5
+PER_PIXEL_RAY = 3.8e-7
 #: Receivers :func:`polygons_seen` looks from (a fixed, even sample: the same forecast each time).
 SEEN_SAMPLE = 64
 #: Seconds per output vertex at 128 gather rays, the default (the exact direct light, the gather,
@@ -92,6 +98,16 @@ class Forecast:
 
     def as_dict(self) -> dict:
         return dict(self.__dict__)
+
+
+def hemicube_seconds(seen: float) -> float:
+    """Seconds a hemi-cube takes on one worker drawing about ``seen`` polygons."""
+    return PER_RECEIVER + PER_SEEN * float(seen)
+
+
+def ray_seconds(resolution: int) -> float:
+    """Seconds Embree's rays through a hemi-cube of ``resolution`` take on one worker."""
+    return PER_RAY_RECEIVER + PER_PIXEL_RAY * 3 * int(resolution) ** 2
 
 
 def polygons_seen(patches, clusters, centers, normals, sample=SEEN_SAMPLE) -> float:
@@ -156,7 +172,11 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecas
     ids = np.arange(int(receivers)) if np.ndim(receivers) == 0 else np.asarray(receivers, np.int64)
     ids = ids[ids < len(u.centers)]
     seen = polygons_seen(ctx.patches, ctx.clusters, u.centers[ids], u.normals[ids])
-    ff = len(ids) * (PER_RECEIVER + PER_SEEN * seen if per_receiver is None else per_receiver) / speed
+    if per_receiver is None:
+        per_receiver_said = ray_seconds(s.resolution) if s.method == "embree" else hemicube_seconds(seen)
+    else:
+        per_receiver_said = per_receiver
+    ff = len(ids) * per_receiver_said / speed
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
     rate = PER_VERTEX if ctx.patches.emitting().any() else PER_VERTEX_LAMPS
     out = output_vertices * rate * rays / 128 / speed

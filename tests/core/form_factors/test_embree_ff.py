@@ -161,3 +161,35 @@ def test_rasteriser_and_embree_agree_on_the_same_pixels(turn, seed):
     assert diff.max() < 1e-3, f"max |F_rast - F_embree| = {diff.max():.2e}"
     np.testing.assert_allclose(R.sky, E.sky, atol=1e-3)
     np.testing.assert_allclose(R.row_sums(), E.row_sums(), atol=1e-3)
+
+
+@needs_embree
+def test_auto_method_casts_rays_where_a_hemicube_would_draw_many_polygons(monkeypatch):
+    """'auto' (the default) draws hemi-cubes where they are cheap and casts Embree's rays
+    through the same pixels where a hemi-cube would draw many polygons (the forecast's own
+    rates, :mod:`.forecast`); the F is the chosen method's, bit for bit, the result says which,
+    and without Embree it is always the rasteriser."""
+    from hemicube_radiosity.core.form_factors import stage
+    from hemicube_radiosity.core.pipeline import bake
+    from hemicube_radiosity.core.runtime.forecast import hemicube_seconds, ray_seconds
+    from hemicube_radiosity.core.settings import BakeSettings
+
+    from tests.support.shapes import sphere
+
+    base = dict(patch_size=0.25, element_size=None, direct="hemicube")
+    box = scenes.cornell_box()
+    # a curved mesh of many small faces: no flat cluster to draw as an outline
+    dense = scenes.cornell_box() + [sphere(80, 0.5, (1.0, 1.0, 0.6))]
+    # where the choice falls: seen polygons at which a hemi-cube costs what its rays cost
+    assert ray_seconds(64) > hemicube_seconds(1000) and ray_seconds(32) < hemicube_seconds(3000)
+    picked = {}
+    for name, meshes, res in (("box", box, 64), ("dense", dense, 32)):
+        auto = bake(meshes, BakeSettings(resolution=res, **base))
+        picked[name] = auto.settings.method
+        same = bake(meshes, BakeSettings(resolution=res, method=picked[name], **base))
+        assert auto.form_factors.nnz == same.form_factors.nnz
+        np.testing.assert_array_equal(auto.form_factors.data, same.form_factors.data)
+        np.testing.assert_array_equal(auto.solution.B, same.solution.B)
+    assert picked == {"box": "hemicube", "dense": "embree"}
+    monkeypatch.setattr(stage, "embree_available", lambda: False)
+    assert bake(dense, BakeSettings(resolution=32, **base)).settings.method == "hemicube"

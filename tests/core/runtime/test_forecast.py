@@ -90,7 +90,7 @@ def test_the_form_factors_forecast_is_the_time_of_a_sample_where_one_is_drawn(mo
     from hemicube_radiosity.core.runtime.forecast import PER_EXTRA_WORKER
     monkeypatch.setattr(hemicube, "PROBE_MIN_BATCHES", 1)
     said = []
-    r = bake(scenes.cornell_box(), BakeSettings(workers=2, **SMALL),
+    r = bake(scenes.cornell_box(), BakeSettings(workers=2, method="hemicube", **SMALL),
              progress=lambda stage, fr, msg: said.append((stage, msg)))
     f = r.forecast
     assert f.per_receiver is not None and 0 < f.per_receiver < 1
