@@ -25,7 +25,7 @@ from ..runtime.cache import Memo
 from ..util.geometry import bilinear
 from ..util.sampling import jittered_grid
 from .outline import GroupOutline
-from .polygon_ff import GROUP_LOOP, group_form_factors, polygon_form_factors
+from .polygon_ff import GROUP_LOOP, group_form_factors, in_front, polygon_form_factors
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..mesh.patches import PatchSet
 from ..util.spatial import morton_order
@@ -239,6 +239,8 @@ class _Transport:
         do not (None: nothing to refine)."""
         x = self.points[s:s + self.step]
         nx = self.normals[s:s + self.step]
+        if self.groups is not None and self.scene is not None:
+            return self._rays_first(s, x, nx)
         if self.groups is None:
             F = polygon_form_factors(x, nx, self.corners, self.em_normals)                # (p, M)
         else:
@@ -256,6 +258,33 @@ class _Transport:
         # exactly 1 where every ray passes and 0 where none does (a ratio of sums rounds)
         v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
         # penumbra: where some rays pass and some do not, cast ``refine`` times more
+        part = ~lit & ~dark
+        return s, F, pi, mi, o, (v, seen, weight, n), part if self.refine > 0 and part.any() else None
+
+    def _rays_first(self, s, x, nx):
+        """:meth:`first_pass` for groups: the first rays first, for every pair whose point is in
+        front of the group (:func:`.polygon_ff.in_front`: the pairs of F > 0 and a few more),
+        then the contour integral only for the pairs some ray reaches. In a level of many
+        rooms most of a point's pairs are walls away (sauer_pandora: 2.5% of them lit), and
+        the contours were nine tenths of the time; the rays are a tenth of a contour's cost.
+        T is the same, bit for bit: a pair no ray reaches is 0 either way, and every other
+        pair's F, rays and penumbra are as they were."""
+        front = in_front(x, self.outline)
+        pi, mi = np.nonzero(front[0] > 0)
+        if not pi.size:
+            return s, np.zeros(front[0].shape), pi, mi, np.zeros((0, 3)), (np.zeros(0), np.zeros(0), np.zeros(0),
+                                                                         np.zeros((0, 3))), None
+        o = x.take(pi, axis=0) + self.eps[s:s + self.step].take(pi)[:, None] * nx.take(pi, axis=0)  # (r, 3)
+        n = nx.take(pi, axis=0)
+        seen, weight, lit, dark = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
+                                                    self.yn.take(mi, axis=0))
+        reached = np.zeros(front[0].shape, bool)
+        reached[pi[~dark], mi[~dark]] = True
+        F = group_form_factors(x, nx, self.corners, self.groups, self.em_normals, self.outline,
+                               pairs=reached, front=front)
+        on = F[pi, mi] > 0                               # the pairs the contours' path would cast
+        pi, mi, o, n, seen, weight, lit, dark = (a[on] for a in (pi, mi, o, n, seen, weight, lit, dark))
+        v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
         part = ~lit & ~dark
         return s, F, pi, mi, o, (v, seen, weight, n), part if self.refine > 0 and part.any() else None
 

@@ -20,7 +20,7 @@ from ..util.unique import run_positions
 from .outline import GroupOutline
 
 __all__ = ["polygon_form_factor", "distant_form_factor", "polygon_form_factors", "front_polygon_sum",
-           "group_form_factors", "GROUP_LOOP", "BLOCK_PAIRS"]
+           "group_form_factors", "in_front", "GROUP_LOOP", "BLOCK_PAIRS"]
 
 
 def polygon_form_factor(x, n, poly):
@@ -123,12 +123,15 @@ def polygon_form_factors(points, normals, polys, poly_normals=None):
     return F
 
 
-def group_form_factors(points, normals, polys, groups, poly_normals, outline: GroupOutline | None = None):
+def group_form_factors(points, normals, polys, groups, poly_normals, outline: GroupOutline | None = None,
+                       pairs=None, front=None):
     """(P, G) unoccluded form factors from differential areas at ``points`` (P, 3) with unit
     ``normals`` to groups of front-facing polygons (``polys`` (M, K, 3), ``groups`` (M,) in
     0..G-1, ``poly_normals`` (M, 3)): the sum of :func:`polygon_form_factors` over each group.
     ``outline``: :meth:`GroupOutline.of` the same polygons, when the caller asks for many
-    chunks of points (else computed here).
+    chunks of points (else computed here). ``pairs`` (P, G) bool or None (all): the pairs to
+    compute, 0 elsewhere (each pair's value is the same whichever others are asked for);
+    ``front``: :func:`in_front` of the points, when the caller has it.
 
     A group in front of a point is one surface to Lambert's contour integral: only its boundary
     edges count (shared edges cancel), clipped to the point's horizon and closed along it where
@@ -143,7 +146,9 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
     P, G = len(points), len(o.count)
     F = np.zeros((P, G))
     below = np.zeros((P, G), bool)
-    n_front, count = _in_front(points, o)
+    n_front, count = in_front(points, o) if front is None else front
+    if pairs is not None:
+        n_front = np.where(pairs, n_front, 0)
     # the contour only for the pairs whose point is in front of the group (a lamp's back is in
     # front of the ceiling above it alone)
     front = n_front > 0
@@ -259,7 +264,7 @@ def front_polygon_sum(points, normals, polys, poly_normals, centre=None, size=No
     return out
 
 
-def _in_front(points, o: GroupOutline):
+def in_front(points, o: GroupOutline):
     """(P, G) how many polygons of each group have the point in front of their plane (by more
     than round-off), and (G,) how many polygons each group has. A planar group (one plane for
     all its polygons) is tested once, a curved one polygon by polygon."""

@@ -214,6 +214,16 @@ class AbruptGrid:
         corners = bilinear(c, u[..., None], v[..., None])                            # (c, 4, 3)
         return self.ids[loc], corners, self.cell_mean[h]
 
+    def hot_parts(self, cells):
+        """(elements (c,), areas (c,), luminance arriving (c,)) of the cells ``cells`` (indices
+        into the grid's cells): what :func:`.shine.hot_elements` ranks them by."""
+        loc = self.cell_loc[cells]
+        el = self.ids[loc]
+        rho = self.elements.rho.take(el, axis=0)
+        mean = self.cell_mean[cells]
+        arriving = np.where(rho > 0, mean / np.where(rho > 0, rho, 1.0), 0.0)
+        return el, self.elements.areas[el] / self.n[loc] ** 2, arriving @ LUMA
+
     def _corner_ids(self, loc, i, j):
         """Grid point ids of the corners (0,0), (1,0), (1,1), (0,1) of cells (i, j) of elements
         ``loc`` (local indices)."""

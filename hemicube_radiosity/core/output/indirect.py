@@ -148,13 +148,14 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     opened = open_elements(ctx, elements)
     select |= shadowed_inside(ctx, elements, xv, nv, light_v, select, opened)
     bar = HOT * mean_light(elements, light_v, opened, ctx.cache)
-    hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened)
+    grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar) if select.any() else None
+    # at most a budget of groups shines, the grid's hot cells counted (those left out: read)
+    hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened, grid=grid)
     if not (select.any() or hot.any()):
         return out
-    grid = cells = None
+    cells = None
     x, masks = np.zeros((0, 3)), [select, hot]
-    if select.any():
-        grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar)
+    if grid is not None:
         cells = grid.hot_cells()
         x, masks = np.concatenate([grid.values, grid.cell_mean]), masks + [grid.spiky, grid.hot]
 

@@ -4,7 +4,8 @@
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
 receiver (one hemi-cube each), and the output, per output vertex (the final gather's rays, the
 exact direct light and what shines; less where no emitting face lights the scene,
-:data:`PER_VERTEX_LAMPS`). The form factors' are measured: the hemi-cube draws a sample of its
+:data:`PER_VERTEX_LAMPS`, more for every lamp past the first, :data:`PER_EXTRA_LAMP`, and for
+what shines where lamps other than suns light it, :data:`PER_VERTEX_SHINE`). The form factors' are measured: the hemi-cube draws a sample of its
 receivers first, spread through the scene, and times them (up to 0.3 s or 2% of them:
 :func:`..form_factors.hemicube._probe`); where there are too few to sample (or another method
 makes them) they are counted, per receiver and per polygon drawn in its hemi-cube
@@ -27,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..light.lamps import SunLight
+from ..output.shine import BUDGET
 from .parallel import resolve_workers
 
 __all__ = ["Forecast", "forecast", "SAID"]
@@ -60,6 +63,18 @@ PER_VERTEX = 2.2e-4
 #: real scenes' sun and sky (``bench/real_scenes.py``): from 0.6x (the bunny, few abrupt elements)
 #: to 2x (zdm2, a shadow's edge across most of its rooms) of this.
 PER_VERTEX_LAMPS = 1.3e-4
+#: Seconds per output vertex for each lamp past the first (one worker): its shadow rays at the
+#: vertices, the abrupt elements' grids and cells, the elements' insides. The rates above were
+#: fitted to one sun; sauer_pandora's six soft point lamps cast 42.8 s of rays in its 68 s output
+#: stage on 2 workers for 108,794 vertices (cProfile, an idle machine).
+PER_EXTRA_LAMP = 9e-5
+#: Seconds per output vertex and group that shines (:mod:`..output.shine`: a contour and
+#: shadow rays each), one worker, where lamps other than suns light the scene: their pools of
+#: light shine, as many groups as :data:`..output.shine.BUDGET` allows (sauer_pandora's six
+#: point lamps lit 681; the 64 that shone took 10.0 s on 2 workers for 108,794 vertices), while
+#: a sun and a sky light no area that brightly (the living room and truck town shine none).
+#: Emitting faces' are in :data:`PER_VERTEX`.
+PER_VERTEX_SHINE = 2e-6
 #: The other stages (patches, refinement, direct light at the patches, solve) as a share of these.
 OTHER = 0.15
 #: The time taken over the forecast, as measured (module docstring), the most for ``make demo``'s
@@ -178,8 +193,13 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecas
         per_receiver_said = per_receiver
     ff = len(ids) * per_receiver_said / speed
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
-    rate = PER_VERTEX if ctx.patches.emitting().any() else PER_VERTEX_LAMPS
-    out = output_vertices * rate * rays / 128 / speed
+    emitting = ctx.patches.emitting().any()
+    lamps = list(getattr(ctx, "lights", ()))
+    out = output_vertices * ((PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128
+                             + PER_EXTRA_LAMP * max(len(lamps) - 1, 0))
+    if not emitting and s.gather_rays > 0 and any(not isinstance(lamp, SunLight) for lamp in lamps):
+        out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
+    out /= speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
                     int(output_vertices), workers, float(seen), per_receiver)
 

@@ -306,7 +306,7 @@ def test_curved_groups_seen_from_everywhere_sum_their_faces_exactly():
     F = group_form_factors(pts, nrm, c, g, pn, outline)
     np.testing.assert_allclose(F, want, rtol=1e-9, atol=1e-13)
     # the cone settles most pairs without a face-by-face test
-    n_front, count = polygon_ff._in_front(pts, outline)
+    n_front, count = polygon_ff.in_front(pts, outline)
     assert ((n_front == 0) | (n_front == count[None])).mean() > 0.8
 
 

@@ -47,6 +47,24 @@ def test_forecast_follows_the_output_and_the_workers():
     assert two.workers == 2 and two.seconds < coarse.seconds
 
 
+def test_lamps_other_than_suns_count_what_shines():
+    """A point lamp's pools of light shine (core/output/shine.py), a sun's light does not: the
+    lamp's forecast counts each output vertex a transport per group the budget allows, and
+    each lamp past the first its shadow rays."""
+    from hemicube_radiosity.core.light.lamps import PointLight, SunLight
+    from hemicube_radiosity.core.output.shine import BUDGET
+    from hemicube_radiosity.core.runtime.forecast import PER_EXTRA_LAMP, PER_VERTEX_SHINE
+
+    room = scenes.cornell_box(light_radiance=0.0)          # no emitting face
+    sun = bake(room, BakeSettings(workers=1, **SMALL), lights=[SunLight((0.0, 0.0, -1.0))]).forecast
+    lamp = bake(room, BakeSettings(workers=1, **SMALL), lights=[PointLight((1.0, 1.0, 1.0))]).forecast
+    per_vertex = sun.output / sun.vertices                   # the gather and the direct light
+    assert np.isclose(lamp.output, lamp.vertices * (per_vertex + BUDGET * PER_VERTEX_SHINE))
+    two = bake(room, BakeSettings(workers=1, **SMALL), lights=[PointLight((1.0, 1.0, 1.0)),
+                                                              PointLight((0.5, 1.5, 1.0))]).forecast
+    assert np.isclose(two.output, two.vertices * (per_vertex + BUDGET * PER_VERTEX_SHINE + PER_EXTRA_LAMP))
+
+
 def test_curved_pieces_are_those_of_bent_clusters():
     """A flat cluster is drawn as its outline however it is cut; a curved one face by face."""
     flat = scenes.tessellate(scenes.cornell_box(), 4)
