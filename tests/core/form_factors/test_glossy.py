@@ -50,6 +50,42 @@ def test_a_square_sees_its_image_at_twice_the_height():
                                [1.0, 0.5, 0.0], atol=1e-12)
 
 
+@needs_embree
+def test_a_mirror_cut_fine_casts_its_unknowns_samples_not_its_faces(monkeypatch):
+    """The same square over a mirror of 24 x 24 faces grouped as one unknown (a cluster): the
+    samples are the cluster's (spread over its faces by area), so the rays follow the unknowns,
+    not how finely the mirror was modelled, and the image is the closed form's all the same."""
+    from hemicube_radiosity.core.form_factors import glossy as glossy_mod
+    from hemicube_radiosity.core.mesh.clusters import make_clusters
+
+    h = 0.5
+    sq = _quad([(0, 0, h), (0, 1, h), (1, 1, h), (1, 0, h)], "square", rho=0.5)
+    floor = scenes.tessellate([_quad([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)], "mirror")], 24, triangles=False)[0]
+    p = build_patches([sq, floor], 0.25)
+    glossy = np.flatnonzero(p.owner == 1)
+    assert glossy.size == 576
+    # the square's 16 patches each their own unknown, the mirror's 576 faces one
+    of = np.where(p.owner == 1, 16, np.cumsum(p.owner == 0) - 1)
+    clusters = make_clusters(p, of)
+    cast = []
+    intersect = glossy_mod.embree_scene(p).intersect
+
+    def counting(o, d):
+        cast.append(len(o))
+        return intersect(o, d)
+    monkeypatch.setattr(glossy_mod.embree_scene(p), "intersect", counting)
+    S = specular_transport(p, glossy, 16384, seed=1, clusters=clusters)
+    assert sum(cast) - 1 == 2 * 16384                 # (the first ray commits the scene)
+    g = np.zeros((len(p), 3))
+    g[glossy] = 1.0
+    F = S.matrix(g).to_dense()[:16, :16]              # the square's unknowns
+    a = clusters.areas[:16]
+    seen = (a[:, None] * F).sum() / a.sum()
+    sky = (a * S.sky(g)[:16, 0]).sum() / a.sum()
+    assert seen == pytest.approx(parallel_rectangles(1, 1, 2 * h), rel=0.02)
+    assert seen + sky == pytest.approx(parallel_rectangles(1, 1, h), rel=0.01)
+
+
 def _offset_factor(h, n=60):
     """Area mean over the unit square [0,1]^2 at z = h facing down of the form factor to the
     parallel square [1,2] x [0,1] at z = -h facing up (by superposition of Lambert's
