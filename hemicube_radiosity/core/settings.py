@@ -226,9 +226,9 @@ class BakeSettings:
                                     "the surface itself stays its diffuse part", "light", cli="--no-specular-bounce",
                                     off="Only diffuse reflectance bounces: light off metal and "
                                     "glossy layers is lost (the paper's model)")
-    specular_rays: int = setting(1024, "Specular Rays", "Rays per glossy patch that carry the "
-                                 "light a metal or lacquer mirrors, with its direction (Specular "
-                                 "Bounce; needs Embree)", "light", min=16, soft_max=65536)
+    specular_rays: int = setting(1024, "Specular Rays", "Rays per glossy patch (its faces "
+                                 "share them by area) that carry the light a metal or lacquer "
+                                 "mirrors, with its direction (Specular Bounce; needs Embree)", "light", min=16, soft_max=65536)
     patch_light_points: int = setting(2, "Light Points per Patch", "Direct light for the solve "
                                       "is averaged over n x n points of each patch (1: its centre "
                                       "only, the paper's way; more: a patch next to a bright lamp "
