@@ -197,7 +197,8 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecas
     lamps = list(getattr(ctx, "lights", ()))
     out = output_vertices * ((PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128
                              + PER_EXTRA_LAMP * max(len(lamps) - 1, 0))
-    if not emitting and s.gather_rays > 0 and any(not isinstance(lamp, SunLight) for lamp in lamps):
+    if not emitting and s.gather_rays > 0 and s.uses_elements() \
+            and any(not isinstance(lamp, SunLight) for lamp in lamps):
         out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
     out /= speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
