@@ -21,7 +21,7 @@ from .contact import cut_along_contacts
 from .patches import PatchSet, meshes_key
 from .subdivide import build_patches, keeps_faces_whole
 
-__all__ = ["meshes_key", "mesh_faces", "output_elements", "output_vertices_ahead", "cut_elements",
+__all__ = ["meshes_key", "mesh_faces", "output_elements", "output_vertices_ahead", "elements_cut_ahead", "cut_elements",
            "start_elements"]
 
 
@@ -84,6 +84,15 @@ def output_vertices_ahead(ctx) -> int:
         return len(ctx.patches.verts)
     _refuse_elements(ctx.settings, len(elements))
     return len(elements.verts)
+
+
+def elements_cut_ahead(ctx) -> int:
+    """How many more output elements than pieces the detail size makes (before the cut along
+    contacts; 0 where the pieces are the output): the forecast's count of the elements' own
+    work (:data:`..runtime.forecast.PER_ELEMENT_CUT`)."""
+    if not ctx.settings.uses_elements():
+        return 0
+    return max(len(_uncut_elements(ctx)) - len(ctx.patches), 0)
 
 
 def _cut(meshes, elements, faces=None) -> PatchSet:

@@ -14,10 +14,12 @@ of polygons seen (1.6 ms in the living room, 1.9 ms on the terrain, 3.3 ms in th
 and the bunny, 6.7 ms in zdm2), which the count alone put 0.6-2x off. The output's rates were
 measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
 ``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
-subdivided, and fitted to the real scenes' sun and sky: the output is the stage least sure,
-from 0.8x (the bunny) to 4.5x (zdm2, a shadow's edge across most of its rooms) of its forecast,
-and :meth:`Forecast.describe` says so. The whole bake came out between about 0.6 and 1.8 times
-the forecast, hence the range :data:`SPREAD`. It is said once the patches are known and before the form factors, with the
+subdivided, and fitted to the real scenes' sun and sky, per output vertex and per element the
+detail size cuts beyond the pieces (:data:`PER_ELEMENT_CUT`): the output is the stage least
+sure, from 0.7x (the living room) to 1.75x (zdm2, a shadow's edge across most of its rooms) of
+its forecast, and :meth:`Forecast.describe` says so. Where Embree's rays make the form factors
+(:func:`ray_seconds`) they are counted, not timed: within 0.6-1.1x on the real scenes. The
+whole bake came out between about 0.6 and 1.8 times the forecast, hence the range :data:`SPREAD`. It is said once the patches are known and before the form factors, with the
 output elements cut already (cached: the vertex stage finds them), and kept on the result
 (``BakeResult.forecast``, the report's 'forecast'); a bake whose form factors come from the
 cache (a relight) has nothing long to forecast.
@@ -59,10 +61,18 @@ SEEN_SAMPLE = 64
 #: what shines), where emitting faces light the scene (their transport and what shines are
 #: most of it: the Cornell box, ``bench_dense.py``) ...
 PER_VERTEX = 2.2e-4
-#: ... and where only lamps, suns and the world do (their rays on every core): fitted to the
-#: real scenes' sun and sky (``bench/real_scenes.py``): from 0.6x (the bunny, few abrupt elements)
-#: to 2x (zdm2, a shadow's edge across most of its rooms) of this.
-PER_VERTEX_LAMPS = 1.3e-4
+#: ... and where only lamps, suns and the world do (their rays on every core), plus
+#: :data:`PER_ELEMENT_CUT`: fitted to the real scenes' sun and sky (``bench/real_scenes.py``, an
+#: idle machine, 2 workers): the bunny and the terrain, whose output elements are their own faces
+#: (0.063 and 0.078 ms a vertex), and the grey-white room, whose output is its patches (0.070).
+PER_VERTEX_LAMPS = 9.5e-5
+#: Seconds per output element the detail size cuts beyond the pieces (one worker, lamps only):
+#: the elements' own work (what shines, abrupt grids, covered corners, the contact cut), which
+#: a scanned bunny (its faces are its elements) does not have and indoor scenes of large
+#: walls do: the living room, truck town and zdm2 (12,000, 13,000 and 68,000 such elements)
+#: took 0.7, 1.2 and 1.75 times what this and :data:`PER_VERTEX_LAMPS` say (the vertex rate
+#: alone said a fifth of zdm2's output stage).
+PER_ELEMENT_CUT = 4.9e-4
 #: Seconds per output vertex for each lamp past the first (one worker): its shadow rays at the
 #: vertices, the abrupt elements' grids and cells, the elements' insides. The rates above were
 #: fitted to one sun; sauer_pandora's six soft point lamps cast 42.8 s of rays in its 68 s output
@@ -173,13 +183,14 @@ def curved_pieces(patches, clusters) -> int:
     return int(_bent(patches, of)[of].sum())
 
 
-def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecast:
+def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_cut: int = 0) -> Forecast:
     """The :class:`Forecast` of the bake of ``ctx`` (after its patch stage) with ``receivers``
     hemi-cubes to draw (their ids among ``ctx.unknowns``, or how many: then looked at from all
     of them) and ``output_vertices`` to evaluate. ``per_receiver``: the seconds a hemi-cube
     took on one worker in a sample of this scene's (:func:`..form_factors.hemicube._probe`),
     which the form factors' forecast then is; None: the rates :data:`PER_RECEIVER` and
-    :data:`PER_SEEN`."""
+    :data:`PER_SEEN`. ``elements_cut``: output elements the detail size makes beyond the pieces
+    (:func:`..mesh.elements.elements_cut_ahead`)."""
     s = ctx.settings
     workers = resolve_workers(s.workers)
     speed = 1.0 + PER_EXTRA_WORKER * (workers - 1)
@@ -197,6 +208,8 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None) -> Forecas
     lamps = list(getattr(ctx, "lights", ()))
     out = output_vertices * ((PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128
                              + PER_EXTRA_LAMP * max(len(lamps) - 1, 0))
+    if not emitting:
+        out += PER_ELEMENT_CUT * max(int(elements_cut), 0)
     if not emitting and s.gather_rays > 0 and s.uses_elements() \
             and any(not isinstance(lamp, SunLight) for lamp in lamps):
         out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups

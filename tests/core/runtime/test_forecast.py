@@ -47,14 +47,18 @@ def test_forecast_follows_the_output_and_the_workers():
     assert two.workers == 2 and two.seconds < coarse.seconds
 
 
-def test_lamps_other_than_suns_count_what_shines():
+def test_lamps_other_than_suns_count_what_shines(monkeypatch):
     """A point lamp's pools of light shine (core/output/shine.py), a sun's light does not: the
     lamp's forecast counts each output vertex a transport per group the budget allows, and
     each lamp past the first its shadow rays."""
     from hemicube_radiosity.core.light.lamps import PointLight, SunLight
     from hemicube_radiosity.core.output.shine import BUDGET
+    from hemicube_radiosity.core.runtime import forecast as forecast_module
     from hemicube_radiosity.core.runtime.forecast import PER_EXTRA_LAMP, PER_VERTEX_SHINE
 
+    # the elements' own work apart (the lamp refines other patches than the sun: another count
+    # of elements cut; test_the_elements_cut_count_on_their_own)
+    monkeypatch.setattr(forecast_module, "PER_ELEMENT_CUT", 0.0)
     room = scenes.cornell_box(light_radiance=0.0)          # no emitting face
     sun = bake(room, BakeSettings(workers=1, **SMALL), lights=[SunLight((0.0, 0.0, -1.0))]).forecast
     lamp = bake(room, BakeSettings(workers=1, **SMALL), lights=[PointLight((1.0, 1.0, 1.0))]).forecast
@@ -63,6 +67,30 @@ def test_lamps_other_than_suns_count_what_shines():
     two = bake(room, BakeSettings(workers=1, **SMALL), lights=[PointLight((1.0, 1.0, 1.0)),
                                                               PointLight((0.5, 1.5, 1.0))]).forecast
     assert np.isclose(two.output, two.vertices * (per_vertex + BUDGET * PER_VERTEX_SHINE + PER_EXTRA_LAMP))
+
+
+def test_the_elements_cut_count_on_their_own(monkeypatch):
+    """Under lamps, each output element the detail size makes beyond the pieces adds its own
+    work to the output's forecast (what shines, abrupt grids, covered corners, the contact cut:
+    indoor scenes of large walls spent 3-7 times a bunny's time per vertex); the pieces' own
+    faces as the output add nothing."""
+    from hemicube_radiosity.core.form_factors import stage
+    from hemicube_radiosity.core.light.lamps import SunLight
+    from hemicube_radiosity.core.runtime import forecast as forecast_module
+    from hemicube_radiosity.core.runtime.forecast import PER_ELEMENT_CUT
+
+    cut = []
+    counted = stage.elements_cut_ahead
+    monkeypatch.setattr(stage, "elements_cut_ahead", lambda ctx: cut.append(counted(ctx)) or cut[-1])
+    room = scenes.cornell_box(light_radiance=0.0)
+    sun = [SunLight((0.0, 0.0, -1.0))]
+    with_cut = bake(room, BakeSettings(workers=1, **SMALL), lights=sun).forecast
+    monkeypatch.setattr(forecast_module, "PER_ELEMENT_CUT", 0.0)
+    without = bake(room, BakeSettings(workers=1, **SMALL), lights=sun).forecast
+    assert cut[0] == cut[1] > 0
+    assert np.isclose(with_cut.output - without.output, PER_ELEMENT_CUT * cut[0])
+    whole = bake(room, BakeSettings(workers=1, **{**SMALL, "element_size": None}), lights=sun)
+    assert cut[2] == 0 and whole.forecast.vertices == len(whole.patches.verts)
 
 
 def test_curved_pieces_are_those_of_bent_clusters():
