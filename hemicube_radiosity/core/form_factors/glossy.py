@@ -140,18 +140,13 @@ def specular_transport(patches, glossy, rays=1024, *, seed=0, clusters=None, wor
     areas = np.asarray(patches.areas if clusters is None else clusters.areas, dtype=np.float64)
     eps = ray_offsets(patches)
     corners = patches.corners()
-    # the glossy patches by unknown: each group its samples, spread over its patches by area
-    unit, first, inv = unique_ints(glossy if column is None else column[glossy], return_index=True,
-                                   return_inverse=True)
-    order = np.argsort(inv.reshape(-1), kind="stable")
-    members = glossy[order]
-    bounds = np.concatenate([[0], np.cumsum(np.bincount(inv.reshape(-1), minlength=unit.size))])
+    members, bounds = _by_unknown(glossy, column)        # each group its samples, by area
     per = max(1, SAMPLES_PER_BATCH // k)
     angles = np.random.default_rng([seed, 0x9105]).uniform(0, 2 * np.pi, len(patches))
 
     def cast(batch):
         # a group's stream is its first glossy patch's (one patch alone: as it always was)
-        rngs = [np.random.default_rng([seed, 0x9105, int(glossy[first[g]])]) for g in batch]
+        rngs = [np.random.default_rng([seed, 0x9105, int(members[bounds[g]])]) for g in batch]
         u = np.stack([stratified_unit_square(r, 1, k)[0] for r in rngs])          # (B,k,2) points
         v = np.stack([stratified_unit_square(r, 1, k)[0][r.permutation(k)] for r in rngs])
         j, x, group_area = _sample_points(patches, corners, members, bounds, batch, u)   # (B,k), (B,k,3)
@@ -187,7 +182,8 @@ def specular_transport(patches, glossy, rays=1024, *, seed=0, clusters=None, wor
     parts, skies = [], []
     if glossy.size:
         scene.intersect(patches.centers[glossy[:1]], patches.normals[glossy[:1]])   # commit before threads
-    batches = (np.arange(s, min(s + per, unit.size)) for s in range(0, unit.size, per))
+    groups = len(bounds) - 1
+    batches = (np.arange(s, min(s + per, groups)) for s in range(0, groups, per))
     with closing(ordered_map(cast, batches, resolve_workers(workers))) as results:
         for part, sky in results:
             if cancelled is not None and cancelled():
@@ -198,6 +194,16 @@ def specular_transport(patches, glossy, rays=1024, *, seed=0, clusters=None, wor
     rows, cols, via, wt = _merge(parts, n, len(patches))
     srows, _, svia, swt = _merge(skies, n, len(patches))
     return Specular(rows, cols, via, wt, srows, svia, swt, n, k, glossy)
+
+
+def _by_unknown(glossy, column):
+    """(members (G,), bounds (U + 1,)): the glossy patches ``glossy`` grouped by their unknown
+    (``column`` (N,), or each patch its own where None), in their order within each group:
+    group g is ``members[bounds[g]:bounds[g + 1]]``, its first patch the first it had in
+    ``glossy``."""
+    inv = unique_ints(glossy if column is None else column[glossy], return_inverse=True)[1].reshape(-1)
+    bounds = np.concatenate([[0], np.cumsum(np.bincount(inv))]).astype(np.int64)
+    return glossy[np.argsort(inv, kind="stable")], bounds
 
 
 def _sample_points(patches, corners, members, bounds, batch, u):
