@@ -47,9 +47,7 @@ def default_surface_rho() -> float:
     as a Cycles diffuse-colour bake reads it, tests/blender/test_cycles_parity.py), earlier
     versions' a grey 0.8 Diffuse BSDF. Read as 0.8, a scanned bunny with no material baked
     3.7% brighter than Cycles."""
-    import bpy
-
-    return DEFAULT_SURFACE_RHO.get(bpy.app.version[:2], DEFAULT_SURFACE_RHO[None])
+    return _this_blenders(DEFAULT_SURFACE_RHO)
 
 
 def default_surface_glossy() -> float:
@@ -58,9 +56,14 @@ def default_surface_glossy() -> float:
     solve bounces as a material's (:mod:`..core.form_factors.glossy`); earlier versions' Diffuse
     BSDF none. Left out, a level with no material (godot_zdm2) lost it at every bounce and
     baked 4.1% darker than Cycles."""
+    return _this_blenders(DEFAULT_SURFACE_GLOSSY)
+
+
+def _this_blenders(table) -> float:
+    """``table``'s value for the running Blender's (major, minor), or its ``None`` entry."""
     import bpy
 
-    return DEFAULT_SURFACE_GLOSSY.get(bpy.app.version[:2], DEFAULT_SURFACE_GLOSSY[None])
+    return table.get(bpy.app.version[:2], table[None])
 
 
 #: Cycles' default surface's diffuse albedo by Blender version (major, minor); None: any other.
