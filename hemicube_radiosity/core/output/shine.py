@@ -87,12 +87,10 @@ def hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=BUDGET
     ids = np.flatnonzero(hot)
     cells = np.flatnonzero(grid.hot) if grid is not None else np.zeros(0, np.int64)
     groups = _shine_groups(ctx, elements, ids) if ids.size else np.zeros(0, np.int64)
-    after = int(groups.max()) + 1 if groups.size else 0
     a, Y = elements.areas[ids], arriving[ids] @ LUMA
     if cells.size:
         parent, cell_a, cell_Y = grid.hot_parts(cells)
-        first, inv = unique_ints(parent, return_inverse=True)
-        groups = np.concatenate([groups, after + _shine_groups(ctx, elements, first, 0.5)[inv.reshape(-1)]])
+        groups = _with_cell_groups(ctx, elements, groups, parent)
         a, Y = np.concatenate([a, cell_a]), np.concatenate([Y, cell_Y])
     if groups.size and groups.max() >= budget:
         mean = np.bincount(groups, weights=a * Y) / np.maximum(np.bincount(groups, weights=a), 1e-300)
@@ -123,6 +121,17 @@ def _shine_groups(ctx, elements, ids, scale=1.0) -> np.ndarray:
     return cached(ctx.cache, cache_key(geometry_key(elements) + ids.tobytes(), ("shine-groups", size)), groups)
 
 
+def _with_cell_groups(ctx, elements, groups, parent) -> np.ndarray:
+    """``groups`` (M,) of shining elements followed by the groups of cells of the elements
+    ``parent`` (c,), numbered after them: the cells of one element group by that element, in
+    half-patch cells (a lamp's glow seen beside the lamp and hidden behind it across the lamp
+    must not share one group's visibility: a patch-size group made the walls of a 1 m room with
+    a lamp 2 mm under its ceiling 0.5% too bright)."""
+    first, inv = unique_ints(parent, return_inverse=True)
+    after = int(groups.max()) + 1 if groups.size else 0
+    return np.concatenate([groups, after + _shine_groups(ctx, elements, first, 0.5)[inv.reshape(-1)]])
+
+
 def shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     """(V, 3) light arriving at the points ``xv`` from elements ``ids`` shining ``radiance``
     (M, 3) toward their front, with shadows: grouped by object and patch-size cell so the
@@ -140,12 +149,7 @@ def shine(ctx, elements, ids, radiance, xv, nv, cells=None):
     verts, polys = elements.verts, elements.polys[ids]
     if cells is not None and len(cells[0]):
         parent, corners, cell_light = cells
-        first, inv = unique_ints(parent, return_inverse=True)
-        after = int(groups.max()) + 1 if groups.size else 0
-        # half-patch cells: a lamp's glow seen beside the lamp and hidden behind it across the
-        # lamp must not share one group's visibility (a patch-size group made the walls of a
-        # 1 m room with a lamp 2 mm under its ceiling 0.5% too bright)
-        groups = np.concatenate([groups, after + _shine_groups(ctx, elements, first, 0.5)[inv.reshape(-1)]])
+        groups = _with_cell_groups(ctx, elements, groups, parent)
         V, c = len(verts), len(parent)
         verts = np.concatenate([verts, corners.reshape(-1, 3)])
         polys = np.concatenate([polys, V + np.arange(4 * c).reshape(c, 4)])
