@@ -248,18 +248,32 @@ class _Transport:
         if self.scene is None:
             return s, F, None, None, None, None, None
         pi, mi = np.nonzero(F > 0)
+        if not pi.size:
+            return self._none_cast(s, F)
+        return self._passed(s, F, pi, mi, *self._first_rays(s, x, nx, pi, mi))
+
+    def _first_rays(self, s, x, nx, pi, mi):
+        """(o (r, 3), n (r, 3), seen, weight, lit, dark): the first ``samples`` rays of the pairs
+        (pi, mi) (points of the chunk at ``s``, emitter units), :func:`_visible_fraction`'s."""
         # rows by ``take``: indexing a 2-D array with an index array is several times slower
         o = x.take(pi, axis=0) + self.eps[s:s + self.step].take(pi)[:, None] * nx.take(pi, axis=0)  # (r, 3)
-        if not pi.size:
-            return s, F, pi, mi, o, (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3))), None
         n = nx.take(pi, axis=0)
-        seen, weight, lit, dark = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
-                                                    self.yn.take(mi, axis=0))
+        return (o, n) + tuple(_visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
+                                                self.yn.take(mi, axis=0)))
+
+    def _passed(self, s, F, pi, mi, o, n, seen, weight, lit, dark):
+        """:meth:`first_pass`'s result for the pairs (pi, mi) and their first rays."""
         # exactly 1 where every ray passes and 0 where none does (a ratio of sums rounds)
         v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
         # penumbra: where some rays pass and some do not, cast ``refine`` times more
         part = ~lit & ~dark
         return s, F, pi, mi, o, (v, seen, weight, n), part if self.refine > 0 and part.any() else None
+
+    @staticmethod
+    def _none_cast(s, F):
+        """:meth:`first_pass`'s result where no pair has a ray to cast."""
+        z = np.zeros(0, np.int64)
+        return s, F, z, z, np.zeros((0, 3)), (np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 3))), None
 
     def _rays_first(self, s, x, nx):
         """:meth:`first_pass` for groups: the first rays first, for every pair whose point is in
@@ -272,21 +286,14 @@ class _Transport:
         front = in_front(x, self.outline)
         pi, mi = np.nonzero(front[0] > 0)
         if not pi.size:
-            return s, np.zeros(front[0].shape), pi, mi, np.zeros((0, 3)), (np.zeros(0), np.zeros(0), np.zeros(0),
-                                                                         np.zeros((0, 3))), None
-        o = x.take(pi, axis=0) + self.eps[s:s + self.step].take(pi)[:, None] * nx.take(pi, axis=0)  # (r, 3)
-        n = nx.take(pi, axis=0)
-        seen, weight, lit, dark = _visible_fraction(self.scene, o, self.ys.take(mi, axis=0), n,
-                                                    self.yn.take(mi, axis=0))
+            return self._none_cast(s, np.zeros(front[0].shape))
+        o, n, seen, weight, lit, dark = self._first_rays(s, x, nx, pi, mi)
         reached = np.zeros(front[0].shape, bool)
         reached[pi[~dark], mi[~dark]] = True
         F = group_form_factors(x, nx, self.corners, self.groups, self.em_normals, self.outline,
                                pairs=reached, front=front)
         on = F[pi, mi] > 0                               # the pairs the contours' path would cast
-        pi, mi, o, n, seen, weight, lit, dark = (a[on] for a in (pi, mi, o, n, seen, weight, lit, dark))
-        v = np.where(lit, 1.0, np.where(dark, 0.0, _share(seen, weight)))
-        part = ~lit & ~dark
-        return s, F, pi, mi, o, (v, seen, weight, n), part if self.refine > 0 and part.any() else None
+        return self._passed(s, F, *(a[on] for a in (pi, mi, o, n, seen, weight, lit, dark)))
 
     def chunk(self, s):
         """(s, T rows (p, units) float32) of the chunk starting at point ``s``: its
