@@ -75,7 +75,7 @@ def _gs_blocks(F, rho_max, size, omega):
     return blocks
 
 
-def _sor_sweep(blocks, rhoT, ST, BT, B32, w):
+def _sor_sweep(blocks, rhoT, ST, BT, B32, w, pockets=None):
     """One over-relaxed block Gauss-Seidel sweep, in place; returns the largest change of a value.
 
     ``blocks`` from :func:`_gs_blocks`; rhoT, ST (bands, N) reflectivity and source, band-major
@@ -86,7 +86,10 @@ def _sor_sweep(blocks, rhoT, ST, BT, B32, w):
 
     Every value changes once a sweep, so the largest change is taken once, from a copy of BT
     before it (the same differences as block by block), and the gathers' columns are intp
-    views (:func:`column_indices`), read without take's bounds check."""
+    views (:func:`column_indices`), read without take's bounds check.
+
+    ``pockets`` (:class:`.pockets.Pockets`): their rows are then solved exactly from the rest,
+    over-relaxed by w as the rows (block SOR: each step lowers the error's energy)."""
     before = BT.copy()
     for b0, b1, cols, vals, starts, nonempty in blocks:
         if starts.size == b1 - b0:            # every row sees something: the sums are the rows
@@ -100,6 +103,15 @@ def _sor_sweep(blocks, rhoT, ST, BT, B32, w):
         BT[:, b0:b1] = new
         if B32 is not BT:
             B32[:, b0:b1] = new
+    if pockets is not None:
+        P = pockets.rows
+        new = pockets.solve_block(rhoT, ST, BT)
+        if w != 1.0:
+            old = BT[:, P]
+            new = old + w * (new - old)
+        BT[:, P] = new
+        if B32 is not BT:
+            B32[:, P] = new
     return float(np.abs(BT - before).max(initial=0.0))
 
 
@@ -151,7 +163,7 @@ class _Relaxation:
                 self._set(w)
 
 
-def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, omega=None):
+def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, omega=None, pockets=None):
     """Gauss-Seidel sweeps over blocks of rows, over-relaxed (SOR): each block is updated at
     once from the newest values of every block before it (block Gauss-Seidel, a Jacobi step
     inside a block). With ``block=1`` this is the paper's row-by-row Gauss-Seidel; larger blocks
@@ -169,7 +181,11 @@ def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, 
     (``|r| <= ((omega - 1) / omega + gamma) max|change|``, times ``kappa`` for the error:
     :func:`.residual.amplification`, None: ``1 / (1 - gamma)``), and the exact residual (one product
     with F) confirms it before stopping; if the float32 copy of B that the sweeps read limits the
-    residual, the sweeps go on in float64. Returns B, sweeps, converged, omega."""
+    residual, the sweeps go on in float64.
+
+    ``pockets`` (:class:`.pockets.Pockets`): rows that trap light, solved exactly at the end of
+    every sweep; gamma and kappa are then those of the block splitting (``G = D^-1 N``), and
+    the bound is ``kappa max|D^-1 r|``. Returns B, sweeps, converged, omega."""
     kappa = 1.0 / (1.0 - gamma) if kappa is None else kappa
     relax = _Relaxation(F, rho.max(axis=1), block or max(1, min(256, F.shape[0] // 32)), omega)
     BT = np.ascontiguousarray(S.T).copy()   # (bands, N): contiguous gathers per band
@@ -179,7 +195,7 @@ def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, 
     it, converged = 0, False
     for it in range(1, max_it + 1):
         w = relax.w
-        change = _sor_sweep(relax.blocks, rhoT, ST, BT, B32, w)
+        change = _sor_sweep(relax.blocks, rhoT, ST, BT, B32, w, pockets)
         ticker.tick(it, max_it)
         scale = np.abs(BT).max()
         if scale == 0:
@@ -187,7 +203,7 @@ def gauss_seidel(F, rho, S, tol, max_it, ticker, gamma, kappa=None, block=None, 
             break
         cheap = ((w - 1.0) / w + gamma) * change * kappa / scale
         if cheap * calib <= tol:
-            Bc, _, exact = better_of_step(F, rho, S, BT.T, kappa)
+            Bc, _, exact = better_of_step(F, rho, S, BT.T, kappa, pockets)
             if exact <= tol:
                 BT = np.ascontiguousarray(Bc.T)
                 converged = True

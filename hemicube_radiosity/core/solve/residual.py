@@ -58,23 +58,30 @@ def gain(F: CSR, rho) -> float:
 POWERS = 8
 
 
-def amplification(F: CSR, rho, powers=POWERS) -> float:
+def amplification(F: CSR, rho, powers=POWERS, pockets=None, slack=0.0) -> float:
     """kappa >= ``||(I - rho F)^-1||_inf``: how much a residual can grow into the error. From
     ``(I - T)^-1 = (I + T + ... + T^(k-1)) (I - T^k)^-1`` and ``g_k = ||T^k||_inf = max(T^k 1)``
     (T = rho F >= 0, each band's below the one of its patches' largest band): the least
     ``(1 + g_1 + ... + g_(k-1)) / (1 - g_k)`` over k <= ``powers`` (k = 1: 1 / (1 - gamma)).
     A few patches of rho near 1 (metal, whose light the bake spreads as diffuse) among duller
     ones make gamma near 1 while ``T^2`` is not: in a room of rho 0.7 with a block of 0.999,
-    1 / (1 - gamma) is 1000, kappa 4.6 (k = 8), 1 / (1 - spectral radius) 3.6. ``powers``
-    products with F."""
+    1 / (1 - gamma) is 1000, kappa 4.6 (k = 8), 1 / (1 - spectral radius) 3.6. At most ``powers``
+    products with F (fewer once ``1 + g_1 + ...`` alone reaches the least so far over
+    ``1 + slack``: no later k can do better by more than that).
+
+    With ``pockets`` (:class:`.pockets.Pockets`) the same for ``G = D^-1 N`` in place of T
+    (the block splitting of :mod:`.pockets`): then kappa bounds ``||(I - G)^-1||_inf``, and
+    the error is at most kappa times ``max|D^-1 r|``."""
     rm = np.asarray(rho, dtype=np.float64).max(axis=1, initial=0.0)
     v, total, best = np.ones(len(rm)), 1.0, np.inf
     for _ in range(powers):
-        v = rm * F.matvec(v)
+        v = rm * matvec(F, v) if pockets is None else pockets.gain_product(F, rm, v)
         g = float(v.max(initial=0.0))
         if g < 1.0:
             best = min(best, total / (1.0 - g))
         total += g
+        if total * (1.0 + slack) >= best:
+            break
     return float(best)
 
 
@@ -112,18 +119,27 @@ def residual_vector(F, rho, S, B):
     return S + rho * matvec(F, B) - B
 
 
-def better_of_step(F, rho, S, B, kappa):
+def better_of_step(F, rho, S, B, kappa, pockets=None):
     """The better of B and one Jacobi step from it, ``B + r``, by the error bound; returns
     (B, its residual vector, its bound). The step's residual ``rho F r`` has lost the parts
     of r that ``(I - rho F)^-1`` barely amplifies and the bound counts as if amplified by
     ``kappa`` (:func:`amplification`): after over-relaxed sweeps that makes the bound ~10-100x
-    tighter, and it is close to the true error. Two products with F."""
+    tighter, and it is close to the true error. Two products with F.
+
+    With ``pockets`` the step is a block-Jacobi one, ``B + D^-1 r``, and the bounds are
+    ``kappa max|D^-1 r|`` (kappa then of G: :mod:`.pockets`)."""
     r = residual_vector(F, rho, S, B)
-    Bj = B + r
-    rj = rho * matvec(F, r)
+    if pockets is None:
+        d, Bj = r, B + r
+        rj = dj = rho * matvec(F, r)
+    else:
+        d = pockets.precondition(r)
+        Bj = B + d
+        rj = r - d + rho * matvec(F, d)
+        dj = pockets.precondition(rj)
     s0, sj = np.abs(B).max(), np.abs(Bj).max()
-    b0 = np.abs(r).max() * kappa / s0 if s0 > 0 else (0.0 if not r.any() else np.inf)
-    bj = np.abs(rj).max() * kappa / sj if sj > 0 else (0.0 if not rj.any() else np.inf)
+    b0 = np.abs(d).max() * kappa / s0 if s0 > 0 else (0.0 if not d.any() else np.inf)
+    bj = np.abs(dj).max() * kappa / sj if sj > 0 else (0.0 if not dj.any() else np.inf)
     return (Bj, rj, bj) if bj <= b0 else (B, r, b0)
 
 
