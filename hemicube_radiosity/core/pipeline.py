@@ -172,6 +172,7 @@ class BakeContext:
     direct_source: np.ndarray | None = None  # (K, 3) exact path: direct light each unknown reflects
     given: bool = False                      # patches handed in ready: used as they are (not refined)
     sky_patch: np.ndarray | None = None      # (N, 3) the world's part of direct_patch (exact path)
+    unbounded_patch: np.ndarray | None = None  # (N, 3) the suns' and maps' part of direct_patch (exact path)
     source: np.ndarray | None = None         # (N, 3) the solve's source term
     glossy: np.ndarray | None = None         # (N, 3) glossy albedo of the patches that mirror (form factors)
     specular: object = None                  # form_factors.glossy.Specular: what they mirror, or None

@@ -20,7 +20,7 @@ from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker
-from .lamps import AreaLight, PointLight, SpotLight, SunLight, light_irradiance
+from .lamps import UNBOUNDED, AreaLight, PointLight, SpotLight, SunLight, light_irradiance
 
 __all__ = ["lamp_irradiance", "shadow_key", "SCALE"]
 
@@ -45,7 +45,7 @@ def _shape_key(light) -> str:
 
 def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples=16, seed=0, points=None,
                     normals=None, eps=None, facing=None, progress=None, cancelled=None, workers=1,
-                    index=0) -> np.ndarray:
+                    index=0, unbounded=None) -> np.ndarray:
     """Incident irradiance (P, 3) W/m^2 from ``lights``, as :func:`.lamps.direct_irradiance`
     with the same arguments gives it (at the patch centres, or at ``points`` (P, 3) with unit
     ``normals`` (P, 3); ``eps`` (P,) the rays' start offsets; ``facing`` (P, 3) or None;
@@ -53,7 +53,8 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
     in ``cache`` (None: nothing kept); ``index``: the first lamp's place among the bake's lamps
     (its random stream: one lamp of a list lit apart draws what it draws in the list). Equal to
     ``direct_irradiance`` up to rounding: each lamp's light is its unit light times its
-    strength."""
+    strength. ``unbounded`` (P, 3) or None: the suns' and environment maps' part of the result
+    is added to it as well (what the energy balance counts as delivered by them)."""
     lights = list(lights)
     x = patches.centers if points is None else np.asarray(points, np.float64)
     n = patches.normals if points is None else np.asarray(normals, np.float64)
@@ -80,6 +81,9 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
             unit = replace(light, **{scale: 1.0}, color=(1.0, 1.0, 1.0))
             key = cache_key(base, ("lamp", _shape_key(light), i, int(samples), seed, shadows))
             E = cached(cache, key, lambda: light_irradiance(patches, unit, _index=i, **kw)) * getattr(light, scale)
-        H += (E if E.ndim == 2 else E[:, None]) * np.asarray(light.color, np.float64)[None, :]
+        E = (E if E.ndim == 2 else E[:, None]) * np.asarray(light.color, np.float64)[None, :]
+        H += E
+        if unbounded is not None and isinstance(light, UNBOUNDED):
+            unbounded += E
     ticker.tick(len(lights), len(lights), force=True)
     return H

@@ -23,6 +23,7 @@ from .emitters import emitter_transport
 from ..form_factors.glossy import mirrored_source
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
+from .lamps import UNBOUNDED
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
@@ -250,7 +251,7 @@ class DirectLight:
         return self._scene
 
     def at(self, points, normals, where: str, samples=None, eps=None, facing=None, split=1,
-           part=None, sky=None) -> np.ndarray:
+           part=None, sky=None, unbounded=None) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
@@ -265,7 +266,8 @@ class DirectLight:
         (:func:`.rays.sky_fraction`). ``sky``: None, or a function that returns the world's
         share (P,) of each point's hemisphere, found by other rays (the final gather's,
         :func:`..output.indirect.gathered_sky`): no sky rays are cast, and it is asked for
-        last (the gather casts while the rest is found)."""
+        last (the gather casts while the rest is found). ``unbounded`` (P, 3) or None: the
+        suns' and environment maps' part (radiance, before the clamp at 0) is added to it too."""
         D = np.zeros((len(points), 3))
         if self.emitters.size:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
@@ -274,11 +276,14 @@ class DirectLight:
         if self.world is not None and sky is None:
             D += self.world_at(points, normals, where, eps=eps, facing=facing, split=split, part=part)
         if self.lights:
+            far = None if unbounded is None else np.zeros((len(points), 3))
             D += lamp_irradiance(self.patches, self.lights, self.cache, points=points, normals=normals,
                                  eps=self.offsets(points, normals) if eps is None else eps,
                                  cancelled=self.cancelled, facing=facing,
                                  samples=min(samples or self.light_samples, self.light_samples),
-                                 seed=self.light_seed, workers=self.workers) / np.pi
+                                 seed=self.light_seed, workers=self.workers, unbounded=far) / np.pi
+            if far is not None:
+                unbounded += far / np.pi
         if self.world is not None and sky is not None:
             D += np.asarray(sky(), dtype=np.float64)[:, None] * self.world[None, :]
         # an environment map's variation about its mean is signed (its estimate, near a point
@@ -456,16 +461,21 @@ def direct_stage(ctx) -> None:
         grouped = ctx.clusters.sizes[ctx.clusters.of] > 1
         stand = stand_ins(p, ctx.clusters, STAND_INS * s.patch_light_points ** 2)
     seen, memo = _seen_weight(ctx), {}
+    far = any(isinstance(li, UNBOUNDED) for li in ctx.lights)
 
-    def at(x, n, where):                      # the same points twice: light them once
+    def at(x, n, where, part=0):              # the same points twice: light them once
         key = (where, array_key(x))
         if key not in memo:
-            memo[key] = ctx.direct.at(x, n, where)
-        return memo[key]
+            U = np.zeros((len(x), 3)) if far else None
+            memo[key] = (ctx.direct.at(x, n, where, unbounded=U), U)
+        return memo[key][part]
     # the plain area mean is what lands on the patches (the energy report, the irradiance);
     # the solve takes the mean over the part of each patch the scene sees
     ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped, stand=stand)
     ctx.irradiance = np.pi * ctx.direct_patch
+    # the suns' and maps' share of it, from the same rays (the energy report counts it as emitted)
+    ctx.unbounded_patch = patch_average(p, s.patch_light_points, lambda x, n, w: at(x, n, w, 1), grouped,
+                                        stand=stand) if far else None
     seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen,
                                                                 stand=stand)
     ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch, stand)

@@ -15,7 +15,6 @@ from ..form_factors.stage import receivers_needed
 from ..runtime.notes import warning
 from ..light.lamp_cache import lamp_irradiance
 from ..light.lamps import UNBOUNDED, SpotLight
-from ..light.points import patch_average
 from .residual import energy_balance
 from .solvers import solve
 from ..util.sparse import CSR
@@ -123,22 +122,20 @@ def lamp_power(light) -> np.ndarray:
 
 
 def _suns_at(ctx):
-    """(N, 3) radiance arriving from the suns alone at the patches, sampled exactly as the
-    direct light was (same points, seed and ray streams: the other lamps are kept in the list,
-    dark and without shadow rays), or None without a sun."""
+    """(N, 3) radiance arriving from the suns (and environment maps) alone at the patches, or
+    None without one: on the exact path the direct light's own share of them
+    (``ctx.unbounded_patch``, from the same rays); on the 'hemicube' path sampled exactly as
+    the direct light was (same seed and ray streams: the other lamps are kept in the list, dark
+    and without shadow rays)."""
     s, p = ctx.settings, ctx.patches
     if not any(isinstance(li, UNBOUNDED) for li in ctx.lights):
         return None
+    if ctx.direct is not None:
+        return ctx.unbounded_patch
     only = [li if isinstance(li, UNBOUNDED) else replace(li, power_w=0.0, cast_shadows=False)
             for li in ctx.lights]
-
-    def at(points=None, normals=None, where=""):
-        return lamp_irradiance(p, only, ctx.cache, points=points, normals=normals, samples=s.light_samples,
-                               seed=s.light_seed, cancelled=ctx.cancelled, workers=s.workers) / np.pi
-    if ctx.direct is None:
-        return at()
-    grouped = None if ctx.clusters is None else ctx.clusters.sizes[ctx.clusters.of] > 1
-    return patch_average(p, s.patch_light_points, at, grouped)
+    return lamp_irradiance(p, only, ctx.cache, samples=s.light_samples, seed=s.light_seed,
+                           cancelled=ctx.cancelled, workers=s.workers) / np.pi
 
 
 def _world_and_direct(ctx, a, D, computed):

@@ -325,9 +325,9 @@ def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
     counted = []
     at = DirectLight.at
 
-    def counting(self, x, n, where=""):
+    def counting(self, x, n, where="", **kw):
         counted.append((where, len(x)))
-        return at(self, x, n, where)
+        return at(self, x, n, where, **kw)
     monkeypatch.setattr(DirectLight, "at", counting)
     r = bake(floor + [lamp], BakeSettings(patch_size=0.25))
     c, p = r.clusters, r.patches
