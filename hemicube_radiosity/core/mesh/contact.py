@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .contact_pieces import assemble_pieces
 from .contact_lines import face_pieces, pieces_segments, segment_hits, split_polygon
-from .patches import PatchSet, poly_geometry
+from .patches import PatchSet
 from ..util.unique import run_positions, unique_ints, unique_rows
 from ..rays import ray_offsets
 
@@ -183,9 +184,9 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     (d_all, len_all, m_all), (hs, he, ht) = segment_hits(
         corners, order, start, gi_all, seg_all, faces.normals[ci_all], elements.normals[order[start[gi_all]]],
         np.sqrt(elements.areas), tol_rel, eps)
-    for s, e, tl in zip(hs.tolist(), he.tolist(), ht.tolist()):
+    for h, (s, e, tl) in enumerate(zip(hs.tolist(), he.tolist(), ht.tolist())):
         a, d, length = seg_all[s, 0], d_all[s], len_all[s]
-        line = (int(ci_all[s]), a, m_all[s], tl, d, length)
+        line = h                                  # the hit's line: (cutter, a, m, tl, d, length)
         todo = pieces.get(e) or [(_polygon(elements, e), ())]
         out = []
         for poly, tags in todo:
@@ -202,7 +203,8 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
         pieces[e] = out
     if not pieces:
         return elements
-    return _assemble(elements, pieces, eps)
+    return assemble_pieces(elements, pieces, (ci_all[hs], seg_all[hs, 0], m_all[hs], ht, d_all[hs], len_all[hs]),
+                           eps)
 
 
 def _direction_keys(normals) -> np.ndarray:
@@ -319,90 +321,3 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
 def _polygon(elements, e):
     p = elements.polys[e]
     return elements.verts[p[p >= 0]]
-
-
-def _assemble(elements, pieces, eps):
-    """The PatchSet of ``elements`` with each element of ``pieces`` replaced by its pieces: a
-    corner on a cut line (within its tolerance, inside the segment's reach) is a vertex of its
-    side only (and of its plane: a cut across a box's edge leaves its two faces apart, as the
-    box's own corners are); other corners keep the element's vertices."""
-    V = len(elements.verts)
-    verts = [elements.verts]
-    index = {}
-    polys, parent = [], []
-    q = max(eps, 1e-300)
-    for e in range(len(elements)):
-        if e not in pieces:
-            polys.append(elements.polys[e])
-            parent.append(e)
-            continue
-        src = elements.polys[e][elements.polys[e] >= 0]
-        src_pts = elements.verts[src]
-        for poly, tags in pieces[e]:
-            ids = []
-            for x in poly:
-                on = tuple(sorted((ln[0], side) for ln, side in tags if _on_segment(x, ln)))
-                same = np.flatnonzero(np.all(np.abs(src_pts - x) <= q, axis=1))
-                if not on and same.size:
-                    ids.append(int(src[same[0]]))
-                    continue
-                # one vertex a place, side and plane: faces meeting at an angle (a box's sides,
-                # whose corners the mesh keeps apart) keep the cut's points apart too
-                k = (int(elements.owner[e]),) + tuple(np.round(x / q).astype(np.int64)) + on \
-                    + tuple(np.round(elements.normals[e] * 1e3).astype(np.int64))
-                if k not in index:
-                    index[k] = V + len(index)
-                    verts.append(x[None])
-                ids.append(index[k])
-            ids = _dedupe(ids)
-            if len(ids) < 3:
-                continue
-            for tri in _fan(ids):
-                polys.append(np.array(tri + [-1] * (4 - len(tri)), np.int64))
-                parent.append(e)
-    verts = np.concatenate(verts)
-    polys = np.array(polys, np.int64)
-    parent = np.array(parent, np.int64)
-    centers, _, areas = poly_geometry(verts, polys)
-    keep = areas > 0
-    polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]
-    used = np.unique(polys[polys >= 0])
-    remap = np.full(len(verts), -1, np.int64)
-    remap[used] = np.arange(used.size)
-    polys = np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
-    return PatchSet(verts[used], polys, centers, elements.normals[parent], areas, elements.rho[parent],
-                    elements.emission[parent], elements.owner[parent], elements.source_face[parent],
-                    list(elements.object_names))
-
-
-def _on_segment(x, line) -> bool:
-    """Whether the point ``x`` lies on the contact segment ``line`` (cutter, start, across,
-    tolerance, along, length): within the tolerance of its line, inside its ends (at an end the
-    surface stops and the light goes round it: a block's corner does not part the floor)."""
-    _, a, m, tol, d, length = line
-    t = float((x - a) @ d)
-    return abs(float((x - a) @ m)) <= tol and tol < t < length - tol
-
-
-def _dedupe(ids):
-    out = []
-    for i in ids:
-        if not out or out[-1] != i:
-            out.append(i)
-    while len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return out
-
-
-def _fan(ids):
-    """A convex polygon's corner ids as quads and triangles (<= 4 corners: itself)."""
-    if len(ids) <= 4:
-        return [list(ids)]
-    out = []
-    i = 1
-    while i + 2 < len(ids):
-        out.append([ids[0], ids[i], ids[i + 1], ids[i + 2]])
-        i += 2
-    if i + 1 < len(ids):
-        out.append([ids[0], ids[i], ids[i + 1]])
-    return out

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..util.unique import run_positions
 
-__all__ = ["face_pieces", "pair_segments", "pieces_segments", "segment_hits", "split_polygon"]
+__all__ = ["face_pieces", "pair_segments", "pieces_segments", "row_dots", "segment_hits",
+           "split_polygon"]
 
 
 def face_pieces(elements, ids, normals, faces):
@@ -153,7 +154,7 @@ def split_polygon(poly, a, m, tol):
     return np.array(pos), np.array(neg)
 
 
-def _dots(x, y):
+def row_dots(x, y):
     """(P,) the dot products of rows ``x`` and ``y`` (P, 3), each as ``x[i] @ y[i]`` gives it
     (the same BLAS call per row, so the same bits as a loop of them)."""
     return np.matmul(x[:, None, :], y[:, :, None])[:, 0, 0]
@@ -176,14 +177,14 @@ def segment_hits(corners, order, start, group_of, segments, cutter_normals, plan
 
     Returns the segments' (d (S, 3), L (S,), m (S, 3)) and the hits (segment (H,), element
     (H,), t (H,)) in segment order, each segment's in its group's order: every value the bit a
-    loop over the segments gave (the same BLAS call per dot product, :func:`_dots`)."""
+    loop over the segments gave (the same BLAS call per dot product, :func:`row_dots`)."""
     S = len(group_of)
     a = segments[:, 0]
     diff = segments[:, 1] - a
-    length = np.sqrt(_dots(diff, diff))
+    length = np.sqrt(row_dots(diff, diff))
     d = diff / length[:, None]
-    m = cutter_normals - _dots(cutter_normals, plane_normals)[:, None] * plane_normals
-    m = m / np.sqrt(_dots(m, m))[:, None]
+    m = cutter_normals - row_dots(cutter_normals, plane_normals)[:, None] * plane_normals
+    m = m / np.sqrt(row_dots(m, m))[:, None]
     cnt = (start[1:] - start[:-1])[group_of]
     ends = np.cumsum(cnt)
     hits = ([], [], [])
