@@ -19,8 +19,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .contact_lines import face_pieces, pieces_segments, split_polygon
-from .patches import PatchSet, poly_geometry
+from .contact_pieces import assemble_pieces
+from .contact_lines import face_pieces, pieces_segments, segment_hits, split_polygon
+from .patches import PatchSet
 from ..util.unique import run_positions, unique_ints, unique_rows
 from ..rays import ray_offsets
 
@@ -178,53 +179,32 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
         seg_all[sl], kept_all[sl] = pieces_segments(flat[order[start[g]], 0], g_n[g], cut_corners[ci_all[sl]], g,
                                                     (g_pieces, g_piece_at), cut_corners, eps)
     gi_all, ci_all, seg_all = gi_all[kept_all], ci_all[kept_all], seg_all[kept_all]
-    bounds = np.r_[0, np.flatnonzero(np.diff(gi_all)) + 1, len(gi_all)] if len(gi_all) else [0]
-    for k0, k1 in zip(bounds[:-1], bounds[1:]):
-        gi = gi_all[k0]
-        ids = order[start[gi]:start[gi + 1]]
-        c = corners[ids]
-        n = elements.normals[ids[0]]
-        size = np.sqrt(elements.areas[ids])
-        for (a, b), g in zip(seg_all[k0:k1], ci_all[k0:k1]):
-            length = float(np.linalg.norm(b - a))
-            d = (b - a) / length
-            # sides: in front of the cutter (its normal's part in this plane) or behind it, the
-            # same on every face it cuts
-            m = faces.normals[g] - (faces.normals[g] @ n) * n
-            m /= np.linalg.norm(m)
-            ext = (c - a) @ d                                             # (M, 4) along the line
-            h = (c - a) @ m                                               # (M, 4) across it
-            tol = np.maximum(tol_rel * size, eps)[:, None]
-            # alongside the segment, not just touching its end (a block's corner does not part
-            # the floor beyond it)
-            along = (ext.max(axis=1) > tol[:, 0]) & (ext.min(axis=1) < length - tol[:, 0])
-            both = (h.max(axis=1) > tol[:, 0]) & (h.min(axis=1) < -tol[:, 0])
-            on = (np.abs(h) <= tol).any(axis=1)
-            hit = along & (both | on)
-            side = np.sign((np.where(np.abs(h) <= tol, 0.0, h)).sum(axis=1))
-            # a line along the face's own border (its neighbour face, a wall meeting a floor
-            # at the floor's edge) has elements on one side only: nothing to keep apart
-            if not (hit & both).any() and np.unique(side[hit & ~both]).size < 2:
+    # the elements each segment parts (every segment against its group's elements at once), then
+    # each hit element split along its segments' lines in turn
+    (d_all, len_all, m_all), (hs, he, ht) = segment_hits(
+        corners, order, start, gi_all, seg_all, faces.normals[ci_all], elements.normals[order[start[gi_all]]],
+        np.sqrt(elements.areas), tol_rel, eps)
+    for h, (s, e, tl) in enumerate(zip(hs.tolist(), he.tolist(), ht.tolist())):
+        a, d, length = seg_all[s, 0], d_all[s], len_all[s]
+        line = h                                  # the hit's line: (cutter, a, m, tl, d, length)
+        todo = pieces.get(e) or [(_polygon(elements, e), ())]
+        out = []
+        for poly, tags in todo:
+            t = (poly - a) @ d
+            if t.max() <= tl or t.min() >= length - tl:
+                out.append((poly, tags))          # this piece lies beyond the segment
                 continue
-            for e, tl in zip(ids[hit], tol[hit, 0]):
-                line = (int(g), a, m, float(tl), d, length)
-                todo = pieces.get(e) or [(_polygon(elements, e), ())]
-                out = []
-                for poly, tags in todo:
-                    t = (poly - a) @ d
-                    if t.max() <= line[3] or t.min() >= length - line[3]:
-                        out.append((poly, tags))          # this piece lies beyond the segment
-                        continue
-                    sp = split_polygon(poly, a, m, line[3])
-                    if sp is None:
-                        hs = (poly - a) @ m
-                        out.append((poly, tags + ((line, 1 if hs.sum() >= 0 else -1),)))
-                    else:
-                        out += [(sp[0], tags + ((line, 1),)), (sp[1], tags + ((line, -1),))]
-                pieces[e] = out
+            sp = split_polygon(poly, a, m_all[s], tl)
+            if sp is None:
+                hs_ = (poly - a) @ m_all[s]
+                out.append((poly, tags + ((line, 1 if hs_.sum() >= 0 else -1),)))
+            else:
+                out += [(sp[0], tags + ((line, 1),)), (sp[1], tags + ((line, -1),))]
+        pieces[e] = out
     if not pieces:
         return elements
-    return _assemble(elements, pieces, eps)
+    return assemble_pieces(elements, pieces, (ci_all[hs], seg_all[hs, 0], m_all[hs], ht, d_all[hs], len_all[hs]),
+                           eps)
 
 
 def _direction_keys(normals) -> np.ndarray:
@@ -269,47 +249,65 @@ def _crossing_candidates(g_lo, g_hi, g_n, lo, hi, c_n, share=0.01):
 
 
 def _overlapping(alo, ahi, blo, bhi, per_box=64):
-    """(i, j): the pairs of boxes ``a`` (lo, hi (A, 3)) and ``b`` (B, 3) that overlap. A grid of
-    cells twice the median box size finds the candidates (a box over more than ``per_box`` cells
-    is tested against every box of the other set instead), then the boxes are compared."""
+    """(i, j) sorted by i then j: the pairs of boxes ``a`` (lo, hi (A, 3)) and ``b`` (B, 3) that
+    overlap. Grids of cells twice the median box size, and 2, 4, 8... times that, find the
+    candidates: each box goes on the finest grid where it covers at most ``per_box`` cells (its
+    level), and a pair is looked for on the grid of the coarser of its two boxes' levels, each
+    box of a finer level on it covering a few cells. Then the boxes are compared. The work
+    grows with the boxes and the pairs found, not with the large boxes times all the others
+    (a game level's 1,600 floor slabs, each tested against every other box, took 20 s)."""
+    if not len(alo) or not len(blo):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
     ext = np.concatenate([ahi - alo, bhi - blo]).max(axis=1)
     size = 2.0 * max(float(np.median(ext)), 1e-12 * max(float(ext.max()), 1e-300))
     origin = np.minimum(alo.min(axis=0), blo.min(axis=0))
 
-    def cells(lo, hi):
-        i0 = np.floor((lo - origin) / size).astype(np.int64)
-        i1 = np.floor((hi - origin) / size).astype(np.int64)
+    def cells(lo, hi, s):
+        i0 = np.floor((lo - origin) / s).astype(np.int64)
+        i1 = np.floor((hi - origin) / s).astype(np.int64)
         return i0, i1, np.prod(i1 - i0 + 1, axis=1)
 
-    def expand(i0, i1, ids):
-        dims = (i1 - i0 + 1)[ids]
+    def levels(lo, hi):
+        level = np.zeros(len(lo), np.int64)
+        up = np.arange(len(lo))
+        for L in range(64):                      # a grid of 2^63 cells holds any finite box
+            up = up[cells(lo[up], hi[up], size * 2.0 ** L)[2] > per_box]
+            if not up.size:
+                break
+            level[up] = L + 1
+        return level
+
+    def expand(lo, hi, ids, s):
+        i0, i1, _ = cells(lo[ids], hi[ids], s)
+        dims = i1 - i0 + 1
         n = np.prod(dims, axis=1)
         own = np.repeat(ids, n)
         off = run_positions(n)                                 # (no ids: empty)
-        d = dims[np.repeat(np.arange(len(ids)), n)]
-        g = i0[own] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
+        at = np.repeat(np.arange(len(ids)), n)
+        d = dims[at]
+        g = i0[at] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
         return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own
 
-    a0, a1, na = cells(alo, ahi)
-    b0, b1, nb = cells(blo, bhi)
-    small_a, small_b = np.flatnonzero(na <= per_box), np.flatnonzero(nb <= per_box)
-    ka, ia = expand(a0, a1, small_a)
-    kb, ib = expand(b0, b1, small_b)
-    order = np.argsort(kb, kind="stable")
-    kb, ib = kb[order], ib[order]
-    lo_ = np.searchsorted(kb, ka, "left")
-    hi_ = np.searchsorted(kb, ka, "right")
-    cnt = hi_ - lo_
-    ii = np.repeat(ia, cnt)
-    jj = ib[np.repeat(lo_ - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())] if cnt.sum() else \
-        np.zeros(0, np.int64)
-    pairs = [np.stack([ii, jj], 1)]
-    for k in np.flatnonzero(na > per_box):                  # big boxes: against every box
-        j = np.flatnonzero(np.all((blo <= ahi[k]) & (bhi >= alo[k]), axis=1))
-        pairs.append(np.stack([np.full(len(j), k), j], 1))
-    for k in np.flatnonzero(nb > per_box):
-        i = np.flatnonzero(np.all((alo <= bhi[k]) & (ahi >= blo[k]), axis=1) & (na <= per_box))
-        pairs.append(np.stack([i, np.full(len(i), k)], 1))
+    def meet(ia_, ib_, s):                        # the pairs of ia_ x ib_ sharing a cell of edge s
+        ka, ia = expand(alo, ahi, ia_, s)
+        kb, ib = expand(blo, bhi, ib_, s)
+        order = np.argsort(kb, kind="stable")
+        kb, ib = kb[order], ib[order]
+        lo_ = np.searchsorted(kb, ka, "left")
+        cnt = np.searchsorted(kb, ka, "right") - lo_
+        ii = np.repeat(ia, cnt)
+        jj = ib[np.repeat(lo_ - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())] if cnt.sum() else \
+            np.zeros(0, np.int64)
+        return np.stack([ii, jj], 1)
+
+    la, lb = levels(alo, ahi), levels(blo, bhi)
+    pairs = [np.zeros((0, 2), np.int64)]
+    for L in np.union1d(la, lb):
+        s = size * 2.0 ** L
+        if np.any(la == L):                       # a's boxes of this level against b's as fine
+            pairs.append(meet(np.flatnonzero(la == L), np.flatnonzero(lb <= L), s))
+        if np.any(lb == L) and np.any(la < L):    # b's against a's finer ones
+            pairs.append(meet(np.flatnonzero(la < L), np.flatnonzero(lb == L), s))
     p = np.concatenate(pairs).astype(np.int64)
     B = max(len(blo), 1)
     k = unique_ints(p[:, 0] * B + p[:, 1])
@@ -323,90 +321,3 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
 def _polygon(elements, e):
     p = elements.polys[e]
     return elements.verts[p[p >= 0]]
-
-
-def _assemble(elements, pieces, eps):
-    """The PatchSet of ``elements`` with each element of ``pieces`` replaced by its pieces: a
-    corner on a cut line (within its tolerance, inside the segment's reach) is a vertex of its
-    side only (and of its plane: a cut across a box's edge leaves its two faces apart, as the
-    box's own corners are); other corners keep the element's vertices."""
-    V = len(elements.verts)
-    verts = [elements.verts]
-    index = {}
-    polys, parent = [], []
-    q = max(eps, 1e-300)
-    for e in range(len(elements)):
-        if e not in pieces:
-            polys.append(elements.polys[e])
-            parent.append(e)
-            continue
-        src = elements.polys[e][elements.polys[e] >= 0]
-        src_pts = elements.verts[src]
-        for poly, tags in pieces[e]:
-            ids = []
-            for x in poly:
-                on = tuple(sorted((ln[0], side) for ln, side in tags if _on_segment(x, ln)))
-                same = np.flatnonzero(np.all(np.abs(src_pts - x) <= q, axis=1))
-                if not on and same.size:
-                    ids.append(int(src[same[0]]))
-                    continue
-                # one vertex a place, side and plane: faces meeting at an angle (a box's sides,
-                # whose corners the mesh keeps apart) keep the cut's points apart too
-                k = (int(elements.owner[e]),) + tuple(np.round(x / q).astype(np.int64)) + on \
-                    + tuple(np.round(elements.normals[e] * 1e3).astype(np.int64))
-                if k not in index:
-                    index[k] = V + len(index)
-                    verts.append(x[None])
-                ids.append(index[k])
-            ids = _dedupe(ids)
-            if len(ids) < 3:
-                continue
-            for tri in _fan(ids):
-                polys.append(np.array(tri + [-1] * (4 - len(tri)), np.int64))
-                parent.append(e)
-    verts = np.concatenate(verts)
-    polys = np.array(polys, np.int64)
-    parent = np.array(parent, np.int64)
-    centers, _, areas = poly_geometry(verts, polys)
-    keep = areas > 0
-    polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]
-    used = np.unique(polys[polys >= 0])
-    remap = np.full(len(verts), -1, np.int64)
-    remap[used] = np.arange(used.size)
-    polys = np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
-    return PatchSet(verts[used], polys, centers, elements.normals[parent], areas, elements.rho[parent],
-                    elements.emission[parent], elements.owner[parent], elements.source_face[parent],
-                    list(elements.object_names))
-
-
-def _on_segment(x, line) -> bool:
-    """Whether the point ``x`` lies on the contact segment ``line`` (cutter, start, across,
-    tolerance, along, length): within the tolerance of its line, inside its ends (at an end the
-    surface stops and the light goes round it: a block's corner does not part the floor)."""
-    _, a, m, tol, d, length = line
-    t = float((x - a) @ d)
-    return abs(float((x - a) @ m)) <= tol and tol < t < length - tol
-
-
-def _dedupe(ids):
-    out = []
-    for i in ids:
-        if not out or out[-1] != i:
-            out.append(i)
-    while len(out) > 1 and out[0] == out[-1]:
-        out.pop()
-    return out
-
-
-def _fan(ids):
-    """A convex polygon's corner ids as quads and triangles (<= 4 corners: itself)."""
-    if len(ids) <= 4:
-        return [list(ids)]
-    out = []
-    i = 1
-    while i + 2 < len(ids):
-        out.append([ids[0], ids[i], ids[i + 1], ids[i + 2]])
-        i += 2
-    if i + 1 < len(ids):
-        out.append([ids[0], ids[i], ids[i + 1]])
-    return out

@@ -9,7 +9,8 @@ import numpy as np
 
 from ..util.unique import run_positions
 
-__all__ = ["face_pieces", "pair_segments", "pieces_segments", "split_polygon"]
+__all__ = ["face_pieces", "pair_segments", "pieces_segments", "row_dots", "segment_hits",
+           "split_polygon"]
 
 
 def face_pieces(elements, ids, normals, faces):
@@ -151,3 +152,66 @@ def split_polygon(poly, a, m, tol):
             pos.append(x)
             neg.append(x)
     return np.array(pos), np.array(neg)
+
+
+def row_dots(x, y):
+    """(P,) the dot products of rows ``x`` and ``y`` (P, 3), each as ``x[i] @ y[i]`` gives it
+    (the same BLAS call per row, so the same bits as a loop of them)."""
+    return np.matmul(x[:, None, :], y[:, :, None])[:, 0, 0]
+
+
+def segment_hits(corners, order, start, group_of, segments, cutter_normals, plane_normals, sizes, tol_rel, eps,
+                 chunk=1 << 16):
+    """Which elements the contact segments part: the lines of :func:`.contact.cut_along_contacts`,
+    S segments at once, each against every element of its group, ``chunk`` pairs at a time.
+
+    ``corners`` (N, 4, 3) the elements' corners; ``order[start[g]:start[g + 1]]`` the elements of
+    group g in order; per segment ``segments`` (S, 2, 3) its ends a, b (on its group's plane),
+    ``group_of`` (S,) its group, ``cutter_normals`` (S, 3) its cutter's normal and
+    ``plane_normals`` (S, 3) its group's; ``sizes`` (N,) each element's size (the square root of
+    its area, world units). A segment has direction d, length L and in-plane normal m (the
+    cutter's normal's part in the plane); it hits an element whose corners reach along d more
+    than the element's tolerance t (``tol_rel`` x its size, at least ``eps``) past a and short
+    of b, and lie on both sides of its line or within t of it. A segment whose hit elements all
+    lie on one side of it with none across (a line along the face's own border) parts nothing.
+
+    Returns the segments' (d (S, 3), L (S,), m (S, 3)) and the hits (segment (H,), element
+    (H,), t (H,)) in segment order, each segment's in its group's order: every value the bit a
+    loop over the segments gave (the same BLAS call per dot product, :func:`row_dots`)."""
+    S = len(group_of)
+    a = segments[:, 0]
+    diff = segments[:, 1] - a
+    length = np.sqrt(row_dots(diff, diff))
+    d = diff / length[:, None]
+    m = cutter_normals - row_dots(cutter_normals, plane_normals)[:, None] * plane_normals
+    m = m / np.sqrt(row_dots(m, m))[:, None]
+    cnt = (start[1:] - start[:-1])[group_of]
+    ends = np.cumsum(cnt)
+    hits = ([], [], [])
+    s0 = 0
+    while s0 < S:
+        s1 = max(int(np.searchsorted(ends, (ends[s0 - 1] if s0 else 0) + chunk, "right")), s0 + 1)
+        c = cnt[s0:s1]
+        seg = np.repeat(np.arange(s0, s1), c)
+        el = order[np.repeat(start[group_of[s0:s1]], c) + run_positions(c)]
+        rel = corners[el] - a[seg][:, None, :]
+        ext = np.matmul(rel, d[seg][:, :, None])[..., 0]                    # (P, 4) along the line
+        h = np.matmul(rel, m[seg][:, :, None])[..., 0]                      # (P, 4) across it
+        tol = np.maximum(tol_rel * sizes[el], eps)
+        along = (ext.max(axis=1) > tol) & (ext.min(axis=1) < length[seg] - tol)
+        both = (h.max(axis=1) > tol) & (h.min(axis=1) < -tol)
+        near = np.abs(h) <= tol[:, None]
+        hit = along & (near.any(axis=1) | both)
+        side = np.sign(np.where(near, 0.0, h).sum(axis=1))
+        # a segment parts its elements when one lies across it, or they lie on both sides
+        across = np.bincount(seg - s0, hit & both, s1 - s0) > 0
+        code = np.where(np.isnan(side), 3, side + 1).astype(np.int64)
+        one = hit & ~both
+        seen = np.zeros((s1 - s0, 4), bool)
+        seen[seg[one] - s0, code[one]] = True
+        keep = (across | (seen.sum(axis=1) >= 2))[seg - s0] & hit
+        for out, x in zip(hits, (seg[keep], el[keep], tol[keep])):
+            out.append(x)
+        s0 = s1
+    hits = tuple(np.concatenate(x) if x else np.zeros(0, t) for x, t in zip(hits, (np.int64, np.int64, float)))
+    return (d, length, m), hits

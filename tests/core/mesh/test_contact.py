@@ -275,6 +275,30 @@ def test_overlapping_boxes_are_every_overlapping_pair(seed):
         assert np.array_equal(got, want) and len(i) == want.sum(), swap
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_overlapping_boxes_of_every_size_are_every_overlapping_pair(seed):
+    """contact._overlapping with boxes whose sizes span five orders of magnitude on both sides
+    (a game level's slabs, walls and trim: each box on the grid of its own level, the pairs
+    looked for on the coarser box's grid) finds exactly the pairs a comparison of every pair
+    finds, each once, sorted by a's index then b's."""
+    from hemicube_radiosity.core.mesh.contact import _overlapping
+
+    rng = np.random.default_rng(100 + seed)
+
+    def boxes(n):
+        lo = rng.uniform(-50, 50, (n, 3))
+        return lo, lo + 10.0 ** rng.uniform(-3, 2, (n, 1)) * rng.uniform(0, 1, (n, 3))
+    (alo, ahi), (blo, bhi) = boxes(700), boxes(900)
+    alo[:50] = blo[:50] - rng.uniform(0, 1, (50, 3))   # boxes that touch b's exactly, at a face
+    ahi[:50] = bhi[:50]
+    ahi[:50, 0] = blo[:50, 0]
+    i, j = _overlapping(alo, ahi, blo, bhi)
+    want = np.all((alo[:, None] <= bhi[None]) & (ahi[:, None] >= blo[None]), axis=2)
+    wi, wj = np.nonzero(want)
+    assert np.array_equal(i, wi) and np.array_equal(j, wj)
+    assert len(np.unique(i * len(blo) + j)) == len(i) > 50
+
+
 @pytest.mark.parametrize("ground", ["warped quad", "octagon"])
 def test_a_house_on_any_piece_of_a_split_face_cuts_it(ground):
     """A face the reader splits into pieces (a warped quad into two triangles, an n-gon into a
