@@ -146,9 +146,10 @@ def test_shared_gather_is_identical_forked_and_with_any_chunking(monkeypatch):
     monkeypatch.setattr(gather, "PROCESS_RAYS", 0)
     ps = _scene(_fan(k=7, h=0.5, up=-1.0, centre=(0, 0, 0.5)))
     ps2 = build_patches([_fan(k=5, h=0.2), _fan(k=7, h=0.4, up=-1.0, centre=(3, 0, 0.5)),
-                         quad([(-9, -9, 0), (9, -9, 0), (9, 9, 0), (-9, 9, 0)], name="ground")], 0.5)
+                         quad([(-9, -9, 0), (9, -9, 0), (9, 9, 0), (-9, 9, 0)], name="ground")], None)
     for mesh in (ps, ps2):
         x, n, _ = vertex_frames(mesh)
+        assert share_corners(mesh, x, n, embree_scene(mesh)) is not None
         runs = [gather_matrix(mesh, x, n, embree_scene(mesh), rays=16, chunk_rays=16 * c, workers=w,
                               hits=True, share=_sharer(mesh)) for w, c in ((1, 4096), (1, 2), (2, 3))]
         G1, s1, H1 = runs[0]
@@ -185,3 +186,14 @@ def test_the_open_fraction_shared_by_corners_finds_the_same_buried_and_open_vert
     assert np.all(shared[inside] == 0.0) and np.all(alone[inside] == 0.0)
     np.testing.assert_array_equal(shared[on_floor] < 0.25, alone[on_floor] < 0.25)
     assert np.abs(shared - alone).max() < 0.2
+
+
+def test_a_mesh_whose_few_corners_share_casts_as_before():
+    """Below MIN_JOINED of the vertices joining another's rays (a smooth mesh with one
+    flat-shaded fan), every vertex casts its own: no reordering for a few rays saved."""
+    from hemicube_radiosity.core.output.shared import MIN_JOINED, joined_ahead
+    ground = quad([(-9, -9, 0), (9, -9, 0), (9, 9, 0), (-9, 9, 0)], name="ground")
+    ps = build_patches([_fan(k=6, h=0.3, centre=(0, 0, 0.01)), ground], 0.5)
+    x, n, _ = vertex_frames(ps)
+    assert 0 < 11 < MIN_JOINED * len(ps.verts)
+    assert share_corners(ps, x, n, embree_scene(ps)) is None and joined_ahead(ps) == 0
