@@ -24,8 +24,12 @@ starts from its own member's point (``xv``, moved a hundredth into its face,
 Vertices share only where that is the same light: at one position, of one object, both
 on an open element (:func:`.sides.open_elements`), normals within :data:`SHARE_COSINE` of the
 cluster's first, and nothing between their points (a partition standing on a floor's edge
-parts the floor's corners). Measured on the bench's bunny (``bench/real_scenes.py
---scenes stanford_bunny``): see docs/performance.md.
+parts the floor's corners). On the bench's bunny (``bench/real_scenes.py --scenes
+stanford_bunny``: 201,570 vertices at 35,887 clusters) the vertex stage took half the CPU
+time (20.5 s -> 10.7 s) at 1.07% RMS against Cycles instead of 1.03% (Cycles at 64 samples:
+1.34%): each member's estimate is noisier than its own lattice's (the sky's share, 0.84%
+against 0.47%: the members' sub-lattices in their own frames do not stratify as one lattice),
+though the mixture wastes little (Kish's effective count 0.98 R on the median).
 
 Units: directions unit vectors, points world units; weights are shares of a vertex's rays.
 """
