@@ -16,8 +16,9 @@ from . import embree as embree_ff
 from ..runtime.cache import cache_key, geometry_key
 from .glossy import specular_stage
 from .hemicube import hemicube_form_factors
-from ..mesh.elements import elements_cut_ahead, output_vertices_ahead
+from ..mesh.elements import elements_cut_ahead, output_mesh_ahead
 from ..mesh.patches import PatchSet
+from ..output.shared import joined_ahead
 from ..rays import embree_available
 from ..util.sparse import CSR
 
@@ -86,13 +87,14 @@ def form_factor_stage(ctx) -> None:
     F = cache.get(key) if cache is not None else None
     ctx.form_factor_source = "cached" if F is not None else "computed"
     if F is None:
-        ahead = output_vertices_ahead(ctx)
+        out_mesh = output_mesh_ahead(ctx)
+        ahead = len(out_mesh.verts)
         started = time.perf_counter()
 
         def said(per_receiver):             # the forecast, with the sample's time when there is one
             from ..runtime.forecast import forecast
             nonlocal started
-            ctx.forecast = forecast(ctx, recv, ahead, per_receiver, elements_cut_ahead(ctx))
+            ctx.forecast = forecast(ctx, recv, ahead, per_receiver, elements_cut_ahead(ctx), joined_ahead(out_mesh))
             ctx.say(0.0, ctx.forecast.describe())
             started = time.perf_counter()       # the ETA counts from here, not the sample
 

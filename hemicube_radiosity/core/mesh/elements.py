@@ -21,8 +21,8 @@ from .contact import cut_along_contacts
 from .patches import PatchSet, meshes_key
 from .subdivide import build_patches, keeps_faces_whole
 
-__all__ = ["meshes_key", "mesh_faces", "output_elements", "output_vertices_ahead", "elements_cut_ahead", "cut_elements",
-           "start_elements"]
+__all__ = ["meshes_key", "mesh_faces", "output_elements", "output_mesh_ahead", "output_vertices_ahead",
+           "elements_cut_ahead", "cut_elements", "start_elements"]
 
 
 def _meshes_key(ctx):
@@ -77,13 +77,19 @@ def output_vertices_ahead(ctx) -> int:
     count, :mod:`.forecast`): the elements before their cut along contacts (a few more vertices
     come with the cut), or the patches when they are the output; refuses, as the vertex stage
     would, more elements than ``max_elements`` (the cut only adds)."""
+    return len(output_mesh_ahead(ctx).verts)
+
+
+def output_mesh_ahead(ctx) -> PatchSet:
+    """The output mesh as :func:`output_vertices_ahead` counts it (the elements before their cut
+    along contacts, or the patches); refuses more elements than ``max_elements``."""
     if not ctx.settings.uses_elements():
-        return len(ctx.patches.verts)
+        return ctx.patches
     elements = _uncut_elements(ctx)
     if geometry_key(elements) == geometry_key(ctx.patches):
-        return len(ctx.patches.verts)
+        return ctx.patches
     _refuse_elements(ctx.settings, len(elements))
-    return len(elements.verts)
+    return elements
 
 
 def elements_cut_ahead(ctx) -> int:

@@ -24,6 +24,7 @@ from ..mesh.patches import PatchSet
 from ..rays import cosine_lattice, ray_offsets
 from ..util.sparse import CSR
 from ..util.unique import unique_ints
+from .shared import cast_shared
 from .through import Through, cast_through
 
 #: Rays (points x rays per point) from which :func:`gather_matrix` casts on forked processes
@@ -96,7 +97,7 @@ def surface_values(params, polys, vertex_values, pid, y):
 
 
 def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0,
-                  chunk_rays=1 << 16, ticker=None, workers=1, hits=False, background=False):
+                  chunk_rays=1 << 16, ticker=None, workers=1, hits=False, background=False, share=None):
     """What a final gather sees, as a matrix: ``(G, sky)`` with G a CSR (P x V) such that the mean
     radiance arriving at ``points`` (P, 3) with unit ``normals`` from surfaces whose outgoing
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
@@ -121,7 +122,9 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     returns, so the caller can go on with other work while the workers cast (only when the
     chunks run on forked processes: otherwise the result is made before the call returns);
     ``ticker`` is then used only before the call returns: poll cancellation with
-    ``result(cancelled)``.
+    ``result(cancelled)``. ``share``: None (each point casts its own rays), or a
+    :class:`.shared.Sharing` of the points: points at one place cast one set of rays between
+    them (:mod:`.shared`; H is then (h, 6)); not where rays pass see-through patches.
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
@@ -145,16 +148,24 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     # forked workers write their rows and hits into shared memory, each chunk of points at its
     # own place (at most 4 entries and one hit per ray), and send back only how many (rays
     # through see-through patches make more: their rows come back as they are)
-    out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches))) if forked and through is None else None
     eps = ray_offsets(patches, points, normals, scene=scene)[:, None]    # the rays' start offsets
-    if through is None:
+    share = share if through is None and P else None
+    out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches)), 5 if share is None else 6) \
+        if forked and through is None else None
+    starts = range(0, P, step)
+    if share is not None:                  # the points cluster by cluster; put back at the end
+        points, normals, eps = points[share.order], normals[share.order], eps[share.order]
+        C = len(share.clusters) - 1            # chunks of chunk_rays rays, a few a worker
+        starts, ends = share.starts(max(1, min(chunk_rays // R, -(-C // (4 * workers)))))
+        cast = partial(cast_shared, share, ends, surface_weights, _hit_dtype(P, len(patches)), patches,
+                       patch_parameters(patches), scene, points, normals, eps, local, hits, out)
+    elif through is None:
         cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step, hits, out)
     else:
         cast = partial(cast_through, through, surface_weights, _hit_dtype(P, len(patches)), patches,
                        patch_parameters(patches), scene, points, normals, eps, local, step, hits)
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
-    starts = range(0, P, step)
     results = (started_map if background and forked else ordered_map)(cast, starts, workers, processes=forked)
 
     def collect(stop=None, tick=ticker):
@@ -174,13 +185,16 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
                     return None
         if out is not None:                            # the shared arrays themselves
             c, w, H = out.compact(written)
-            G = CSR(np.cumsum(counts), c, w, (P, V), {"rays": R, "seed": seed})
-            return (G, sky, H) if hits else (G, sky)
-        G = CSR(np.cumsum(counts), np.concatenate(cols) if cols else np.zeros(0, np.int32),
-                np.concatenate(vals) if vals else np.zeros(0, np.float32), (P, V), {"rays": R, "seed": seed})
-        if hits:
-            return G, sky, np.concatenate(found) if found else np.zeros((0, 5), np.float32)
-        return G, sky
+        else:
+            c = np.concatenate(cols) if cols else np.zeros(0, np.int32)
+            w = np.concatenate(vals) if vals else np.zeros(0, np.float32)
+            H = (np.concatenate(found) if found else np.zeros((0, 5 if share is None else 6), np.float32)) \
+                if hits else None
+        indptr, s_ = np.cumsum(counts), sky
+        if share is not None:                          # back in the points' own order
+            indptr, c, w, s_, H = share.restore(np.diff(indptr), c, w, sky, H)
+        G = CSR(indptr, c, w, (P, V), {"rays": R, "seed": seed})
+        return (G, s_, H) if hits else (G, s_)
     if not background:
         return collect()
     if not forked:                   # threads or serial: nothing would be left to overlap
@@ -200,11 +214,11 @@ class _SharedRows:
     shared_array`): the chunk of points from ``s`` at entries ``4 R s`` and hits ``R s`` on
     (a point's rays make at most 4 entries and one hit each), so chunks never overlap."""
 
-    def __init__(self, P, R, hits, hit_dtype):
+    def __init__(self, P, R, hits, hit_dtype, width=5):
         self.R = R
         self.cols = shared_array(4 * R * P, np.int32)
         self.vals = shared_array(4 * R * P, np.float32)
-        self.hits = shared_array((R * P if hits else 0, 5), hit_dtype)
+        self.hits = shared_array((R * P if hits else 0, width), hit_dtype)
 
     def write(self, s, cols, vals, H):
         """Store a chunk's entries and hits; (entries, hits or None) to send back."""

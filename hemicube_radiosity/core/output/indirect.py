@@ -23,6 +23,7 @@ from ..util.unique import unique_ints
 from .abrupt import AbruptGrid, abrupt_elements, shadowed_inside
 from .gather import apply_gather, correction_matrix, gather_matrix, product
 from .interpolate import interpolate_corners, located_corners, locate
+from .shared import corner_sharing
 from .shine import HOT, hot_elements, mean_light, shine
 from .sides import open_elements, sided_mesh
 from .through import through_key
@@ -239,7 +240,14 @@ def start_gather(ctx, elements, xv, nv):
             return None
     return gather_matrix(elements, xv, nv, embree_scene(elements), rays=gather_count(ctx),
                          ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
-                         hits=True, background=True)
+                         hits=True, background=True, share=_sharing(ctx, elements, xv, nv))
+
+
+def _sharing(ctx, elements, xv, nv):
+    """Which element vertices cast their gather rays together (:func:`.shared.corner_sharing`:
+    a flat-shaded mesh's corners at one place), their elements buried in a solid
+    (:func:`.sides.open_elements`) left out; None: each its own."""
+    return corner_sharing(ctx.cache, elements, xv, nv, open_elements(ctx, elements))
 
 
 def _gather_rays(ctx, elements, xv, nv, pending=None, hits=True):
@@ -262,7 +270,7 @@ def _gather_rays(ctx, elements, xv, nv, pending=None, hits=True):
         else:
             G, sky, H = gather_matrix(elements, xv, nv, embree_scene(elements), rays=gather_count(ctx),
                                       ticker=Ticker(None, ctx.cancelled), workers=ctx.settings.workers,
-                                      hits=True)
+                                      hits=True, share=_sharing(ctx, elements, xv, nv))
         G.sky = sky
         if ctx.cache is not None:
             ctx.cache.put(key, G)

@@ -20,6 +20,7 @@ from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
+from .shared import corner_sharing, shared_open_fraction
 
 _SIDED = Memo(8)            # (verts, polys, split code) -> the sided mesh's (verts, polys)
 storable(OpenSide)          # cached on disk: a relight in a new process finds it (:func:`buried_side`)
@@ -184,15 +185,24 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
     return flat.reshape(polys.shape), np.concatenate([np.arange(V), groups[extra, 0]])
 
 
-def seen_fraction(ctx, elements, x, nrm):
+def seen_fraction(ctx, elements, x, nrm, share=None):
     """(P,) in [0, 1]: how much of the scene sees the points ``x`` (P, 3) on ``elements`` with
     normals ``nrm``: :func:`.rays.open_fraction` (reach a twentieth of the patch size) over a
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
-    millimetres above a lamp's back or inside a block not at all. Cached (geometry only)."""
+    millimetres above a lamp's back or inside a block not at all. ``share``: a
+    :class:`.shared.Sharing` of the points (``x`` the vertices' points): the vertices at one
+    place cast the rays once between them (:func:`.shared.shared_open_fraction`). Cached
+    (geometry only)."""
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(geometry_key(elements) + array_key(x), ("exposure", reach))   # x hashed once per array
-    f = cached(ctx.cache, key, lambda: open_fraction(elements, x, nrm, embree_scene(elements), reach,
-                                                     workers=ctx.settings.workers))
+    key = cache_key(geometry_key(elements) + array_key(x) + (b"" if share is None else b"shared"),
+                    ("exposure", reach))                                       # x hashed once per array
+
+    def make():
+        if share is None:
+            return open_fraction(elements, x, nrm, embree_scene(elements), reach, workers=ctx.settings.workers)
+        return shared_open_fraction(elements, x, nrm, embree_scene(elements), reach, share,
+                                    workers=ctx.settings.workers)
+    f = cached(ctx.cache, key, make)
     return np.minimum(1.0, f / 0.5)
 
 
@@ -212,7 +222,9 @@ def buried_side(ctx, elements, xv, nv):
     open), or None without Embree. Geometry only, cached: a relight casts no ray."""
     if ctx.direct is None or not embree_available():
         return None
-    buried = seen_fraction(ctx, elements, xv, nv) < 0.5
+    # a flat-shaded mesh's corners at one place cast the rays once (as the gather's)
+    share = corner_sharing(ctx.cache, elements, xv, nv, open_elements(ctx, elements))
+    buried = seen_fraction(ctx, elements, xv, nv, share) < 0.5
     if not buried.any():
         return None
     key = cache_key(geometry_key(elements) + array_key(xv), ("open-side",))

@@ -26,7 +26,7 @@ __all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geome
 #: In every key: a cache folder written by a version that computed some entry differently (how
 #: vertices are told apart per side, where contacts cut) is not read as this version's. Changed
 #: with any change to what a cached entry holds for the same inputs.
-COMPUTED = b"2026-12-06b: lamps in sources_at drawn as in split_at, in its units"
+COMPUTED = b"2026-12-06c: a flat-shaded mesh's corners at one place share their gather rays"
 
 
 def cache_key(geometry_key: bytes, settings_key) -> str:

@@ -73,6 +73,13 @@ PER_VERTEX_LAMPS = 9.5e-5
 #: took 0.7, 1.2 and 1.75 times what this and :data:`PER_VERTEX_LAMPS` say (the vertex rate
 #: alone said a fifth of zdm2's output stage).
 PER_ELEMENT_CUT = 4.9e-4
+#: What an output vertex that casts no gather rays of its own costs, as a share of
+#: :data:`PER_VERTEX` or :data:`PER_VERTEX_LAMPS`: a flat-shaded mesh's corners at one place
+#: cast one set between them (:mod:`..output.shared`, counted ahead by
+#: :func:`..output.shared.joined_ahead`). The bunny's 201,570 vertices cast from 35,887 places:
+#: its vertex stage took 0.55 of the CPU time it took when each cast its own (11.4 s and 20.5 s,
+#: bench/real_scenes.py, 2 workers, a busy machine), which this says.
+PER_JOINED = 0.46
 #: Seconds per output vertex for each lamp past the first (one worker): its shadow rays at the
 #: vertices, the abrupt elements' grids and cells, the elements' insides. The rates above were
 #: fitted to one sun; sauer_pandora's six soft point lamps cast 42.8 s of rays in its 68 s output
@@ -183,14 +190,16 @@ def curved_pieces(patches, clusters) -> int:
     return int(_bent(patches, of)[of].sum())
 
 
-def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_cut: int = 0) -> Forecast:
+def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_cut: int = 0,
+             joined: int = 0) -> Forecast:
     """The :class:`Forecast` of the bake of ``ctx`` (after its patch stage) with ``receivers``
     hemi-cubes to draw (their ids among ``ctx.unknowns``, or how many: then looked at from all
     of them) and ``output_vertices`` to evaluate. ``per_receiver``: the seconds a hemi-cube
     took on one worker in a sample of this scene's (:func:`..form_factors.hemicube._probe`),
     which the form factors' forecast then is; None: the rates :data:`PER_RECEIVER` and
     :data:`PER_SEEN`. ``elements_cut``: output elements the detail size makes beyond the pieces
-    (:func:`..mesh.elements.elements_cut_ahead`)."""
+    (:func:`..mesh.elements.elements_cut_ahead`); ``joined``: output vertices that cast no
+    gather rays of their own (:func:`..output.shared.joined_ahead`, :data:`PER_JOINED`)."""
     s = ctx.settings
     workers = resolve_workers(s.workers)
     speed = 1.0 + PER_EXTRA_WORKER * (workers - 1)
@@ -206,8 +215,10 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_c
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
     emitting = ctx.patches.emitting().any()
     lamps = list(getattr(ctx, "lights", ()))
-    out = output_vertices * ((PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128
-                             + PER_EXTRA_LAMP * max(len(lamps) - 1, 0))
+    gathers = s.gather_rays > 0 and s.uses_elements()
+    casting = output_vertices - (1 - PER_JOINED) * min(max(int(joined), 0), output_vertices) * gathers
+    out = casting * (PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128 \
+        + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - 1, 0)
     if not emitting:
         out += PER_ELEMENT_CUT * max(int(elements_cut), 0)
     if not emitting and s.gather_rays > 0 and s.uses_elements() \

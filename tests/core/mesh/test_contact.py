@@ -328,3 +328,23 @@ def test_a_house_on_any_piece_of_a_split_face_cuts_it(ground):
         straddle = (inside & real).any(axis=1) & (outside & real).any(axis=1)
         assert not straddle.any(), (ground, size, c[straddle][:3])
         assert cut.areas[cut.owner == 0].sum() == pytest.approx(el.areas[el.owner == 0].sum(), rel=1e-9)
+
+
+def test_corners_met_counts_what_comparing_every_pair_of_corners_counts():
+    """contact._corners_met against the (P, 4, 4, 3) comparison it replaced: corners within eps
+    of any source corner, a triangle's repeated 4th left out; shared corners, near misses by
+    a hair either side of eps, and none."""
+    from hemicube_radiosity.core.mesh.contact import _corners_met
+    rng = np.random.default_rng(7)
+    P, eps = 4000, 1e-6
+    src = rng.uniform(-1, 1, (P, 4, 3))
+    cut = rng.uniform(-1, 1, (P, 4, 3))
+    pick = rng.integers(0, 4, (P, 4))
+    on = rng.uniform(size=(P, 4)) < 0.5
+    jitter = rng.choice([0.0, 0.5 * eps, 0.99 * eps, 1.01 * eps, 3 * eps], size=(P, 4, 3))
+    cut[on] = src[np.arange(P)[:, None].repeat(4, 1)[on], pick[on]] + jitter[on] * rng.choice([-1, 1], (on.sum(), 3))
+    tri = rng.uniform(size=P) < 0.3
+    cut[tri, 3] = cut[tri, 2]
+    same = np.abs(src[:, :, None, :] - cut[:, None, :, :]).max(axis=-1) <= eps
+    want = same.any(axis=1)[:, :3].sum(axis=1) + (same.any(axis=1)[:, 3] & ~tri)
+    assert np.array_equal(_corners_met(src, cut, eps, ~tri), want) and want.max() == 4 and want.min() == 0

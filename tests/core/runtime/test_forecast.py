@@ -59,6 +59,9 @@ def test_lamps_other_than_suns_count_what_shines(monkeypatch):
     # the elements' own work apart (the lamp refines other patches than the sun: another count
     # of elements cut; test_the_elements_cut_count_on_their_own)
     monkeypatch.setattr(forecast_module, "PER_ELEMENT_CUT", 0.0)
+    # nor the vertices that share a place's gather rays (elements of refined patches meet
+    # others' at their corners: another count for another refinement)
+    monkeypatch.setattr(forecast_module, "PER_JOINED", 1.0)
     room = scenes.cornell_box(light_radiance=0.0)          # no emitting face
     sun = bake(room, BakeSettings(workers=1, **SMALL), lights=[SunLight((0.0, 0.0, -1.0))]).forecast
     lamp = bake(room, BakeSettings(workers=1, **SMALL), lights=[PointLight((1.0, 1.0, 1.0))]).forecast
@@ -143,3 +146,29 @@ def test_the_form_factors_forecast_is_the_time_of_a_sample_where_one_is_drawn(mo
     assert np.isclose(f.form_factors, f.receivers * f.per_receiver / (1 + PER_EXTRA_WORKER))
     ff = [m for st, m in said if st == "form_factors" and m]
     assert sum(m.startswith("expected about") for m in ff) == 1 and "timed on a sample" in ff[0]
+
+
+def test_vertices_that_share_a_places_gather_rays_count_their_share():
+    """A flat-shaded mesh's corners at one place cast one set of gather rays
+    (core/output/shared.py): the forecast counts each corner past the first at PER_JOINED of a
+    vertex, and a smooth mesh (no two vertices at one place) as before."""
+    from hemicube_radiosity.core.mesh.patches import MeshInput
+    from hemicube_radiosity.core.output.shared import joined_ahead
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    from hemicube_radiosity.core.runtime.forecast import PER_JOINED, forecast
+
+    a = np.arange(6) * np.pi / 3
+    ring = np.c_[np.cos(a), np.sin(a), np.zeros(6)]
+    smooth = MeshInput.from_faces(np.vstack([[0, 0, 0.3], ring]), [[0, 1 + i, 1 + (i + 1) % 6] for i in range(6)])
+    flat = MeshInput.from_faces(np.array([v for i in range(6) for v in ([0, 0, 0.3], ring[i], ring[(i + 1) % 6])]),
+                                [[3 * i, 3 * i + 1, 3 * i + 2] for i in range(6)])
+    assert joined_ahead(build_patches(smooth, None)) == 0
+    # the apex's 6 corners share (faces 38 degrees apart), each ring place's 2 (faces 19 apart)
+    assert joined_ahead(build_patches(flat, None)) == 5 + 6
+    r = bake(scenes.cornell_box(), BakeSettings(workers=1, **SMALL))
+    from types import SimpleNamespace
+    ctx = SimpleNamespace(settings=r.settings, patches=r.patches, clusters=r.clusters, unknowns=r.patches)
+    one = forecast(ctx, 10, 1000)
+    shared = forecast(ctx, 10, 1000, joined=600)
+    assert np.isclose(shared.output, one.output * (400 + 600 * PER_JOINED) / 1000)
+    assert shared.form_factors == one.form_factors
