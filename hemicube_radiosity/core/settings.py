@@ -77,14 +77,14 @@ QUALITY = {
                   direct_samples=32, light_samples=32, sky_rays=512),
 }
 QUALITY_LEVELS = (
-    ("draft", "Draft", "A first look: about half Production's time (0.5-0.6x), its median error "
-     "against Cycles 10-38% higher on the real-scene benchmark"),
-    ("preview", "Preview", "About 0.7x Production's time (0.65-0.76x), its median error 2-12% higher"),
+    ("draft", "Draft", "A first look: about half Production's time (0.4-0.7x), its median error "
+     "against Cycles 6-44% higher on the real-scene benchmark"),
+    ("preview", "Preview", "About 0.7x Production's time (0.55-0.95x), its median error 2-20% higher"),
     ("production", "Production", "The defaults (the speed-against-error frontier of the "
-     "benchmark): 1.0% RMS from Cycles' reference on the Stanford bunny (Cycles 64 spp: 1.15%), "
-     "2-14 s per 10k triangles on 2 cores"),
+     "benchmark): 1.1% RMS from Cycles' reference on the Stanford bunny (Cycles 64 spp: 1.3%), "
+     "1.4-11 s per 10k triangles on 2 cores"),
     ("final", "Final", "1.4x the patches per diagonal, finer hemi-cubes and twice the rays: "
-     "1.3-2.5x Production's time, its median error 2-9% lower (RMS at most 4% lower on the "
+     "1.5-2.3x Production's time, its median error 2-14% lower (RMS at most 5% lower on the "
      "benchmark: what is left there is systematic)"),
 )
 TARGETS = (
