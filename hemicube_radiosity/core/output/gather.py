@@ -22,7 +22,7 @@ from ..runtime.forked import release_tail, shared_array
 from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
 from ..rays import cosine_lattice, ray_offsets
-from ..util.sparse import CSR
+from ..util.sparse import CSR, summed_entries
 from ..util.unique import unique_ints
 from .shared import cast_shared
 from .through import Through, cast_through
@@ -279,16 +279,11 @@ def _cast(patches, params, scene, points, normals, eps, local, step, hits, out, 
     if hits:
         H = np.column_stack([s + f // R, pf, y]).astype(_hit_dtype(len(points), len(patches)))
     # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
-    V = len(patches.verts)
-    key, inv = unique_ints(np.repeat(f // R, 4) * V + ids.ravel(), return_inverse=True, grouped=True)
-    summed = np.bincount(inv.reshape(-1), weights=w.ravel() / R, minlength=key.size)
-    keep = summed != 0
-    key, summed = key[keep], summed[keep]
-    cols, vals = (key % V).astype(np.int32), summed.astype(np.float32)
+    counts, cols, vals = summed_entries(f // R, ids, w / R, len(patches.verts), m)
     if out is not None:
         e, h = out.write(s, cols, vals, H)
-        return s, m, sky_s, np.bincount(key // V, minlength=m), e, None, h
-    return s, m, sky_s, np.bincount(key // V, minlength=m), cols, vals, H
+        return s, m, sky_s, counts, e, None, h
+    return s, m, sky_s, counts, cols, vals, H
 
 
 def correct_hits(G, H, patches: PatchSet, vertex_values, exact, select) -> np.ndarray:

@@ -42,6 +42,7 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..util.geometry import in_frames, tangent_frames
 from ..util.sampling import cosine_directions, jittered_grid
+from ..util.sparse import summed_entries
 from ..util.unique import unique_ints
 
 __all__ = ["MIN_JOINED", "SHARE_COSINE", "Sharing", "share_corners", "corner_sharing", "cast_shared", "joined_ahead",
@@ -340,13 +341,8 @@ def cast_shared(share, ends, weights, hit_dtype, patches, params, scene, points,
     H = None
     if hits:
         H = np.column_stack([s + pp, pf[ph], y[ph], pw * R]).astype(hit_dtype)
-    V = len(patches.verts)
-    key, inv = unique_ints(np.repeat(pp, 4) * V + ids[ph].ravel(), return_inverse=True, grouped=True)
-    summed = np.bincount(inv.reshape(-1), weights=(wt[ph] * pw[:, None]).ravel(), minlength=key.size)
-    keep = summed != 0
-    key, summed = key[keep], summed[keep]
-    cols, vals = (key % V).astype(np.int32), summed.astype(np.float32)
+    counts, cols, vals = summed_entries(pp, ids[ph], wt[ph] * pw[:, None], len(patches.verts), m)
     if out is not None:
         ne, nh = out.write(s, cols, vals, H)
-        return s, m, sky_s, np.bincount(key // V, minlength=m), ne, None, nh
-    return s, m, sky_s, np.bincount(key // V, minlength=m), cols, vals, H
+        return s, m, sky_s, counts, ne, None, nh
+    return s, m, sky_s, counts, cols, vals, H

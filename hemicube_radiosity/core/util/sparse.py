@@ -15,7 +15,7 @@ import numpy as np
 from ..runtime.stored import storable
 from .unique import unique_ints
 
-__all__ = ["CSR"]
+__all__ = ["CSR", "summed_entries"]
 
 
 @storable
@@ -117,3 +117,16 @@ class CSR:
         with np.load(path, allow_pickle=False) as z:
             return cls(z["indptr"], z["indices"], z["data"], tuple(int(s) for s in z["shape"]),
                        ast.literal_eval(str(z["meta"])), z["sky"] if "sky" in z.files else None)
+
+
+def summed_entries(rows, ids, weights, width, m):
+    """A block of ``m`` sparse rows from entries that may repeat: ``rows`` (h,) each entry
+    group's row, ``ids`` (h, k) its columns (below ``width``), ``weights`` (h, k) their values;
+    duplicates summed in float64 (as :meth:`CSR.from_coo` sums them), zeros dropped. Returns
+    (counts (m,) entries per row, cols (n,) int32, vals (n,) float32), row by row."""
+    k = np.shape(ids)[1]
+    key, inv = unique_ints(np.repeat(rows, k) * width + np.ravel(ids), return_inverse=True, grouped=True)
+    summed = np.bincount(inv.reshape(-1), weights=np.ravel(weights), minlength=key.size)
+    keep = summed != 0
+    key, summed = key[keep], summed[keep]
+    return np.bincount(key // width, minlength=m), (key % width).astype(np.int32), summed.astype(np.float32)
