@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .contact_lines import row_dots
-from .patches import PatchSet, poly_geometry
+from .patches import PatchSet, compact, poly_geometry
 from ..util.unique import run_positions, unique_rows
 
 __all__ = ["assemble_pieces"]
@@ -94,11 +94,8 @@ def assemble_pieces(elements: PatchSet, pieces, lines, eps) -> PatchSet:
     centers, _, areas = poly_geometry(verts, polys)
     keep = areas > 0
     polys, parent, centers, areas = polys[keep], parent[keep], centers[keep], areas[keep]
-    used = np.unique(polys[polys >= 0])
-    remap = np.full(len(verts), -1, np.int64)
-    remap[used] = np.arange(used.size)
-    polys = np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
-    return PatchSet(verts[used], polys, centers, elements.normals[parent], areas, elements.rho[parent],
+    verts, polys = compact(verts, polys)
+    return PatchSet(verts, polys, centers, elements.normals[parent], areas, elements.rho[parent],
                     elements.emission[parent], elements.owner[parent], elements.source_face[parent],
                     list(elements.object_names))
 

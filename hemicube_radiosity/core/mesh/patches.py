@@ -26,7 +26,7 @@ from ..runtime.stored import storable
 from ..runtime.errors import RadiosityError
 from ..light.transmit import see_through
 
-__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "check_faces", "meshes_key", "RHO_MAX",
+__all__ = ["MeshInput", "PatchSet", "PatchError", "poly_geometry", "compact", "check_faces", "meshes_key", "RHO_MAX",
            "ZERO_AREA", "covering_faces"]
 
 RHO_MAX = 0.999          # the solve needs every band's reflectivity below 1: the most a face takes
@@ -287,6 +287,14 @@ def _face_index(source_face, owner, counts):
         if o.size == 0 or (f.min() >= 0 and (f < size[o]).all()):
             return np.concatenate([[0], np.cumsum(size)]).astype(np.int64)[o] + f
     return None
+
+
+def compact(verts, polys):
+    """(verts, polys) without the vertices no poly uses, the polys renumbered (-1 stays -1)."""
+    used = np.unique(polys[polys >= 0])
+    remap = np.full(len(verts), -1, dtype=np.int64)
+    remap[used] = np.arange(used.size)
+    return verts[used], np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
 
 
 def poly_geometry(verts, polys):

@@ -15,7 +15,7 @@ from typing import NamedTuple
 import numpy as np
 from ..util.unique import unique_rows
 from .ngons import to_tris_and_quads
-from .patches import ZERO_AREA, MeshInput, PatchError, PatchSet, check_faces, poly_geometry
+from .patches import ZERO_AREA, MeshInput, PatchError, PatchSet, check_faces, compact, poly_geometry
 from ..light.transmit import see_through
 
 __all__ = ["build_patches", "keeps_faces_whole"]
@@ -342,14 +342,6 @@ def _without_collapsed(polys, parent):
     return polys[keep], parent[keep]
 
 
-def _compact(verts, polys):
-    """Drop vertices no poly uses; renumber."""
-    used = np.unique(polys[polys >= 0])
-    remap = np.full(len(verts), -1, dtype=np.int64)
-    remap[used] = np.arange(used.size)
-    return verts[used], np.where(polys >= 0, remap[np.maximum(polys, 0)], -1)
-
-
 def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
     """Cut source meshes into patches of edge length about ``patch_size`` (world units; times
     a mesh's ``size_scale``).
@@ -385,7 +377,7 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
         v, p, src = to_tris_and_quads(mesh)
         v, p, parent = _subdivide(v, p, patch_size * mesh.size_scale if patch_size else patch_size)
         src = src[parent]
-        v, p = _compact(v, p)
+        v, p = compact(v, p)
         c, nrm, a = poly_geometry(v, p)
         if min_area is None:
             span = np.ptp(np.asarray(mesh.verts, float), axis=0) if len(mesh.verts) else np.zeros(3)
@@ -395,7 +387,7 @@ def build_patches(meshes, patch_size=None, min_area=None) -> PatchSet:
         if not np.any(keep):
             raise PatchError(f"{mesh.name!r}: every face has zero area")
         p, c, nrm, a, src = p[keep], c[keep], nrm[keep], a[keep], src[keep]
-        v, p = _compact(v, p)
+        v, p = compact(v, p)
         parts.append((v, p + v_base * (p >= 0), c, nrm, a, rho[src], em[src],
                       np.full(len(p), oi, np.int32), src.astype(np.int32)))
         v_base += len(v)
