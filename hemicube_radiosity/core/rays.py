@@ -35,7 +35,7 @@ from .runtime.parallel import ordered_map, resolve_workers
 from .mesh.patches import PatchSet
 from .light.transmit import SeeThroughScene, visibility
 
-__all__ = ["cosine_lattice", "open_fraction", "sky_fraction", "mesh_offsets", "ray_offsets",
+__all__ = ["cosine_lattice", "open_fraction", "closed_rays", "sky_fraction", "mesh_offsets", "ray_offsets",
            "EmbreeUnavailable", "embree_available",
            "import_embreex", "EmbreeScene",
            "embree_scene", "clear_ray_cache", "NumpyOccluder", "occluder", "patch_triangles"]
@@ -380,14 +380,13 @@ def _occluding(patches: PatchSet) -> PatchSet:
 def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
                   chunk_rays: int = 1 << 20, workers: int = 1, eps=None) -> np.ndarray:
     """(P,) fraction of ``rays`` cosine rays from each point (P, 3) with unit ``normals`` that
-    leave it into the open: neither hitting a surface closer than ``reach`` (world units) nor
-    the back of one at any distance. A point a few millimetres above a lamp's back, or on a
-    floor buried inside a block, has none; a point in the open has all, one in a corner about
-    half. ``scene``: :func:`.rays.embree_scene` of ``patches``. One jittered pattern (seeded)
-    for every point, in its normal's frame. Geometry only. ``workers`` (0 = every core):
-    threads casting a few chunks of points each (Embree lets go of the GIL while it casts); each point's
-    value does not depend on the chunks, so the result is the same for any count. ``eps`` (P,):
-    the rays' start offsets (default :func:`ray_offsets` of the points)."""
+    leave it into the open (:func:`closed_rays`, ``reach`` in world units): a point a few
+    millimetres above a lamp's back, or on a floor buried inside a block, has none; one in the
+    open all, one in a corner about half. ``scene``: :func:`.rays.embree_scene` of ``patches``.
+    One jittered pattern (seeded) for every point, in its normal's frame. Geometry only.
+    ``workers`` (0 = every core): threads casting a few chunks of points each (Embree lets go of
+    the GIL while it casts); each point's value does not depend on the chunks, so the result is
+    the same for any count. ``eps`` (P,): the rays' start offsets (default :func:`ray_offsets`)."""
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
@@ -406,15 +405,19 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
         pid, t = scene.intersect(np.repeat(x + eps[s:s + step] * n, R, axis=0), d)
-        pid = np.asarray(pid)
-        hit = pid >= 0
-        back = np.zeros_like(hit)
-        back[hit] = np.einsum("ij,ij->i", d[hit], patches.normals[pid[hit]]) > 0
-        closed = back | (hit & (np.asarray(t) < reach))
-        out[s:s + step] = 1.0 - closed.reshape(len(x), R).mean(axis=1)
+        out[s:s + step] = 1.0 - closed_rays(patches, d, pid, t, reach).reshape(len(x), R).mean(axis=1)
     for _ in ordered_map(chunk, range(0, len(points), step), workers if len(points) > step else 1):
         pass
     return out
+
+
+def closed_rays(patches: PatchSet, directions, pid, t, reach: float) -> np.ndarray:
+    """(M,) bool: the rays (``directions`` (M, 3), hits ``pid``, ``t`` of :meth:`EmbreeScene.intersect`)
+    that hit a patch's back, or any surface nearer than ``reach``: those not leaving into the open."""
+    hit = np.asarray(pid) >= 0
+    back = np.zeros_like(hit)
+    back[hit] = np.einsum("ij,ij->i", directions[hit], patches.normals[np.asarray(pid)[hit]]) > 0
+    return back | (hit & (np.asarray(t) < reach))
 
 
 def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rays import mesh_offsets, ray_offsets
+from ..rays import closed_rays, mesh_offsets, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..util.geometry import in_frames, tangent_frames
@@ -293,12 +293,7 @@ def shared_open_fraction(patches, points, normals, scene, reach, share, rays=16,
 
     def chunk(s):
         k, C, d, o, w = _cluster_rays(share, s, ends[s], local, points, normals, eps)
-        pid, t = scene.intersect(o, d)
-        pid = np.asarray(pid)
-        hit = pid >= 0
-        back = np.zeros_like(hit)
-        back[hit] = np.einsum("ij,ij->i", d[hit], patches.normals[pid[hit]]) > 0
-        closed = back | (hit & (np.asarray(t) < reach))
+        closed = closed_rays(patches, d, *scene.intersect(o, d), reach)
         out[s:ends[s]] = np.einsum("cr,crk->ck", (~closed).reshape(C, -1).astype(np.float64), w).reshape(-1)
     for _ in ordered_map(chunk, starts, workers if len(starts) > 1 else 1):
         pass
