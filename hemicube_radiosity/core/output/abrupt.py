@@ -49,7 +49,8 @@ def shadowed_inside(ctx, elements, xv, nv, light_v, select, opened=None, ratio=2
     a bridge in the middle of a 70 m triangle, sunlit at all three corners), which
     :func:`abrupt_elements` cannot see. Elements already in ``select`` (N,) and those the scene
     does not see (``opened`` 0) are left out. Looked for at the centre of each element, or of
-    n x n cells of an element n detail sizes across; the world's light is not cast again (it
+    n x n cells of an element n detail sizes across (on a huge object's elements, cells of
+    the detail size along each side: :func:`grid_sides`); the world's light is not cast again (it
     changes slowly); the lamps' rays are cached, so a relight casts none."""
     out = np.zeros(len(elements), bool)
     if ctx.direct is None or not (ctx.direct.lights or ctx.direct.emitters.size):
@@ -106,11 +107,12 @@ def huge_elements(ctx, elements, ids) -> np.ndarray:
 def grid_sides(corners, areas, step, square, most, huge, huge_step=None, rounding=np.ceil):
     """((M,), (M,)) int64 cells along e1 (corners 0 -> 1) and e2 (0 -> 3) of the elements of
     ``corners`` (M, 4, 3) (a triangle's 4th corner its 3rd) of ``areas`` (M,): n x n, n the
-    square root of the area over ``step`` rounded up (``rounding``), 1 to ``square``; or where ``huge`` (M,)
-    (an object cut at a size of its own, :mod:`..mesh.sizes`), each side's longer edge over
-    ``huge_step`` (None: ``step``; rounded up), both scaled down together to at most ``most`` cells: a long element
-    many steps across (a 68 m x 11 m piece of a huge ground under a racetrack) gets cells of
-    the step along its length and across it, not ``square`` x ``square``."""
+    square root of the area over ``step`` (``rounding``), 1 to ``square``; or where ``huge``
+    (M,) (an object cut at a size of its own, :mod:`..mesh.sizes`), each side's longer edge
+    over ``huge_step`` (None: ``step``; ``rounding``), both scaled down together to at most
+    ``most`` cells: a long element many steps across (a 68 m x 11 m piece of a huge ground under
+    a racetrack) gets cells of the step along its length and across it, not ``square`` x
+    ``square``."""
     n = np.clip(rounding(np.sqrt(areas) / step), 1.0, square)
     lu = np.maximum(np.linalg.norm(corners[:, 1] - corners[:, 0], axis=1),
                     np.linalg.norm(corners[:, 2] - corners[:, 3], axis=1))
@@ -172,9 +174,11 @@ class AbruptGrid:
         huge = huge_elements(ctx, elements, ids)
         key = cache_key(geometry_key(elements) + np.ascontiguousarray(ids, np.int64).tobytes()
                         + np.packbits(huge).tobytes(),
-                        ("abrupt-grid", size, ctx.settings.patch_size, self.CELLS, self.MOST, self.HUGE_CELLS, inset))
-        (self.nu, self.nv, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm, self.seen,
-         loc, i, j, k, w) = cached(ctx.cache, key, lambda: self._layout(ctx, elements, ids, size, inset, huge))
+                        ("abrupt-grid", size, ctx.settings.patch_size, self.CELLS, self.MOST, self.HUGE_CELLS,
+                         inset))
+        (self.nu, self.nv, self.offset, self.cell_offset, self.local, self.corners, x, owner, nrm,
+         self.seen, loc, i, j, k, w) = cached(ctx.cache, key,
+                                              lambda: self._layout(ctx, elements, ids, size, inset, huge))
         split = self.SKY_SPLIT if ctx.direct.sky_rays % self.SKY_SPLIT == 0 else 1
         light = ctx.direct.at(x, nrm, "abrupt-grid", split=split, part=self._sky_parts(len(x)) if split > 1 else None)
         self.values = elements.rho.take(owner, axis=0) * light     # take: rows 3x as fast as [owner]
