@@ -254,20 +254,21 @@ def test_a_grid_whose_2x2_blocks_share_the_sky_rays_reads_each_cells_middle_with
     0.67%; all rays at every corner 0.26%, one point 0.42%)."""
     from hemicube_radiosity.core.output.abrupt import AbruptGrid
 
-    grid = AbruptGrid.__new__(AbruptGrid)                 # its layout only: elements of n x n cells
-    grid.n = np.array([3, 2, 1])
-    grid.offset = np.concatenate([[0], np.cumsum((grid.n + 1) ** 2)[:-1]])
-    part = grid._sky_parts(int(((grid.n + 1) ** 2).sum()))
-    for m, n in enumerate(grid.n):                        # every cell's corners: all four parts
-        p = part[grid.offset[m]:grid.offset[m] + (n + 1) ** 2].reshape(n + 1, n + 1)
-        for i in range(n):
-            for j in range(n):
+    grid = AbruptGrid.__new__(AbruptGrid)                 # its layout only: elements of nu x nv cells
+    grid.nu, grid.nv = np.array([3, 2, 1, 5]), np.array([3, 2, 1, 2])
+    points = (grid.nu + 1) * (grid.nv + 1)
+    grid.offset = np.concatenate([[0], np.cumsum(points)[:-1]])
+    part = grid._sky_parts(int(points.sum()))
+    for m, (nu, nv) in enumerate(zip(grid.nu, grid.nv)):   # every cell's corners: all four parts
+        p = part[grid.offset[m]:grid.offset[m] + points[m]].reshape(nu + 1, nv + 1)
+        for i in range(nu):
+            for j in range(nv):
                 assert sorted(p[i:i + 2, j:j + 2].ravel()) == [0, 1, 2, 3]
     plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
     floor = quad([(-2, -2, 0), (3, -2, 0), (3, 3, 0), (-2, 3, 0)], name="Floor")
     ps = build_patches([plate, floor], 0.25)
     centres = np.linspace(-0.6, 0.6, 49)
-    grid.n = np.ones(len(centres), np.int64)              # one cell an element, corner i * 2 + j
+    grid.nu = grid.nv = np.ones(len(centres), np.int64)   # one cell an element, corner i * 2 + j
     grid.offset = 4 * np.arange(len(centres))
     a, b = (g.ravel() for g in np.meshgrid([-0.025, 0.025], [-0.025, 0.025], indexing="ij"))
     pts = np.column_stack([(centres[:, None] + a).ravel(), (0.37 + b[None] + 0 * centres[:, None]).ravel(),
