@@ -132,14 +132,10 @@ def offset(verts) -> float:
     return max(OFFSET_SHARE * diag, OFFSET_ULPS * 2.0 ** -23 * float(np.abs(v).max()))
 
 
-def _back(mesh, index, faces, emit: bool, cache=None, key=b""):
-    """The back of ``faces`` (F,) bool of ``mesh``: a mesh of those faces turned around and
-    moved :func:`offset` behind, ``back_of = index``. Its geometry is kept in ``cache`` under
-    ``key`` (the meshes' geometry) and the faces: a relight's back is the same arrays."""
-    from ..runtime.cache import cache_key, cached
-
-    verts, new_offsets, face_indices, corner, sel, triangles = cached(
-        cache, cache_key(key + np.packbits(faces).tobytes(), ("back", index)), lambda: _back_geometry(mesh, faces))
+def _back(mesh, index, shape, emit: bool):
+    """The back of some faces of ``mesh`` (their :func:`_back_geometry` ``shape``, cached for all
+    backs as one item: hundreds of open meshes must not fill the cache's count of items)."""
+    verts, new_offsets, face_indices, corner, sel, triangles = shape
 
     def corners(a):
         return None if a is None else np.asarray(a)[corner]
@@ -215,6 +211,8 @@ def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_ray
     decide which backs may be lit; ``probe_rays`` per point look for what a back faces. Which
     backs matter depends on geometry and on where the sources are, not on their strength or
     colour: kept in ``cache`` (a relight casts no ray)."""
+    from ..runtime.cache import cache_key, cached
+
     meshes = list(meshes)
     boxes = [(np.min(m.verts, axis=0), np.max(m.verts, axis=0)) for m in meshes if len(m.verts)]
     if not boxes:
@@ -227,9 +225,11 @@ def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_ray
     if not opened:
         return meshes
     matter = _cached_backs(meshes, opened, lights, world, probe_rays, cache, two_sided_emission, key)
-    backs = [_back(meshes[i], i, faces & matter[i], two_sided_emission, cache, key)
-             for i, faces in opened.items() if (faces & matter[i]).any()]
-    return meshes + backs
+    faces = {i: f & matter[i] for i, f in opened.items() if (f & matter[i]).any()}
+    shapes = cached(cache, cache_key(key + b"".join(np.packbits(f).tobytes() for f in faces.values()),
+                                     ("back", tuple(faces))),
+                    lambda: [_back_geometry(meshes[i], f) for i, f in faces.items()])
+    return meshes + [_back(meshes[i], i, shape, two_sided_emission) for i, shape in zip(faces, shapes)]
 
 
 def _cached_open(meshes, tol, cache, key) -> dict:

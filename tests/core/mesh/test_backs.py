@@ -6,6 +6,7 @@ from hemicube_radiosity.core.builtin_scenes import box, quad
 from hemicube_radiosity.core.mesh.backs import with_backs
 from hemicube_radiosity.core.mesh.patches import MeshInput, covering_faces
 from hemicube_radiosity.core.pipeline import bake
+from hemicube_radiosity.core.runtime.cache import FormFactorCache
 from hemicube_radiosity.core.settings import BakeSettings
 
 SKY = np.array([0.4, 0.5, 0.6])
@@ -59,3 +60,20 @@ def test_a_mesh_whose_only_open_faces_are_slivers_bakes_as_without_them(method):
     # the floor beside the block: lit by the sky (0.6 x sky on open ground, less in the block's shade)
     floor = slivered.patch_radiosity[slivered.patches.owner == 0]
     assert 0.3 * 0.6 * SKY[2] < floor[:, 2].mean() < 0.6 * SKY[2]
+
+
+def test_a_relight_of_hundreds_of_open_meshes_keeps_its_form_factors():
+    """300 open cards over a floor under a sky: each card's back matters. Their backs are one
+    cache item, so a relight finds the form factors the first bake left (a staircase hall of 775
+    objects evicted them: the backs filled the cache's count of items) and equals a cold bake."""
+    cards = [quad([(x, y, 0.5), (x + 0.2, y, 0.5), (x + 0.2, y, 0.7), (x, y, 0.7)], name=f"card{x}_{y}")
+             for x in np.linspace(-1.8, 1.6, 20) for y in np.linspace(-1.8, 1.6, 15)]
+    floor = quad([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], rho=(0.6, 0.6, 0.6), name="floor")
+    s = BakeSettings(patch_size=0.5, resolution=16, method="hemicube")
+    cache = FormFactorCache()
+    first = bake([floor, *cards], s, world=SKY, cache=cache)
+    assert len(first.patches.areas) > 600                      # both sides of every card
+    warm = bake([floor, *cards], s, world=2 * SKY, cache=cache)
+    assert warm.form_factor_source == "cached" and warm.form_factors is first.form_factors
+    assert len(cache._mem) < 64
+    np.testing.assert_allclose(warm.solution.B, 2 * first.solution.B, rtol=1e-6, atol=1e-12)
