@@ -421,15 +421,23 @@ def _vm_hwm_mb():
 
 
 def scale_light(factor):
-    """Every lamp's power and the world's Background strength times ``factor`` (a relight: no
-    geometry or material changes, so the result must scale by exactly ``factor``); returns how
-    many were scaled (0: the scene is lit by emitting surfaces only)."""
+    """Every lamp's power, every emitting material's strength (a Principled BSDF's Emission
+    Strength, an Emission shader's Strength, where not linked) and the world's Background strength
+    times ``factor`` (a relight: no geometry changes, so the result must scale by exactly
+    ``factor``); returns how many were scaled (0: nothing in the scene gives light)."""
     import bpy
 
     n = 0
     for light in bpy.data.lights:
         light.energy *= factor
         n += 1
+    for material in bpy.data.materials:
+        for node in (material.node_tree.nodes if material.node_tree is not None else ()):
+            name = {"BSDF_PRINCIPLED": "Emission Strength", "EMISSION": "Strength"}.get(node.type)
+            socket = node.inputs.get(name) if name else None
+            if socket is not None and not socket.is_linked and socket.default_value > 0:
+                socket.default_value *= factor
+                n += 1
     world = bpy.context.scene.world
     for node in (world.node_tree.nodes if world is not None and world.node_tree is not None else ()):
         if node.type == "BACKGROUND":
