@@ -163,8 +163,50 @@ def test_the_outlines_area_check_sums_each_cluster_as_alone():
         alone.append(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
     alone = np.array(alone)
     areas = alone * rng.choice([1.0, 1 + 1e-12, 1 + 1e-6, 1 - 1e-6], size=len(alone))
-    wrong = drawn._area_differs(pos, tris, areas)
+    flat, kt, ks = np.concatenate(tris), np.repeat(np.arange(len(tris)), [len(t) for t in tris]), np.arange(len(tris))
+    wrong = drawn._area_differs(pos, flat, kt, ks, areas)
     np.testing.assert_array_equal(wrong, np.abs(alone - areas) > 1e-9 * areas)
     assert 100 < wrong.sum() < 200
-    exact = drawn._area_differs(pos, tris, alone)
+    exact = drawn._area_differs(pos, flat, kt, ks, alone)
     assert not exact.any()
+
+
+def test_every_loop_clipped_at_once_as_one_at_a_time():
+    """:func:`drawn._ear_clip_loops` (the fans of convex loops found for many loops at once)
+    gives each loop's triangles, in order, as :func:`drawn._ear_clip` of the loop alone, and
+    fails the same loops: convex polygons (some with collinear or repeated vertices, either
+    winding), star-shaped and self-crossing ones, degenerate ones, up to 60 vertices."""
+    from hemicube_radiosity.core.form_factors import drawn
+    rng = np.random.default_rng(5)
+    pos, loops, normals = [], [], []
+    for i in range(600):
+        m = int(rng.integers(3, 61 if i % 10 == 0 else 9))
+        kind = i % 6
+        ang = np.sort(rng.uniform(0, 2 * np.pi, m))
+        r = np.ones(m) if kind in (0, 1) else rng.uniform(0.3, 1.0, m)
+        xy = np.stack([r * np.cos(ang), r * np.sin(ang)], 1)
+        if kind == 1 and m > 4:                       # a vertex on a side, and one repeated
+            xy[2] = 0.5 * (xy[1] + xy[3])
+            xy[m - 1] = xy[m - 2]
+        if kind == 3:
+            xy = xy[rng.permutation(m)]
+        if kind == 4:
+            xy[:] = xy[:1] + rng.uniform(0, 1, (m, 1)) * (xy[1] - xy[0])    # all on one line
+        if kind == 5:
+            xy = xy[::-1]
+        axis = int(rng.integers(3))
+        p3 = np.insert(xy, axis, rng.normal(), axis=1)
+        n = np.zeros(3)
+        n[axis] = rng.choice([-1.0, 1.0])
+        loops.append(np.arange(m) + sum(len(q) for q in pos))
+        pos.append(p3)
+        normals.append(n + rng.normal(scale=0.1, size=3))
+    pos = np.concatenate(pos)
+    tris, tri_loop, bad = drawn._ear_clip_loops(pos, np.concatenate(loops), np.array([len(L) for L in loops]),
+                                                np.array(normals))
+    for l, (L, n) in enumerate(zip(loops, normals)):
+        alone = drawn._ear_clip(pos, list(L), n)
+        assert bad[l] == (alone is None)
+        if alone is not None:
+            np.testing.assert_array_equal(tris[tri_loop == l], alone)
+    assert 50 < bad.sum() < 500 and (tri_loop[1:] >= tri_loop[:-1]).all()
