@@ -30,7 +30,7 @@ import numpy as np
 
 from ..mesh.clusters import Clusters
 from ..mesh.patches import PatchSet
-from ..util.unique import unique_ints, unique_rows
+from ..util.unique import run_positions, unique_ints, unique_rows
 
 __all__ = ["DrawSet", "draw_set"]
 
@@ -86,15 +86,10 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
     areas = np.bincount(of, weights=np.asarray(pieces.areas, np.float64), minlength=K)
     ok[of[bent]] = False
 
-    loops = _outline_loops(wpolys, of, ok, upos, n[rep])              # cluster -> loops, or failed
-    ok &= np.isin(np.arange(K), list(loops))
-    # every loop of the outlined clusters end to end: its vertices, its loop, its cluster
-    ks0 = np.flatnonzero(ok)
-    per = [loops[k] for k in ks0]
-    lens = np.array([len(L) for ls in per for L in ls], dtype=np.int64)
-    flat = np.array([v for ls in per for L in ls for v in L], dtype=np.int64)
+    # every loop of the outlined clusters end to end: its vertices, its length, its cluster
+    flat, lens, l_cl = _outline_loops(wpolys, of, ok, upos, n[rep])
+    ok &= np.isin(np.arange(K), l_cl)
     loop_of = np.repeat(np.arange(lens.size), lens)
-    l_cl = np.repeat(ks0, [len(ls) for ls in per]).astype(np.int64)
     succ = np.arange(1, flat.size + 1)                             # the next vertex in its loop
     succ[np.cumsum(lens) - 1] = np.cumsum(lens) - lens
     while True:
@@ -146,7 +141,7 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     is each cluster's normal (the pieces wind counter-clockwise about it)."""
     sel = np.flatnonzero(ok[of])
     if not sel.size:
-        return {}
+        return (np.zeros(0, np.int64),) * 3
     p = wpolys[sel]
     k = np.where(p[:, 3] < 0, 3, 4)
     nxt = np.where(np.arange(4)[None, :] + 1 < k[:, None], np.roll(p, -1, axis=1), p[:, :1])
@@ -166,18 +161,71 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     a, b, cl = a[edge], b[edge], cl[edge]
     o = np.lexsort((a, cl))
     a, b, cl = a[o], b[o], cl[o]
-    loops = {}
-    ends = np.r_[0, np.flatnonzero(np.diff(cl)) + 1, cl.size]
-    for s, e in zip(ends[:-1], ends[1:]):
-        if e - s < 3:                 # (no boundary edge at all: s = e = 0, a face doubled)
-            continue
-        k_ = int(cl[s])
-        if k_ in broken:
-            continue
-        found = _loops(a[s:e].tolist(), b[s:e].tolist(), pos, normals[k_])
+    # each cluster's edges a run; a run of fewer than 3 (s = e = 0: no boundary edge at all, a
+    # face doubled) or with a broken edge has no outline
+    first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
+    run = np.repeat(np.arange(first.size), np.diff(np.r_[first, cl.size]))
+    usable = (np.diff(np.r_[first, cl.size]) >= 3) & ~np.isin(cl[first] if cl.size else first, list(broken))
+    # pinched (a vertex left twice): each through _loops; the others are cycles of one next edge
+    twice = np.zeros(first.size, bool)
+    twice[run[1:][(a[1:] == a[:-1]) & (cl[1:] == cl[:-1])]] = True
+    V = np.int64(max(len(pos), 1))
+    ek = cl * V + a                                                     # ascending
+    want = cl * V + b
+    nxt = np.minimum(np.searchsorted(ek, want), max(ek.size - 1, 0))
+    closed = ek[nxt] == want if ek.size else np.zeros(0, bool)
+    into = np.bincount(nxt[closed], minlength=ek.size)
+    fails = np.zeros(first.size, bool)
+    fails[run[~closed | (into != 1)]] = True
+    cyc = usable & ~twice & ~fails
+    lv, ll, lc = _cycles(np.flatnonzero(cyc[run]), nxt, a, cl)
+    parts = [(lv, ll, lc)]
+    stop = np.r_[first[1:], cl.size]
+    for r in np.flatnonzero(usable & twice):
+        s_, e_ = first[r], stop[r]
+        k_ = int(cl[s_])
+        found = _loops(a[s_:e_].tolist(), b[s_:e_].tolist(), pos, normals[k_])
         if found is not None:
-            loops[k_] = found
-    return loops
+            parts.append((np.array([v for L in found for v in L], dtype=np.int64),
+                          np.array([len(L) for L in found], dtype=np.int64), np.full(len(found), k_, np.int64)))
+    flat = np.concatenate([q[0] for q in parts])
+    lens = np.concatenate([q[1] for q in parts])
+    l_cl = np.concatenate([q[2] for q in parts])
+    o = np.argsort(l_cl, kind="stable")                   # clusters ascending, each's loops in order
+    start = np.cumsum(lens) - lens
+    at = np.repeat(start[o], lens[o]) + run_positions(lens[o])
+    return flat[at], lens[o], l_cl[o]
+
+
+def _cycles(edges, nxt, a, cl):
+    """The loops of ``edges`` (ids into ``a``, ``cl``: whole clusters whose every edge has one
+    next edge ``nxt`` and one before it): each loop from its lowest edge (the lowest vertex of
+    its cluster's loop: edges by cluster, then ``a``), the loops by that edge, as :func:`_loops`
+    walks them. Returns (vertices end to end, (L,) lengths, (L,) cluster)."""
+    if not edges.size:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    pos = np.full(len(a), -1, np.int64)
+    pos[edges] = np.arange(edges.size)
+    nx = pos[nxt[edges]]                          # within ``edges``
+    # the lowest edge of each loop, and how far each edge is from the loop's last one: doubling
+    low, jump = np.arange(edges.size), nx.copy()
+    n = 1
+    while n < edges.size:
+        low = np.minimum(low, low[jump])
+        jump = jump[jump]
+        n *= 2
+    last = nx == low                              # the edge back to the loop's start
+    dist = np.where(last, 0, 1)
+    step = np.where(last, np.arange(edges.size), nx)
+    n = 1
+    while n < edges.size:
+        dist = dist + dist[step]
+        step = step[step]
+        n *= 2
+    length = dist[low] + 1
+    order = np.lexsort((length - 1 - dist, low))     # by loop (its lowest edge), then along it
+    heads = low[order][np.r_[True, low[order][1:] != low[order][:-1]]]
+    return a[edges[order]], length[heads], cl[edges[heads]]
 
 
 def _loops(a, b, pos, normal):
