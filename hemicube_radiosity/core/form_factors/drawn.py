@@ -130,10 +130,11 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
     return DrawSet(upos[live], m_polys, normals, centers, item_of, ok)
 
 
-def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
-    """{cluster: [loop, ...]}, each loop the welded vertex ids around one part of the cluster's
-    boundary, for clusters ``ok`` whose boundary is loops without holes; the others are left
-    out (a hole, an edge used twice the same way).
+def _outline_loops(wpolys, of, ok, pos, normals) -> tuple:
+    """The loops of clusters ``ok`` whose boundary is loops without holes (the others are left
+    out: a hole, an edge used twice the same way), each the welded vertex ids around one part of
+    its cluster's boundary: (their vertices end to end, (L,) lengths, (L,) cluster of each),
+    by cluster.
 
     Where the boundary touches itself at a vertex (two triangles meeting at a corner only), each
     edge arriving there goes on with the first edge leaving it clockwise in the cluster's plane
