@@ -22,7 +22,7 @@ import numpy as np
 from .contact_pieces import assemble_pieces
 from .contact_lines import face_pieces, pieces_segments, segment_hits, split_polygon
 from .patches import PatchSet
-from ..util.unique import run_positions, unique_rows
+from ..util.unique import run_positions, unique_ints, unique_rows
 from ..rays import ray_offsets
 
 __all__ = ["OpenSide", "open_side"]
@@ -340,7 +340,7 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
             pairs.append(meet(np.flatnonzero(la < L), np.flatnonzero(lb == L), s))
     p = np.concatenate(pairs).astype(np.int64)
     B = max(len(blo), 1)
-    k = np.sort(p[:, 0] * B + p[:, 1])
+    k = unique_ints(p[:, 0] * B + p[:, 1])     # (sorted; once each, cell keys colliding too)
     return k // B, k % B
 
 
