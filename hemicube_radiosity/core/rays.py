@@ -124,12 +124,12 @@ class EmbreeScene:
         return np.asarray(self._scene.run(o, d, query="OCCLUDED", **kw)) >= 0
 
 
-_SCENE_CACHE = Memo(4)
+_SCENE_CACHE = Memo(6)
 
 
 def embree_scene(patches: PatchSet) -> EmbreeScene:
-    """The Embree scene for ``patches``, built once per geometry (the four most recent are kept
-    until :func:`clear_ray_cache`)."""
+    """The Embree scene for ``patches``, built once per geometry (the six most recent are kept
+    until :func:`clear_ray_cache`: with four, zdm2 built five of its ten twice)."""
     return _per_geometry(_SCENE_CACHE, patches, EmbreeScene)
 
 

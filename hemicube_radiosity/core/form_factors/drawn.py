@@ -30,7 +30,7 @@ import numpy as np
 
 from ..mesh.clusters import Clusters
 from ..mesh.patches import PatchSet
-from ..util.unique import unique_ints, unique_rows
+from ..util.unique import run_positions, unique_ints, unique_rows
 
 __all__ = ["DrawSet", "draw_set"]
 
@@ -86,32 +86,39 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
     areas = np.bincount(of, weights=np.asarray(pieces.areas, np.float64), minlength=K)
     ok[of[bent]] = False
 
-    loops = _outline_loops(wpolys, of, ok, upos, n[rep])              # cluster -> loops, or failed
-    ok &= np.isin(np.arange(K), list(loops))
+    # every loop of the outlined clusters end to end: its vertices, its length, its cluster
+    flat, lens, l_cl = _outline_loops(wpolys, of, ok, upos, n[rep])
+    ok &= np.isin(np.arange(K), l_cl)
+    loop_of = np.repeat(np.arange(lens.size), lens)
+    succ = np.arange(1, flat.size + 1)                             # the next vertex in its loop
+    succ[np.cumsum(lens) - 1] = np.cumsum(lens) - lens
     while True:
         # vertices every outline agrees to leave out: none that a piece drawn as-is uses
         used = wpolys[~ok[of]]
         pinned = np.zeros(len(upos), bool)
         pinned[used[used >= 0]] = True
-        drop = _droppable(upos, [L for k in np.flatnonzero(ok) for L in loops[k]], pinned, diag)
-        ks, tri, failed = [], [], []
-        for k in np.flatnonzero(ok):
-            t = _ear_clips(upos, [[v for v in L if not drop[v]] for L in loops[k]], n[rep[k]])
-            if t is None:
-                failed.append(k)
-                continue
-            ks.append(k)
-            tri.append(t)
-        wrong = _area_differs(upos, tri, areas[np.asarray(ks, dtype=np.int64)])
-        failed += [k for k, w in zip(ks, wrong) if w]
+        live = ok[l_cl][loop_of]
+        drop = _droppable(upos, flat[live], flat[succ[live]], pinned, diag)
+        keep = live & ~drop[flat]
+        tris, tri_loop, bad = _ear_clip_loops(upos, flat[keep], np.bincount(loop_of[keep], minlength=lens.size),
+                                              n[rep[l_cl]])
+        bad |= ~ok[l_cl]
+        failed = np.zeros(K, bool)
+        failed[l_cl[bad]] = True
+        ks = np.flatnonzero(ok & ~failed)
+        kt = l_cl[tri_loop]
+        good = ~failed[kt]
+        tris, kt = tris[good], kt[good]
+        wrong = _area_differs(upos, tris, kt, ks, areas[ks])
+        failed = np.flatnonzero(failed & ok).tolist() + ks[wrong].tolist()
         if not failed:
             break
         ok[failed] = False            # drawn as pieces: decide the drop again around them
     as_is = np.flatnonzero(~ok[of])
-    t_polys = np.concatenate(tri) if tri else np.zeros((0, 3), np.int64)
+    t_polys = tris
     m_polys = np.concatenate([wpolys[as_is],
                               np.concatenate([t_polys, np.full((len(t_polys), 1), -1)], axis=1)])
-    k_of = np.repeat(np.asarray(ks, dtype=np.int64), [len(t) for t in tri])
+    k_of = kt
     item_of = np.concatenate([of[as_is], k_of])
     normals = np.concatenate([n[as_is], n[rep][k_of]])
     centers = np.concatenate([c[as_is], c[rep][k_of]])
@@ -123,10 +130,11 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
     return DrawSet(upos[live], m_polys, normals, centers, item_of, ok)
 
 
-def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
-    """{cluster: [loop, ...]}, each loop the welded vertex ids around one part of the cluster's
-    boundary, for clusters ``ok`` whose boundary is loops without holes; the others are left
-    out (a hole, an edge used twice the same way).
+def _outline_loops(wpolys, of, ok, pos, normals) -> tuple:
+    """The loops of clusters ``ok`` whose boundary is loops without holes (the others are left
+    out: a hole, an edge used twice the same way), each the welded vertex ids around one part of
+    its cluster's boundary: (their vertices end to end, (L,) lengths, (L,) cluster of each),
+    by cluster.
 
     Where the boundary touches itself at a vertex (two triangles meeting at a corner only), each
     edge arriving there goes on with the first edge leaving it clockwise in the cluster's plane
@@ -134,7 +142,7 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     is each cluster's normal (the pieces wind counter-clockwise about it)."""
     sel = np.flatnonzero(ok[of])
     if not sel.size:
-        return {}
+        return (np.zeros(0, np.int64),) * 3
     p = wpolys[sel]
     k = np.where(p[:, 3] < 0, 3, 4)
     nxt = np.where(np.arange(4)[None, :] + 1 < k[:, None], np.roll(p, -1, axis=1), p[:, :1])
@@ -154,18 +162,71 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> dict:
     a, b, cl = a[edge], b[edge], cl[edge]
     o = np.lexsort((a, cl))
     a, b, cl = a[o], b[o], cl[o]
-    loops = {}
-    ends = np.r_[0, np.flatnonzero(np.diff(cl)) + 1, cl.size]
-    for s, e in zip(ends[:-1], ends[1:]):
-        if e - s < 3:                 # (no boundary edge at all: s = e = 0, a face doubled)
-            continue
-        k_ = int(cl[s])
-        if k_ in broken:
-            continue
-        found = _loops(a[s:e].tolist(), b[s:e].tolist(), pos, normals[k_])
+    # each cluster's edges a run; a run of fewer than 3 (s = e = 0: no boundary edge at all, a
+    # face doubled) or with a broken edge has no outline
+    first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
+    run = np.repeat(np.arange(first.size), np.diff(np.r_[first, cl.size]))
+    usable = (np.diff(np.r_[first, cl.size]) >= 3) & ~np.isin(cl[first] if cl.size else first, list(broken))
+    # pinched (a vertex left twice): each through _loops; the others are cycles of one next edge
+    twice = np.zeros(first.size, bool)
+    twice[run[1:][(a[1:] == a[:-1]) & (cl[1:] == cl[:-1])]] = True
+    V = np.int64(max(len(pos), 1))
+    ek = cl * V + a                                                     # ascending
+    want = cl * V + b
+    nxt = np.minimum(np.searchsorted(ek, want), max(ek.size - 1, 0))
+    closed = ek[nxt] == want if ek.size else np.zeros(0, bool)
+    into = np.bincount(nxt[closed], minlength=ek.size)
+    fails = np.zeros(first.size, bool)
+    fails[run[~closed | (into != 1)]] = True
+    cyc = usable & ~twice & ~fails
+    lv, ll, lc = _cycles(np.flatnonzero(cyc[run]), nxt, a, cl)
+    parts = [(lv, ll, lc)]
+    stop = np.r_[first[1:], cl.size]
+    for r in np.flatnonzero(usable & twice):
+        s_, e_ = first[r], stop[r]
+        k_ = int(cl[s_])
+        found = _loops(a[s_:e_].tolist(), b[s_:e_].tolist(), pos, normals[k_])
         if found is not None:
-            loops[k_] = found
-    return loops
+            parts.append((np.array([v for L in found for v in L], dtype=np.int64),
+                          np.array([len(L) for L in found], dtype=np.int64), np.full(len(found), k_, np.int64)))
+    flat = np.concatenate([q[0] for q in parts])
+    lens = np.concatenate([q[1] for q in parts])
+    l_cl = np.concatenate([q[2] for q in parts])
+    o = np.argsort(l_cl, kind="stable")                   # clusters ascending, each's loops in order
+    start = np.cumsum(lens) - lens
+    at = np.repeat(start[o], lens[o]) + run_positions(lens[o])
+    return flat[at], lens[o], l_cl[o]
+
+
+def _cycles(edges, nxt, a, cl):
+    """The loops of ``edges`` (ids into ``a``, ``cl``: whole clusters whose every edge has one
+    next edge ``nxt`` and one before it): each loop from its lowest edge (the lowest vertex of
+    its cluster's loop: edges by cluster, then ``a``), the loops by that edge, as :func:`_loops`
+    walks them. Returns (vertices end to end, (L,) lengths, (L,) cluster)."""
+    if not edges.size:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    pos = np.full(len(a), -1, np.int64)
+    pos[edges] = np.arange(edges.size)
+    nx = pos[nxt[edges]]                          # within ``edges``
+    # the lowest edge of each loop, and how far each edge is from the loop's last one: doubling
+    low, jump = np.arange(edges.size), nx.copy()
+    n = 1
+    while n < edges.size:
+        low = np.minimum(low, low[jump])
+        jump = jump[jump]
+        n *= 2
+    last = nx == low                              # the edge back to the loop's start
+    dist = np.where(last, 0, 1)
+    step = np.where(last, np.arange(edges.size), nx)
+    n = 1
+    while n < edges.size:
+        dist = dist + dist[step]
+        step = step[step]
+        n *= 2
+    length = dist[low] + 1
+    order = np.lexsort((length - 1 - dist, low))     # by loop (its lowest edge), then along it
+    heads = low[order][np.r_[True, low[order][1:] != low[order][:-1]]]
+    return a[edges[order]], length[heads], cl[edges[heads]]
 
 
 def _loops(a, b, pos, normal):
@@ -211,14 +272,12 @@ def _loops(a, b, pos, normal):
     return loops
 
 
-def _droppable(pos, loops, pinned, diag) -> np.ndarray:
-    """(V,) bool welded vertices every outline may leave out: two outline edges (over all loops,
-    undirected) meet there, collinear, and no piece drawn as-is uses the vertex."""
+def _droppable(pos, a, b, pinned, diag) -> np.ndarray:
+    """(V,) bool welded vertices every outline may leave out: two outline edges (``a`` -> ``b``,
+    over all loops, undirected) meet there, collinear, and no piece drawn as-is uses the vertex."""
     drop = np.zeros(len(pos), bool)
-    if not loops:
+    if not a.size:
         return drop
-    a = np.concatenate([np.asarray(L) for L in loops])
-    b = np.concatenate([np.roll(np.asarray(L), -1) for L in loops])
     und = unique_rows(np.stack([np.minimum(a, b), np.maximum(a, b)], axis=1))
     ends = und.ravel()
     deg = np.bincount(ends, minlength=len(pos))
@@ -241,30 +300,19 @@ def _droppable(pos, loops, pinned, diag) -> np.ndarray:
     return drop
 
 
-def _ear_clips(pos, loops, normal):
-    """(T, 3) int64 triangles filling ``loops`` (each a simple polygon, counter-clockwise about
-    ``normal``), or None when a loop cannot be clipped into ears (:func:`_ear_clip`)."""
-    parts = []
-    for loop in loops:
-        t = _ear_clip(pos, loop, normal) if len(loop) >= 3 else None
-        if t is None:
-            return None
-        parts.append(t)
-    return np.concatenate(parts)
-
-
-def _area_differs(pos, tris, areas, tol=1e-9) -> np.ndarray:
-    """(K,) bool: where the triangles ``tris[k]`` (T_k, 3) of a cluster do not cover its pieces'
-    area ``areas[k]`` (to ``tol`` relative): a loop that is a hole, or loops that overlap. Every
-    cluster's triangles at once, their areas summed a row per cluster of clusters with as many
-    triangles (the sums of the cluster-by-cluster check, bit for bit: NumPy sums a row of a 2-D
-    array as it sums the row alone; a dense level's 30,000 clusters took 4 s in tiny NumPy calls)."""
-    K = len(tris)
+def _area_differs(pos, tris, kt, ks, areas, tol=1e-9) -> np.ndarray:
+    """(K,) bool: where the triangles ``tris`` (T, 3) of clusters ``ks`` (K,) (``kt`` (T,) the
+    cluster of each, ascending) do not cover its pieces' area ``areas`` (K,) (to ``tol``
+    relative): a loop that is a hole, or loops that overlap. Every cluster's triangles at once,
+    their areas summed a row per cluster of clusters with as many triangles (the sums of the
+    cluster-by-cluster check, bit for bit: NumPy sums a row of a 2-D array as it sums the row
+    alone; a dense level's 30,000 clusters took 4 s in tiny NumPy calls)."""
+    K = len(ks)
     out = np.zeros(K, bool)
     if not K:
         return out
-    count = np.array([len(t) for t in tris], dtype=np.int64)
-    p = pos[np.concatenate(tris)]
+    count = np.bincount(np.searchsorted(ks, kt), minlength=K)
+    p = pos[tris]
     norms = np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
     first = np.cumsum(count) - count
     got = np.empty(K)
@@ -272,6 +320,91 @@ def _area_differs(pos, tris, areas, tol=1e-9) -> np.ndarray:
         k = np.flatnonzero(count == T)
         got[k] = 0.5 * norms[first[k, None] + np.arange(T)[None]].sum(axis=1)
     return np.abs(got - areas) > tol * areas
+
+
+def _ear_clip_loops(pos, flat, count, normals):
+    """Every loop's triangles (:func:`_ear_clip`): the loops end to end, ``flat`` their vertex ids,
+    ``count`` (L,) their lengths, ``normals`` (L, 3) their planes. Returns (T, 3) int64
+    triangles, (T,) the loop of each (ascending, each loop's in :func:`_ear_clip`'s order), and
+    (L,) bool the loops that cannot be clipped (or have fewer than 3 vertices).
+
+    Where :func:`_ear_clip` takes the fan from a loop's last vertex (every step an ear: a convex
+    outline, the usual case), the same tests decide it here for all loops of one length at once,
+    the same numbers compared the same way (:func:`_fan`); the others go through :func:`_ear_clip`."""
+    start = np.cumsum(count) - count
+    bad = count < 3
+    parts, owners = [], []
+    slow = np.flatnonzero((count > _FAN_MAX) & ~bad).tolist()
+    for m in np.unique(count[(count >= 3) & (count <= _FAN_MAX)]):
+        rows = np.flatnonzero(count == m)
+        for sel in np.array_split(rows, -(-rows.size * m * m // (1 << 20))):
+            t, tl, none, rest = _fan(pos, flat[start[sel, None] + np.arange(m)], normals[sel])
+            bad[sel[none]] = True
+            parts.append(t)
+            owners.append(sel[tl])
+            slow += sel[rest].tolist()
+    for l in slow:
+        t = _ear_clip(pos, flat[start[l]:start[l] + count[l]], normals[l])
+        if t is None:
+            bad[l] = True
+        else:
+            parts.append(t)
+            owners.append(np.full(len(t), l, np.int64))
+    if not parts:
+        return np.zeros((0, 3), np.int64), np.zeros(0, np.int64), bad
+    tris, tri_loop = np.concatenate(parts), np.concatenate(owners)
+    o = np.argsort(tri_loop, kind="stable")
+    return tris[o], tri_loop[o], bad
+
+
+_FAN_MAX = 48    # loops of up to so many vertices: :func:`_fan` first
+
+
+def _fan(pos, ids, normals):
+    """:func:`_ear_clip` for the loops ``ids`` (n, m) whose every step is an ear: it clips the fan
+    from the last vertex, (m-1, j, j+1) for j < m - 3, then (m-3, m-2, m-1). Returns their
+    triangles (T, 3), the row of each (T,), the rows :func:`_ear_clip` gives None for, and the
+    rows whose clipping is not the fan (left to :func:`_ear_clip`)."""
+    n, m = ids.shape
+    ax = np.argmax(np.abs(normals), axis=1)
+    pts = pos[ids]                                                    # (n, m, 3)
+    x = np.take_along_axis(pts, np.array([1, 2, 0])[ax][:, None, None], axis=2)[..., 0]
+    y = np.take_along_axis(pts, np.array([2, 0, 1])[ax][:, None, None], axis=2)[..., 0]
+    xn, yn = np.roll(x, -1, axis=1), np.roll(y, -1, axis=1)
+    area2 = np.cumsum(x * yn - xn * y, axis=1)[:, -1]       # Python's sum: in order, one by one
+    s = np.where(area2 > 0, 1.0, -1.0)[:, None]
+    r = np.arange(n)[:, None]
+
+    def cross(p, q, t):        # (n, k) positions in each row, as _ear_clip's cross
+        xp, yp = x[r, p], y[r, p]
+        return s * ((x[r, q] - xp) * (y[r, t] - yp) - (y[r, q] - yp) * (x[r, t] - xp))
+
+    fan = np.ones(n, bool)
+    if m > 3:
+        q = np.broadcast_to(np.arange(m - 3), (n, m - 3))
+        p = np.full((n, m - 3), m - 1)
+        fan = (cross(p, q, q + 1) > 0).all(axis=1)
+        # at step j the other vertices j + 2 .. m - 2: none inside the ear, its border included
+        # (those at the place of one of its corners left out)
+        tt = np.broadcast_to(np.arange(m), (n, m - 3, m)).reshape(n, -1)
+        pj, qj = np.repeat(p, m, axis=1), np.repeat(q, m, axis=1)
+        rj = qj + 1
+        other = (tt >= qj + 2) & (tt <= m - 2)
+        for c in (pj, qj, rj):
+            other &= ~((x[r, tt] == x[r, c]) & (y[r, tt] == y[r, c]))
+        inside = (cross(pj, qj, tt) >= 0) & (cross(qj, rj, tt) >= 0) & (cross(rj, pj, tt) >= 0)
+        fan &= ~(other & inside).any(axis=1)
+    last = cross(np.full((n, 1), m - 3), np.full((n, 1), m - 2), np.full((n, 1), m - 1))[:, 0]
+    none = (area2 == 0) | (fan & (last < 0))
+    fan &= ~none
+    rows = np.flatnonzero(fan)
+    tail = rows[last[rows] > 0]
+    k = np.repeat(rows, m - 3)
+    j = np.tile(np.arange(m - 3), rows.size)
+    tri = np.concatenate([np.stack([ids[k, m - 1], ids[k, j], ids[k, j + 1]], axis=1), ids[tail][:, m - 3:]])
+    row = np.concatenate([k, tail])
+    order = np.argsort(row, kind="stable")
+    return tri[order], row[order], none, np.flatnonzero(~fan & ~none)
 
 
 def _ear_clip(pos, loop, normal):

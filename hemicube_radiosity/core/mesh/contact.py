@@ -146,6 +146,13 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
     # both sides of, or on, the group's plane
     gi_all, ci_all = _crossing_candidates(g_lo, g_hi, g_n, lo, hi, faces.normals)
+    # a face of the same object at a corner of the group's face (the same place) is left out
+    # below (the mesh going on): most pairs of a scanned mesh, whose neighbours' boxes overlap
+    weld = unique_rows(faces.verts, return_inverse=True)[1].reshape(-1)
+    at = np.where(faces.polys < 0, weld[faces.polys[:, 2:3]], weld[np.maximum(faces.polys, 0)])
+    goes_on = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
+    goes_on &= (at[g_face[gi_all]][:, :, None] == at[ci_all][:, None, :]).any(axis=(1, 2))
+    gi_all, ci_all = gi_all[~goes_on], ci_all[~goes_on]
     h = np.einsum("pkj,pj->pk", cut_corners[ci_all] - flat[order[start[gi_all]], 0][:, None], g_n[gi_all])
     tri = np.all(cut_corners[ci_all][:, 3] == cut_corners[ci_all][:, 2], axis=1)
     on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
@@ -269,7 +276,8 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
     overlap. Grids of cells twice the median box size, and 2, 4, 8... times that, find the
     candidates: each box goes on the finest grid where it covers at most ``per_box`` cells (its
     level), and a pair is looked for on the grid of the coarser of its two boxes' levels, each
-    box of a finer level on it covering a few cells. Then the boxes are compared. The work
+    box of a finer level on it covering a few cells; the boxes are compared there, and a pair
+    that overlaps is kept in one cell only (its overlap's lowest corner's). The work
     grows with the boxes and the pairs found, not with the large boxes times all the others
     (a game level's 1,600 floor slabs, each tested against every other box, took 20 s)."""
     if not len(alo) or not len(blo):
@@ -304,7 +312,9 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         g = i0[at] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
         return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own
 
-    def meet(ia_, ib_, s):                        # the pairs of ia_ x ib_ sharing a cell of edge s
+    def meet(ia_, ib_, s):
+        """The pairs of ia_ x ib_ that overlap, each found in the cell of edge s holding its
+        overlap's lowest corner (a cell both boxes cover), so once."""
         ka, ia = expand(alo, ahi, ia_, s)
         kb, ib = expand(blo, bhi, ib_, s)
         order = np.argsort(kb, kind="stable")
@@ -314,7 +324,11 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         ii = np.repeat(ia, cnt)
         jj = ib[np.repeat(lo_ - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())] if cnt.sum() else \
             np.zeros(0, np.int64)
-        return np.stack([ii, jj], 1)
+        ok = np.all((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj]), axis=1)
+        ii, jj, kk = ii[ok], jj[ok], np.repeat(ka, cnt)[ok]
+        g = np.floor((np.maximum(alo[ii], blo[jj]) - origin) / s).astype(np.int64)
+        first = (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2] == kk
+        return np.stack([ii[first], jj[first]], 1)
 
     la, lb = levels(alo, ahi), levels(blo, bhi)
     pairs = [np.zeros((0, 2), np.int64)]
@@ -326,12 +340,8 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
             pairs.append(meet(np.flatnonzero(la < L), np.flatnonzero(lb == L), s))
     p = np.concatenate(pairs).astype(np.int64)
     B = max(len(blo), 1)
-    k = unique_ints(p[:, 0] * B + p[:, 1])
-    p = np.stack([k // B, k % B], 1)
-    if not len(p):
-        return p[:, 0], p[:, 1]
-    ok = np.all((alo[p[:, 0]] <= bhi[p[:, 1]]) & (ahi[p[:, 0]] >= blo[p[:, 1]]), axis=1)
-    return p[ok, 0], p[ok, 1]
+    k = unique_ints(p[:, 0] * B + p[:, 1])     # (sorted; once each, cell keys colliding too)
+    return k // B, k % B
 
 
 def _polygon(elements, e):

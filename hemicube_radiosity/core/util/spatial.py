@@ -126,9 +126,12 @@ class _Level:
     def _key(self, ci):
         return (ci[..., 0] * self.dims[1] + ci[..., 1]) * self.dims[2] + ci[..., 2]
 
-    def ring(self, sites, p, k, r):
+    def ring(self, sites, p, k, r, upper=None):
         """Candidates of the points p (m, 3) in the cube of (2 r + 1)^3 cells around theirs: (m, k)
-        sites and d2 (the k smallest found), (m,) bool where they are certainly the k nearest."""
+        sites and d2 (the k smallest found), (m,) bool where they are certainly the k nearest.
+        ``upper`` (m,): each point's k-th smallest d2 among sites of a cube inside this one (a finer
+        level's), or inf; cells and sites farther than it cannot be among the k and are skipped
+        (the k smallest found are the same)."""
         m, h, dims = len(p), self.h, self.dims
         pc = np.clip(np.floor((p - self.lo) / h), -r - 1, dims + r).astype(np.int64)
         nb = pc[:, None, :] + _offsets(r)[None]                       # (m, c, 3)
@@ -137,8 +140,16 @@ class _Level:
         pos = np.minimum(np.searchsorted(self.keys, key), len(self.keys) - 1)
         hit = valid & (self.keys[pos] == key)
         cnt = np.where(hit, self.count[pos], 0)
+        total = cnt.sum(axis=1)                          # sites in the cube, skipped ones included
+        if upper is not None and np.isfinite(upper).any():
+            # a cell whose box is farther than the bound (a margin for rounding) holds none of the k
+            lo = self.lo + nb * h
+            gap = np.maximum(np.maximum(lo - p[:, None, :], p[:, None, :] - (lo + h)), 0.0)
+            far = ((gap * gap).sum(-1) * (1 - _MARGIN) > upper[:, None]) & np.isfinite(upper)[:, None]
+            cnt = np.where(far, 0, cnt)
         if m > 1 and int(cnt.sum()) > MAX_PAIRS:     # crowded cells (sites much denser than the cell): halves
-            parts = [self.ring(sites, q, k, r) for q in (p[:m // 2], p[m // 2:])]
+            half = (slice(0, m // 2), slice(m // 2, m))
+            parts = [self.ring(sites, p[q], k, r, None if upper is None else upper[q]) for q in half]
             return tuple(np.concatenate(x) for x in zip(*parts))
         cnt = cnt.ravel()
         nz = cnt > 0
@@ -147,11 +158,14 @@ class _Level:
         within = run_positions(cnt)
         site = self.order[np.repeat(st, cnt) + within]
         d2 = sq_dist(p[row], sites[site])
-        s, d, n = _select(row, site, d2, m, k)
+        if upper is not None:
+            near = d2 <= upper[row]
+            row, site, d2 = row[near], site[near], d2[near]
+        s, d, _ = _select(row, site, d2, m, k)
         # the distance from each point to its cube's nearest face: every site outside is farther
         bound = np.minimum(p - (self.lo + (pc - r) * h), (self.lo + (pc + r + 1) * h) - p).min(1)
-        ok = (n >= k) & (bound > 0) & (d[:, -1] < (bound * (1 - _MARGIN)) ** 2)
-        return s, d, ok | (n == len(sites))
+        ok = (total >= k) & (bound > 0) & (d[:, -1] < (bound * (1 - _MARGIN)) ** 2)
+        return s, d, ok | (total == len(sites))
 
 
 class Grid:
@@ -203,10 +217,12 @@ class Grid:
         for a in range(0, P, chunk):
             ids = np.arange(a, min(a + chunk, P))
             i = 0
+            upper = None
             while ids.size and (i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4):
-                s, d, ok = self._level(i).ring(self.sites, points[ids], k, 1)
+                # each coarser cube holds the finer one: its k-th found bounds the k nearest
+                s, d, ok = self._level(i).ring(self.sites, points[ids], k, 1, upper)
                 out_s[ids[ok]], out_d[ids[ok]] = s[ok], d[ok]
-                ids = ids[~ok]
+                ids, upper = ids[~ok], d[~ok, -1]
                 i += 1
             rows = max(1, MAX_PAIRS // N)
             for b in range(0, ids.size, rows):

@@ -107,8 +107,8 @@ def test_outlines_touching_at_a_corner_are_cut_into_simple_loops():
     clusters = make_clusters(pieces, of)
     pos, weld = np.unique(pieces.verts, axis=0, return_inverse=True)
     w = np.where(pieces.polys < 0, -1, weld.reshape(-1)[np.maximum(pieces.polys, 0)])
-    loops = drawn._outline_loops(w, of, np.ones(2, bool), pos, clusters.normals)
-    assert sorted(len(L) for L in loops[0]) == [3, 7] and len(loops[1]) == 1
+    _, lens, l_cl = drawn._outline_loops(w, of, np.ones(2, bool), pos, clusters.normals)
+    assert sorted(lens[l_cl == 0]) == [3, 7] and (l_cl == 1).sum() == 1
     d = draw_set(pieces, clusters)
     assert d.outlined.all()
     a = np.bincount(d.item_of, weights=_triangle_areas(d), minlength=2)
@@ -163,8 +163,92 @@ def test_the_outlines_area_check_sums_each_cluster_as_alone():
         alone.append(0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1).sum())
     alone = np.array(alone)
     areas = alone * rng.choice([1.0, 1 + 1e-12, 1 + 1e-6, 1 - 1e-6], size=len(alone))
-    wrong = drawn._area_differs(pos, tris, areas)
+    flat, kt, ks = np.concatenate(tris), np.repeat(np.arange(len(tris)), [len(t) for t in tris]), np.arange(len(tris))
+    wrong = drawn._area_differs(pos, flat, kt, ks, areas)
     np.testing.assert_array_equal(wrong, np.abs(alone - areas) > 1e-9 * areas)
     assert 100 < wrong.sum() < 200
-    exact = drawn._area_differs(pos, tris, alone)
+    exact = drawn._area_differs(pos, flat, kt, ks, alone)
     assert not exact.any()
+
+
+def test_every_loop_clipped_at_once_as_one_at_a_time():
+    """:func:`drawn._ear_clip_loops` (the fans of convex loops found for many loops at once)
+    gives each loop's triangles, in order, as :func:`drawn._ear_clip` of the loop alone, and
+    fails the same loops: convex polygons (some with collinear or repeated vertices, either
+    winding), star-shaped and self-crossing ones, degenerate ones, up to 60 vertices."""
+    from hemicube_radiosity.core.form_factors import drawn
+    rng = np.random.default_rng(5)
+    pos, loops, normals = [], [], []
+    for i in range(600):
+        m = int(rng.integers(3, 61 if i % 10 == 0 else 9))
+        kind = i % 6
+        ang = np.sort(rng.uniform(0, 2 * np.pi, m))
+        r = np.ones(m) if kind in (0, 1) else rng.uniform(0.3, 1.0, m)
+        xy = np.stack([r * np.cos(ang), r * np.sin(ang)], 1)
+        if kind == 1 and m > 4:                       # a vertex on a side, and one repeated
+            xy[2] = 0.5 * (xy[1] + xy[3])
+            xy[m - 1] = xy[m - 2]
+        if kind == 3:
+            xy = xy[rng.permutation(m)]
+        if kind == 4:
+            xy[:] = xy[:1] + rng.uniform(0, 1, (m, 1)) * (xy[1] - xy[0])    # all on one line
+        if kind == 5:
+            xy = xy[::-1]
+        axis = int(rng.integers(3))
+        p3 = np.insert(xy, axis, rng.normal(), axis=1)
+        n = np.zeros(3)
+        n[axis] = rng.choice([-1.0, 1.0])
+        loops.append(np.arange(m) + sum(len(q) for q in pos))
+        pos.append(p3)
+        normals.append(n + rng.normal(scale=0.1, size=3))
+    pos = np.concatenate(pos)
+    tris, tri_loop, bad = drawn._ear_clip_loops(pos, np.concatenate(loops), np.array([len(L) for L in loops]),
+                                                np.array(normals))
+    for l, (L, n) in enumerate(zip(loops, normals)):
+        alone = drawn._ear_clip(pos, list(L), n)
+        assert bad[l] == (alone is None)
+        if alone is not None:
+            np.testing.assert_array_equal(tris[tri_loop == l], alone)
+    assert 50 < bad.sum() < 500 and (tri_loop[1:] >= tri_loop[:-1]).all()
+
+
+def test_outline_loops_found_at_once_as_walked_one_cluster_at_a_time():
+    """:func:`drawn._outline_loops` (the loops of every cluster whose boundary is simple cycles
+    found at once) gives the loops :func:`drawn._loops` walks cluster by cluster, in order: grids
+    of squares cut into random clusters (some with several loops, holes, corners touching)."""
+    from hemicube_radiosity.core.form_factors import drawn
+    rng = np.random.default_rng(3)
+    for trial in range(6):
+        n = 12
+        ij = np.stack(np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij"), -1).reshape(-1, 2)
+        pos = np.column_stack([ij, np.zeros(len(ij))]).astype(float)
+        v = lambda i, j: i * (n + 1) + j                                      # noqa: E731
+        quads = np.array([[v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1)] for i in range(n) for j in range(n)])
+        keep = rng.uniform(size=len(quads)) > 0.15 * (trial % 3)
+        quads = quads[keep]
+        if trial % 2:                                             # some squares as two triangles
+            tri = rng.uniform(size=len(quads)) < 0.5
+            t = quads[tri]
+            quads = np.concatenate([quads[~tri],
+                                    np.column_stack([t[:, [0, 1, 2]], np.full(len(t), -1)]),
+                                    np.column_stack([t[:, [0, 2, 3]], np.full(len(t), -1)])])
+        of = rng.integers(0, 9, len(quads))
+        K = int(of.max()) + 1
+        ok = np.ones(K, bool)
+        normals = np.tile([0.0, 0.0, 1.0], (K, 1))
+        flat, lens, l_cl = drawn._outline_loops(quads, of, ok, pos, normals)
+        # as walked before: cluster by cluster, the boundary's edges by (cluster, vertex)
+        want = []
+        for k in range(K):
+            p = quads[of == k]
+            edges = [(int(r[c]), int(r[(c + 1) % (3 if r[3] < 0 else 4)])) for r in p for c in range(3 if r[3] < 0 else 4)]
+            und = [tuple(sorted(e)) for e in edges]
+            bnd = sorted(e for e in edges if und.count(tuple(sorted(e))) == 1)
+            if len(bnd) < 3 or any(und.count(u) > 2 or (und.count(u) == 2 and edges.count(e) == 2)
+                                   for u, e in zip(und, edges)):
+                continue
+            got = drawn._loops([e[0] for e in bnd], [e[1] for e in bnd], pos, normals[k])
+            want += [(k, L) for L in (got or [])]
+        assert [int(c) for c in l_cl] == [k for k, _ in want]
+        np.testing.assert_array_equal(lens, [len(L) for _, L in want])
+        np.testing.assert_array_equal(flat, [x for _, L in want for x in L])

@@ -165,6 +165,26 @@ def test_k_nearest_equals_a_full_sort(monkeypatch, pairs):
         np.testing.assert_array_equal(d2, np.take_along_axis(full, ref, 1))
 
 
+def test_k_nearest_through_coarse_levels_equals_a_full_sort():
+    """Sites dense in a few spots and sparse elsewhere (a level's small patches beside its floors),
+    many neighbours asked: most points settle only on coarse levels, whose cubes skip the cells and
+    sites beyond the k-th found on the finer level; the result is still the full sort's."""
+    rng = np.random.default_rng(7)
+    for trial in range(6):
+        spots = rng.uniform(-10, 10, (4, 3)) * [1, 1, 0.05]
+        dense = np.concatenate([c + rng.normal(size=(300, 3)) * 0.05 for c in spots])
+        sites = np.concatenate([dense, rng.uniform(-10, 10, (200, 3)) * [1, 1, 0.05]])
+        if trial % 2:
+            sites = np.round(sites * 4) / 4           # a lattice's ties
+        pts = np.concatenate([rng.uniform(-12, 12, (300, 3)) * [1, 1, 0.1], dense[::7] + 0.01])
+        k = (9, 65, 33)[trial % 3]
+        idx, d2 = k_nearest(sites, pts, k, cell=0.1, chunk=97)
+        full = ((pts[:, None, :] - sites[None]) ** 2).sum(-1)
+        ref = np.argsort(full, axis=1, kind="stable")[:, :k]
+        np.testing.assert_array_equal(idx, ref)
+        np.testing.assert_array_equal(d2, np.take_along_axis(full, ref, 1))
+
+
 def test_a_dense_objects_whole_faces_need_no_search(monkeypatch):
     """A dense object in a coarse room (the Cornell box's tall block as 4,000 triangles, finer
     than the patches and the detail size): its faces are whole as patches and as elements, so
