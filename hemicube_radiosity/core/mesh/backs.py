@@ -1,13 +1,11 @@
 """The backs of open surfaces: what Cycles reflects from the other side of a single plane.
 
-The paper's patches reflect from their front only. In Cycles every surface reflects on both
-sides: a single-plane wall lit from behind sends light back into the room behind it, a lamp
-panel's back and the ceiling 5 mm above it bounce light between them, a floor mirrored by a
-negative scale (its faces turned away from the room) is lit from the room. Here each face of an
-*open* surface gets a back: the same face with its corners in reverse order, moved a hair
-(:func:`offset`) behind the front, so that from either side the nearer of the two is the one
-facing the viewer. The hemi-cube's depth test, Embree's nearest hit and the front-only tests of
-every stage then treat the two sides as two surfaces, with nothing special anywhere else.
+The paper's patches reflect from their front only; in Cycles every surface reflects on both
+sides (a single-plane wall lit from behind, a lamp panel's back 5 mm under a ceiling, a floor
+turned away from the room by a negative scale). Here each face of an *open* surface gets a
+back: the same face with its corners in reverse order, moved a hair (:func:`offset`) behind the
+front, so that from either side the nearer of the two faces the viewer. The hemi-cube's depth
+test, Embree's nearest hit and every front-only test then see two surfaces, nothing special.
 
 An open surface is a connected part of a mesh (faces joined through edges that two faces share
 with opposite orientation, corners welded by position) that has an edge no other face closes: a
@@ -54,6 +52,9 @@ SECOND_RAYS = 8
 FACING_SHARE = 1.0 / 8.0
 #: Faces larger than this share of the scene's diagonal, squared, are probed at five points.
 LARGE_FACE = 0.05
+#: An emitting face's back is also probed this share of the way from each corner to its centre
+#: (what it lights may lie where its centre's rays graze: an opening's rim 1 cm over a lamp).
+NEAR_CORNER = 0.02
 
 
 def _corner_next(offsets) -> np.ndarray:
@@ -214,12 +215,10 @@ def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_ray
     from ..runtime.cache import cache_key, cached
 
     meshes = list(meshes)
-    boxes = [(np.min(m.verts, axis=0), np.max(m.verts, axis=0)) for m in meshes if len(m.verts)]
-    if not boxes:
+    corners = [np.asarray(m.verts) for m in meshes if len(m.verts)]
+    if not corners:
         return meshes
-    lo = np.min([b[0] for b in boxes], axis=0)
-    hi = np.max([b[1] for b in boxes], axis=0)
-    tol = 1e-9 * (float(np.linalg.norm(hi - lo)) or 1.0)
+    tol = 1e-9 * (float(np.linalg.norm(np.ptp(np.concatenate(corners), axis=0))) or 1.0)
     key = meshes_key(meshes)
     opened = _cached_open(meshes, tol, cache, key)
     if not opened:
@@ -289,7 +288,7 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     underside in Cycles too, for no one to see), or where that much of its view is the fronts of surfaces
     that are not shut in (their own rays find some front, or escape, not only the backs of
     others). With ``emit`` (two-sided emitters) the back of an emitting face matters
-    wherever it faces any surface. The rest are left out, so a scene pays nothing for them: the
+    wherever it faces any surface, probed from near its corners too (:data:`NEAR_CORNER`). The rest are left out, so a scene pays nothing for them: the
     underside of a floor, the outside of a room built of single planes in a dark world, the
     inside of a box without a bottom standing on a floor (it faces only its own walls' backs
     and the floor they shut in), the inside of a scanned model seen through holes in its base.
@@ -313,12 +312,18 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     n, start_eps = normals[sel], eps[sel][at]
     S, R = len(sel), probe_rays
     matter, world_on = _lit(scene, lights, world, points, n[at], at, S, start_eps)
-    hit, x, m, escaped, touched, up = _probe(scene, normals, points, -n[at], R, start_eps)
+    hit, x, m, escaped, up = _probe(scene, normals, points, -n[at], R, start_eps)
     ray_face = np.repeat(at, R)
     rays = np.bincount(ray_face, minlength=S)
     if emit:                                    # an emitter's back shines on whatever it faces
-        shines = np.bincount(ray_face, weights=touched, minlength=S) > 0
-        matter |= shines & (_face_emission(meshes, offsets, sel) > 0)
+        lamp = _face_emission(meshes, offsets, sel) > 0
+        matter |= lamp & (np.bincount(ray_face, weights=~escaped, minlength=S) > 0)
+        k = np.full(len(centres), -1, np.int64)
+        k[sel[lamp]] = np.flatnonzero(lamp)
+        on, k = k[corner_face] >= 0, k[corner_face][k[corner_face] >= 0]    # and from its corners
+        near = corner[on] + NEAR_CORNER * (centres[corner_face[on]] - corner[on])
+        esc = _probe(scene, normals, near, -normals[sel[k]], R, eps[sel[k]])[3]
+        matter |= np.bincount(np.repeat(k, R), weights=~esc, minlength=S) > 0
     if world_on:                                # the lit sky over a share of its view
         matter |= np.bincount(ray_face, weights=escaped & up, minlength=S) >= FACING_SHARE * rays
     # fronts over a share of its view, not shut in: their own rays find some front, or escape
@@ -346,12 +351,9 @@ def _probe_points(sel, centres, areas, corner, corner_face, scale):
 def _per_mesh(opened, matter) -> dict:
     """{mesh index: (F,) bool}: ``matter`` (S,), one per open face of ``opened`` in its order,
     scattered back onto each mesh's faces (False where a face is not open)."""
-    out, start = {}, 0
-    for o, f in opened.items():
-        k = int(f.sum())
-        out[o] = np.zeros_like(f)
-        out[o][np.flatnonzero(f)] = matter[start:start + k]
-        start += k
+    out = {o: np.zeros_like(f) for o, f in opened.items()}
+    for (o, f), m in zip(opened.items(), np.split(matter, np.cumsum([f.sum() for f in opened.values()])[:-1])):
+        out[o][f] = m
     return out
 
 
@@ -387,7 +389,7 @@ def _open_share(scene, normals, x, m, front, face, S, eps) -> np.ndarray:
     first = np.searchsorted(face, face, side="left")
     keep = (np.arange(face.size) - first) < SECOND_HITS
     front, face = front[keep], face[keep]
-    h2, _, _, esc2, _, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps[front])
+    h2, _, _, esc2, _ = _probe(scene, normals, x[front], m[front], SECOND_RAYS, eps[front])
     open2 = (esc2 | (h2 >= 0)).reshape(-1, SECOND_RAYS).any(axis=1)
     return np.bincount(face, weights=open2, minlength=S) / np.maximum(np.bincount(face, minlength=S), 1)
 
@@ -476,8 +478,8 @@ def _probe(scene, normals, points, directions_about, rays, eps):
     """``rays`` cosine rays from each of ``points`` (P, 3) about ``directions_about`` (P, 3),
     starting ``eps`` (P,) off along it:
     (hit (P * rays,) the face whose front a ray hit, or -1; where (P * rays, 3) it hit; that
-    face's normal (P * rays, 3); escaped, touched and up (P * rays,) bool: the ray found nothing,
-    or a face, front or back; it points above the horizon (+Z, Blender's up))."""
+    face's normal (P * rays, 3); escaped and up (P * rays,) bool: the ray found nothing; it
+    points above the horizon (+Z, Blender's up))."""
     from ..rays import cosine_lattice
     from ..util.geometry import in_frames, tangent_frames
 
@@ -486,15 +488,13 @@ def _probe(scene, normals, points, directions_about, rays, eps):
     o = np.repeat(points + eps[:, None] * directions_about, rays, axis=0)
     pid, t = scene.intersect(o, d)
     escaped = pid < 0
-    touched = pid >= 0
     nrm = normals[np.maximum(pid, 0)]
     front = (pid >= 0) & (np.einsum("pj,pj->p", nrm, d) < 0)
     where = o + np.where(front, t, 0.0)[:, None] * d
-    return np.where(front, pid, -1), where, nrm, escaped, touched, d[:, 2] > 0
+    return np.where(front, pid, -1), where, nrm, escaped, d[:, 2] > 0
 
 
 def _face_emission(meshes, offsets, sel) -> np.ndarray:
     """(S,) the largest band of each face's emission, of the faces ``sel`` numbered over all meshes."""
-    em = np.concatenate([np.asarray(m.face_emission, dtype=np.float64).reshape(-1, 3).max(axis=1)
-                         if len(m.face_offsets) >= 2 else np.zeros(0) for m in meshes])
-    return em[sel]
+    return np.concatenate([np.asarray(m.face_emission, dtype=np.float64).reshape(-1, 3).max(axis=1)
+                           if len(m.face_offsets) >= 2 else np.zeros(0) for m in meshes])[sel]
