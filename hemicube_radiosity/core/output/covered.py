@@ -17,7 +17,9 @@ centre; any other toward its element's), and a bake point is *covered* where ano
 over it, along its triangle's normal, within its object's ray offset, or between it and where
 its vertex's rays start, or on the ray toward the scene's strongest sun before that ray rises a
 ray offset over the corner's plane (a kerb's lip beside the grass's corner, not over it: our
-sun ray starts over the lip; :func:`covered_corners`; three rays per point). A covered point is lit
+sun ray starts over the lip; :func:`covered_corners`; three rays per point, the first and the
+last going on past the corner's own face: a warped face's elements, cut bilinearly, run a hair
+off Blender's triangle the point lies on, in front of what covers it). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 nothing from below its triangle's plane), and its vertex's light reflected more than once
@@ -65,6 +67,8 @@ TIE_ULPS = 1
 #: the surface over it, if nearer): as near as Cycles' start, at the corner itself, as a ray off a
 #: plane can start without meeting it again.
 LIFT_ULPS = 16
+#: How many times a covering ray goes on past its own face's hits (:func:`_cover_along`).
+OWN_PASSES = 3
 #: Cosine rays per covered corner for the share of the open scene it sees.
 OPEN_RAYS = 64
 #: The least rise of the strongest sun over a corner's triangle (the sine of its elevation above
@@ -127,11 +131,8 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     own = _face_keys(elements)
     origin = point + tie[:, None] * geo
     # the nearest surface above the point along its triangle's normal, within the ray offset
-    up, t = scene.intersect(origin, geo, eps)
-    up = np.asarray(up)
-    above = up >= 0
-    above[above] = own[fronts[up[above]]] != own[p[above]]
-    gap = np.where(above, tie + np.asarray(t, dtype=np.float64), np.inf)
+    above, t = _cover_along(scene, fronts, own, p, origin, geo, eps, tie)
+    gap = np.where(above, tie + t, np.inf)
     # or the segment from the point to where the vertex's rays start crosses a surface
     seg = xv[v] + eps[:, None] * nv[v] - origin
     length = np.linalg.norm(seg, axis=1)
@@ -146,11 +147,8 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         rise = geo @ to_sun
         toward = rise > 0.0
         reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
-        hit, _ = scene.intersect(origin, np.broadcast_to(to_sun, origin.shape), reach)
-        hit = np.asarray(hit)
-        shaded = toward & (hit >= 0)
-        shaded[shaded] = own[fronts[hit[shaded]]] != own[p[shaded]]
-        chosen |= shaded
+        shaded, _ = _cover_along(scene, fronts, own, p, origin, np.broadcast_to(to_sun, origin.shape), reach, tie)
+        chosen |= toward & shaded
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
@@ -171,6 +169,40 @@ def _fronts(ctx, elements):
                   emission=elements.emission[rows], owner=elements.owner[rows],
                   source_face=elements.source_face[rows])
     return rows, embree_scene(sub)
+
+
+def _cover_along(scene, fronts, own, p, origin, direction, reach, tie):
+    """((K,) bool, (K,) distance): whether the ray from each ``origin`` (K, 3) along its unit
+    ``direction`` (K, 3) meets, within ``reach`` (K,), another face than that of the corner of
+    element ``p`` (K,) it starts from, and how far along (inf where none). A ray that meets the
+    corner's own face first goes on past it (up to :data:`OWN_PASSES` times): our
+    elements cut a bent face along other diagonals than Blender's triangle the bake point lies
+    on, so its first hit may be a hair away on its own face, over the face that covers it (a
+    bevel's foot a few microns over the shelf it rests on)."""
+    origin = np.array(origin, dtype=np.float64)
+    direction = np.asarray(direction, dtype=np.float64)
+    left = np.array(reach, dtype=np.float64)
+    covers = np.zeros(len(p), bool)
+    dist = np.full(len(p), np.inf)
+    gone = np.zeros(len(p))
+    todo = np.arange(len(p))
+    for _ in range(OWN_PASSES):
+        hit, t = scene.intersect(origin[todo], direction[todo], left[todo])
+        hit, t = np.asarray(hit), np.asarray(t, dtype=np.float64)
+        met = hit >= 0
+        yes = np.zeros(len(todo), bool)
+        yes[met] = own[fronts[hit[met]]] != own[p[todo[met]]]
+        covers[todo[yes]] = True
+        dist[todo[yes]] = gone[todo[yes]] + t[yes]
+        again = met & ~yes & (t + tie[todo] < left[todo])
+        todo, t = todo[again], t[again]
+        if not len(todo):
+            break
+        step = t + tie[todo]                      # past the own face's hit, a float32 step on
+        origin[todo] += step[:, None] * direction[todo]
+        left[todo] -= step
+        gone[todo] += step
+    return covers, dist
 
 
 def _face_keys(elements) -> np.ndarray:

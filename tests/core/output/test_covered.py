@@ -213,3 +213,37 @@ def test_a_corner_whose_sun_passes_under_a_lip_beside_it_gets_no_sun():
     assert east.sum() == 2 and west.sum() == 2
     assert D[east].max() < 1e-3 * SUN / np.pi
     np.testing.assert_allclose(D[west], SUN * np.cos(np.pi / 4) / np.pi, rtol=1e-3)
+
+
+
+def test_a_corner_behind_its_own_warped_face_still_finds_the_floor_under_it():
+    """One mesh: the floor and a 2 x 2 m lid facing down, rising from 5 um over the floor at y =
+    -0.5 to 0.2 m at y = 1.5, warped 2 cm (one bilinear piece, not cut along Blender's triangles:
+    core/mesh/ngons.py ``WARPED``): the living room's bevel undersides on the shelf, 4.7 um over
+    it. Cycles bakes corner 0 on Blender's first triangle (0, 1, 2), which near the corner runs
+    a hair behind the bilinear lid; its rays meet the floor 9 um under it, which sees the sun and
+    sky only through the wedge between the two (an upper bound: the sky above 13 degrees' slit,
+    2.5% of the floor's hemisphere, 0.3% of the open floor's light at the lid). Ours met the lid's
+    own face first along the corner's normal and stopped there: the corner kept its vertex's light,
+    read from under the floor, 84% of the open floor's. Corner 3, on the triangle (0, 2, 3), was
+    dark already."""
+    gap = 5e-6
+    xs = np.arange(-2.0, 2.5, 1.0)
+    verts = [(x, y, 0.0) for y in xs for x in xs]
+    faces = [(j * 5 + i, j * 5 + i + 1, (j + 1) * 5 + i + 1, (j + 1) * 5 + i) for j in range(4) for i in range(4)]
+    verts += [(-0.5, -0.5, gap), (-0.5, 1.5, 0.2), (1.5, 1.5, 0.22), (1.5, -0.5, gap)]
+    faces += [(25, 26, 27, 28)]
+    sky = np.array([0.3, 0.35, 0.4])
+    r = bake([MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="floor")],
+             BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False, gather_rays=64),
+             lights=[SunLight((0.2, 0.1, -1.0), strength=SUN)], world=sky)
+    E = r.elements
+    assert gap < 0.5 * mesh_offsets(r.patches)[0]              # the floor lies within the ray offset
+    pos, val = E.verts[E.corner_ids()], r.corner_values().mean(axis=2)
+    lid = (E.source_face == 16)[:, None]
+    feet = lid & (np.abs(pos[..., 2] - gap) < 1e-9) & (np.abs(np.abs(pos[..., 0] - 0.5) - 1.0) < 1e-9)
+    far = ~lid & np.all(np.abs(pos[..., :2]) > 1.9, axis=2)
+    open_floor = RHO * (SUN / np.linalg.norm((0.2, 0.1, 1.0)) / np.pi + sky.mean())
+    assert feet.sum() == 2 and far.sum() >= 4
+    np.testing.assert_allclose(val[far], open_floor, rtol=0.05)     # (and what the lid's edge sends)
+    assert val[feet].max() < 0.05 * open_floor
