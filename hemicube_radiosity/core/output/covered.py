@@ -230,8 +230,7 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     if lean.any():
         low = np.full((len(p), 3), np.nan)
         low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])
-        tie = 4 * 2.0 ** -23 * np.maximum(np.abs(np.nan_to_num(low)).max(axis=1), 1.0)
-        D += below_plane(ctx, low + tie[:, None] * geo, shade, geo, "covered-below")
+        D += below_plane(ctx, low, shade, geo, "covered-below")
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     v = elements.polys[p, c]
     key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))

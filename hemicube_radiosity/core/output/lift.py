@@ -22,13 +22,17 @@ import numpy as np
 from ..util.geometry import barycentric
 
 __all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners", "bake_points",
-           "corner_edges", "corner_normals", "lifted_starts"]
+           "corner_edges", "corner_normals", "lifted_starts", "ON_PLANE_ULPS"]
 
 #: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
 TERMINATOR_OFFSET = 0.1
 #: How far Cycles moves a corner's bake point toward its triangle's centre, per unit of its
 #: largest coordinate (at least 1).
 BAKE_NUDGE = 1e-4
+#: Float32 steps of its largest coordinate a lifted start lies at least over its triangle's
+#: plane (:func:`lifted_starts`). Raising every start by 4 (not only those nearer the plane) let
+#: truck town's racetrack lip's rays pass a neighbour 4 mm on that Cycles' meet.
+ON_PLANE_ULPS = 4
 
 
 def blocked_share(mesh, face, corner, to_light, occluded) -> np.ndarray:
@@ -250,7 +254,11 @@ def lifted_starts(elements, meshes, p, c):
     if ok.any():
         Ng, P, w, n = _bake_frame(V[ok], N[ok], at[ok])
         h = _height(V[ok], N[ok], P, w, np.einsum("ij,ij->i", n, Ng) > 0)
-        out[k[ok]] = P + h[:, None] * n
+        # at least ON_PLANE_ULPS float32 steps over the plane, so that a ray from a start on the
+        # plane (a lift of 0) meets its triangle again as Cycles' does (or not, at random: ties)
+        over = h * np.einsum("ij,ij->i", n, Ng)
+        floor = ON_PLANE_ULPS * 2.0 ** -23 * np.maximum(np.abs(P).max(axis=1), 1.0)
+        out[k[ok]] = P + h[:, None] * n + np.maximum(floor - over, 0.0)[:, None] * Ng
     return out
 
 
