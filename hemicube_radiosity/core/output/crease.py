@@ -51,6 +51,7 @@ from ..rays import ray_offsets
 from ..light.lamps import SunLight
 from ..mesh.patches import meshes_key
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from .above import above_shares
 from .lift import ON_PLANE_ULPS, bake_points, corner_normals, lifted_starts
 from .normals import corner_shading_normals
 
@@ -121,16 +122,18 @@ def _turned(elements, meshes, p, c, geo, facing) -> np.ndarray:
     return turned
 
 
-def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
+def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_v=None):
     """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
     (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
     (V, 3)) but at the corners of :func:`crease_corners` their own, lit by ``ctx.direct`` (a
     triangle's fourth corner its third); and the share of the light reflected more than once that each corner keeps: 1, but
-    at those corners the share of the shading normal's cosine-weighted hemisphere above the
-    triangle's plane, (1 + N . Ng) / 2 (the sky view factor of a plane tilted by their angle;
-    Cycles' diffuse bounce takes nothing from below that plane, ``bsdf_diffuse_sample``), the
-    light arriving at the vertex taken as even over its hemisphere. None when no corner is lit
-    on its own."""
+    at those corners the share of what the vertex's gather read (as ``read_v`` (V, 3), the
+    light leaving the vertices) that arrived from above the triangle's plane
+    (:func:`.above.above_shares`; Cycles' diffuse bounce takes nothing from below that plane,
+    ``bsdf_diffuse_sample``), or where that is not known the share of the shading normal's
+    cosine-weighted hemisphere above the plane, (1 + N . Ng) / 2 (the sky view factor of a
+    plane tilted by their angle: the light arriving taken as even over the hemisphere). None
+    when no corner is lit on its own."""
     if ctx.direct is None:
         return None
     found = _corner_rays(ctx, elements, xv, nv, opened, buried)
@@ -145,6 +148,8 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None):
         D[o] = ctx.direct.at(start[o], shade[o], "corners", eps=np.zeros(int(o.sum())), facing=facing[o])
     D += below_plane(ctx, low, shade, geo, "corners-below")     # Cycles' lifted rays
     k = (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2           # the hemisphere's share above the plane
+    share = above_shares(ctx, elements, p, c, geo, xv, read_v)   # the gather's hits say it
+    k = np.where(np.isfinite(share), share, k)
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
     tri = (elements.polys[p, 3] < 0) & (c == 2)
