@@ -148,8 +148,11 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_
         D[o] = ctx.direct.at(start[o], shade[o], "corners", eps=np.zeros(int(o.sum())), facing=facing[o])
     D += below_plane(ctx, low, shade, geo, "corners-below")     # Cycles' lifted rays
     k = (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2           # the hemisphere's share above the plane
-    share = above_shares(ctx, elements, p, c, geo, xv, read_v)   # the gather's hits say it
-    k = np.where(np.isfinite(share), share, k)
+    share = above_shares(ctx, elements, p, c, geo, xv, read_v)   # the gather's hits say it,
+    # where the vertex gathered about the corner's own shading normal (not where Cycles wrote
+    # another face's normal over the vertex, :mod:`..mesh.cycles_normals`)
+    about = np.einsum("ij,ij->i", shade, nv[elements.polys[p, c]]) >= np.cos(np.radians(CREASE_ANGLE))
+    k = np.where(np.isfinite(share) & about, share, k)
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
     tri = (elements.polys[p, 3] < 0) & (c == 2)
