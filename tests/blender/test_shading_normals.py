@@ -179,3 +179,54 @@ def test_a_smooth_lip_s_slope_corners_take_the_sun_as_cycles_does(profile, zenit
 def _unit(v):
     v = np.asarray(v, dtype=np.float64)
     return v / np.linalg.norm(v)
+
+
+#: A piece of godot_truck_town's grass (three triangles about one vertex, at the origin), its
+#: corner normals as the file has them: the thin steep triangle (1, 2, 3) faces +y, its corner
+#: at the origin is shaded with the hill's normal, up and toward +y.
+CREST_VERTS = ((-0.6474, 1.5821, 1.1656), (-0.786, 0.02, 0.4934), (0.8243, -0.0572, -0.4236), (0.0, 0.0, 0.0))
+CREST_FACES = ((0, 3, 2), (0, 1, 3), (1, 2, 3))
+CREST_NORMALS = ((0.1138, -0.5551, 0.8239), (0.3186, -0.0918, 0.9434), (0.1540, -0.2909, 0.9443),
+                 (0.4678, 0.3272, 0.8210))
+
+
+def test_a_crest_s_steep_corner_takes_a_sun_behind_its_triangle_where_cycles_lifted_ray_passes():
+    """The sun 7 degrees behind the steep triangle's plane (Ng . L = -0.12), 35 degrees off its
+    corner's shading normal at the origin. Cycles' shadow ray starts at the bake point lifted by
+    the shadow-terminator offset (4 cm here along the normal) and passes over the triangle's
+    far edge: the corner's direct light is rho E cos(N, L) / pi, as the other two triangles'
+    corners' there. Our rays for it started at the vertex's point, 6 mm up the same normal, and
+    met the triangle (truck town's grass: 0.13 where Cycles has 0.36); now they start where
+    Cycles' do (:func:`core.output.lift.lifted_starts`)."""
+    cr.new_empty_scene()
+    me = bpy.data.meshes.new("crest")
+    me.from_pydata([tuple(v) for v in CREST_VERTS], [], [tuple(f) for f in CREST_FACES])
+    me.update()
+    me.shade_smooth()
+    n = [_unit(CREST_NORMALS[v]) for f in CREST_FACES for v in f]
+    me.normals_split_custom_set([tuple(x) for x in n])
+    ob = bpy.data.objects.new("crest", me)
+    bpy.context.scene.collection.objects.link(ob)
+    ob.data.materials.append(cr.diffuse_material((RHO,) * 3))
+    to_sun = _unit((0.36868784, -0.5265408, 0.7660445))
+    zen, az = math.acos(to_sun[2]), math.atan2(to_sun[0], -to_sun[1])
+    cr.add_light("SUN", (0, 0, 5), (zen, 0, az), energy=IRRADIANCE, angle=0.0)
+    ref = cr.bake_vertex_radiance([ob], samples=16, bounces=0).corner["crest"]     # direct light only
+    dg = bpy.context.evaluated_depsgraph_get()
+    from hemicube_radiosity.blender.read import scene as reader
+    from hemicube_radiosity.blender.read.lights import read_lights
+    meshes = reader.read_scene(dg, [ob]).meshes
+    lights, world, _ = read_lights(dg)
+    r = bake(meshes, BakeSettings(**SETTINGS), lights=lights, world=world)
+    E = r.elements
+    steep = CREST_FACES.index((1, 2, 3))
+    loop = 3 * steep + 2                                    # its corner at the origin
+    lit = RHO * IRRADIANCE * float(np.dot(_unit(CREST_NORMALS[3]), to_sun)) / math.pi
+    assert float(np.dot(np.cross(np.subtract(CREST_VERTS[2], CREST_VERTS[1]),
+                                  np.subtract(CREST_VERTS[3], CREST_VERTS[1])), to_sun)) < 0  # behind it
+    np.testing.assert_allclose(ref[loop], lit, rtol=0.02)
+    e = np.flatnonzero((E.owner == 0) & (E.source_face == steep))
+    k = [(i, j) for i in e for j in range(3) if np.linalg.norm(E.verts[E.polys[i, j]]) < 1e-6]
+    assert len(k) == 1
+    _, rho, D, _ = r.corner_parts()
+    np.testing.assert_allclose(rho[k[0]] * D[k[0]], ref[loop], rtol=0.02)

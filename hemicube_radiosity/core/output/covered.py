@@ -22,7 +22,8 @@ last going on past the corner's own face: a warped face's elements, cut bilinear
 off Blender's triangle the point lies on, in front of what covers it). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
-nothing from below its triangle's plane), and its vertex's light reflected more than once
+the light from below its triangle's plane by rays from Cycles' lifted start where its shading
+normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light reflected more than once
 scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
 face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
@@ -54,8 +55,8 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .crease import strongest_sun
-from .lift import bake_points, corner_normals, source_corners
+from .crease import CREASE_ANGLE, below_plane, strongest_sun
+from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .normals import corner_shading_normals
 
 __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
@@ -224,6 +225,12 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     shade = geo if shade is None else np.where(has[:, None], shade, geo)
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
     D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo)
+    # and the light below the triangle's plane, from Cycles' lifted start (:mod:`.crease`)
+    lean = np.einsum("ij,ij->i", shade, geo) < np.cos(np.radians(CREASE_ANGLE))
+    if lean.any():
+        low = np.full((len(p), 3), np.nan)
+        low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])
+        D += below_plane(ctx, low, shade, geo, "covered-below")
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
     v = elements.polys[p, c]
     key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))

@@ -22,13 +22,17 @@ import numpy as np
 from ..util.geometry import barycentric
 
 __all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners", "bake_points",
-           "corner_edges", "corner_normals"]
+           "corner_edges", "corner_normals", "lifted_starts", "ON_PLANE_ULPS"]
 
 #: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
 TERMINATOR_OFFSET = 0.1
 #: How far Cycles moves a corner's bake point toward its triangle's centre, per unit of its
 #: largest coordinate (at least 1).
 BAKE_NUDGE = 1e-4
+#: Float32 steps of its largest coordinate a lifted start lies at least over its triangle's
+#: plane (:func:`lifted_starts`). Raising every start by 4 (not only those nearer the plane) let
+#: truck town's racetrack lip's rays pass a neighbour 4 mm on that Cycles' meet.
+ON_PLANE_ULPS = 4
 
 
 def blocked_share(mesh, face, corner, to_light, occluded) -> np.ndarray:
@@ -68,6 +72,18 @@ def _lifted(V, N, at, L):
     """Cycles' shadow ray from corner ``at`` (m,) of triangles ``V`` (m, 3, 3) with corner
     normals ``N`` (m, 3, 3) toward ``L``: (start (m, 3), below (m,) bool: L below the triangle's
     plane and above the shading normal's)."""
+    Ng, P, w, n = _bake_frame(V, N, at)
+    nl = np.einsum("ij,j->i", n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), L)
+    ngl = Ng @ L
+    cut = TERMINATOR_OFFSET
+    amount = np.where(nl < cut, np.clip(2.0 - (ngl + nl) / cut, 0.0, 1.0), np.clip(1.0 - ngl / cut, 0.0, 1.0))
+    start = P + (_height(V, N, P, w, np.einsum("ij,ij->i", n, Ng) > 0) * amount)[:, None] * n
+    return start, (ngl < 0) & (nl > 0)
+
+
+def _bake_frame(V, N, at):
+    """(Ng (m, 3) unit, P (m, 3) the bake point, w (m, 3) its barycentrics, n (m, 3) the normal
+    interpolated there, not normalised) at corner ``at`` (m,) of triangles ``V`` (m, 3, 3)."""
     m = len(V)
     Ng = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
     Ng /= np.maximum(np.linalg.norm(Ng, axis=1, keepdims=True), 1e-300)
@@ -77,13 +93,7 @@ def _lifted(V, N, at, L):
     step = np.minimum(dist, np.maximum(np.abs(corner).max(axis=1), 1.0) * BAKE_NUDGE)
     P = corner + to_centre * (step / np.maximum(dist, 1e-300))[:, None]
     w = barycentric(V, P)
-    n = np.einsum("mk,mkj->mj", w, N)                        # interpolated, not normalised
-    nl = np.einsum("ij,j->i", n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), L)
-    ngl = Ng @ L
-    cut = TERMINATOR_OFFSET
-    amount = np.where(nl < cut, np.clip(2.0 - (ngl + nl) / cut, 0.0, 1.0), np.clip(1.0 - ngl / cut, 0.0, 1.0))
-    start = P + (_height(V, N, P, w, np.einsum("ij,ij->i", n, Ng) > 0) * amount)[:, None] * n
-    return start, (ngl < 0) & (nl > 0)
+    return Ng, P, w, np.einsum("mk,mkj->mj", w, N)
 
 
 def _height(V, N, P, w, facing) -> np.ndarray:
@@ -224,12 +234,44 @@ def _first_row_holding(ft, face, j) -> np.ndarray:
 def _first_triangles(elements, meshes, p, x):
     """(k (R,) rows of ``p``, centre (R, 3)): for the element corners at ``x`` (K, 3) that are
     corners of their source face, the centre of the first of Blender's loop triangles of the
-    face holding it: a triangle's own, a quad's (0, 1, 2) for corners 0-2 and (0, 2, 3) for
-    corner 3, or the first row of the mesh's ``face_triangles`` holding it, where that triangle
-    has an area; None when there are none."""
+    face holding it (:func:`_first_triangle_corners`); None when there are none."""
+    found = _first_triangle_corners(elements, meshes, p, x)
+    return None if found is None else (found[0], found[1].mean(axis=1))
+
+
+def lifted_starts(elements, meshes, p, c):
+    """(K, 3) where Cycles' shadow rays toward a light below its triangle's plane start at
+    corner ``c`` (K,) of element ``p`` (K,) (module docstring: the bake point lifted by the
+    whole shadow-terminator offset, which every light below the plane gets), NaN where the
+    corner is no corner of its source face or its mesh has no corner normals."""
+    x = elements.verts[elements.polys[p, c]]
+    out = np.full((len(p), 3), np.nan)
+    found = _first_triangle_corners(elements, meshes, p, x)
+    if found is None:
+        return out
+    k, V, N, at = found
+    ok = np.all(np.isfinite(N), axis=(1, 2))
+    if ok.any():
+        Ng, P, w, n = _bake_frame(V[ok], N[ok], at[ok])
+        h = _height(V[ok], N[ok], P, w, np.einsum("ij,ij->i", n, Ng) > 0)
+        # at least ON_PLANE_ULPS float32 steps over the plane, so that a ray from a start on the
+        # plane (a lift of 0) meets its triangle again as Cycles' does (or not, at random: ties)
+        over = h * np.einsum("ij,ij->i", n, Ng)
+        floor = ON_PLANE_ULPS * 2.0 ** -23 * np.maximum(np.abs(P).max(axis=1), 1.0)
+        out[k[ok]] = P + h[:, None] * n + np.maximum(floor - over, 0.0)[:, None] * Ng
+    return out
+
+
+def _first_triangle_corners(elements, meshes, p, x):
+    """(k (R,) rows of ``p``, V (R, 3, 3), N (R, 3, 3), at (R,)): for the element corners at
+    ``x`` (K, 3) that are corners of their source face, the first of Blender's loop triangles
+    of the face holding it: a triangle's own, a quad's (0, 1, 2) for corners 0-2 and (0, 2, 3)
+    for corner 3, or the first row of the mesh's ``face_triangles`` holding it, where that
+    triangle has an area; its corner normals (NaN without ``corner_normal``) and which of its
+    corners the element corner is. None when there are none."""
     if not meshes:
         return None
-    ks, cs = [], []
+    ks, Vs, Ns, ats = [], [], [], []
     corner = source_corners(elements, meshes, p, x)
     owner = elements.owner[p]
     for oi, m in enumerate(meshes):
@@ -254,13 +296,18 @@ def _first_triangles(elements, meshes, p, x):
             tri[row >= 0] = ft[row[row >= 0], 1:]
         ok = np.flatnonzero(tri[:, 0] >= 0)
         idx = np.asarray(m.face_indices, dtype=np.int64)
-        V = np.asarray(m.verts, dtype=np.float64)[idx[off[face[ok]][:, None] + tri[ok]]]
+        loops = off[face[ok]][:, None] + tri[ok]
+        V = np.asarray(m.verts, dtype=np.float64)[idx[loops]]
+        cn = getattr(m, "corner_normal", None)
+        N = np.full(V.shape, np.nan) if cn is None else np.asarray(cn, dtype=np.float64)[loops]
         # a triangle of no area (a quad with two corners at one point) has no centre to move to
         area2 = np.linalg.norm(np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0]), axis=1)
         edge2 = np.max([np.sum((V[:, i] - V[:, (i + 1) % 3]) ** 2, axis=1) for i in range(3)], axis=0)
         flat = area2 <= 1e-9 * edge2
         ks.append(rows[ok[~flat]])
-        cs.append(V[~flat].mean(axis=1))
+        Vs.append(V[~flat])
+        Ns.append(N[~flat])
+        ats.append(np.argmax(tri[ok][~flat] == j[ok][~flat, None], axis=1))
     if not ks:
         return None
-    return np.concatenate(ks), np.concatenate(cs)
+    return np.concatenate(ks), np.concatenate(Vs), np.concatenate(Ns), np.concatenate(ats)

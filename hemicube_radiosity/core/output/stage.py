@@ -131,7 +131,9 @@ def vertex_stage(ctx) -> None:
         rest_v = side.spread(rest_v)
     # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
     buried = None if side is None else side.count > 0
-    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried)
+    read_v = None if lighting else rho_v * D_vert + rest_v      # what the gather's rays read
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried, read_v)
+    ctx.gather_rays = None                              # its hits go with it
     # where another surface lies between a corner and its vertex's rays, the corner's own light
     creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried)
     _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)

@@ -1,0 +1,59 @@
+"""The share of a vertex's gathered light that a corner of it takes: what arrives from above the
+plane of the corner's own triangle.
+
+An output vertex gathers the light reflected more than once with cosine rays about its shading
+normal (:mod:`.gather`). Cycles bakes each face corner on its own triangle, and its diffuse
+bounce drops every direction below that triangle's plane (``bsdf_diffuse_sample``): a corner
+whose shading normal leans off its triangle (:mod:`.crease`) takes only the part of that light
+arriving from above the plane. Taking the share of a cosine-weighted hemisphere above the plane,
+(1 + N . Ng) / 2, assumed the light even over it; on a crest or a track's edge it comes mostly
+from the ground below, which that plane cuts off. Here the gather's own hits say it: the light
+they read from above the corner's plane over all they read (:func:`above_shares`). Radiance
+units; world space.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .gather import patch_parameters, surface_values
+
+__all__ = ["above_shares"]
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+#: Corners whose hits are read at once.
+CHUNK = 4096
+
+
+def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
+    """(K,) for corner ``c`` (K,) of element ``p`` (K,) with its triangle's unit normal ``geo``
+    (K, 3), the share of its vertex's gathered light whose rays hit above that plane (through
+    the vertex's point ``xv`` (V, 3)), read as ``read_v`` (V, 3) (the light leaving the element
+    vertices, as the gather's rays read it); NaN where not known: no gather's hits
+    (``ctx.gather_rays``), no hit, or nothing read."""
+    out = np.full(len(p), np.nan)
+    rays = getattr(ctx, "gather_rays", None)
+    if rays is None or read_v is None or not len(p):
+        return out
+    _, H = rays(hits=True)
+    if H is None or not len(H):
+        return out
+    start = np.searchsorted(H[:, 0], np.arange(len(xv) + 1) - 0.5)   # the hits come in point order
+    params = patch_parameters(elements)
+    v = elements.polys[p, c]
+    n = start[v + 1] - start[v]
+    for a in range(0, len(p), CHUNK):                     # memory: a chunk's hits at a time
+        k = np.arange(a, min(a + CHUNK, len(p)))
+        m = n[k]
+        row = np.repeat(k - a, m)
+        at = np.repeat(start[v[k]] - (np.cumsum(m) - m), m) + np.arange(int(m.sum()))
+        h = H[at]
+        y = h[:, 2:5].astype(np.float64)
+        val = surface_values(params, elements.polys, read_v, h[:, 1].astype(np.int64), y) @ LUMA
+        if H.shape[1] > 5:                                   # hits carrying a weight of their own
+            val = val * h[:, 5]
+        up = np.einsum("ij,ij->i", y - xv[v[k]][row], geo[k][row]) > 0
+        total = np.bincount(row, weights=val, minlength=len(k))
+        above = np.bincount(row, weights=np.where(up, val, 0.0), minlength=len(k))
+        ok = total > 0
+        out[k[ok]] = np.clip(above[ok] / total[ok], 0.0, 1.0)
+    return out
