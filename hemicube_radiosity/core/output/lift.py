@@ -1,4 +1,4 @@
-"""Whether Cycles' own triangle blocks a sun below its plane at a smooth face's corner.
+"""Where Cycles bakes a smooth face's corner, and where its shadow rays below the plane start.
 
 A corner whose shading normal N leans off its triangle's normal Ng sees a light direction L
 with N . L > 0 > Ng . L. Cycles' shadow ray from there (``intern/cycles/kernel/light/sample.h``
@@ -11,9 +11,8 @@ the triangle's centre (``kernel/integrator/init_from_bake.h`` ``bake_offset_towa
 From the lifted start the ray meets the triangle's plane again at a distance h (n . Ng) /
 (-Ng . L): inside the triangle, or on a neighbour that carries the surface on, the sun is
 blocked; past a convex edge it passes (a light a little below the plane, a start lifted much).
-A face's corner is baked on each of Blender's triangles of the
-face that hold it (a quad: cut along its first diagonal); this gives the share of those
-triangles that block, the rays cast by the caller. World units.
+A face's corner is baked on the first of Blender's triangles of the face that holds it (a quad:
+cut along its first diagonal; :func:`lifted_starts`), the rays cast by the caller. World units.
 """
 from __future__ import annotations
 
@@ -21,11 +20,9 @@ import numpy as np
 
 from ..util.geometry import barycentric
 
-__all__ = ["TERMINATOR_OFFSET", "BAKE_NUDGE", "blocked_share", "face_corners", "bake_points",
+__all__ = ["BAKE_NUDGE", "face_corners", "bake_points",
            "corner_edges", "corner_normals", "lifted_starts", "ON_PLANE_ULPS"]
 
-#: Cycles' default shadow-terminator geometry offset (``Object.shadow_terminator_geometry_offset``).
-TERMINATOR_OFFSET = 0.1
 #: How far Cycles moves a corner's bake point toward its triangle's centre, per unit of its
 #: largest coordinate (at least 1).
 BAKE_NUDGE = 1e-4
@@ -33,52 +30,6 @@ BAKE_NUDGE = 1e-4
 #: plane (:func:`lifted_starts`). Raising every start by 4 (not only those nearer the plane) let
 #: truck town's racetrack lip's rays pass a neighbour 4 mm on that Cycles' meet.
 ON_PLANE_ULPS = 4
-
-
-def blocked_share(mesh, face, corner, to_light, occluded) -> np.ndarray:
-    """(K,) in [0, 1]: the share of Blender's triangles of face ``face`` (K,) of ``mesh`` (a
-    :class:`.mesh.patches.MeshInput` with ``corner_normal``) holding its corner ``corner`` (K,)
-    (0.. in the face's loop order) on which Cycles' shadow ray toward the unit direction
-    ``to_light`` (3,), below the triangle's plane, is blocked: from its lifted start
-    (module docstring) ``occluded(origins (m, 3), direction (3,)) -> (m,) bool`` says whether
-    the scene (the triangle and its neighbours among it) stops it. 0 where the light is above the plane or behind the shading normal, and on
-    n-gons (more than four corners)."""
-    off = np.asarray(mesh.face_offsets, dtype=np.int64)
-    idx = np.asarray(mesh.face_indices, dtype=np.int64)
-    X = np.asarray(mesh.verts, dtype=np.float64)
-    cn = np.asarray(mesh.corner_normal, dtype=np.float64)
-    L = np.asarray(to_light, dtype=np.float64)
-    face, corner = np.asarray(face, dtype=np.int64), np.asarray(corner, dtype=np.int64)
-    size = off[face + 1] - off[face]
-    total, count = np.zeros(len(face)), np.zeros(len(face))
-    # Blender's triangles of a triangle and of a quad (first diagonal), as loop positions
-    for k, tris in ((3, ((0, 1, 2),)), (4, ((0, 1, 2), (0, 2, 3)))):
-        for tri in tris:
-            rows = np.flatnonzero((size == k) & np.isin(corner, tri))
-            if not rows.size:
-                continue
-            loops = off[face[rows]][:, None] + np.asarray(tri)[None, :]
-            at = np.argmax(corner[rows][:, None] == np.asarray(tri)[None, :], axis=1)
-            start, below = _lifted(X[idx[loops]], cn[loops], at, L)
-            hit = np.zeros(len(rows), bool)
-            if below.any():
-                hit[below] = np.asarray(occluded(start[below], L), bool)
-            total[rows] += hit
-            count[rows] += 1
-    return np.where(count > 0, total / np.maximum(count, 1), 0.0)
-
-
-def _lifted(V, N, at, L):
-    """Cycles' shadow ray from corner ``at`` (m,) of triangles ``V`` (m, 3, 3) with corner
-    normals ``N`` (m, 3, 3) toward ``L``: (start (m, 3), below (m,) bool: L below the triangle's
-    plane and above the shading normal's)."""
-    Ng, P, w, n = _bake_frame(V, N, at)
-    nl = np.einsum("ij,j->i", n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300), L)
-    ngl = Ng @ L
-    cut = TERMINATOR_OFFSET
-    amount = np.where(nl < cut, np.clip(2.0 - (ngl + nl) / cut, 0.0, 1.0), np.clip(1.0 - ngl / cut, 0.0, 1.0))
-    start = P + (_height(V, N, P, w, np.einsum("ij,ij->i", n, Ng) > 0) * amount)[:, None] * n
-    return start, (ngl < 0) & (nl > 0)
 
 
 def _bake_frame(V, N, at):

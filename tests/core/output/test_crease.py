@@ -95,22 +95,23 @@ def test_a_lip_s_slope_corner_is_blocked_where_cycles_lifted_ray_meets_the_slope
     ray, lifted off the slope's corner, passes over the lip's edge on the 73-degree slope and
     meets the slope on the 84-degree one (Cycles itself: tests/blender/test_shading_normals.py)."""
     from hemicube_radiosity.core.mesh.subdivide import build_patches
-    from hemicube_radiosity.core.output.lift import blocked_share, face_corners
+    from hemicube_radiosity.core.output.lift import face_corners, lifted_starts
     from hemicube_radiosity.core.rays import occluder
 
     m, faces = _step(profile)
-    occ = occluder(build_patches([m], 10.0), "auto")
+    patches = build_patches([m], 10.0)
+    assert np.array_equal(patches.source_face, np.arange(len(faces)))       # one patch a face
+    occ = occluder(patches, "auto")
     zen = np.radians(zenith)
     to_sun = np.array([0.0, -np.sin(zen), np.cos(zen)])
     face = np.array([6, 7, 8] * 2)                              # the slope's first row
     top = np.array([np.asarray(m.verts)[faces[f][j]] for j in (0, 1) for f in (6, 7, 8)])
     corner = face_corners(m, face, top, 1e-9)
     assert np.array_equal(corner, [0, 0, 0, 1, 1, 1])
-    got = blocked_share(m, face, corner, to_sun, lambda x, d: occ.occluded(x, np.broadcast_to(d, x.shape), None))
-    np.testing.assert_array_equal(got, blocked)
-    # the plateau's corners on the lip see the sun above their plane: nothing to block
-    np.testing.assert_array_equal(blocked_share(m, np.array([3, 4, 5]), np.array([3, 3, 3]), to_sun,
-                                                lambda x, d: np.ones(len(x), bool)), 0.0)
+    start = lifted_starts(patches, [m], face, corner)
+    assert np.all(np.isfinite(start))
+    got = occ.occluded(start, np.broadcast_to(to_sun, start.shape), None)
+    np.testing.assert_array_equal(got, bool(blocked))
 
 
 def test_a_corner_lit_as_its_vertex_takes_the_vertexs_light_and_casts_no_ray(monkeypatch):
