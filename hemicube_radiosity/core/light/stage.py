@@ -251,7 +251,7 @@ class DirectLight:
         return self._scene
 
     def at(self, points, normals, where: str, samples=None, eps=None, facing=None, split=1,
-           part=None, sky=None, unbounded=None) -> np.ndarray:
+           part=None, sky=None, unbounded=None, emitters=True) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
@@ -267,9 +267,10 @@ class DirectLight:
         share (P,) of each point's hemisphere, found by other rays (the final gather's,
         :func:`..output.indirect.gathered_sky`): no sky rays are cast, and it is asked for
         last (the gather casts while the rest is found). ``unbounded`` (P, 3) or None: the
-        suns' and environment maps' part (radiance, before the clamp at 0) is added to it too."""
+        suns' and environment maps' part (radiance, before the clamp at 0) is added to it too.
+        ``emitters`` False: the lamps' and the world's light only."""
         D = np.zeros((len(points), 3))
-        if self.emitters.size:
+        if self.emitters.size and emitters:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
             D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True, eps=eps),
                                    self.emitted(), transposed=True)

@@ -223,12 +223,13 @@ def below_plane(ctx, low, shade, geo, where) -> np.ndarray:
     """(K, 3) the lamps' (and the world's, :data:`BELOW_WORLD`) light arriving from below the
     plane of each corner's triangle (unit normal ``geo`` (K, 3)) and above its shading normal's
     ``shade`` (K, 3), by shadow rays from ``low`` (K, 3), Cycles' lifted start for such light
-    (:func:`.lift.lifted_starts`; NaN rows: none, 0)."""
+    (:func:`.lift.lifted_starts`; NaN rows: none, 0). Not the emitters': the light above the
+    plane counted them whole (their shadow rays start above it), so they would count twice."""
     out = np.zeros((len(low), 3))
     r = np.flatnonzero(np.all(np.isfinite(low), axis=1))
     if r.size and ctx.direct is not None:
         out[r] = ctx.direct.at(low[r], shade[r], where, eps=np.zeros(r.size), facing=-geo[r],
-                               sky=lambda: np.zeros(r.size))
+                               sky=lambda: np.zeros(r.size), emitters=False)
         if BELOW_WORLD and ctx.direct.world is not None:
             out[r] += BELOW_WORLD * ctx.direct.world_at(low[r], shade[r], where, eps=np.zeros(r.size), facing=-geo[r])
     return out
