@@ -49,7 +49,7 @@ and five buildings, the large lit terrain issue 32 names). Without that folder t
    ``run``, ``write``), with ``BakeSettings()`` as shipped, then once more with the patches twice as
    large (``patch_size`` x2, ``element_size`` kept at the defaults' resolved value: only the
    grouping of the solve is coarser). After the defaults' bake the same child relights: every
-   lamp and the world's strength x ``RELIGHT``, then prepare + run + write again in the same
+   lamp, emitting material and the world's strength x ``RELIGHT``, then prepare + run + write again in the same
    process (the session's cache holds form factors and transports), timed against Cycles'
    64-spp bake (a Cycles re-bake costs as much) and checked to be ``RELIGHT`` x the first. And
    through ``--cache`` in a new process: one child bakes the defaults with a cache folder, a

@@ -398,7 +398,7 @@ def real_section(res):
          + ". RMS at Cycles' face"
          " corners matched by position and normal, zero-area faces, emitters and never-lit corners left out, the"
          " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
-         " filled the cache). Relight: after the defaults' bake, every lamp and the world's strength x"
+         " filled the cache). Relight: after the defaults' bake, every lamp, emitting material and the world's strength x"
          f" {real_scenes.RELIGHT:g} and the bake again, in the same process (the session's cache) and through"
          " `--cache` in a new process (a first child fills the folder), against Cycles' 64-spp time (a re-bake"
          " costs Cycles as much). Failures (refused, crashed, timed out) are rows with their first error line."
