@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .gather import patch_parameters, surface_values
+from ..runtime.cache import array_key, cache_key, cached
+from .gather import patch_parameters, surface_weights
 
 __all__ = ["above_shares"]
 
@@ -29,31 +30,49 @@ def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
     (K, 3), the share of its vertex's gathered light whose rays hit above that plane (through
     the vertex's point ``xv`` (V, 3)), read as ``read_v`` (V, 3) (the light leaving the element
     vertices, as the gather's rays read it); NaN where not known: no gather's hits
-    (``ctx.gather_rays``), no hit, or nothing read."""
+    (``ctx.gather_rays``), no hit, or nothing read. What the hits read (:func:`_reading`) is
+    geometry only and cached: a relight reads no hit of the gather's."""
     out = np.full(len(p), np.nan)
     rays = getattr(ctx, "gather_rays", None)
     if rays is None or read_v is None or not len(p):
         return out
+    key = cache_key(str(getattr(rays, "key", "")).encode() + array_key(np.stack([p, c], 1)) + array_key(geo) + array_key(xv),
+                    ("above-reading", CHUNK))
+    found = cached(getattr(ctx, "cache", None), key, lambda: _reading(rays, elements, p, c, geo, xv))
+    if found is None:
+        return out
+    rows, ids, w, up = found
+    val = np.einsum("hc,hc->h", w, (np.asarray(read_v, dtype=np.float64) @ LUMA)[ids])
+    total = np.bincount(rows, weights=val, minlength=len(p))
+    above = np.bincount(rows, weights=np.where(up, val, 0.0), minlength=len(p))
+    ok = total > 0
+    out[ok] = np.clip(above[ok] / total[ok], 0.0, 1.0)
+    return out
+
+
+def _reading(rays, elements, p, c, geo, xv):
+    """(rows (h,) the corner of each of its vertex's gather hits, ids (h, 4) the element vertices
+    it reads, w (h, 4) their surface weights times the hit's own weight, up (h,) bool: above the
+    corner's triangle's plane); None without hits."""
     _, H = rays(hits=True)
     if H is None or not len(H):
-        return out
+        return None
     start = np.searchsorted(H[:, 0], np.arange(len(xv) + 1) - 0.5)   # the hits come in point order
     params = patch_parameters(elements)
     v = elements.polys[p, c]
     n = start[v + 1] - start[v]
+    parts = ([], [], [], [])                               # rows, ids, w, up
     for a in range(0, len(p), CHUNK):                     # memory: a chunk's hits at a time
         k = np.arange(a, min(a + CHUNK, len(p)))
         m = n[k]
-        row = np.repeat(k - a, m)
+        row = np.repeat(k, m)
         at = np.repeat(start[v[k]] - (np.cumsum(m) - m), m) + np.arange(int(m.sum()))
         h = H[at]
         y = h[:, 2:5].astype(np.float64)
-        val = surface_values(params, elements.polys, read_v, h[:, 1].astype(np.int64), y) @ LUMA
+        ids, w = surface_weights(params, elements.polys, h[:, 1].astype(np.int64), y)
         if H.shape[1] > 5:                                   # hits carrying a weight of their own
-            val = val * h[:, 5]
-        up = np.einsum("ij,ij->i", y - xv[v[k]][row], geo[k][row]) > 0
-        total = np.bincount(row, weights=val, minlength=len(k))
-        above = np.bincount(row, weights=np.where(up, val, 0.0), minlength=len(k))
-        ok = total > 0
-        out[k[ok]] = np.clip(above[ok] / total[ok], 0.0, 1.0)
-    return out
+            w = w * h[:, 5:6]
+        up = np.einsum("ij,ij->i", y - xv[v[row]], geo[row]) > 0
+        for part, x in zip(parts, (row, ids, w, up)):
+            part.append(x)
+    return tuple(np.concatenate(x) for x in parts)
