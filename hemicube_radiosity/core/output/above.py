@@ -73,6 +73,6 @@ def _reading(rays, elements, p, c, geo, xv):
         if H.shape[1] > 5:                                   # hits carrying a weight of their own
             w = w * h[:, 5:6]
         up = np.einsum("ij,ij->i", y - xv[v[row]], geo[row]) > 0
-        for part, x in zip(parts, (row, ids, w, up)):
+        for part, x in zip(parts, (row.astype(np.int32), ids.astype(np.int32), w.astype(np.float32), up)):
             part.append(x)
     return tuple(np.concatenate(x) for x in parts)
