@@ -130,7 +130,6 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     eps = eps_rel * scale
     corners = elements.corners()
     cut_corners = faces.corners()
-    lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
     # a group: the elements of one plane of a source face (a warped quad's two triangles are two)
     plane = np.round(np.asarray(elements.normals, dtype=np.float64) * 1e3).astype(np.int64)
     key = np.column_stack([elements.owner.astype(np.int64), elements.source_face.astype(np.int64), plane])
@@ -143,34 +142,7 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     g_hi = np.maximum.reduceat(flat.max(axis=1)[order], start[:-1]) + eps
     g_n = elements.normals[order[start[:-1]]]
     g_pieces, g_piece_at, g_face = face_pieces(elements, order[start[:-1]], g_n, faces)
-    # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
-    # both sides of, or on, the group's plane
-    gi_all, ci_all = _crossing_candidates(g_lo, g_hi, g_n, lo, hi, faces.normals)
-    # a face of the same object at a corner of the group's face (the same place) is left out
-    # below (the mesh going on): most pairs of a scanned mesh, whose neighbours' boxes overlap
-    weld = unique_rows(faces.verts, return_inverse=True)[1].reshape(-1)
-    at = np.where(faces.polys < 0, weld[faces.polys[:, 2:3]], weld[np.maximum(faces.polys, 0)])
-    goes_on = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
-    goes_on &= (at[g_face[gi_all]][:, :, None] == at[ci_all][:, None, :]).any(axis=(1, 2))
-    gi_all, ci_all = gi_all[~goes_on], ci_all[~goes_on]
-    h = np.einsum("pkj,pj->pk", cut_corners[ci_all] - flat[order[start[gi_all]], 0][:, None], g_n[gi_all])
-    tri = np.all(cut_corners[ci_all][:, 3] == cut_corners[ci_all][:, 2], axis=1)
-    on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
-    keep = (((h.min(axis=1) < -eps) & (h.max(axis=1) > eps)) | (on >= 2)) & \
-        (np.abs(np.einsum("pj,pj->p", faces.normals[ci_all], g_n[gi_all])) < 1 - 1e-6)
-    keep &= True if cuts is None else np.asarray(cuts, dtype=bool)[ci_all]
-    gi_all, ci_all = gi_all[keep], ci_all[keep]
-    # a face sharing an edge with the group's face (two corners at the same places) meets it at
-    # its border: nothing to cut (the faces of a tessellated box along its edges)
-    shared = _corners_met(cut_corners[g_face[gi_all]], cut_corners[ci_all], eps, ~tri[keep])
-    # nor does a face of the same object sharing a corner: the mesh going on (a subdivided
-    # surface's quads are a little warped, so their diagonal neighbours cross each other's
-    # planes: Suzanne at level 3 was cut along 60,000 such lines)
-    own = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
-    apart = (shared < 2) & ~(own & (shared >= 1))
-    gi_all, ci_all = gi_all[apart], ci_all[apart]
-    by = np.argsort(gi_all, kind="stable")
-    gi_all, ci_all = gi_all[by], ci_all[by]
+    gi_all, ci_all = _cutters(elements, faces, cut_corners, order, start, flat, g_lo, g_hi, g_n, g_face, eps, cuts)
     pieces = {}                       # element -> list of (polygon, tags)
     # where each cutter meets its group's plane, and the part of that segment on the group's
     # own face, any of its pieces (a cutter that crosses the face's plane beside the face, a curved mesh's
@@ -269,6 +241,43 @@ def _crossing_candidates(g_lo, g_hi, g_n, lo, hi, c_n, share=0.01):
     # by i, then j (as a lexsort): one int64 key, sorted stably (each part comes sorted)
     o = np.argsort(i * np.int64(len(c_n) + 1) + j, kind="stable")
     return i[o], j[o]
+
+
+def _cutters(elements, faces, cut_corners, order, start, flat, g_lo, g_hi, g_n, g_face, eps, cuts):
+    """(group ids, face ids), sorted by group: the faces (``cut_corners`` their corners) that may
+    cut each group of :func:`cut_along_contacts` (``order``/``start``: its elements by group,
+    ``flat`` their corners, ``g_lo``/``g_hi``/``g_n`` its boxes and planes, ``g_face`` a face
+    of each; ``eps``, ``cuts`` as there)."""
+    lo, hi = cut_corners.min(axis=1) - eps, cut_corners.max(axis=1) + eps
+    # the faces that may cut each group: boxes overlapping (a grid of cells) and corners on
+    # both sides of, or on, the group's plane
+    gi_all, ci_all = _crossing_candidates(g_lo, g_hi, g_n, lo, hi, faces.normals)
+    # a face of the same object at a corner of the group's face (the same place) is left out
+    # below (the mesh going on): most pairs of a scanned mesh, whose neighbours' boxes overlap
+    weld = unique_rows(faces.verts, return_inverse=True)[1].reshape(-1)
+    at = np.where(faces.polys < 0, weld[faces.polys[:, 2:3]], weld[np.maximum(faces.polys, 0)])
+    goes_on = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
+    goes_on &= (at[g_face[gi_all]][:, :, None] == at[ci_all][:, None, :]).any(axis=(1, 2))
+    gi_all, ci_all = gi_all[~goes_on], ci_all[~goes_on]
+    h = np.einsum("pkj,pj->pk", cut_corners[ci_all] - flat[order[start[gi_all]], 0][:, None], g_n[gi_all])
+    tri = np.all(cut_corners[ci_all][:, 3] == cut_corners[ci_all][:, 2], axis=1)
+    on = (np.abs(h) <= eps).sum(axis=1) - (tri & (np.abs(h[:, 3]) <= eps))
+    keep = (((h.min(axis=1) < -eps) & (h.max(axis=1) > eps)) | (on >= 2)) & \
+        (np.abs(np.einsum("pj,pj->p", faces.normals[ci_all], g_n[gi_all])) < 1 - 1e-6)
+    keep &= True if cuts is None else np.asarray(cuts, dtype=bool)[ci_all]
+    gi_all, ci_all = gi_all[keep], ci_all[keep]
+    # a face sharing an edge with the group's face (two corners at the same places) meets it at
+    # its border: nothing to cut (the faces of a tessellated box along its edges)
+    shared = _corners_met(cut_corners[g_face[gi_all]], cut_corners[ci_all], eps, ~tri[keep])
+    # nor does a face of the same object sharing a corner: the mesh going on (a subdivided
+    # surface's quads are a little warped, so their diagonal neighbours cross each other's
+    # planes: Suzanne at level 3 was cut along 60,000 such lines)
+    own = elements.owner[order[start[gi_all]]] == faces.owner[ci_all]
+    apart = (shared < 2) & ~(own & (shared >= 1))
+    gi_all, ci_all = gi_all[apart], ci_all[apart]
+    by = np.argsort(gi_all, kind="stable")
+    gi_all, ci_all = gi_all[by], ci_all[by]
+    return gi_all, ci_all
 
 
 def _overlapping(alo, ahi, blo, bhi, per_box=64):
