@@ -37,7 +37,7 @@ def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
     if rays is None or read_v is None or not len(p):
         return out
     key = cache_key(str(getattr(rays, "key", "")).encode() + array_key(np.stack([p, c], 1)) + array_key(geo) + array_key(xv),
-                    ("above-reading", CHUNK))
+                    ("above-reading",))
     found = cached(getattr(ctx, "cache", None), key, lambda: _reading(rays, elements, p, c, geo, xv))
     if found is None:
         return out
@@ -62,7 +62,7 @@ def _reading(rays, elements, p, c, geo, xv):
     v = elements.polys[p, c]
     n = start[v + 1] - start[v]
     parts = ([], [], [], [])                               # rows, ids, w, up
-    for a in range(0, len(p), CHUNK):                     # memory: a chunk's hits at a time
+    for a in range(0, len(p), CHUNK):                     # temporaries: a chunk's hits at a time
         k = np.arange(a, min(a + CHUNK, len(p)))
         m = n[k]
         row = np.repeat(k, m)
