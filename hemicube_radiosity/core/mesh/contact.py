@@ -143,7 +143,6 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     g_n = elements.normals[order[start[:-1]]]
     g_pieces, g_piece_at, g_face = face_pieces(elements, order[start[:-1]], g_n, faces)
     gi_all, ci_all = _cutters(elements, faces, cut_corners, order, start, flat, g_lo, g_hi, g_n, g_face, eps, cuts)
-    pieces = {}                       # element -> list of (polygon, tags)
     # where each cutter meets its group's plane, and the part of that segment on the group's
     # own face, any of its pieces (a cutter that crosses the face's plane beside the face, a curved mesh's
     # diagonal neighbour sharing one corner, meets it at that corner at most and cuts
@@ -161,9 +160,22 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
     (d_all, len_all, m_all), (hs, he, ht) = segment_hits(
         corners, order, start, gi_all, seg_all, faces.normals[ci_all], elements.normals[order[start[gi_all]]],
         np.sqrt(elements.areas), tol_rel, eps)
+    pieces = _split_hits(elements, (hs, he, ht), seg_all[:, 0], m_all, d_all, len_all)
+    if not pieces:
+        return elements
+    return assemble_pieces(elements, pieces, (ci_all[hs], seg_all[hs, 0], m_all[hs], ht, d_all[hs], len_all[hs]),
+                           eps)
+
+
+def _split_hits(elements, hits, a_all, m_all, d_all, len_all):
+    """{element: [(polygon (k, 3), tags)]}: each element ``hits`` (segments, elements,
+    tolerances) name split along its segments' lines in turn (segment s: start ``a_all[s]``,
+    in-plane normal ``m_all[s]``, direction ``d_all[s]``, length ``len_all[s]``); a piece's tags
+    ((line, side), ...) say which side of each line (the hit's index) it lies on."""
+    pieces = {}
+    hs, he, ht = hits
     for h, (s, e, tl) in enumerate(zip(hs.tolist(), he.tolist(), ht.tolist())):
-        a, d, length = seg_all[s, 0], d_all[s], len_all[s]
-        line = h                                  # the hit's line: (cutter, a, m, tl, d, length)
+        a, d, length = a_all[s], d_all[s], len_all[s]
         todo = pieces.get(e) or [(_polygon(elements, e), ())]
         out = []
         for poly, tags in todo:
@@ -174,14 +186,11 @@ def cut_along_contacts(elements: PatchSet, faces: PatchSet, eps_rel=1e-6, tol_re
             sp = split_polygon(poly, a, m_all[s], tl)
             if sp is None:
                 hs_ = (poly - a) @ m_all[s]
-                out.append((poly, tags + ((line, 1 if hs_.sum() >= 0 else -1),)))
+                out.append((poly, tags + ((h, 1 if hs_.sum() >= 0 else -1),)))
             else:
-                out += [(sp[0], tags + ((line, 1),)), (sp[1], tags + ((line, -1),))]
+                out += [(sp[0], tags + ((h, 1),)), (sp[1], tags + ((h, -1),))]
         pieces[e] = out
-    if not pieces:
-        return elements
-    return assemble_pieces(elements, pieces, (ci_all[hs], seg_all[hs, 0], m_all[hs], ht, d_all[hs], len_all[hs]),
-                           eps)
+    return pieces
 
 
 def _corners_met(src, cut, eps, quad):
@@ -293,25 +302,53 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     ext = np.concatenate([ahi - alo, bhi - blo]).max(axis=1)
     size = 2.0 * max(float(np.median(ext)), 1e-12 * max(float(ext.max()), 1e-300))
-    origin = np.minimum(alo.min(axis=0), blo.min(axis=0))
+    grid = _Grids(np.minimum(alo.min(axis=0), blo.min(axis=0)), size, per_box)
+    la, lb = grid.levels(alo, ahi), grid.levels(blo, bhi)
+    pairs = [np.zeros((0, 2), np.int64)]
+    for L in np.union1d(la, lb):
+        s = size * 2.0 ** L
+        if np.any(la == L):                       # a's boxes of this level against b's as fine
+            pairs.append(grid.meet((alo, ahi), np.flatnonzero(la == L), (blo, bhi), np.flatnonzero(lb <= L), s))
+        if np.any(lb == L) and np.any(la < L):    # b's against a's finer ones
+            pairs.append(grid.meet((alo, ahi), np.flatnonzero(la < L), (blo, bhi), np.flatnonzero(lb == L), s))
+    p = np.concatenate(pairs).astype(np.int64)
+    B = max(len(blo), 1)
+    k = unique_ints(p[:, 0] * B + p[:, 1])     # (sorted; once each, cell keys colliding too)
+    return k // B, k % B
 
-    def cells(lo, hi, s):
-        i0 = np.floor((lo - origin) / s).astype(np.int64)
-        i1 = np.floor((hi - origin) / s).astype(np.int64)
+
+class _Grids:
+    """The grids of :func:`_overlapping`: cells of edge ``size`` * 2^L from ``origin`` (3,),
+    a box on the finest one where it covers at most ``per_box`` cells."""
+
+    def __init__(self, origin, size, per_box):
+        self.origin, self.size, self.per_box = origin, size, per_box
+
+    def cells(self, lo, hi, s):
+        """The first and last cell (n, 3) int64 of each box on the grid of edge s, and how many
+        cells it covers (n,)."""
+        i0 = np.floor((lo - self.origin) / s).astype(np.int64)
+        i1 = np.floor((hi - self.origin) / s).astype(np.int64)
         return i0, i1, np.prod(i1 - i0 + 1, axis=1)
 
-    def levels(lo, hi):
+    def key(self, g):
+        """(n,) int64 one key per cell (n, 3)."""
+        return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2]
+
+    def levels(self, lo, hi):
+        """(n,) int64 each box's level L."""
         level = np.zeros(len(lo), np.int64)
         up = np.arange(len(lo))
         for L in range(64):                      # a grid of 2^63 cells holds any finite box
-            up = up[cells(lo[up], hi[up], size * 2.0 ** L)[2] > per_box]
+            up = up[self.cells(lo[up], hi[up], self.size * 2.0 ** L)[2] > self.per_box]
             if not up.size:
                 break
             level[up] = L + 1
         return level
 
-    def expand(lo, hi, ids, s):
-        i0, i1, _ = cells(lo[ids], hi[ids], s)
+    def expand(self, lo, hi, ids, s):
+        """(cell keys, box ids): every cell of edge s that boxes ``ids`` cover, once per box."""
+        i0, i1, _ = self.cells(lo[ids], hi[ids], s)
         dims = i1 - i0 + 1
         n = np.prod(dims, axis=1)
         own = np.repeat(ids, n)
@@ -319,13 +356,15 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
         at = np.repeat(np.arange(len(ids)), n)
         d = dims[at]
         g = i0[at] + np.stack([off // (d[:, 1] * d[:, 2]), (off // d[:, 2]) % d[:, 1], off % d[:, 2]], 1)
-        return (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2], own
+        return self.key(g), own
 
-    def meet(ia_, ib_, s):
-        """The pairs of ia_ x ib_ that overlap, each found in the cell of edge s holding its
-        overlap's lowest corner (a cell both boxes cover), so once."""
-        ka, ia = expand(alo, ahi, ia_, s)
-        kb, ib = expand(blo, bhi, ib_, s)
+    def meet(self, a, ia_, b, ib_, s):
+        """(P, 2) the pairs of boxes ``a`` (lo, hi) ``ia_`` x ``b`` ``ib_`` that overlap, each
+        found in the cell of edge s holding its overlap's lowest corner (a cell both boxes
+        cover), so once."""
+        (alo, ahi), (blo, bhi) = a, b
+        ka, ia = self.expand(alo, ahi, ia_, s)
+        kb, ib = self.expand(blo, bhi, ib_, s)
         order = np.argsort(kb, kind="stable")
         kb, ib = kb[order], ib[order]
         lo_ = np.searchsorted(kb, ka, "left")
@@ -335,22 +374,9 @@ def _overlapping(alo, ahi, blo, bhi, per_box=64):
             np.zeros(0, np.int64)
         ok = np.all((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj]), axis=1)
         ii, jj, kk = ii[ok], jj[ok], np.repeat(ka, cnt)[ok]
-        g = np.floor((np.maximum(alo[ii], blo[jj]) - origin) / s).astype(np.int64)
-        first = (g[:, 0] * 2097152 + g[:, 1]) * 2097152 + g[:, 2] == kk
+        g = np.floor((np.maximum(alo[ii], blo[jj]) - self.origin) / s).astype(np.int64)
+        first = self.key(g) == kk
         return np.stack([ii[first], jj[first]], 1)
-
-    la, lb = levels(alo, ahi), levels(blo, bhi)
-    pairs = [np.zeros((0, 2), np.int64)]
-    for L in np.union1d(la, lb):
-        s = size * 2.0 ** L
-        if np.any(la == L):                       # a's boxes of this level against b's as fine
-            pairs.append(meet(np.flatnonzero(la == L), np.flatnonzero(lb <= L), s))
-        if np.any(lb == L) and np.any(la < L):    # b's against a's finer ones
-            pairs.append(meet(np.flatnonzero(la < L), np.flatnonzero(lb == L), s))
-    p = np.concatenate(pairs).astype(np.int64)
-    B = max(len(blo), 1)
-    k = unique_ints(p[:, 0] * B + p[:, 1])     # (sorted; once each, cell keys colliding too)
-    return k // B, k % B
 
 
 def _polygon(elements, e):
