@@ -61,8 +61,10 @@ and five buildings, the large lit terrain issue 32 names). Without that folder t
 **Error.** At every Cycles face corner (its world position and its face's normal) our result is read
 where ``core.output.interpolate.locate`` finds it on the object of the same name (matched by
 position and normal): the element's corner values (what the writer writes at its corners, a
-textured face's corners each their own colour) interpolated bilinearly. Left out: corners of zero-area faces (a point-domain Cycles bake would average
-their black corners in), of emitters (EMIT bake > 0), corners the reference never lights (its
+textured face's corners each their own colour) interpolated bilinearly. Left out: corners of
+zero-area faces (a point-domain Cycles bake would average their black corners in), corners Cycles
+shades on a triangle without area (:func:`flat_bake_corners`: it bakes them at another vertex with
+an undefined normal), of emitters (EMIT bake > 0), corners the reference never lights (its
 luminance <= 1e-4 x the median) and those of objects we did not bake. ``errors`` of
 ``speed_vs_error.py``: RMS of the luminance-weighted difference / the reference's mean luminance.
 ``rms`` has the reference's own noise taken out, estimated from Cycles 64 against 256 samples
@@ -352,6 +354,43 @@ def corner_geometry(objects):
     return cat(pos), cat(mid), cat(nrm), np.concatenate(area), np.concatenate(own), np.concatenate(fid), tris
 
 
+def flat_bake_corners(objects):
+    """Per face corner of ``objects`` (the order of :func:`corner_geometry`): whether Cycles shades
+    it on a triangle without area, and so not at the corner. A colour-attribute bake gives each
+    corner the first of its face's loop triangles that holds it (``object_bake_api.cc``,
+    ``bake_targets_populate_pixels_color_attributes``: "first triangle wins"), at that vertex;
+    Cycles moves a point that sits on a vertex toward the triangle's centre by solving for its
+    barycentric coordinates (``init_from_bake.h``, ``bake_offset_towards_center``), and where that
+    system's determinant ``|e1|^2 |e2|^2 - (e1.e2)^2`` is 0 it bakes at the triangle's third vertex
+    instead, with the triangle's own normal: NaN where the edges are parallel (two vertices at one
+    place, or three in a line), rounding noise where they nearly are. With a NaN normal the sky
+    and all bounced light drop out: a flat-shaded face reads 0, one with custom normals the sun
+    alone through the third corner's normal (``tests/blender/test_bench_corners.py``; the living
+    room's wall corner 744 reads 0.265, the sun alone, at its neighbour's place). Zero here: within
+    float32 rounding of the products (Cycles' arithmetic), in world space (Cycles applies the
+    objects' transforms)."""
+    out = []
+    for ob in objects:
+        me = ob.data
+        M = np.array(ob.matrix_world)
+        co = np.empty(len(me.vertices) * 3)
+        me.vertices.foreach_get("co", co)
+        lv = np.empty(len(me.loops), np.int64)
+        me.loops.foreach_get("vertex_index", lv)
+        w = (co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]).astype(np.float32)[lv]
+        tl = np.empty(len(me.loop_triangles) * 3, np.int64)
+        me.loop_triangles.foreach_get("loops", tl)
+        t = w[tl.reshape(-1, 3)]
+        e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
+        flat = d11 * d22 - d12 * d12 <= 4 * np.finfo(np.float32).eps * d11 * d22
+        loops, first = np.unique(tl, return_index=True)        # first triangle holding each corner
+        f = np.zeros(len(lv), bool)
+        f[loops] = flat[first // 3]
+        out.append(f)
+    return np.concatenate(out) if out else np.zeros(0, bool)
+
+
 def own_evaluated_meshes(objects):
     """Each of ``objects`` as a mesh object with its own mesh, modifiers applied (a vertex-colour
     bake writes one value per corner of the mesh itself, and a mesh shared by two objects would get
@@ -408,7 +447,10 @@ def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY), filter_gl
         rec[key] = {"seconds": b.seconds, "cached": b.cached, **b.settings}
         log(f"{name}: {key} {b.settings['samples']} spp {'cached' if b.cached else 'baked'}: {b.seconds:.1f} s"
             f" ({time.perf_counter() - t:.1f} s here)")
-    np.savez(out_npz, pos=pos, centroid=mid, normal=nrm, area=area, owner=own, face=face, names=np.array([o.name for o in objs]), **arrays)
+    flat = flat_bake_corners(objs)
+    rec["flat_corners"] = int(flat.sum())
+    np.savez(out_npz, pos=pos, centroid=mid, normal=nrm, area=area, owner=own, face=face,
+             flat=flat, names=np.array([o.name for o in objs]), **arrays)
     return rec
 
 
@@ -653,9 +695,10 @@ def compare(cyc_npz, vals):
     """(errors against the reference, Cycles 64's errors, corners compared) at the Cycles corners."""
     with np.load(cyc_npz) as z:
         ref, cand, emit, area = z["ref"], z["cand"], z["emit"], z["area"]
+        flat = z["flat"] if "flat" in z.files else np.zeros(len(area), bool)
         diag = float(np.linalg.norm(np.ptp(z["pos"], axis=0))) if len(z["pos"]) else 1.0
     Yr = ref @ sve.LUMA
-    mask = (area > 1e-12 * diag * diag) & ((emit @ sve.LUMA) <= 0) & np.all(np.isfinite(ref), 1)
+    mask = (area > 1e-12 * diag * diag) & ~flat & ((emit @ sve.LUMA) <= 0) & np.all(np.isfinite(ref), 1)
     mask &= Yr > 1e-4 * np.median(Yr[mask]) if mask.any() else mask
     if vals is not None:   # inf: not matched; NaN: our bake gave NaN there (counted in the row)
         mask &= np.all(np.isfinite(vals), 1)
