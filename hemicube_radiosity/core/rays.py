@@ -491,9 +491,13 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
                 passed = np.where(below, 0.0, passed)
             out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
             return
-        hit = np.asarray(scene.occluded(o, d))
-        if below is not None:
-            hit = hit | below
+        if below is None:
+            hit = np.asarray(scene.occluded(o, d))
+        else:                        # rays below ``facing`` count as hits: only the others cast
+            hit = below.copy()
+            up = np.flatnonzero(~below)
+            if up.size:
+                hit[up] = np.asarray(scene.occluded(o[up], d[up]))
         out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
     for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
         pass

@@ -21,7 +21,7 @@ from .gather import patch_parameters, surface_weights
 __all__ = ["above_shares"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
-#: Corners whose hits are read at once.
+#: Vertices (or corners) whose hits are read at once.
 CHUNK = 4096
 
 
@@ -37,12 +37,15 @@ def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
     if rays is None or read_v is None or not len(p):
         return out
     key = cache_key(str(getattr(rays, "key", "")).encode() + array_key(np.stack([p, c], 1)) + array_key(geo) + array_key(xv),
-                    ("above-reading",))
+                    ("above-reading-by-vertex",))
     found = cached(getattr(ctx, "cache", None), key, lambda: _reading(rays, elements, p, c, geo, xv))
     if found is None:
         return out
-    rows, ids, w, up = found
+    spans, ids, w, of, up = found
     val = np.einsum("hc,hc->h", w, (np.asarray(read_v, dtype=np.float64) @ LUMA)[ids])
+    at, n = _spans(spans, of)                              # each corner reads its vertex's hits
+    rows = np.repeat(np.arange(len(p)), n)
+    val = val[at]
     total = np.bincount(rows, weights=val, minlength=len(p))
     above = np.bincount(rows, weights=np.where(up, val, 0.0), minlength=len(p))
     ok = total > 0
@@ -50,29 +53,41 @@ def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
     return out
 
 
+def _spans(start, v):
+    """(at (h,) the rows of the hits of vertices ``v`` (k,), one vertex after another; n (k,)
+    how many each has), the hits of vertex i being rows ``start[i]:start[i + 1]``."""
+    n = start[v + 1] - start[v]
+    return np.repeat(start[v] - (np.cumsum(n) - n), n) + np.arange(int(n.sum())), n
+
+
 def _reading(rays, elements, p, c, geo, xv):
-    """(rows (h,) the corner of each of its vertex's gather hits, ids (h, 4) the element vertices
-    it reads, w (h, 4) their surface weights times the hit's own weight, up (h,) bool: above the
-    corner's triangle's plane); None without hits."""
+    """What the gather's hits of the corners' vertices read, each vertex's once (a vertex has
+    several leaning corners; truck town's 32,825 read 3.5 million hits through 6,936
+    vertices): (spans (U + 1,) vertex u's hits at rows ``spans[u]:spans[u + 1]`` of ids (h, 4)
+    the element vertices they read and w (h, 4) their surface weights times the hit's own
+    weight; of (K,) each corner's vertex u; up (k,) bool per corner, its vertex's hits in
+    order, above the corner's triangle's plane); None without hits."""
     _, H = rays(hits=True)
     if H is None or not len(H):
         return None
     start = np.searchsorted(H[:, 0], np.arange(len(xv) + 1) - 0.5)   # the hits come in point order
     params = patch_parameters(elements)
     v = elements.polys[p, c]
-    n = start[v + 1] - start[v]
-    parts = ([], [], [], [])                               # rows, ids, w, up
-    for a in range(0, len(p), CHUNK):                     # temporaries: a chunk's hits at a time
-        k = np.arange(a, min(a + CHUNK, len(p)))
-        m = n[k]
-        row = np.repeat(k, m)
-        at = np.repeat(start[v[k]] - (np.cumsum(m) - m), m) + np.arange(int(m.sum()))
-        h = H[at]
-        y = h[:, 2:5].astype(np.float64)
-        ids, w = surface_weights(params, elements.polys, h[:, 1].astype(np.int64), y)
+    verts, of = np.unique(v, return_inverse=True)
+    ids, w = [], []
+    for a in range(0, len(verts), CHUNK):                  # temporaries: a chunk's hits at a time
+        h = H[_spans(start, verts[a:a + CHUNK])[0]]
+        i, x = surface_weights(params, elements.polys, h[:, 1].astype(np.int64), h[:, 2:5].astype(np.float64))
         if H.shape[1] > 5:                                   # hits carrying a weight of their own
-            w = w * h[:, 5:6]
-        up = np.einsum("ij,ij->i", y - xv[v[row]], geo[row]) > 0
-        for part, x in zip(parts, (row.astype(np.int32), ids.astype(np.int32), w.astype(np.float32), up)):
-            part.append(x)
-    return tuple(np.concatenate(x) for x in parts)
+            x = x * h[:, 5:6]
+        ids.append(i.astype(np.int32))
+        w.append(x.astype(np.float32))
+    up = []
+    for a in range(0, len(p), CHUNK):
+        k = np.arange(a, min(a + CHUNK, len(p)))
+        at, m = _spans(start, v[k])
+        row = np.repeat(k, m)
+        up.append(np.einsum("ij,ij->i", H[at, 2:5].astype(np.float64) - xv[v[row]], geo[row]) > 0)
+    n = start[verts + 1] - start[verts]
+    spans = np.concatenate([[0], np.cumsum(n)])
+    return spans, np.concatenate(ids), np.concatenate(w), of, np.concatenate(up)

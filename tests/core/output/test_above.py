@@ -42,3 +42,24 @@ def test_the_share_is_what_the_hits_above_the_corner_s_plane_read():
     assert np.isnan(above_shares(_Ctx(None), E, p, c, np.array([(0.0, 0.0, 1.0)]), xv, read)).all()
     none = H[H[:, 0] != v]
     assert np.isnan(above_shares(_Ctx(none), E, p, c, np.array([(0.0, 0.0, 1.0)]), xv, read)).all()
+
+
+def test_corners_that_share_a_vertex_read_its_hits_each_against_its_own_plane():
+    E = _two_plates()
+    up = int(np.argmax(E.centers[:, 2]))
+    read = np.where(E.verts[:, 2:3] > 0, 1.0, 3.0) * np.ones((1, 3))
+    xv = np.zeros((len(E.verts), 3))
+    a, b = 0, int(E.polys[1 - up, 0])                # a vertex of each plate
+    hits = [(a, up, 0.5, 0.5, 1.0)] * 4 + [(a, 1 - up, 0.25, 0.75, -1.0)] * 4 \
+        + [(b, up, 0.5, 0.5, 1.0)] * 1 + [(b, 1 - up, 0.5, 0.5, -1.0)] * 2
+    H = np.array(sorted(hits), dtype=np.float32)
+    pa = int(np.flatnonzero((E.polys == a).any(axis=1))[0])
+    pb = int(np.flatnonzero((E.polys == b).any(axis=1))[0])
+    ca, cb = (int(np.flatnonzero(E.polys[q] == x)[0]) for q, x in ((pa, a), (pb, b)))
+    # vertex a's hits read by three corners (two planes), b's by one, in a mixed order
+    p = np.array([pa, pb, pa, pa])
+    c = np.array([ca, cb, ca, ca])
+    geo = np.array([(0, 0, 1.0), (0, 0, 1.0), (0, 0, -1.0), (0, 0, 1.0)])
+    got = above_shares(_Ctx(H), E, p, c, geo, xv, read)
+    # a: 4 hits reading 1 above z = 0, 4 reading 3 below; b: 1 reading 1 above, 2 reading 3 below
+    np.testing.assert_allclose(got, [4 / 16, 1 / 7, 12 / 16, 4 / 16], rtol=1e-6)
