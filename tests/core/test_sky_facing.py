@@ -5,7 +5,8 @@ import pytest
 
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.mesh.subdivide import build_patches
-from hemicube_radiosity.core.rays import embree_available, embree_scene, sky_fraction
+from hemicube_radiosity.core.rays import embree_available, embree_scene
+from hemicube_radiosity.core.hemisphere import sky_fraction
 
 
 class Counted:
@@ -72,7 +73,7 @@ def test_casting_only_the_rays_above_the_plane_matches_casting_them_all_in_the_c
     kept = sky_fraction(everything, x, n, 64, eps=np.zeros(len(x)), facing=f)
     whole = sky_fraction(everything, x, n, 64, eps=np.zeros(len(x)))
     assert (kept <= whole + 1e-12).all() and (kept < whole).any() and (kept > 0).any()
-    from hemicube_radiosity.core.rays import cosine_lattice
+    from hemicube_radiosity.core.hemisphere import cosine_lattice
     from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
     d = in_frames(cosine_lattice(64, 0), tangent_frames(n)).reshape(-1, 3)
     below = np.einsum("ij,ij->i", d, np.repeat(f, 64, axis=0)) <= 0

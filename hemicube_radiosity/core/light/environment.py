@@ -1,7 +1,7 @@
 """The world's light by direction: an environment map (an HDRI) as a light.
 
 A constant world is exact everywhere already: its radiance times the part of each point's
-hemisphere where rays find no surface (:func:`..rays.sky_fraction`), in the direct light, the
+hemisphere where rays find no surface (:func:`..hemisphere.sky_fraction`), in the direct light, the
 form factors' sky term and the gather. A map is a constant (its solid-angle median,
 :meth:`EnvironmentLight.base`, which the reader hands on as the world) **plus its variation
 about it**, and only the variation is this light: the sun spot of an HDRI, the sky's gradient,

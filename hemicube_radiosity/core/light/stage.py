@@ -28,7 +28,8 @@ from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
 from .points import STAND_INS, centres_of, patch_average, stand_ins, turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
-from ..rays import embree_available, embree_scene, occluder, open_fraction, ray_offsets, sky_fraction
+from ..rays import embree_available, embree_scene, occluder, ray_offsets
+from ..hemisphere import open_fraction, sky_fraction
 from ..runtime.cache import Memo
 from ..util.unique import unique_ints
 
@@ -169,7 +170,7 @@ class DirectLight:
 
     def world_at(self, points, normals, where: str, eps=None, facing=None, split=1, part=None) -> np.ndarray:
         """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
-        fraction of the hemisphere where rays find no surface (:func:`.rays.sky_fraction`,
+        fraction of the hemisphere where rays find no surface (:func:`.hemisphere.sky_fraction`,
         ``sky_rays`` per point; geometry only, cached). ``eps`` (P,): the rays' start offsets
         (default :meth:`offsets`); ``facing`` (P, 3), ``split``, ``part``: as :meth:`at`."""
         own = b"" if eps is None else array_key(np.asarray(eps, dtype=np.float64))
@@ -263,7 +264,7 @@ class DirectLight:
         ``split``: the points come in runs of that many whose mean is what is read (an abrupt
         cell's, :mod:`..output.abrupt`): each casts ``sky_rays / split`` of the sky's rays, the
         run all of them once; ``part`` (P,): which share each point casts instead
-        (:func:`.rays.sky_fraction`). ``sky``: None, or a function that returns the world's
+        (:func:`.hemisphere.sky_fraction`). ``sky``: None, or a function that returns the world's
         share (P,) of each point's hemisphere, found by other rays (the final gather's,
         :func:`..output.indirect.gathered_sky`): no sky rays are cast, and it is asked for
         last (the gather casts while the rest is found). ``unbounded`` (P, 3) or None: the
@@ -389,7 +390,7 @@ def source_term(patches, F, *, direct_irradiance=None, world=None) -> np.ndarray
 
 def _seen_weight(ctx):
     """``weight_at`` for :func:`patch_average`: a point counts fully when at least half of its
-    hemisphere is open (:func:`.rays.open_fraction`, reach a twentieth of the patch size), less as
+    hemisphere is open (:func:`.hemisphere.open_fraction`, reach a twentieth of the patch size), less as
     less of it is, nothing when it is enclosed (above a lamp's back, inside a block), so a
     patch's light is that of the part the scene sees. None without Embree."""
     p, s = ctx.patches, ctx.settings

@@ -480,7 +480,7 @@ def _probe(scene, normals, points, directions_about, rays, eps):
     (hit (P * rays,) the face whose front a ray hit, or -1; where (P * rays, 3) it hit; that
     face's normal (P * rays, 3); escaped and up (P * rays,) bool: the ray found nothing; it
     points above the horizon (+Z, Blender's up))."""
-    from ..rays import cosine_lattice
+    from ..hemisphere import cosine_lattice
     from ..util.geometry import in_frames, tangent_frames
 
     local = cosine_lattice(rays, 7)

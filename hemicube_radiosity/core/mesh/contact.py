@@ -77,7 +77,7 @@ def _edges(polys) -> np.ndarray:
 
 def open_side(elements: PatchSet, buried, scene, opened=None) -> OpenSide:
     """The :class:`OpenSide` of ``elements``' vertices ``buried`` (V,) bool (they see (almost)
-    nothing: :func:`.rays.open_fraction`). ``scene``: the Embree scene of ``elements``
+    nothing: :func:`.hemisphere.open_fraction`). ``scene``: the Embree scene of ``elements``
     (:func:`.rays.embree_scene`, whose ``intersect`` gives hit distances along unit directions).
     ``opened`` (N,): elements the scene sees (> 0; None: all); only their edges count, as only
     they are ever seen and interpolated across (a floor wholly under a block stays dark).

@@ -237,7 +237,7 @@ class AbruptGrid:
                 seen[k.T])
 
     def _sky_parts(self, count) -> np.ndarray:
-        """(X,) which quarter of the sky's rays each grid point casts (:func:`..rays.sky_fraction`'s
+        """(X,) which quarter of the sky's rays each grid point casts (:func:`..hemisphere.sky_fraction`'s
         ``part``): (row % 2) * 2 + column % 2, so every cell's four corners cast all of them
         once and a gather ray landing in a cell reads about what one point's full pattern
         would (the sky's part of the grid, a quarter of the rays)."""
@@ -284,7 +284,7 @@ class AbruptGrid:
         (:func:`_place_uniforms`): a cell's mean depends neither on which others there are nor
         on their order, and the cells along a lamp's edge do not all sample its glow at the same
         distance (one pattern for every cell made a room's walls 3.7% too bright). The sky's
-        rays are shared out among a cell's points (:func:`..rays.sky_fraction`'s ``split``): the
+        rays are shared out among a cell's points (:func:`..hemisphere.sky_fraction`'s ``split``): the
         cell's mean casts the pattern once, as one point does, not SPIKE^2 times."""
         S = self.SPIKE
 

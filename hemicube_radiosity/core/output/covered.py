@@ -25,7 +25,7 @@ way to the face over it): its direct light found again there (cosine to its shad
 the light from below its triangle's plane by rays from Cycles' lifted start where its shading
 normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light reflected more than once
 scaled by how much of the open scene it sees against how much the vertex's start did
-(:func:`.rays.open_fraction`: rays closed within a twentieth of the patch size or on a back
+(:func:`.hemisphere.open_fraction`: rays closed within a twentieth of the patch size or on a back
 face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
 :data:`OPEN_FLOOR`: a vertex whose rays start inside a solid (a bevelled box resting on a
 shelf of the same mesh, its foot's rays starting in the shelf) gathered the light its closed
@@ -53,7 +53,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
+from ..rays import embree_available, embree_scene, ray_offsets
+
+from ..hemisphere import open_fraction
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .crease import CREASE_ANGLE, below_plane, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners

@@ -2,7 +2,7 @@
 
 A coarse patch solution is accurate in the power each patch reflects but blurs where light
 changes. The finer output elements gather it instead of interpolating it: from each element
-vertex, cosine-distributed rays of one even pattern (:func:`.rays.cosine_lattice`) find the
+vertex, cosine-distributed rays of one even pattern (:func:`.hemisphere.cosine_lattice`) find the
 surface they see, and read there the bilinear interpolation of the patches' reflected radiance
 (``R = B - E``, at patch vertices).
 Their mean is the radiance arriving at the point from reflected light (the emitters' own light
@@ -21,7 +21,8 @@ from ..runtime.background import Background
 from ..runtime.forked import release_tail, shared_array
 from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
-from ..rays import cosine_lattice, ray_offsets
+from ..rays import ray_offsets
+from ..hemisphere import cosine_lattice
 from ..util.sparse import CSR, summed_entries
 from ..util.unique import unique_ints
 from .shared import cast_shared
@@ -103,7 +104,7 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     radiance is ``vals`` (V, k) at ``patches.verts`` is ``G @ vals + sky * world``.
 
     ``scene``: :func:`.rays.embree_scene` of ``patches`` (needs ``intersect``). ``rays`` per
-    point: one cosine pattern (:func:`.rays.cosine_lattice`, seeded) shared by every point, in
+    point: one cosine pattern (:func:`.hemisphere.cosine_lattice`, seeded) shared by every point, in
     the point's normal frame. A ray that hits the back of a patch sees nothing. A ray that hits
     a see-through patch (``patches.see_through``) reads part of it and goes on past it
     (:mod:`.through`). G depends on geometry (and what passes) only: a relight reuses it.

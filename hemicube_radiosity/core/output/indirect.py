@@ -192,7 +192,7 @@ def gather_finds_world(ctx) -> bool:
     """Whether the gather's rays also find the constant world's light at the element vertices:
     the gather runs (a detail size, gather rays, Embree) and the world is direct light
     (``ctx.direct.world``). Its rays that hit nothing are then what the vertices' sky rays would
-    be (cosine rays from the same points: :func:`.rays.sky_fraction`), so the vertices cast
+    be (cosine rays from the same points: :func:`.hemisphere.sky_fraction`), so the vertices cast
     no sky rays of their own (:func:`gathered_sky`) and the gather casts the sky's count
     (:func:`gather_count`). Not where the sky asks for more than :data:`SKY_PER_GATHER` times
     the gather's rays (the quality levels ask twice): the gather's matrix and hits grow with its

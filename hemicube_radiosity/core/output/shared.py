@@ -5,7 +5,7 @@ scanned bunny: 200,000 vertices at 35,000 places, about six at each). Each would
 gather's ``R`` cosine rays of its own (:func:`.gather.gather_matrix`), six times the rays of the
 surface's shape. Here the vertices at one place whose normals are close (a *cluster*) share
 one set of ``R`` rays instead: member ``a`` of a cluster of ``k`` casts the pattern's rays
-``a, a + k, a + 2k, ...`` (``r_a`` of them, :func:`.rays.cosine_lattice`) in its own normal's frame,
+``a, a + k, a + 2k, ...`` (``r_a`` of them, :func:`.hemisphere.cosine_lattice`) in its own normal's frame,
 from its own point, and every member reads every ray of the cluster, weighted by the balance
 heuristic of the mixture of the members' cosine lobes (multiple importance sampling with
 ``r_l`` samples from lobe ``l``):
@@ -37,7 +37,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..rays import closed_rays, mesh_offsets, ray_offsets
+from ..rays import mesh_offsets, ray_offsets
+
+from ..hemisphere import closed_rays
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.parallel import ordered_map, resolve_workers
 from ..util.geometry import in_frames, tangent_frames
@@ -274,7 +276,7 @@ def _cluster_rays(share, s, e, local, points, normals, eps):
 
 
 def shared_open_fraction(patches, points, normals, scene, reach, share, rays=16, seed=0, workers=1):
-    """:func:`.rays.open_fraction` (the same jittered pattern, seeded; start offsets
+    """:func:`.hemisphere.open_fraction` (the same jittered pattern, seeded; start offsets
     :func:`.rays.ray_offsets`) at the vertices of ``share`` (a :class:`Sharing` of ``points``),
     each cluster casting the pattern once between its members, each member's fraction its
     weighted share of its cluster's rays that leave into the open (neither a back face nor

@@ -16,7 +16,8 @@ import numpy as np
 from ..light.emitters import vertex_frames
 from ..mesh.contact import OpenSide, open_side
 from ..mesh.patches import PatchSet
-from ..rays import embree_available, embree_scene, open_fraction, ray_offsets
+from ..rays import embree_available, embree_scene, ray_offsets
+from ..hemisphere import open_fraction
 from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
@@ -30,7 +31,7 @@ __all__ = ["open_elements", "sided_mesh", "seen_fraction", "seen_vertices", "bur
 
 def open_elements(ctx, elements):
     """(N,) 1 for an element the scene can see, 0 for one buried in a solid (its centre's rays
-    all end on back faces or within a twentieth of the patch size: :func:`.rays.open_fraction`),
+    all end on back faces or within a twentieth of the patch size: :func:`.hemisphere.open_fraction`),
     so output vertices on a block's outline are evaluated on the open side. None without
     Embree (every element counts). Read-only, kept beside the fractions: the same array at
     every call (a relight's frames and fits key on it, hashing it once)."""
@@ -187,7 +188,7 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
 
 def seen_fraction(ctx, elements, x, nrm, share=None):
     """(P,) in [0, 1]: how much of the scene sees the points ``x`` (P, 3) on ``elements`` with
-    normals ``nrm``: :func:`.rays.open_fraction` (reach a twentieth of the patch size) over a
+    normals ``nrm``: :func:`.hemisphere.open_fraction` (reach a twentieth of the patch size) over a
     half, so a point with half its hemisphere open (in a corner) counts fully, one a few
     millimetres above a lamp's back or inside a block not at all. ``share``: a
     :class:`.shared.Sharing` of the points (``x`` the vertices' points): the vertices at one

@@ -12,7 +12,8 @@ from hemicube_radiosity.core.light.transmit import AlphaImage, Transmit, see_thr
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
-from hemicube_radiosity.core.rays import embree_available, occluder, sky_fraction
+from hemicube_radiosity.core.rays import embree_available, occluder
+from hemicube_radiosity.core.hemisphere import sky_fraction
 
 pytestmark = pytest.mark.skipif(not embree_available(), reason="see-through faces need embreex")
 
@@ -132,7 +133,8 @@ def test_sky_fraction_on_threads_and_in_float32_is_the_serial_float64_cast():
     """The sky rays cast in chunks on two threads, their origins and directions rounded to
     float32 once (Embree's precision) instead of cast from float64 arrays: the same fractions,
     bit for bit, as the serial cast of the float64 rays it replaced (written out here)."""
-    from hemicube_radiosity.core.rays import cosine_lattice, ray_offsets
+    from hemicube_radiosity.core.rays import ray_offsets
+    from hemicube_radiosity.core.hemisphere import cosine_lattice
     from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
     floor, roof = _scene(None, leaf_half=1.0)
     P = build_patches([floor, roof], None)

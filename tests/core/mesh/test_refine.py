@@ -10,7 +10,8 @@ from hemicube_radiosity.core.light.stage import DirectLight
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import bake
-from hemicube_radiosity.core.rays import embree_scene, open_fraction
+from hemicube_radiosity.core.rays import embree_scene
+from hemicube_radiosity.core.hemisphere import open_fraction
 from hemicube_radiosity.core.mesh.refine import split_patches
 from hemicube_radiosity.core.settings import BakeSettings
 

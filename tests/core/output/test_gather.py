@@ -8,7 +8,8 @@ from hemicube_radiosity.core.output.gather import (
 )
 from hemicube_radiosity.core.light.polygon_ff import polygon_form_factors
 from hemicube_radiosity.core.mesh.subdivide import build_patches
-from hemicube_radiosity.core.rays import embree_scene, ray_offsets, sky_fraction
+from hemicube_radiosity.core.rays import embree_scene, ray_offsets
+from hemicube_radiosity.core.hemisphere import sky_fraction
 from hemicube_radiosity.core.builtin_scenes import closed_box, quad
 
 
@@ -62,7 +63,7 @@ def _rectangle_above(x1, x2, y1, y2, c):
 def test_the_shared_ray_pattern_reads_a_plates_form_factor_along_a_row_under_its_edge(seed):
     """Floor points on a row that passes under the edge of a 1 m plate 0.5 m up: the cosine rays
     that hit the plate are its form factor (closed form), for the gather (the plate's value 1)
-    and the sky fraction alike, which cast the same pattern (:func:`.rays.cosine_lattice`).
+    and the sky fraction alike, which cast the same pattern (:func:`.hemisphere.cosine_lattice`).
     256 rays: RMS error along the row 0.42-0.50% of the hemisphere, at worst 1.3% (measured,
     seeds 0-2); the jittered grid the pattern replaced: 0.45-0.82%, at worst 2.2%."""
     plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
@@ -122,7 +123,7 @@ def test_gather_directions_are_the_einsum_of_the_frames_bit_for_bit():
     """`geometry.in_frames` (the gather's and the open fraction's rays in world space) sums the
     three axes as einsum did: a relight's cached G and the reference bakes keep every bit."""
     from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
-    from hemicube_radiosity.core.rays import cosine_lattice
+    from hemicube_radiosity.core.hemisphere import cosine_lattice
     rng = np.random.default_rng(3)
     n = rng.normal(size=(500, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
@@ -186,7 +187,7 @@ def test_directions_rounded_to_float32_once_are_the_float64_ones_cast():
     """``in_frames(..., np.float32)`` (the sky rays handed to Embree) rounds the same float64
     sums once: the float64 directions cast, bit for bit."""
     from hemicube_radiosity.core.util.geometry import in_frames, tangent_frames
-    from hemicube_radiosity.core.rays import cosine_lattice
+    from hemicube_radiosity.core.hemisphere import cosine_lattice
     rng = np.random.default_rng(4)
     n = rng.normal(size=(300, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)

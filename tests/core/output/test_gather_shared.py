@@ -164,7 +164,7 @@ def test_the_open_fraction_shared_by_corners_finds_the_same_buried_and_open_vert
     each corner's fraction tells them apart as its own rays do (the same side of a quarter)."""
     from hemicube_radiosity.core.builtin_scenes import box
     from hemicube_radiosity.core.output.shared import shared_open_fraction
-    from hemicube_radiosity.core.rays import open_fraction
+    from hemicube_radiosity.core.hemisphere import open_fraction
     g = np.linspace(-2, 2, 9)
     verts, faces = [], []
     for i in range(8):

@@ -719,9 +719,9 @@ def test_cancel_while_the_gather_runs_in_the_background(monkeypatch, pool_kind):
 
 @needs_embree
 def test_open_fraction_identical_with_two_workers(box):
-    """:func:`.rays.open_fraction` cast by two threads in chunks: the same fractions as one
+    """:func:`.hemisphere.open_fraction` cast by two threads in chunks: the same fractions as one
     thread in one chunk (each point's rays do not depend on the chunk it is in)."""
-    from hemicube_radiosity.core.rays import open_fraction
+    from hemicube_radiosity.core.hemisphere import open_fraction
     x, n, _ = vertex_frames(box)
     x = np.concatenate([x] * 40)                     # past one chunk of 4,096 points a worker
     n = np.concatenate([n] * 40)

@@ -1,0 +1,149 @@
+"""Rays over a point's hemisphere: how much of it is open sky, how much leaves into the open.
+
+* :func:`cosine_lattice`: one cosine-distributed pattern of directions that every point shares
+  (in its own normal's frame), so neighbouring points cast parallel rays;
+* :func:`sky_fraction`: the cosine-weighted share of a point's hemisphere from which no surface
+  is hit (the world's light arriving is the world's radiance times it);
+* :func:`open_fraction` / :func:`closed_rays`: the share of rays that leave into the open (not
+  onto a patch's back or a surface nearer than a reach).
+
+The rays are cast by a back-end of :mod:`.rays` (Embree or the NumPy BVH).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh.patches import PatchSet
+from .rays import ray_offsets
+from .runtime.parallel import ordered_map, resolve_workers
+from .util.geometry import in_frames, tangent_frames
+from .util.sampling import cosine_directions, jittered_grid
+
+__all__ = ["cosine_lattice", "sky_fraction", "open_fraction", "closed_rays"]
+
+
+def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays: int = 16, seed: int = 0,
+                  chunk_rays: int = 1 << 20, workers: int = 1, eps=None) -> np.ndarray:
+    """(P,) fraction of ``rays`` cosine rays from each point (P, 3) with unit ``normals`` that
+    leave it into the open (:func:`closed_rays`, ``reach`` in world units): a point a few
+    millimetres above a lamp's back, or on a floor buried inside a block, has none; one in the
+    open all, one in a corner about half. ``scene``: :func:`.rays.embree_scene` of ``patches``.
+    One jittered pattern (seeded) for every point, in its normal's frame. Geometry only.
+    ``workers`` (0 = every core): threads casting a few chunks of points each (Embree lets go of
+    the GIL while it casts); each point's value does not depend on the chunks, so the result is
+    the same for any count. ``eps`` (P,): the rays' start offsets (default :func:`ray_offsets`)."""
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    u, v = jittered_grid(np.random.default_rng(seed), 1, rays)
+    local = cosine_directions(np.stack([u[0], v[0]], -1))                         # (R, 3)
+    R = len(local)
+    eps = (ray_offsets(patches, points, normals, scene=scene) if eps is None else np.asarray(eps, np.float64))[:, None]
+    out = np.empty(len(points))
+    step = max(1, chunk_rays // R)
+    workers = resolve_workers(workers)
+    if workers > 1:                  # two chunks a worker, of at least 4,096 points
+        step = max(1, min(step, max(4096, -(-len(points) // (2 * workers)))))
+    if len(points) and (workers > 1 and len(points) > step):
+        scene.intersect(points[:1], normals[:1])      # commit the scene before threads share it
+
+    def chunk(s):
+        x, n = points[s:s + step], normals[s:s + step]
+        d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
+        pid, t = scene.intersect(np.repeat(x + eps[s:s + step] * n, R, axis=0), d)
+        out[s:s + step] = 1.0 - closed_rays(patches, d, pid, t, reach).reshape(len(x), R).mean(axis=1)
+    for _ in ordered_map(chunk, range(0, len(points), step), workers if len(points) > step else 1):
+        pass
+    return out
+
+
+def closed_rays(patches: PatchSet, directions, pid, t, reach: float) -> np.ndarray:
+    """(M,) bool: the rays (``directions`` (M, 3), hits ``pid``, ``t`` of :meth:`EmbreeScene.intersect`)
+    that hit a patch's back, or any surface nearer than ``reach``: those not leaving into the open."""
+    hit = np.asarray(pid) >= 0
+    back = np.zeros_like(hit)
+    back[hit] = np.einsum("ij,ij->i", directions[hit], patches.normals[np.asarray(pid)[hit]]) > 0
+    return back | (hit & (np.asarray(t) < reach))
+
+
+def cosine_lattice(rays: int, seed: int = 0) -> np.ndarray:
+    """(rays, 3) cosine-distributed local directions (+Z the normal) from a Fibonacci lattice of
+    the unit square, (u, v) = ((i + 1/2) / n, i / golden ratio) mod 1, shifted by a seeded
+    random offset (a Cranley-Patterson rotation: over seeds its mean is the exact integral),
+    mapped as :func:`.sampling.cosine_directions` does (u the squared radius on the disk, v the
+    angle: Vogel's sunflower, lifted to the hemisphere).
+
+    For a pattern every point shares, what matters is how evenly it covers any sliver of the
+    hemisphere: as a point moves, the rays that cross an object's outline switch from sky to
+    object one at a time, and an uneven pattern makes uneven steps between neighbouring
+    points. The lattice covers slivers more evenly than a jittered grid: on the open yard's
+    ground and walls the sky's roughness at 256 rays is what a jittered grid reaches at 1,024."""
+    n = int(rays)
+    shift = np.random.default_rng(seed).uniform(size=2)
+    i = np.arange(n)
+    u = ((i + 0.5) / n + shift[0]) % 1.0
+    v = (i * (np.sqrt(5.0) - 1.0) / 2.0 + shift[1]) % 1.0
+    return cosine_directions(np.stack([u, v], -1))
+
+
+def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_rays: int = 1 << 16, *,
+                 eps, facing=None, workers: int = 1, split: int = 1, part=None) -> np.ndarray:
+    """(P,) cosine-weighted fraction of each point's hemisphere (unit ``normals``) from which no
+    surface is hit: the world's radiance times it is the world's light arriving. ``scene``:
+    anything with ``occluded(origins, directions)`` (:func:`occluder`); ``eps`` (P,) the rays'
+    start offsets (:func:`ray_offsets` of the points on the scene's patches). One pattern of ``rays``
+    (:func:`cosine_lattice`, seeded) for every point, in its normal's frame: neighbouring points
+    cast parallel rays, so the estimate varies smoothly over a surface. ``facing`` (P, 3) or
+    None: rays with a negative or zero component along it count as hitting a surface (below a
+    point's own triangle, :func:`.light.lamps.direct_irradiance`). ``split``: the points share
+    the pattern out, point p casting rays ``part[p]``, ``part[p] + split``, ... (``rays / split``
+    each); ``part`` (P,) in [0, split), default runs of ``split`` points (a cell's, whose mean
+    is what is read: it casts every ray of the pattern once).
+
+    ``chunk_rays``: rays cast at once (65,536: their temporaries stay in the caches); ``workers``
+    (0 = every core): threads casting chunks of points (Embree lets go of the GIL while it
+    casts, and so do the large NumPy steps). Each point's value depends on neither, so the
+    result is the same, bit for bit, for any chunking and any count."""
+    points = np.asarray(points, dtype=np.float64)
+    normals = np.asarray(normals, dtype=np.float64)
+    local = cosine_lattice(rays, seed)                                             # (R, 3)
+    R = len(local) // split
+    eps = np.broadcast_to(np.asarray(eps, dtype=np.float64), (len(points),))[:, None]
+    out = np.empty(len(points))
+    step = max(1, chunk_rays // R)
+    part = np.arange(len(points)) % split if part is None else np.asarray(part, dtype=np.int64)
+    workers = resolve_workers(workers) if len(points) > step else 1
+    see_through = getattr(scene, "see_through", False)
+    if workers > 1 and not see_through:
+        scene.occluded(points[:1], normals[:1])       # commit the scene before threads share it
+    # Embree takes float32: the directions rounded once from the same float64 sums, the
+    # origins before they are repeated (the same values as a float64 array cast whole)
+    single = facing is None and not see_through
+
+    def chunk(s):
+        x, n = points[s:s + step], normals[s:s + step]
+        f, dt = tangent_frames(n), np.float32 if single else np.float64
+        d = in_frames(local, f, dt) if split == 1 else np.empty((len(x), R, 3), dt)
+        for k in range(split if split > 1 else 0):
+            m = part[s:s + step] == k
+            d[m] = in_frames(local[k::split], f[m], dt)
+        d = d.reshape(-1, 3)
+        o = x + eps[s:s + step] * n
+        o = np.repeat(o.astype(np.float32) if single else o, R, axis=0)
+        below = None if facing is None else np.einsum("ij,ij->i", d, np.repeat(facing[s:s + step], R, axis=0)) <= 0
+        if see_through:
+            passed = scene.transmitted(o, d)
+            if below is not None:
+                passed = np.where(below, 0.0, passed)
+            out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
+            return
+        if below is None:
+            hit = np.asarray(scene.occluded(o, d))
+        else:                        # rays below ``facing`` count as hits: only the others cast
+            hit = below.copy()
+            up = np.flatnonzero(~below)
+            if up.size:
+                hit[up] = np.asarray(scene.occluded(o[up], d[up]))
+        out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
+    for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
+        pass
+    return out
