@@ -190,6 +190,7 @@ class BakeContext:
     corner_direct: np.ndarray | None = None      # (N, 4, 3): creased corners' own direct light (output stage)
     corner_keep: np.ndarray | None = None        # (N, 4): their share of the vertex's indirect light (output stage)
     gather_rays: object = None               # the final gather's (G, H) reader (output stage, output.above)
+    gather_key: object = None                # what its rays depend on (output.above keys its table by it)
     error_estimate: object = None            # core.output.estimate.ErrorEstimate (estimate stage)
     forecast: object = None                  # core.runtime.forecast.Forecast (said before the form factors)
     _meshes_key: bytes | None = None         # :meth:`meshes_key`, once a bake

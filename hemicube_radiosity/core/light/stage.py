@@ -292,6 +292,11 @@ class DirectLight:
         # that sees little of the sky, can dip below what the mean gives): light is not
         return np.maximum(D, 0.0, out=D)
 
+    def lamps_at(self, points, normals, where: str, eps=None, facing=None) -> np.ndarray:
+        """(P, 3) :meth:`at`'s radiance from the lamps alone: no emitting face, no world."""
+        return self.at(points, normals, where, eps=eps, facing=facing, sky=lambda: np.zeros(len(points)),
+                       emitters=False)
+
 
 def _turn_emitters(settings) -> bool:
     """Whether emitters also shine from their faces turned around (Cycles' two-sided Emission):

@@ -35,13 +35,9 @@ two normals' bisector; the lamps' from below the plane by rays from Cycles' lift
 its face holding it), and the world's so too, :data:`BELOW_WORLD` of it (:func:`below_plane`).
 Where Cycles' bake point is not known (an element corner inside its face), the rays start at
 the vertex's own point (on the front of all its elements), as Cycles' leave the corner itself,
-nothing cut. Truck town (against Cycles, noise-corrected RMS): 7.56% with the strongest sun's
-verdict alone cutting the light below the plane, the rays starting at the vertex elsewhere
-(:mod:`.lift` found the lifted ray blocked at far fewer corners than the vertex's start met
-its own triangle); 6.05% with the lifted starts. Only
-meshes with corner normals (smooth or custom-normal faces as Blender reads them) have such
-corners: elsewhere the faces that share a vertex lie in one plane, and the bake is as before
-bit for bit. Radiance units; world space.
+nothing cut. Only meshes with corner normals (smooth or custom-normal faces as Blender reads
+them) have such corners: elsewhere the faces that share a vertex lie in one plane, and the bake
+is as before bit for bit. Radiance units; world space.
 """
 from __future__ import annotations
 
@@ -228,8 +224,7 @@ def below_plane(ctx, low, shade, geo, where) -> np.ndarray:
     out = np.zeros((len(low), 3))
     r = np.flatnonzero(np.all(np.isfinite(low), axis=1))
     if r.size and ctx.direct is not None:
-        out[r] = ctx.direct.at(low[r], shade[r], where, eps=np.zeros(r.size), facing=-geo[r],
-                               sky=lambda: np.zeros(r.size), emitters=False)
+        out[r] = ctx.direct.lamps_at(low[r], shade[r], where, eps=np.zeros(r.size), facing=-geo[r])
         if BELOW_WORLD and ctx.direct.world is not None:
             out[r] += BELOW_WORLD * ctx.direct.world_at(low[r], shade[r], where, eps=np.zeros(r.size), facing=-geo[r])
     return out

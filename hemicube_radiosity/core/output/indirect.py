@@ -104,8 +104,8 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
         if "G" not in got or (hits and got["H"] is None):
             got["G"], got["H"] = _gather_rays(ctx, elements, xv, nv, pending, hits)
         return got["G"], got["H"]
-    rays.key = _gather_key(ctx, elements)
     ctx.gather_rays = rays        # the corners lit on their own read its hits (:mod:`.above`)
+    ctx.gather_key = _gather_key(ctx, elements)
     corrections = _corrections(ctx, elements, rays, xv, nv, light_v, direct_e)
     G = rays(hits=False)[0]       # a relight whose corrections are cached reads no hits
     world = ctx.world if ctx.direct.world is None else None   # else in the vertices' direct light

@@ -133,7 +133,7 @@ def vertex_stage(ctx) -> None:
     buried = None if side is None else side.count > 0
     read_v = None if lighting else rho_v * D_vert + rest_v      # what the gather's rays read
     creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried, read_v)
-    ctx.gather_rays = None                              # its hits go with it
+    ctx.gather_rays = ctx.gather_key = None             # its hits go with it
     # where another surface lies between a corner and its vertex's rays, the corner's own light
     creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried)
     _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
