@@ -396,7 +396,8 @@ def real_section(res):
             " glossy layers hand on after a diffuse bounce, 5.2% of `godot_zdm2`'s)"
             if str(res.get("filter_glossy", "default")) not in ("default", "None") else "")
          + ". RMS at Cycles' face"
-         " corners matched by position and normal, zero-area faces, emitters and never-lit corners left out, the"
+         " corners matched by position and normal, zero-area faces, corners Cycles shades on a triangle without area"
+         " (it bakes them at another vertex with an undefined normal), emitters and never-lit corners left out, the"
          " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
          " filled the cache). Relight: after the defaults' bake, every lamp, emitting material and the world's strength x"
          f" {real_scenes.RELIGHT:g} and the bake again, in the same process (the session's cache) and through"
@@ -410,6 +411,8 @@ def real_section(res):
         bits = [c.get("light") or d.get("light") or sc.get("light_kind", "")]
         if not real_scenes.failed(d) and d:
             bits.append(f"{d.get('compared', 0):,} of {c.get('corners', 0):,} corners compared")
+            if c.get("flat_corners"):
+                bits.append(f"{c['flat_corners']:,} on triangles without area left out")
             if d.get("corners_unmatched"):
                 bits.append(f"{d['corners_unmatched']:,} not matched to a face of ours")
             if d.get("vertices_nan"):
