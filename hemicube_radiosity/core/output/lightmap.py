@@ -273,7 +273,7 @@ def located_parts(elements, parts, points, normals, owner, faces=None):
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     idx, uv = locate_texels(elements, points, normals, owner, faces)
-    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
 
@@ -472,9 +472,11 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]
     good = covered & np.all(np.isfinite(image), axis=-1)
-    image, filled = dilate(np.nan_to_num(image), good, margin)
-    if lighting is not None:
-        lighting = dilate(np.nan_to_num(lighting), good, margin)[0].astype(np.float32)
+    if lighting is None:
+        image, filled = dilate(np.nan_to_num(image), good, margin)
+    else:       # both passes in one (channel by channel: the same texels, the same values)
+        both, filled = dilate(np.nan_to_num(np.concatenate([image, lighting], axis=-1)), good, margin)
+        image, lighting = both[..., :3], both[..., 3:].astype(np.float32)
     # an island texel that had no finite value takes its neighbours' (counted if none reached it)
     unset = int(np.count_nonzero(covered & ~filled))
     return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset, lighting)
