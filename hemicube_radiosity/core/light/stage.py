@@ -205,14 +205,18 @@ class DirectLight:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
-    def split_at(self, points, normals, where: str, samples=None, which=None) -> np.ndarray:
+    def split_at(self, points, normals, where: str, samples=None, which=None, facing=None) -> np.ndarray:
         """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
         emitting object (its faces together), every lamp, the world, in that order; summed over
         the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
         scales with its strength and colour, so what depends only on each column's shape, not
         its scale, is the same after a relight. ``samples``: fewer shadow rays per point for the
         emitters and lamps, as :meth:`at` takes it (the world's rays are ``sky_rays``);
-        ``which`` (S,) bool or None: only those columns (the others 0)."""
+        ``which`` (S,) bool or None: only those columns (the others 0); ``facing`` (P, 3) or
+        None: the world's light only from directions on its side (Cycles' diffuse closure drops
+        the directions it samples behind the face; a lamp's and an emitter's light is sampled on
+        the source, whatever side: measured on a lone quad whose shading normal leans 60 degrees
+        off it, a sun 11 degrees behind its face lights it by the cosine to that normal)."""
         x = np.asarray(points, dtype=np.float64)
         owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
         S = len(owners) + len(self.lights) + (self.world is not None)
@@ -234,7 +238,7 @@ class DirectLight:
                     samples=min(samples or self.light_samples, self.light_samples), seed=self.light_seed,
                     cancelled=self.cancelled, workers=self.workers) / np.pi
         if self.world is not None and want[-1]:
-            out[:, -1] = self.world_at(x, normals, where)
+            out[:, -1] = self.world_at(x, normals, where, facing=facing)
         return out
 
     def probed(self) -> np.ndarray:

@@ -35,7 +35,9 @@ __all__ = ["ear_clip", "to_tris_and_quads", "bent_faces", "BENT"]
 #: tenth of a millimetre a metre, where a bench scene's errors are percents. The bench's living room has 49
 #: n-gons: 31 planar to 1e-7 of their size, 18 bent by more than 1e-3 (11 by more than 1e-2).
 BENT = 1e-4
-#: A quad is cut along Blender's triangles only when it is warped by more than this (of its size):
+#: A quad is cut along Blender's triangles only when it is warped by more than this (of its size,
+#: or of its width where that is less: a bevel's strip 5 cm wide and 4.5 m long twisted by 1.2 cm,
+#: 3e-3 of its size, tilts its two triangles by 9 degrees and buries one under the bilinear quad):
 #: the core's bilinear quad and Blender's two triangles part by up to half the warp, so a quad of a
 #: smooth curved surface (a subdivided mesh: warps of 1e-3 and less) stays one bilinear piece, and
 #: a strongly warped one (a bevel's twisted corner: millimetres on a few centimetres) is cut as
@@ -97,7 +99,7 @@ def ear_clip(p: np.ndarray) -> list:
 def bent_faces(verts, face_offsets, face_indices, tol=BENT, quad_tol=WARPED) -> np.ndarray:
     """(F,) bool: the faces of more than four corners that are not planar, a corner farther than
     ``tol`` times the face's size off its mean plane (:data:`BENT`), and the quads warped by more
-    than ``quad_tol`` of their size (:data:`WARPED`). ``verts`` (V, 3), ``face_offsets``
+    than ``quad_tol`` of their size or their width, whichever is less (:data:`WARPED`). ``verts`` (V, 3), ``face_offsets``
     (F + 1,), ``face_indices`` (L,) as in :class:`MeshInput`."""
     off = np.asarray(face_offsets, dtype=np.int64)
     idx = np.asarray(face_indices, dtype=np.int64)
@@ -117,10 +119,14 @@ def bent_faces(verts, face_offsets, face_indices, tol=BENT, quad_tol=WARPED) -> 
     centre = np.add.reduceat(p, start, axis=0) / k[:, None]
     a, b = p - centre[face], v[idx[nxt]] - centre[face]      # about the centre: no cancellation
     n = np.add.reduceat(np.cross(a, b), start, axis=0)
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    twice_area = np.linalg.norm(n, axis=1)
+    n /= np.maximum(twice_area, 1e-300)[:, None]
     off_plane = np.maximum.reduceat(np.abs(np.einsum("lj,lj->l", a, n[face])), start)
     size = np.linalg.norm(np.maximum.reduceat(p, start, axis=0) - np.minimum.reduceat(p, start, axis=0), axis=1)
-    out[big] = off_plane > np.where(k == 4, quad_tol, tol) * size
+    # a quad's warp against its width too (twice its area over its size: the size itself for a
+    # square): a long thin strip twisted by a centimetre over its 5 cm is warped, however long
+    width = np.where(k == 4, np.minimum(size, twice_area / np.maximum(size, 1e-300)), size)
+    out[big] = off_plane > np.where(k == 4, quad_tol, tol) * width
     return out
 
 

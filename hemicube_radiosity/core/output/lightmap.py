@@ -41,7 +41,7 @@ import numpy as np
 from ..mesh.patches import PatchSet
 from ..util.unique import run_positions
 from .interpolate import interpolate_corner_values, locate
-from .texels import LUMA, by_source
+from .texels import LUMA, as_cycles, by_source
 
 __all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
@@ -273,7 +273,7 @@ def located_parts(elements, parts, points, normals, owner, faces=None):
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     idx, uv = locate_texels(elements, points, normals, owner, faces)
-    E, rho, _, indirect = (interpolate_corner_values(a, idx, uv) for a in parts)
+    E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
 
@@ -281,13 +281,14 @@ def _lit_points(world, normals, tri, bary, flip):
     """(points, face normals, shading normals) (n, 3) each of texels ``tri``, ``bary`` (n,),
     (n, 3), the points moved :data:`INSET` of the way toward their triangle's centre (a point on
     an edge where two walls meet sees neither); shading normals interpolated from ``normals``
-    (T, 3, 3), or the faces' where none are given or they turn away from the face."""
+    (T, 3, 3) where given (whichever side of the face they point to, as Cycles shades: only a
+    zero one falls back to the face's), else the faces'."""
     pts, nrm = texel_points(world, tri, bary * (1.0 - INSET) + INSET / 3.0, flip)
     if normals is None:
         return pts, nrm, nrm
     shading = np.einsum("nk,nkj->nj", bary, np.asarray(normals, dtype=np.float64)[tri])
-    shading /= np.maximum(np.linalg.norm(shading, axis=1, keepdims=True), 1e-300)
-    return pts, nrm, np.where(np.einsum("ij,ij->i", shading, nrm)[:, None] > 0, shading, nrm)
+    length = np.linalg.norm(shading, axis=1, keepdims=True)
+    return pts, nrm, np.where(length > 1e-12, shading / np.maximum(length, 1e-300), nrm)
 
 
 def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR, channels=False):
@@ -362,7 +363,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
                  faces=None, inside=None):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
-    :func:`texel_light` with ``split(points, normals, samples=None, which=None) -> (n, S, 3)``
+    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)``
     the direct light of each source apart (:meth:`..light.stage.DirectLight.split_at`): at the
     texel centres, exact where the light needs it and interpolated where it is smooth
     (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
@@ -385,7 +386,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     pts, nrm, shading = _lit_points(world, normals, t, b, flip)
     pitch = _pitch(uv, world, width, height)[t]
     own = None if faces is None else faces[t]
-    Ds = by_source(lambda ids, samples, which=None: split(pts[ids], shading[ids], samples, which), covered,
+    Ds = by_source(as_cycles(split, pts, nrm, shading, probed), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
     E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)
@@ -402,22 +403,23 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
         rows, cols = np.nonzero(covered)
         px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
         which, sub = _sub_texels(px, t[edge], np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1))
-        D[edge] = _sub_mean(split, world, normals, flip, t[edge], which, sub, Ds[edge], need[edge], D[edge])
+        D[edge] = _sub_mean(split, world, normals, flip, t[edge], which, sub, Ds[edge], need[edge], D[edge],
+                            probed)
     light = D + indirect
     return E + rho * light, light
 
 
-def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D):
+def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=None):
     """(m, 3) the direct light of m texels (triangles ``tri`` (m,)) averaged over their sub-texel
     points (``which`` (k,) texel, ``sub`` (k, 3) barycentric: :func:`_sub_texels`): the sources
     ``need`` (m, S) bool lit again at each point, the others the centre's ``Ds`` (m, S, 3); a
     texel with no point keeps ``D`` (m, 3)."""
-    pts, _, shading = _lit_points(world, normals, tri[which], sub, flip)
+    lit = as_cycles(split, *_lit_points(world, normals, tri[which], sub, flip), probed)
     per = Ds[which].copy()                                            # (k, S, 3)
     for k in range(Ds.shape[1]):
         at = np.flatnonzero(need[which, k])
         if at.size:
-            per[at, k] = split(pts[at], shading[at], SUB_RAYS, np.arange(Ds.shape[1]) == k)[:, k]
+            per[at, k] = lit(at, SUB_RAYS, np.arange(Ds.shape[1]) == k)[:, k]
     per = np.maximum(per.sum(axis=1), 0.0)
     m = len(tri)
     count = np.bincount(which, minlength=m)
@@ -438,7 +440,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
     dilated over too and, if still unset, counted in ``Lightmap.unset``.
 
-    With ``parts`` and ``split(points, normals, samples=None, which=None) -> (n, S, 3)`` (the
+    With ``parts`` and ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)`` (the
     bake's exact direct light of each source apart, times the exposure:
     :meth:`..light.stage.DirectLight.split_at`; ``probed`` (S,) bool the sources a one-ray
     probe stands for), or ``direct(points, normals) -> (n, 3)`` (one source, no probe), the
@@ -460,7 +462,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lighting = None
     t, b = tri[covered], bary[covered]
     if split is None and direct is not None:
-        def split(points, normals, samples=None, which=None):      # one source, no probe
+        def split(points, normals, samples=None, which=None, facing=None):      # one source, no probe
             return np.asarray(direct(points, normals), dtype=np.float64)[:, None, :]
     if parts is None or split is None:
         pts, nrm = texel_points(world, t, b, flip)
@@ -472,9 +474,11 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]
     good = covered & np.all(np.isfinite(image), axis=-1)
-    image, filled = dilate(np.nan_to_num(image), good, margin)
-    if lighting is not None:
-        lighting = dilate(np.nan_to_num(lighting), good, margin)[0].astype(np.float32)
+    if lighting is None:
+        image, filled = dilate(np.nan_to_num(image), good, margin)
+    else:       # both passes in one (channel by channel: the same texels, the same values)
+        both, filled = dilate(np.nan_to_num(np.concatenate([image, lighting], axis=-1)), good, margin)
+        image, lighting = both[..., :3], both[..., 3:].astype(np.float32)
     # an island texel that had no finite value takes its neighbours' (counted if none reached it)
     unset = int(np.count_nonzero(covered & ~filled))
     return Lightmap(image.astype(np.float32), covered, filled, inside & good, unset, lighting)

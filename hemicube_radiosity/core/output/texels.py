@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["by_source", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
+__all__ = ["by_source", "as_cycles", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
@@ -237,3 +237,29 @@ def _rim(value, done, inside, faces, index, rows, cols):
     r, k = np.nonzero(got)
     value[rim[r], k] = total[r, k] / count[r, k][:, None]
     done[rim[r], k] = True
+
+
+def _facing(faces, shading, ids):
+    """The ``facing`` of points ``ids``' direct light: their face normals (the world's light only
+    from directions in front of the face, as Cycles' diffuse closure drops what it samples behind
+    it), or None where every shading normal is its face's (no direction to leave out)."""
+    f, n = faces[ids], shading[ids]
+    return None if np.array_equal(f, n) else f
+
+
+def as_cycles(split, pts, nrm, shading, probed):
+    """``split(ids, samples, which)`` of the texels at ``pts`` (n, 3) with face normals ``nrm``
+    and shading normals ``shading`` as Cycles' bake lights them: the world only from in front of
+    the face (:func:`_facing`), and no lamp nor emitter (the ``probed`` (S,) sources; None: no
+    source is left out) where the shading normal turns away from the face (measured on a lone
+    quad whose normals lean 95 or 120 degrees off it: a sun lights it from no direction, the
+    world from those in front of it)."""
+    away = np.einsum("ij,ij->i", shading, nrm) < 0
+
+    def lit(ids, samples, which=None):
+        D = split(pts[ids], shading[ids], samples, which, _facing(nrm, shading, ids))
+        off = away[ids]
+        if off.any() and probed is not None:
+            D[np.ix_(off, np.asarray(probed, bool))] = 0.0
+        return D
+    return lit

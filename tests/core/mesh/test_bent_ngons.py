@@ -110,6 +110,24 @@ def test_a_warped_quad_is_cut_as_blender_triangulates_it():
     np.testing.assert_allclose(np.sort(ps.areas), np.sort([0.5, _tri_area(quads[1][[1, 2, 3]])]), rtol=1e-12)
 
 
+def test_a_long_thin_quad_is_warped_against_its_width():
+    """The warp of a quad is judged against its width where that is less than its size: the
+    corners' distance off the mean plane over min(size, 2 area / size), 2 area / size being the
+    size itself for a square. A strip 90 times longer than wide (a bevel: 4.5 m by 5 cm), its
+    corners h / 4 off for h / 4 = 0.1 WARPED x its size, is bent (its width's 9 WARPED); the same
+    at 0.1 WARPED x its width is not; a square keeps its answer either side of WARPED."""
+    length, width = 4.5, 0.05
+    size = np.hypot(length, width)
+    quads = []
+    for share, L, W, s in ((0.1, length, width, size), (0.1, length, width, width * length / size),
+                           (0.9, 1.0, 1.0, np.sqrt(2.0)), (1.1, 1.0, 1.0, np.sqrt(2.0))):
+        h = share * WARPED * s * 4                        # corner 2 up h: the corners lie h / 4 off
+        quads.append(np.array([[0, 0, 0], [L, 0, 0], [L, W, h], [0, W, 0]], float))
+    verts = np.concatenate(quads)
+    off, idx = np.arange(0, 17, 4), np.arange(16)
+    assert bent_faces(verts, off, idx).tolist() == [True, False, False, True]
+
+
 def test_a_neighbour_s_fan_leaves_no_t_junction_on_the_given_triangles():
     """A flat hexagon fanned about its centre beside the folded octagon, sharing its edge 1-2:
     the edge's midpoint re-cuts the triangle on that edge, so every inner edge is used by two
