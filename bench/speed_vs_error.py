@@ -57,7 +57,7 @@ sys.path.insert(0, os.path.join(ROOT, "tools"))
 
 from hemicube_radiosity.core import pipeline  # noqa: E402
 from hemicube_radiosity.core.runtime.cache import FormFactorCache  # noqa: E402
-from hemicube_radiosity.core.light.stage import DirectLight  # noqa: E402
+from hemicube_radiosity.core.light.direct import DirectLight  # noqa: E402
 from hemicube_radiosity.core.output.interpolate import interpolate_at  # noqa: E402
 from hemicube_radiosity.core.mesh.patches import MeshInput  # noqa: E402
 from hemicube_radiosity.core.mesh.subdivide import build_patches  # noqa: E402
@@ -145,7 +145,7 @@ def flat_vertices(sc, pts, normals, mask, edges):
       edges between original faces, so a vertex on a face's border or corner has 2-3);
     * it is compared at all (``mask``: not an emitter, not a never-lit hidden vertex);
     * it is lit by the direct light: D_v > 5% of the mean of D over ``mask``, where D is the exact
-      direct luminance at the vertex (``core.light.stage.DirectLight.plan`` on a patches-only bake
+      direct luminance at the vertex (``core.light.direct.DirectLight.plan`` on a patches-only bake
       of the coarse scene: emitters, lamps and the world's sky seen from the vertex, shadow rays);
     * no neighbour's D differs from its own by more than 30% (of the larger): no shadow boundary;
     * and none of its neighbours fails one of the tests above (a one-vertex margin).

@@ -19,7 +19,7 @@ For each baked object (``settings.target == 'lightmap'``, baked copies only):
 * **Texels** (:mod:`..core.output.lightmap`): the bake's output read at every texel centre of
   the copy's triangles in that UV map (Blender's loop triangles, as Cycles and glTF interpolate
   UVs), from the same solution and output elements as the vertex colours: the direct light
-  exact at the texel (the bake's :class:`..core.light.stage.DirectLight`, lit with the mesh's
+  exact at the texel (the bake's :class:`..core.light.direct.DirectLight`, lit with the mesh's
   corner normals; averaged over the texel's square where it varies), the rest interpolated from
   the elements' corners; then dilated 8 texels. Values are radiance times ``2**exposure``.
 * **Files** in ``lightmap_dir`` (empty: ``lightmaps/`` beside the saved .blend; unsaved: Blender's
@@ -250,8 +250,8 @@ def _material(name, uv_name, exr, png, lighting_png=None):
 def _texel_light(result, scale):
     """(parts, split, probed) for :func:`..core.output.lightmap.bake_lightmap`: the bake's
     corner parts and its exact direct light at any points, each source apart
-    (:meth:`..core.light.stage.DirectLight.split_at`), both times ``scale`` (the exposure), and
-    which sources a one-ray probe stands for (:meth:`..core.light.stage.DirectLight.probed`); (None,
+    (:meth:`..core.light.direct.DirectLight.split_at`), both times ``scale`` (the exposure), and
+    which sources a one-ray probe stands for (:meth:`..core.light.direct.DirectLight.probed`); (None,
     None, None) without the exact direct light (every texel then interpolated)."""
     parts = result.corner_parts()
     if parts is None or result.direct is None:

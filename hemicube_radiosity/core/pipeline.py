@@ -17,7 +17,8 @@ import numpy as np
 
 from .form_factors.glossy import GLOSSY_MIN
 from .form_factors.stage import compute_form_factors, form_factor_stage, receivers_needed
-from .light.stage import DirectLight, direct_stage, source_term
+from .light.stage import direct_stage, source_term
+from .light.direct import DirectLight
 from .mesh.backs import with_backs
 from .mesh.clusters import Clusters
 from .mesh.elements import meshes_key, output_elements, start_elements

@@ -321,7 +321,7 @@ def test_relight_rewrites_the_images_without_new_form_factors(tmp_path, monkeypa
     objects equal a bake of the changed scene from an empty cache. Lightmap Pack makes the same
     UVs on the new copy, so the texels are the same points."""
     from hemicube_radiosity.core.form_factors import stage as ff_stage
-    from hemicube_radiosity.core.light import stage as light_stage
+    from hemicube_radiosity.core.light import direct as light_direct
     from hemicube_radiosity.core.rays import clear_ray_cache
     from hemicube_radiosity.core.runtime.cache import FormFactorCache
 
@@ -333,7 +333,7 @@ def test_relight_rewrites_the_images_without_new_form_factors(tmp_path, monkeypa
             return real(*a, **k)
         return call
     monkeypatch.setattr(ff_stage, "compute_form_factors", counted("form_factors", ff_stage.compute_form_factors))
-    monkeypatch.setattr(light_stage, "emitter_transport", counted("transports", light_stage.emitter_transport))
+    monkeypatch.setattr(light_direct, "emitter_transport", counted("transports", light_direct.emitter_transport))
     r, b, panel = room()
 
     def bake_images(cache, folder):

@@ -276,7 +276,7 @@ def test_a_suns_light_is_counted_from_the_rays_that_lit_the_patches(monkeypatch)
     escapes directly, to rounding (a second sampling at every face centre put a share of the
     delivered light in 'escaped': -2.4e-4 of it in the grey-white room)."""
     from hemicube_radiosity.core.light import lamp_cache
-    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.light.direct import DirectLight
 
     floor = tessellate([quad([(-1, -1, 0), (1, -1, 0), (1, 1, 0), (-1, 1, 0)], (0.5, 0.4, 0.3), name="floor")], 60)
     board = quad([(-0.2, -1, 0.5), (0.4, -1, 0.5), (0.4, 1, 0.5), (-0.2, 1, 0.5)], (0.6,) * 3, name="board")

@@ -17,7 +17,7 @@ The backs are meshes of their own, after the fronts (``MeshInput.back_of``: the 
 front), so the object's sizes, materials and grouping carry over and the writer can put a back's
 light on the same object. A back's emission follows ``two_sided_emission``: the back of an
 emitting face emits as its front does (Cycles' Emission shader), or nothing for one-sided
-emitters; emitters then need no second, turned-around transport (:mod:`..light.stage`).
+emitters; emitters then need no second, turned-around transport (:mod:`..light.direct`).
 
 Units: world units; ``offset`` is a distance.
 """

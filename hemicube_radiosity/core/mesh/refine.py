@@ -18,7 +18,7 @@ import numpy as np
 from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from .clusters import make_clusters
 from ..light.points import grid_of
-from ..light.stage import LUMA, DirectLight
+from ..light.direct import LUMA, DirectLight
 from .patches import PatchSet, poly_geometry
 from .stage import form_factor_gb
 from ..rays import embree_available, embree_scene
@@ -111,7 +111,7 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
     """Split patches where the direct light changes abruptly, up to ``levels`` times.
 
     ``light_at(points (P, 3), normals (P, 3)) -> (P, S)``: the luminance arriving directly from
-    each of S sources apart (:meth:`.light.stage.DirectLight.sources_at`). A patch is split
+    each of S sources apart (:meth:`.light.direct.DirectLight.sources_at`). A patch is split
     when the light of one source is :func:`abrupt` over an ``n`` x ``n`` grid of its points,
     ``floor`` a fraction of that source's area-weighted mean over the scene (taken once, from
     the patches as given). Each source is judged on its own and only by ratios, so a relight

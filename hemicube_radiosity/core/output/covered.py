@@ -258,7 +258,7 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
 
 def start_offsets(ctx, elements, points, normals) -> np.ndarray:
     """(P,) how far rays from ``points`` (P, 3) on the surfaces of ``elements`` start along
-    their unit ``normals``: their object's ray offset (:meth:`.light.stage.DirectLight.offsets`),
+    their unit ``normals``: their object's ray offset (:meth:`.light.direct.DirectLight.offsets`),
     but half the way to a face over the point when one lies nearer (at least :data:`LIFT_ULPS`
     float32 steps), as :func:`covered_light` starts a covered corner's: the point where a buried
     vertex's edge meets what buries it (:func:`.sides.buried_side`) lies against that surface,

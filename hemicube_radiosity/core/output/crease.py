@@ -27,7 +27,7 @@ found again for that corner alone, the cosine taken to its shading normal
 (:func:`corner_light`), and its light reflected more than once (per vertex) scaled by the share
 of its hemisphere above the triangle's plane. A turned-around corner has both normals negated
 and takes no light from below its triangle's plane. The lamps' and the world's light from above
-the plane (``facing`` of :meth:`.light.stage.DirectLight.at`; an emitting face's is not limited:
+the plane (``facing`` of :meth:`.light.direct.DirectLight.at`; an emitting face's is not limited:
 its shadow rays start above the plane) is found by rays from a point :data:`INSET` of the way
 into the corner's element, off it by its object's offset (:func:`.rays.ray_offsets`) along the
 two normals' bisector; the lamps' from below the plane by rays from Cycles' lifted start

@@ -364,7 +364,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
     :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)``
-    the direct light of each source apart (:meth:`..light.stage.DirectLight.split_at`): at the
+    the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
     texel centres, exact where the light needs it and interpolated where it is smooth
     (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
     then, where a source's light varies between neighbours (:func:`varying`: a shadow's edge, a
@@ -442,7 +442,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
 
     With ``parts`` and ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)`` (the
     bake's exact direct light of each source apart, times the exposure:
-    :meth:`..light.stage.DirectLight.split_at`; ``probed`` (S,) bool the sources a one-ray
+    :meth:`..light.direct.DirectLight.split_at`; ``probed`` (S,) bool the sources a one-ray
     probe stands for), or ``direct(points, normals) -> (n, 3)`` (one source, no probe), the
     direct light is taken at the texels (exact where it needs to be, :func:`texel_values`), the
     rest interpolated, and texels where the light varies are the mean over their square, lit

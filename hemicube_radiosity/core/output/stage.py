@@ -6,7 +6,7 @@ patch solution". Per output vertex (V, 3), radiance units:
 
     B_v = E_v + rho_v * D_v + R_v
 
-with D_v the exact direct light at the vertex (:class:`.light.stage.DirectLight`) and R_v the
+with D_v the exact direct light at the vertex (:class:`.light.direct.DirectLight`) and R_v the
 light reflected more than once, from the patch solution: averaged to the vertices as in the paper,
 then for elements gathered by cosine rays that read it where they land (needs Embree) or
 interpolated bilinearly (:mod:`.indirect`).

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """The direct light at a lightmap's texels, exact only where the light needs it.
 
-A texel's direct light is exact (:meth:`..light.stage.DirectLight.split_at`, each source apart)
+A texel's direct light is exact (:meth:`..light.direct.DirectLight.split_at`, each source apart)
 at the corners of a coarse grid of texels (every :data:`STRIDES`-th row and column); a texel
 between four such anchors takes their bilinear interpolation, source by source, where:
 

@@ -88,7 +88,7 @@ def test_a_lamp_face_cut_into_100_patches_shines_as_one_unit():
     shadows), not 100 contours and 4 rays per patch (400). Where nothing stands between, the light is the whole face's closed form (its
     outline's contour, exact); the same face with one patch of another emission (a texture's) or
     bent out of its plane shines patch by patch, as before."""
-    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.light.direct import DirectLight
     from hemicube_radiosity.core.pipeline import BakeSettings
 
     h = 0.25

@@ -11,7 +11,7 @@ import pytest
 
 from hemicube_radiosity.core.builtin_scenes import quad
 from hemicube_radiosity.core.light.lamps import SunLight, direct_irradiance
-from hemicube_radiosity.core.light.stage import DirectLight
+from hemicube_radiosity.core.light.direct import DirectLight
 from hemicube_radiosity.core.mesh.backs import offset
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.output.gather import gather_matrix

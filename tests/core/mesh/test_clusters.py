@@ -316,7 +316,7 @@ def test_a_clusters_light_costs_a_few_stand_ins_and_keeps_its_mean(monkeypatch):
     source still matches the closed-form mean over all its faces (a Lambertian square lamp over
     a floor of 20,000 triangles, nothing in between)."""
     from hemicube_radiosity.core.light import stage as direct_light
-    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.light.direct import DirectLight
 
     floor = scenes.tessellate([scenes.quad([(0, 0, 0), (2, 0, 0), (2, 2, 0), (0, 2, 0)], rho=(0.6,) * 3,
                                            name="Floor")], 100)
@@ -358,7 +358,7 @@ def test_a_lamps_slivers_shine_with_their_neighbours():
     neighbour in the same plane: 4 groups at both sizes, whose form factors still sum to the
     lamp's closed form. A sliver never joins a group in another plane (a furnace box is one
     object: its walls' groups stay apart)."""
-    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.light.direct import DirectLight
 
     boxes = {n: scenes.tessellate(scenes.cornell_box(), n) for n in (8, 21)}
     s = BakeSettings().resolved(boxes[8])                  # 'auto': 0.247 m patches

@@ -6,7 +6,7 @@ import pytest
 from tests.support.analytic import point_under_rectangle_corner
 from hemicube_radiosity.core.output import indirect as output
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.light.stage import DirectLight
+from hemicube_radiosity.core.light.direct import DirectLight
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import bake

@@ -122,7 +122,7 @@ def test_a_corner_lit_as_its_vertex_takes_the_vertexs_light_and_casts_no_ray(mon
     a face, where Cycles bakes, starts its rays below the plane at Cycles' lifted start).
     Lighting every one of them again instead gives the same corners, to rounding."""
     from hemicube_radiosity.core.builtin_scenes import quad
-    from hemicube_radiosity.core.light.stage import DirectLight
+    from hemicube_radiosity.core.light.direct import DirectLight
     from hemicube_radiosity.core.output import crease
 
     m, _ = _step(((-1.0, 0.6), (-0.5, 0.6), (0.0, 0.6), (0.15, 0.3), (0.3, 0.0)))

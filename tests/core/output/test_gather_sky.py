@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hemicube_radiosity.core import builtin_scenes as scenes
-from hemicube_radiosity.core.light import stage as light_stage
+from hemicube_radiosity.core.light import direct as light_direct
 from hemicube_radiosity.core.output import indirect, stage as output_stage
 from hemicube_radiosity.core.pipeline import bake
 from hemicube_radiosity.core.rays import embree_available
@@ -29,7 +29,7 @@ def _scene():
 
 def test_the_gathers_rays_light_the_vertices_as_their_own_sky_rays_of_the_same_count(monkeypatch):
     s = BakeSettings(patch_size=0.5, element_size=0.25, gather_rays=64, sky_rays=128, workers=1)
-    calls = counted_points(monkeypatch, light_stage, "sky_fraction")
+    calls = counted_points(monkeypatch, light_direct, "sky_fraction")
     new = bake(_scene(), s, world=WORLD)
     cast_new = sum(calls)
     calls.clear()
