@@ -300,7 +300,8 @@ def _interpolated(ctx, elements, field_v, xv, nv):
             v = elements.polys[e[on], c]
             idx[v], uv[v], known[v] = pid[on], corner_uv, True
         rest = np.flatnonzero(~known)
-        i1, uv1 = locate(ctx.patches, xv[rest], owner=owner_v[rest], normals=nv[rest])
+        w = ctx.settings.workers
+        i1, uv1 = locate(ctx.patches, xv[rest], owner=owner_v[rest], normals=nv[rest], workers=w)
         # a point beside small patches (refined along a partition) may not have the patch it
         # lies in among the nearest centres: clamped into a neighbour across the partition, it
         # read the other side's light. Those off their patch along it look again, farther (off
@@ -314,7 +315,8 @@ def _interpolated(ctx, elements, field_v, xv, nv):
         off = (np.linalg.norm(d - across[:, None] * n, axis=1) > 1e-6 * size) | (np.abs(across) > 1e-3 * size)
         if off.any():
             far = rest[off]
-            i1[off], uv1[off] = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64)
+            i1[off], uv1[off] = locate(ctx.patches, xv[far], owner=owner_v[far], normals=nv[far], candidates=64,
+                                       workers=w)
         idx[rest], uv[rest] = i1, uv1
         return idx, uv
 

@@ -190,6 +190,14 @@ class Grid:
             self._levels.append(_Level(self.sites, self.lo, self.cell * 2.0 ** len(self._levels)))
         return self._levels[i]
 
+    def build_levels(self) -> None:
+        """Build every level :meth:`k_nearest` may look at now (they are built when first needed
+        otherwise): threads may then query the grid at once."""
+        i = 0
+        while i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4:
+            self._level(i)
+            i += 1
+
     def _all(self, p, k):
         """Brute force: every site for every point (what :meth:`k_nearest` falls back to)."""
         d2 = sq_dist(p[:, None, :], self.sites[None, :, :])

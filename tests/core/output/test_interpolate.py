@@ -126,20 +126,26 @@ def _points(ps, rng):
     return pts, ps.owner[src], nrm
 
 
-@pytest.mark.parametrize("brute", [0, 512])
-def test_locate_equals_a_brute_force_search(monkeypatch, brute):
+@pytest.mark.parametrize("brute,workers", [(0, 1), (512, 1), (0, 2)])
+def test_locate_equals_a_brute_force_search(monkeypatch, brute, workers):
     """To the bit, ties included; ``brute``: objects of at most so many patches skip the grid
-    (0: the grid for all; the objects here have 96 to 432 patches, 528 for points of any object)."""
+    (0: the grid for all; the objects here have 96 to 432 patches, 528 for points of any object);
+    ``workers``: threads take the grid's chunks of points (their rows written at once)."""
     monkeypatch.setattr(interpolate, "_BRUTE", brute)
+    maps = []
+    real_map = interpolate.ordered_map
+    monkeypatch.setattr(interpolate, "ordered_map", lambda fn, items, w: maps.append(w) or real_map(fn, items, w))
     rng = np.random.default_rng(3)
     for ps in _mixed_scene():
         pts, owner, nrm = _points(ps, rng)
         for args in ((owner, nrm), (owner, None), (None, None), (None, nrm)):
             for candidates in (8, 3, 64):      # 64: the far search, its fits pruned (_PRUNE)
-                idx, uv = locate(ps, pts, *args, candidates=candidates, chunk=97)
+                idx, uv = locate(ps, pts, *args, candidates=candidates, chunk=97, workers=workers)
                 ref_idx, ref_uv = _brute_locate(ps, pts, *args, candidates=candidates)
                 np.testing.assert_array_equal(idx, ref_idx)
                 np.testing.assert_array_equal(uv, ref_uv)
+    if brute == 0:
+        assert max(maps) == workers             # the threads were asked for
 
 
 @pytest.mark.parametrize("pairs", [None, 64])
