@@ -78,13 +78,13 @@ QUALITY = {
 }
 QUALITY_LEVELS = (
     ("draft", "Draft", "A first look: about half Production's time (0.4-0.7x), its median error "
-     "against Cycles 6-44% higher on the real-scene benchmark"),
-    ("preview", "Preview", "About 0.7x Production's time (0.55-0.95x), its median error 2-20% higher"),
+     "against Cycles 8-44% higher on the real-scene benchmark"),
+    ("preview", "Preview", "About 0.7x Production's time (0.55-0.95x), its median error 0-20% higher"),
     ("production", "Production", "The defaults (the speed-against-error frontier of the "
      "benchmark): 1.1% RMS from Cycles' reference on the Stanford bunny (Cycles 64 spp: 1.3%), "
-     "1.4-11 s per 10k triangles on 2 cores"),
+     "1.3-15 s per 10k triangles on 2 cores"),
     ("final", "Final", "1.4x the patches per diagonal, finer hemi-cubes and twice the rays: "
-     "1.5-2.3x Production's time, its median error 2-14% lower (RMS at most 5% lower on the "
+     "1.6-2.6x Production's time, its median error 0-14% lower (RMS at most 6% lower on the "
      "benchmark: what is left there is systematic)"),
 )
 TARGETS = (

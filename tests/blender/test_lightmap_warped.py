@@ -35,6 +35,23 @@ def _strip():
     return v, [[0, 1, 2, 3]]
 
 
+def _lightmap(ob, density, folder):
+    """(image (h, w, 3), the lightmap's record, the baked copy's mesh, (h, w) bool the texels whose
+    centre lies inside a UV triangle) of a default lightmap bake of ``ob`` alone."""
+    from hemicube_radiosity.blender import lightmap as blm
+    from hemicube_radiosity.core.output import lightmap as core_lightmap
+    settings = bake.BakeSettings(target="lightmap", lightmap_density=density, lightmap_dir=str(folder))
+    job = bake.BakeJob.prepare(bpy.context, [ob], settings)
+    job.run()
+    job.write(bpy.context)
+    rec, = job.lightmaps
+    img = cr.image_rgb(bpy.data.images[f"{ob.name}.lightmap.exr"])
+    w, h = rec["size"]
+    copy = bpy.data.objects[f"{ob.name}.radiosity"].data
+    _, _, inside = core_lightmap.rasterize(blm._triangle_uvs(copy, rec["uv_map"]), w, h)
+    return img, rec, copy, inside
+
+
 def test_a_twisted_strip_is_lit_as_blenders_two_triangles(tmp_path):
     v, f = _strip()
     # warped against its width, not against its size
@@ -50,17 +67,7 @@ def test_a_twisted_strip_is_lit_as_blenders_two_triangles(tmp_path):
     n = [np.cross(v[b] - v[a], v[c] - v[a]) for a, b, c in tris]
     cos = float(np.dot(n[0], n[1]) / np.linalg.norm(n[0]) / np.linalg.norm(n[1]))
     assert np.dot(n[0], [0, 0, 1]) > 0 and cos < np.cos(np.radians(10))   # facing up, a real fold
-    settings = bake.BakeSettings(target="lightmap", lightmap_density=64.0, lightmap_dir=str(tmp_path))
-    job = bake.BakeJob.prepare(bpy.context, [ob], settings)
-    job.run()
-    job.write(bpy.context)
-    rec, = job.lightmaps
-    img = cr.image_rgb(bpy.data.images["Strip.lightmap.exr"])
-    w, h = rec["size"]
-    from hemicube_radiosity.blender import lightmap as blm
-    from hemicube_radiosity.core.output import lightmap as core_lightmap
-    copy = bpy.data.objects["Strip.radiosity"].data
-    _, _, inside = core_lightmap.rasterize(blm._triangle_uvs(copy, rec["uv_map"]), w, h)
+    img, rec, copy, inside = _lightmap(ob, 64.0, tmp_path)
     y = img[inside].mean(-1)
     assert y.size > 100
     low, high = RHO * (1 + cos) / 2, RHO * (1 + (1 - cos) / 2)
@@ -97,18 +104,9 @@ def test_the_texels_shading_normal_and_face_as_cycles_takes_them(tmp_path, lean,
     sun = cr.add_light("SUN", (0.0, 0.0, 3.0), energy=3.0, angle=0.0)
     from mathutils import Vector
     sun.rotation_euler = Vector(tuple(to_sun)).to_track_quat("Z", "Y").to_euler()   # shines along its -z
-    settings = bake.BakeSettings(target="lightmap", lightmap_density=16.0, lightmap_dir=str(tmp_path))
-    job = bake.BakeJob.prepare(bpy.context, [ob], settings)
-    job.run()
-    job.write(bpy.context)
-    rec, = job.lightmaps
-    ours = cr.image_rgb(bpy.data.images["Turned.lightmap.exr"])
-    from hemicube_radiosity.blender import lightmap as blm
-    from hemicube_radiosity.core.output import lightmap as core_lightmap
+    ours, rec, copy, inside = _lightmap(ob, 16.0, tmp_path)
     from hemicube_radiosity.blender import write
-    w, h = rec["size"]
-    copy = bpy.data.objects["Turned.radiosity"].data
-    _, _, inside = core_lightmap.rasterize(blm._triangle_uvs(copy, rec["uv_map"]), w, h)
+    w, _ = rec["size"]
     uv = np.empty(len(copy.loops) * 2, np.float32)
     copy.uv_layers[rec["uv_map"]].data.foreach_get("uv", uv)
     want = RHO * 3.0 * float(np.dot(n, to_sun)) / np.pi if lit else 0.0
