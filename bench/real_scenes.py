@@ -325,14 +325,9 @@ def corner_geometry(objects):
     pos, mid, nrm, area, own, fid, tris = [], [], [], [], [], [], 0
     for oi, ob in enumerate(objects):
         me = ob.data
-        M = np.array(ob.matrix_world)
-        co = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", co)
-        lv = np.empty(len(me.loops), np.int64)
-        me.loops.foreach_get("vertex_index", lv)
+        w, lv = _world_corners(ob)
         tot = np.empty(len(me.polygons), np.int64)
         me.polygons.foreach_get("loop_total", tot)
-        w = (co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3])[lv]
         face = np.repeat(np.arange(len(tot)), tot)
         start = np.r_[0, np.cumsum(tot)[:-1]]
         # Newell normal of each face in world space (its length is twice the area)
@@ -354,6 +349,18 @@ def corner_geometry(objects):
     return cat(pos), cat(mid), cat(nrm), np.concatenate(area), np.concatenate(own), np.concatenate(fid), tris
 
 
+def _world_corners(ob, dtype=np.float64):
+    """(positions (L, 3) of each face corner of mesh object ``ob`` in world space, cast to
+    ``dtype`` after the transform; its vertex indices (L,))."""
+    me = ob.data
+    M = np.array(ob.matrix_world)
+    co = np.empty(len(me.vertices) * 3)
+    me.vertices.foreach_get("co", co)
+    lv = np.empty(len(me.loops), np.int64)
+    me.loops.foreach_get("vertex_index", lv)
+    return (co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]).astype(dtype)[lv], lv
+
+
 def flat_bake_corners(objects):
     """Per face corner of ``objects`` (the order of :func:`corner_geometry`): whether Cycles shades
     it on a triangle without area, and so not at the corner. A colour-attribute bake gives each
@@ -372,12 +379,7 @@ def flat_bake_corners(objects):
     out = []
     for ob in objects:
         me = ob.data
-        M = np.array(ob.matrix_world)
-        co = np.empty(len(me.vertices) * 3)
-        me.vertices.foreach_get("co", co)
-        lv = np.empty(len(me.loops), np.int64)
-        me.loops.foreach_get("vertex_index", lv)
-        w = (co.reshape(-1, 3) @ M[:3, :3].T + M[:3, 3]).astype(np.float32)[lv]
+        w, lv = _world_corners(ob, np.float32)
         tl = np.empty(len(me.loop_triangles) * 3, np.int64)
         me.loop_triangles.foreach_get("loops", tl)
         t = w[tl.reshape(-1, 3)]
