@@ -99,8 +99,8 @@ def ear_clip(p: np.ndarray) -> list:
 def bent_faces(verts, face_offsets, face_indices, tol=BENT, quad_tol=WARPED) -> np.ndarray:
     """(F,) bool: the faces of more than four corners that are not planar, a corner farther than
     ``tol`` times the face's size off its mean plane (:data:`BENT`), and the quads warped by more
-    than ``quad_tol`` of their size or their width, whichever is less (:data:`WARPED`). ``verts`` (V, 3), ``face_offsets``
-    (F + 1,), ``face_indices`` (L,) as in :class:`MeshInput`."""
+    than ``quad_tol`` of their size or their width, whichever is less (:data:`WARPED`).
+    ``verts`` (V, 3), ``face_offsets`` (F + 1,), ``face_indices`` (L,) as in :class:`MeshInput`."""
     off = np.asarray(face_offsets, dtype=np.int64)
     idx = np.asarray(face_indices, dtype=np.int64)
     sizes = np.diff(off)
