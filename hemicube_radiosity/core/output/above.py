@@ -30,13 +30,14 @@ def above_shares(ctx, elements, p, c, geo, xv, read_v) -> np.ndarray:
     (K, 3), the share of its vertex's gathered light whose rays hit above that plane (through
     the vertex's point ``xv`` (V, 3)), read as ``read_v`` (V, 3) (the light leaving the element
     vertices, as the gather's rays read it); NaN where not known: no gather's hits
-    (``ctx.gather_rays``, keyed by ``ctx.gather_key``), no hit, or nothing read. What the hits read (:func:`_reading`) is
-    geometry only and cached: a relight reads no hit of the gather's."""
+    (``ctx.gather_rays``, keyed by ``ctx.gather_key``), no hit, or nothing read. What the hits
+    read (:func:`_reading`) is geometry only and cached: a relight reads no hit of the gather's."""
     out = np.full(len(p), np.nan)
     rays = getattr(ctx, "gather_rays", None)
     if rays is None or read_v is None or not len(p):
         return out
-    key = cache_key(str(getattr(ctx, "gather_key", None) or "").encode() + array_key(np.stack([p, c], 1)) + array_key(geo) + array_key(xv),
+    gather = str(getattr(ctx, "gather_key", None) or "").encode()
+    key = cache_key(gather + array_key(np.stack([p, c], 1)) + array_key(geo) + array_key(xv),
                     ("above-reading-by-vertex",))
     found = cached(getattr(ctx, "cache", None), key, lambda: _reading(rays, elements, p, c, geo, xv))
     if found is None:
