@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh.clusters import Clusters
-from ..mesh.patches import PatchSet
+from ..mesh.patches import PatchSet, compact
 from ..util.unique import run_positions, unique_ints, unique_rows
 
 __all__ = ["DrawSet", "draw_set"]
@@ -115,19 +115,12 @@ def draw_set(pieces: PatchSet, clusters: Clusters) -> DrawSet:
             break
         ok[failed] = False            # drawn as pieces: decide the drop again around them
     as_is = np.flatnonzero(~ok[of])
-    t_polys = tris
-    m_polys = np.concatenate([wpolys[as_is],
-                              np.concatenate([t_polys, np.full((len(t_polys), 1), -1)], axis=1)])
-    k_of = kt
-    item_of = np.concatenate([of[as_is], k_of])
-    normals = np.concatenate([n[as_is], n[rep][k_of]])
-    centers = np.concatenate([c[as_is], c[rep][k_of]])
-    # compact the vertices to those drawn
-    live = np.unique(m_polys[m_polys >= 0])
-    remap = np.full(len(upos), -1, dtype=np.int64)
-    remap[live] = np.arange(live.size)
-    m_polys = np.where(m_polys < 0, -1, remap[np.maximum(m_polys, 0)])
-    return DrawSet(upos[live], m_polys, normals, centers, item_of, ok)
+    m_polys = np.concatenate([wpolys[as_is], np.concatenate([tris, np.full((len(tris), 1), -1)], axis=1)])
+    item_of = np.concatenate([of[as_is], kt])
+    normals = np.concatenate([n[as_is], n[rep][kt]])
+    centers = np.concatenate([c[as_is], c[rep][kt]])
+    drawn, m_polys = compact(upos, m_polys)                # only the vertices drawn
+    return DrawSet(drawn, m_polys, normals, centers, item_of, ok)
 
 
 def _outline_loops(wpolys, of, ok, pos, normals) -> tuple:
@@ -140,28 +133,10 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> tuple:
     edge arriving there goes on with the first edge leaving it clockwise in the cluster's plane
     (counter-clockwise from the outside): the loops part there, each simple. ``normals`` (K, 3)
     is each cluster's normal (the pieces wind counter-clockwise about it)."""
-    sel = np.flatnonzero(ok[of])
-    if not sel.size:
+    found = _boundary_edges(wpolys, of, ok)
+    if found is None:
         return (np.zeros(0, np.int64),) * 3
-    p = wpolys[sel]
-    k = np.where(p[:, 3] < 0, 3, 4)
-    nxt = np.where(np.arange(4)[None, :] + 1 < k[:, None], np.roll(p, -1, axis=1), p[:, :1])
-    live = np.arange(4)[None, :] < k[:, None]
-    a, b = p[live], nxt[live]
-    cl = np.repeat(of[sel], k)
-    keep = a != b
-    a, b, cl = a[keep], b[keep], cl[keep]
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = np.stack([cl, lo, hi], axis=1)
-    _, inv, cnt = unique_rows(key, return_inverse=True, return_counts=True)
-    inv = inv.reshape(-1)
-    fwd = np.bincount(inv, weights=(a < b).astype(np.float64), minlength=cnt.size)
-    bad = (cnt > 2) | ((cnt == 2) & (fwd != 1))
-    broken = set(np.unique(cl[bad[inv]]).tolist())
-    edge = cnt[inv] == 1
-    a, b, cl = a[edge], b[edge], cl[edge]
-    o = np.lexsort((a, cl))
-    a, b, cl = a[o], b[o], cl[o]
+    a, b, cl, broken = found
     # each cluster's edges a run; a run of fewer than 3 (s = e = 0: no boundary edge at all, a
     # face doubled) or with a broken edge has no outline
     first = np.r_[0, np.flatnonzero(np.diff(cl)) + 1]
@@ -196,6 +171,35 @@ def _outline_loops(wpolys, of, ok, pos, normals) -> tuple:
     start = np.cumsum(lens) - lens
     at = np.repeat(start[o], lens[o]) + run_positions(lens[o])
     return flat[at], lens[o], l_cl[o]
+
+
+def _boundary_edges(wpolys, of, ok):
+    """The boundary edges of the clusters ``ok`` (``wpolys`` the pieces' welded corners, ``of``
+    their clusters): (a, b, cluster), each an edge only one piece of its cluster has, directed as
+    that piece winds, sorted by cluster then a; and the set of clusters with a broken edge (used
+    more than twice, or twice the same way). None when no cluster is ``ok``."""
+    sel = np.flatnonzero(ok[of])
+    if not sel.size:
+        return None
+    p = wpolys[sel]
+    k = np.where(p[:, 3] < 0, 3, 4)
+    nxt = np.where(np.arange(4)[None, :] + 1 < k[:, None], np.roll(p, -1, axis=1), p[:, :1])
+    live = np.arange(4)[None, :] < k[:, None]
+    a, b = p[live], nxt[live]
+    cl = np.repeat(of[sel], k)
+    keep = a != b
+    a, b, cl = a[keep], b[keep], cl[keep]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    key = np.stack([cl, lo, hi], axis=1)
+    _, inv, cnt = unique_rows(key, return_inverse=True, return_counts=True)
+    inv = inv.reshape(-1)
+    fwd = np.bincount(inv, weights=(a < b).astype(np.float64), minlength=cnt.size)
+    bad = (cnt > 2) | ((cnt == 2) & (fwd != 1))
+    broken = set(np.unique(cl[bad[inv]]).tolist())
+    edge = cnt[inv] == 1
+    a, b, cl = a[edge], b[edge], cl[edge]
+    o = np.lexsort((a, cl))
+    return a[o], b[o], cl[o], broken
 
 
 def _cycles(edges, nxt, a, cl):
