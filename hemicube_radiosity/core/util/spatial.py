@@ -190,11 +190,16 @@ class Grid:
             self._levels.append(_Level(self.sites, self.lo, self.cell * 2.0 ** len(self._levels)))
         return self._levels[i]
 
+    def _worth(self, i) -> bool:
+        """Whether :meth:`k_nearest` looks at level ``i``: the first, and each coarser one while
+        the one below it has more than 4 cells an axis."""
+        return i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4
+
     def build_levels(self) -> None:
         """Build every level :meth:`k_nearest` may look at now (they are built when first needed
         otherwise): threads may then query the grid at once."""
         i = 0
-        while i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4:
+        while self._worth(i):
             self._level(i)
             i += 1
 
@@ -226,7 +231,7 @@ class Grid:
             ids = np.arange(a, min(a + chunk, P))
             i = 0
             upper = None
-            while ids.size and (i == 0 or self.cell * 2.0 ** (i - 1) < self.extent / 4):
+            while ids.size and self._worth(i):
                 # each coarser cube holds the finer one: its k-th found bounds the k nearest
                 s, d, ok = self._level(i).ring(self.sites, points[ids], k, 1, upper)
                 out_s[ids[ok]], out_d[ids[ok]] = s[ok], d[ok]
