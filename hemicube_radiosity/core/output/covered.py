@@ -23,8 +23,8 @@ off Blender's triangle the point lies on, in front of what covers it). A covered
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 the light from below its triangle's plane by rays from Cycles' lifted start where its shading
-normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light reflected more than once
-scaled by how much of the open scene it sees against how much the vertex's start did
+normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light
+reflected more than once scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.hemisphere.open_fraction`: rays closed within a twentieth of the patch size or on a back
 face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
 :data:`OPEN_FLOOR`: a vertex whose rays start inside a solid (a bevelled box resting on a
@@ -54,10 +54,9 @@ from dataclasses import replace
 import numpy as np
 
 from ..rays import embree_available, embree_scene, ray_offsets
-
 from ..hemisphere import open_fraction
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .crease import CREASE_ANGLE, below_plane, strongest_sun
+from .crease import below_plane, leans, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .normals import corner_shading_normals
 
@@ -228,7 +227,7 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
     D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo)
     # and the light below the triangle's plane, from Cycles' lifted start (:mod:`.crease`)
-    lean = np.einsum("ij,ij->i", shade, geo) < np.cos(np.radians(CREASE_ANGLE))
+    lean = leans(shade, geo)
     if lean.any():
         low = np.full((len(p), 3), np.nan)
         low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])

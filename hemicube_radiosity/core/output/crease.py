@@ -51,7 +51,7 @@ from .above import above_shares
 from .lift import ON_PLANE_ULPS, bake_points, corner_normals, lifted_starts
 from .normals import corner_shading_normals
 
-__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "strongest_sun"]
+__all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "leans", "strongest_sun"]
 
 #: Degrees: a corner's shading normal leaning this far off its triangle's normal, or off its
 #: vertex's normal, gets the corner its own direct light. Truck town: 5 degrees lit 63,204 of
@@ -67,6 +67,11 @@ NEAR_PERPENDICULAR = 0.05
 #: along the plane to rounding, Cycles shades its front (godot_zdm2: of the 1,911 corners whose
 #: normal lies within 1e-6 of their plane, Cycles' NORMAL bake turns 7%).
 TIE = 1e-6
+
+
+def leans(a, b) -> np.ndarray:
+    """(K,) bool: unit normals ``a`` (K, 3) more than :data:`CREASE_ANGLE` off ``b`` (K, 3)."""
+    return np.einsum("ij,ij->i", a, b) < np.cos(np.radians(CREASE_ANGLE))
 
 
 def crease_corners(elements, meshes, nv, opened=None, buried=None):
@@ -147,7 +152,7 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_
     share = above_shares(ctx, elements, p, c, geo, xv, read_v)   # the gather's hits say it,
     # where the vertex gathered about the corner's own shading normal (not where Cycles wrote
     # another face's normal over the vertex, :mod:`..mesh.cycles_normals`)
-    about = np.einsum("ij,ij->i", shade, nv[elements.polys[p, c]]) >= np.cos(np.radians(CREASE_ANGLE))
+    about = ~leans(shade, nv[elements.polys[p, c]])
     k = np.where(np.isfinite(share) & about, share, k)
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
