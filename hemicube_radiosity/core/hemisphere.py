@@ -136,14 +136,19 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
                 passed = np.where(below, 0.0, passed)
             out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
             return
-        if below is None:
-            hit = np.asarray(scene.occluded(o, d))
-        else:                        # rays below ``facing`` count as hits: only the others cast
-            hit = below.copy()
-            up = np.flatnonzero(~below)
-            if up.size:
-                hit[up] = np.asarray(scene.occluded(o[up], d[up]))
-        out[s:s + step] = 1.0 - hit.reshape(len(x), R).mean(axis=1)
+        out[s:s + step] = 1.0 - _hits(scene, o, d, below).reshape(len(x), R).mean(axis=1)
     for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
         pass
     return out
+
+
+def _hits(scene, o, d, below):
+    """(M,) bool: the rays ``o`` + t ``d`` (M, 3) that meet a surface; those ``below`` (M,) bool
+    (or None) a point's ``facing`` plane count as hits and are not cast."""
+    if below is None:
+        return np.asarray(scene.occluded(o, d))
+    hit = below.copy()
+    up = np.flatnonzero(~below)
+    if up.size:
+        hit[up] = np.asarray(scene.occluded(o[up], d[up]))
+    return hit

@@ -282,16 +282,16 @@ def backs_that_matter(meshes, opened, lights=(), world=None, probe_rays=PROBE_RA
     """{mesh index: (F,) bool}: which of the open faces ``opened`` ({index: (F,) bool}) have a
     back that can take part in the light.
 
-    A back matters where a source reaches it (a lamp behind the face's plane or a sun on its
-    back, by a shadow ray), where the lit world (or an environment map) above the horizon
-    fills at least :data:`FACING_SHARE` of its view (the world below a terrain lights its
-    underside in Cycles too, for no one to see), or where that much of its view is the fronts of surfaces
-    that are not shut in (their own rays find some front, or escape, not only the backs of
-    others). With ``emit`` (two-sided emitters) the back of an emitting face matters
-    wherever it faces any surface, probed from near its corners too (:data:`NEAR_CORNER`). The rest are left out, so a scene pays nothing for them: the
-    underside of a floor, the outside of a room built of single planes in a dark world, the
-    inside of a box without a bottom standing on a floor (it faces only its own walls' backs
-    and the floor they shut in), the inside of a scanned model seen through holes in its base.
+    A back matters where a source reaches it (a lamp behind the face's plane or a sun on its back,
+    by a shadow ray), where the lit world (or an environment map) above the horizon fills at least
+    :data:`FACING_SHARE` of its view (the world below a terrain lights its underside in Cycles too,
+    for no one to see), or where that much of its view is the fronts of surfaces that are not shut
+    in (their own rays find some front, or escape, not only the backs of others). With ``emit``
+    (two-sided emitters) the back of an emitting face matters wherever it faces any surface, probed
+    from near its corners too (:data:`NEAR_CORNER`). The rest are left out, so a scene pays nothing
+    for them: the underside of a floor, the outside of a room built of single planes in a dark
+    world, the inside of a box without a bottom standing on a floor (it faces only its own walls'
+    backs and the floor they shut in), the inside of a scanned model seen through holes in its base.
 
     Probed from each face's centre (and halfway to each corner on faces larger than
     :data:`LARGE_FACE` of the scene's diagonal squared) with ``probe_rays`` cosine rays against

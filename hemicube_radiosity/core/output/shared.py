@@ -38,7 +38,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..rays import mesh_offsets, ray_offsets
-
 from ..hemisphere import closed_rays
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.parallel import ordered_map, resolve_workers
