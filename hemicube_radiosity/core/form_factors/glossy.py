@@ -145,39 +145,9 @@ def specular_transport(patches, glossy, rays=1024, *, seed=0, clusters=None, wor
     angles = np.random.default_rng([seed, 0x9105]).uniform(0, 2 * np.pi, len(patches))
 
     def cast(batch):
-        # a group's stream is its first glossy patch's (one patch alone: as it always was)
-        rngs = [np.random.default_rng([seed, 0x9105, int(members[bounds[g]])]) for g in batch]
-        u = np.stack([stratified_unit_square(r, 1, k)[0] for r in rngs])          # (B,k,2) points
-        v = np.stack([stratified_unit_square(r, 1, k)[0][r.permutation(k)] for r in rngs])
-        j, x, group_area = _sample_points(patches, corners, members, bounds, batch, u)   # (B,k), (B,k,3)
-        nrm = patches.normals[j]                                                  # (B,k,3)
-        frames = tangent_frames(nrm.reshape(-1, 3), angles[j].reshape(-1)).reshape(*j.shape, 3, 3)
-        d = np.einsum("bkc,bkcj->bkj", cosine_directions(v), frames)              # (B,k,3)
-        m = 2.0 * np.einsum("bkj,bkj->bk", d, nrm)[..., None] * nrm - d           # mirrored
-        o = (x + eps[j][..., None] * nrm).reshape(-1, 3)
-        pid, _ = scene.intersect(np.concatenate([o, o]), np.concatenate([d.reshape(-1, 3), m.reshape(-1, 3)]))
-        pid = np.asarray(pid, np.int64)
-        dirs = np.concatenate([d.reshape(-1, 3), m.reshape(-1, 3)])
-        jj = j.reshape(-1)
-        hit = pid >= 0
-        ok = hit.copy()
-        ok[hit] = np.einsum("ij,ij->i", dirs[hit], patches.normals[pid[hit]]) < 0   # fronts only
-        ok &= pid != np.tile(jj, 2)
-        col = np.where(ok, pid if column is None else column[np.maximum(pid, 0)], -1)
-        S = len(o)
-        a, b = col[:S], col[S:]                # along w, along its mirror image
-        w = np.repeat(group_area, k) / k       # each sample's share of its group's area
-        both = (a >= 0) & (b >= 0)
-        # both ways of each sample, half the weight each: (receiver a, source b) and (b, a)
-        rows = np.concatenate([a[both], b[both]])
-        cols = np.concatenate([b[both], a[both]])
-        via = np.concatenate([jj[both], jj[both]])
-        wt = 0.5 * np.concatenate([w[both], w[both]]) / areas[rows]
-        # one way found a surface, the other nothing: the receiver sees the world in the mirror
-        ra = np.concatenate([a[(a >= 0) & ~hit[S:]], b[(b >= 0) & ~hit[:S]]])
-        sv = np.concatenate([jj[(a >= 0) & ~hit[S:]], jj[(b >= 0) & ~hit[:S]]])
-        sw = 0.5 * np.concatenate([w[(a >= 0) & ~hit[S:]], w[(b >= 0) & ~hit[:S]]]) / areas[ra]
-        return _summed(rows, cols, via, wt, n, len(patches)), _summed(ra, np.zeros_like(ra), sv, sw, n, len(patches))
+        jj, pid, dirs, group_area = _cast_batch(scene, patches, corners, members, bounds, batch,
+                                                k, seed, angles, eps)
+        return _entries(patches, column, areas, jj, pid, dirs, np.repeat(group_area, k) / k, n)
 
     parts, skies = [], []
     if glossy.size:
@@ -194,6 +164,52 @@ def specular_transport(patches, glossy, rays=1024, *, seed=0, clusters=None, wor
     rows, cols, via, wt = _merge(parts, n, len(patches))
     srows, _, svia, swt = _merge(skies, n, len(patches))
     return Specular(rows, cols, via, wt, srows, svia, swt, n, k, glossy)
+
+
+def _cast_batch(scene, patches, corners, members, bounds, batch, k, seed, angles, eps):
+    """Cast the ``k`` samples of each group of glossy patches in ``batch`` (B,) along their
+    cosine direction w and its mirror image. Returns (jj (S,) the patch of each sample, S = B k;
+    pid (2 S,) the patch hit along w then along the mirror, -1 for none; dirs (2 S, 3) those
+    directions; group_area (B,) each group's area). A group's stream is its first glossy
+    patch's (one patch alone: as it always was)."""
+    rngs = [np.random.default_rng([seed, 0x9105, int(members[bounds[g]])]) for g in batch]
+    u = np.stack([stratified_unit_square(r, 1, k)[0] for r in rngs])          # (B,k,2) points
+    v = np.stack([stratified_unit_square(r, 1, k)[0][r.permutation(k)] for r in rngs])
+    j, x, group_area = _sample_points(patches, corners, members, bounds, batch, u)   # (B,k), (B,k,3)
+    nrm = patches.normals[j]                                                  # (B,k,3)
+    frames = tangent_frames(nrm.reshape(-1, 3), angles[j].reshape(-1)).reshape(*j.shape, 3, 3)
+    d = np.einsum("bkc,bkcj->bkj", cosine_directions(v), frames)              # (B,k,3)
+    m = 2.0 * np.einsum("bkj,bkj->bk", d, nrm)[..., None] * nrm - d           # mirrored
+    o = (x + eps[j][..., None] * nrm).reshape(-1, 3)
+    dirs = np.concatenate([d.reshape(-1, 3), m.reshape(-1, 3)])
+    pid, _ = scene.intersect(np.concatenate([o, o]), dirs)
+    return j.reshape(-1), np.asarray(pid, np.int64), dirs, group_area
+
+
+def _entries(patches, column, areas, jj, pid, dirs, w, n):
+    """The summed (surface, sky) transport entries of one batch of :func:`_cast_batch`'s
+    samples, ``w`` (S,) each sample's share of its group's area: a sample whose two ways both
+    reach a front face (not its own patch) links them both ways, half the weight each; one way
+    on a surface and the other on nothing lets that receiver see the world in the mirror."""
+    hit = pid >= 0
+    ok = hit.copy()
+    ok[hit] = np.einsum("ij,ij->i", dirs[hit], patches.normals[pid[hit]]) < 0   # fronts only
+    ok &= pid != np.tile(jj, 2)
+    col = np.where(ok, pid if column is None else column[np.maximum(pid, 0)], -1)
+    S = len(jj)
+    a, b = col[:S], col[S:]                # along w, along its mirror image
+    both = (a >= 0) & (b >= 0)
+    # both ways of each sample, half the weight each: (receiver a, source b) and (b, a)
+    rows = np.concatenate([a[both], b[both]])
+    cols = np.concatenate([b[both], a[both]])
+    via = np.concatenate([jj[both], jj[both]])
+    wt = 0.5 * np.concatenate([w[both], w[both]]) / areas[rows]
+    # one way found a surface, the other nothing: the receiver sees the world in the mirror
+    ra = np.concatenate([a[(a >= 0) & ~hit[S:]], b[(b >= 0) & ~hit[:S]]])
+    sv = np.concatenate([jj[(a >= 0) & ~hit[S:]], jj[(b >= 0) & ~hit[:S]]])
+    sw = 0.5 * np.concatenate([w[(a >= 0) & ~hit[S:]], w[(b >= 0) & ~hit[:S]]]) / areas[ra]
+    return (_summed(rows, cols, via, wt, n, len(patches)),
+            _summed(ra, np.zeros_like(ra), sv, sw, n, len(patches)))
 
 
 def _by_unknown(glossy, column):
