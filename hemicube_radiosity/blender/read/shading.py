@@ -613,6 +613,61 @@ def _copied(evaluated):
     return tuple(copy(v) for v in evaluated)
 
 
+def _classified(objects, depsgraph, out, stand_ins):
+    """Classify the materials of ``objects`` into ``out.kinds`` (a material with missing images
+    through a stand-in, added to ``stand_ins``) and mark the sampled emitters in ``out.sampled``.
+    Returns (objects whose materials Cycles evaluates at their corners, the constant materials
+    by name, whether any may emit, the names of the materials sampled for emission)."""
+    need, constants, emit, sampled = [], {}, False, set()
+    for obj in objects:
+        if obj.type != "MESH":
+            continue
+        ob_eval = obj.evaluated_get(depsgraph)
+        if len(ob_eval.data.polygons) == 0:
+            continue                     # the reader refuses it (or skips it as an occluder)
+        corners = False
+        for s in ob_eval.material_slots:
+            m = _original(s.material)
+            if m is None:
+                continue
+            if m.name_full not in out.kinds:
+                missing = missing_images(m)
+                if missing:
+                    stand_ins[m.name_full] = _stand_in(m, missing)
+                    kind, why = classify(stand_ins[m.name_full])
+                    out.kinds[m.name_full] = (kind, [_missing_note(n) for n in missing] + why)
+                else:
+                    out.kinds[m.name_full] = classify(m)
+            kind = out.kinds[m.name_full][0]
+            emits = kind != "plain" and may_emit(_stand_in_for(m, stand_ins))
+            emit |= emits
+            corners |= kind == "corners"
+            if kind == "corners" and emits:
+                out.sampled.add(m.name_full)
+                sampled.add(_stand_in_for(m, stand_ins).name_full)
+            if kind == "constant":
+                constants[m.name_full] = m
+        if corners:
+            need.append(obj)
+    return need, constants, emit, sampled
+
+
+def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
+    """Fill ``out``'s corners, materials and face emission from Cycles, or from one of the last
+    :data:`.shading_key.KEPT` evaluations when nothing they depend on changed."""
+    key = evaluation_key(need, depsgraph, constants, emit, stand_ins, sampled)
+    if key is not None and key in _EVALUATED:       # nothing it depends on changed
+        _EVALUATED.move_to_end(key)
+        out.corners, out.materials, out.face_emission = _copied(_EVALUATED[key])
+        return
+    out.corners, out.materials, out.seconds, out.face_emission = evaluate(
+        need, depsgraph, constants, emit, stand_ins, sampled)
+    if key is not None:
+        _EVALUATED[key] = _copied((out.corners, out.materials, out.face_emission))
+        while len(_EVALUATED) > KEPT:
+            _EVALUATED.popitem(last=False)
+
+
 def shade(objects, depsgraph) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
     ones that need it, in one batch, unless nothing that depends on changed since one of the
@@ -622,52 +677,13 @@ def shade(objects, depsgraph) -> Shaded:
     import bpy
 
     out = Shaded()
-    need, constants, emit, stand_ins, sampled = [], {}, False, {}, set()
+    stand_ins = {}
     try:
-        for obj in objects:
-            if obj.type != "MESH":
-                continue
-            ob_eval = obj.evaluated_get(depsgraph)
-            if len(ob_eval.data.polygons) == 0:
-                continue                     # the reader refuses it (or skips it as an occluder)
-            corners = False
-            for s in ob_eval.material_slots:
-                m = _original(s.material)
-                if m is None:
-                    continue
-                if m.name_full not in out.kinds:
-                    missing = missing_images(m)
-                    if missing:
-                        stand_ins[m.name_full] = _stand_in(m, missing)
-                        kind, why = classify(stand_ins[m.name_full])
-                        out.kinds[m.name_full] = (kind, [_missing_note(n) for n in missing] + why)
-                    else:
-                        out.kinds[m.name_full] = classify(m)
-                kind = out.kinds[m.name_full][0]
-                emits = kind != "plain" and may_emit(_stand_in_for(m, stand_ins))
-                emit |= emits
-                corners |= kind == "corners"
-                if kind == "corners" and emits:
-                    out.sampled.add(m.name_full)
-                    sampled.add(_stand_in_for(m, stand_ins).name_full)
-                if kind == "constant":
-                    constants[m.name_full] = m
-            if corners:
-                need.append(obj)
+        need, constants, emit, sampled = _classified(objects, depsgraph, out, stand_ins)
         if not need and not constants:
             return out
         try:
-            key = evaluation_key(need, depsgraph, constants.values(), emit, stand_ins, sampled)
-            if key is not None and key in _EVALUATED:       # nothing it depends on changed
-                _EVALUATED.move_to_end(key)
-                out.corners, out.materials, out.face_emission = _copied(_EVALUATED[key])
-                return out
-            out.corners, out.materials, out.seconds, out.face_emission = evaluate(
-                need, depsgraph, constants.values(), emit, stand_ins, sampled)
-            if key is not None:
-                _EVALUATED[key] = _copied((out.corners, out.materials, out.face_emission))
-                while len(_EVALUATED) > KEPT:
-                    _EVALUATED.popitem(last=False)
+            _evaluated(out, need, depsgraph, list(constants.values()), emit, stand_ins, sampled)
         except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
             out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
         return out
