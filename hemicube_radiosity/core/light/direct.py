@@ -195,7 +195,8 @@ class DirectLight:
             cols.append(self.world_at(points, normals, where) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
-    def split_at(self, points, normals, where: str, samples=None, which=None, facing=None) -> np.ndarray:
+    def split_at(self, points, normals, where: str, samples=None, which=None, facing=None,
+                 low=None) -> np.ndarray:
         """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
         emitting object (its faces together), every lamp, the world, in that order; summed over
         the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
@@ -206,7 +207,11 @@ class DirectLight:
         None: the world's light only from directions on its side (Cycles' diffuse closure drops
         the directions it samples behind the face; a lamp's and an emitter's light is sampled on
         the source, whatever side: measured on a lone quad whose shading normal leans 60 degrees
-        off it, a sun 11 degrees behind its face lights it by the cosine to that normal)."""
+        off it, a sun 11 degrees behind its face lights it by the cosine to that normal).
+        ``low`` (P, 3) with ``facing``: the lamps' light is split at the plane of ``facing``,
+        from above it by rays from the points, from below it by rays from ``low`` (where
+        Cycles' shadow rays toward such a light start: :func:`..output.lift.lift`), as
+        :mod:`..output.crease` lights a leaning corner."""
         x = np.asarray(points, dtype=np.float64)
         owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
         S = len(owners) + len(self.lights) + (self.world is not None)
@@ -223,12 +228,26 @@ class DirectLight:
                     out[:, j] = T[:, owner == o].astype(np.float64) @ L[owner == o]
         for i, lamp in enumerate(self.lights):
             if want[len(owners) + i]:
-                out[:, len(owners) + i] = lamp_irradiance(
-                    self.patches, [lamp], self.cache, points=x, normals=normals, eps=eps, index=i,
-                    samples=min(samples or self.light_samples, self.light_samples), seed=self.light_seed,
-                    cancelled=self.cancelled, workers=self.workers) / np.pi
+                out[:, len(owners) + i] = self._lamp_split(i, x, normals, eps, samples, facing, low)
         if self.world is not None and want[-1]:
             out[:, -1] = self.world_at(x, normals, where, facing=facing)
+        return out
+
+    def _lamp_split(self, i, x, normals, eps, samples, facing, low) -> np.ndarray:
+        """(P, 3) lamp ``i``'s radiance at ``x`` for :meth:`split_at`: whole, or with ``low``
+        from above the plane of ``facing`` at ``x`` and from below it at ``low``."""
+        def lit(at, nrm, off, side):
+            return lamp_irradiance(self.patches, [lamp], self.cache, points=at, normals=nrm, eps=off, index=i,
+                                   samples=min(samples or self.light_samples, self.light_samples),
+                                   seed=self.light_seed, facing=side, cancelled=self.cancelled,
+                                   workers=self.workers) / np.pi
+        lamp = self.lights[i]
+        if low is None or facing is None:
+            return lit(x, normals, eps, None)
+        out = lit(x, normals, eps, facing)
+        r = np.flatnonzero(np.all(np.isfinite(low), axis=1))
+        if r.size:
+            out[r] += lit(np.ascontiguousarray(low[r]), np.asarray(normals)[r], np.zeros(r.size), -np.asarray(facing)[r])
         return out
 
     def probed(self) -> np.ndarray:

@@ -21,7 +21,7 @@ import numpy as np
 from ..util.geometry import barycentric
 
 __all__ = ["BAKE_NUDGE", "face_corners", "bake_points",
-           "corner_edges", "corner_normals", "lifted_starts", "ON_PLANE_ULPS"]
+           "corner_edges", "corner_normals", "lifted_starts", "lift", "ON_PLANE_ULPS"]
 
 #: How far Cycles moves a corner's bake point toward its triangle's centre, per unit of its
 #: largest coordinate (at least 1).
@@ -32,9 +32,9 @@ BAKE_NUDGE = 1e-4
 ON_PLANE_ULPS = 4
 
 
-def _bake_frame(V, N, at):
-    """(Ng (m, 3) unit, P (m, 3) the bake point, w (m, 3) its barycentrics, n (m, 3) the normal
-    interpolated there, not normalised) at corner ``at`` (m,) of triangles ``V`` (m, 3, 3)."""
+def _bake_frame(V, at):
+    """(Ng (m, 3) unit, P (m, 3) the bake point, w (m, 3) its barycentrics) at corner ``at`` (m,)
+    of triangles ``V`` (m, 3, 3)."""
     m = len(V)
     Ng = np.cross(V[:, 1] - V[:, 0], V[:, 2] - V[:, 0])
     Ng /= np.maximum(np.linalg.norm(Ng, axis=1, keepdims=True), 1e-300)
@@ -43,8 +43,7 @@ def _bake_frame(V, N, at):
     dist = np.linalg.norm(to_centre, axis=1)
     step = np.minimum(dist, np.maximum(np.abs(corner).max(axis=1), 1.0) * BAKE_NUDGE)
     P = corner + to_centre * (step / np.maximum(dist, 1e-300))[:, None]
-    w = barycentric(V, P)
-    return Ng, P, w, np.einsum("mk,mkj->mj", w, N)
+    return Ng, P, barycentric(V, P)
 
 
 def _height(V, N, P, w, facing) -> np.ndarray:
@@ -203,14 +202,24 @@ def lifted_starts(elements, meshes, p, c):
     k, V, N, at = found
     ok = np.all(np.isfinite(N), axis=(1, 2))
     if ok.any():
-        Ng, P, w, n = _bake_frame(V[ok], N[ok], at[ok])
-        h = _height(V[ok], N[ok], P, w, np.einsum("ij,ij->i", n, Ng) > 0)
-        # at least ON_PLANE_ULPS float32 steps over the plane, so that a ray from a start on the
-        # plane (a lift of 0) meets its triangle again as Cycles' does (or not, at random: ties)
-        over = h * np.einsum("ij,ij->i", n, Ng)
-        floor = ON_PLANE_ULPS * 2.0 ** -23 * np.maximum(np.abs(P).max(axis=1), 1.0)
-        out[k[ok]] = P + h[:, None] * n + np.maximum(floor - over, 0.0)[:, None] * Ng
+        Ng, P, w = _bake_frame(V[ok], at[ok])
+        out[k[ok]] = lift(V[ok], N[ok], Ng, P, w)
     return out
+
+
+def lift(V, N, Ng, P, w) -> np.ndarray:
+    """(m, 3) where Cycles' shadow rays toward a light below the plane start from points ``P``
+    (m, 3), barycentric ``w`` (m, 3), of triangles ``V`` (m, 3, 3) with corner normals ``N``
+    (m, 3, 3) and unit normal ``Ng`` (m, 3): lifted along the interpolated normal by the
+    shadow-terminator offset (module docstring), at least :data:`ON_PLANE_ULPS` float32 steps
+    over the plane."""
+    n = np.einsum("mk,mkj->mj", w, N)
+    h = _height(V, N, P, w, np.einsum("ij,ij->i", n, Ng) > 0)
+    # at least ON_PLANE_ULPS float32 steps over the plane, so that a ray from a start on the
+    # plane (a lift of 0) meets its triangle again as Cycles' does (or not, at random: ties)
+    over = h * np.einsum("ij,ij->i", n, Ng)
+    floor = ON_PLANE_ULPS * 2.0 ** -23 * np.maximum(np.abs(P).max(axis=1), 1.0)
+    return P + h[:, None] * n + np.maximum(floor - over, 0.0)[:, None] * Ng
 
 
 def _first_triangle_corners(elements, meshes, p, x):

@@ -41,6 +41,7 @@ import numpy as np
 from ..mesh.patches import PatchSet
 from ..util.unique import run_positions
 from .interpolate import interpolate_corner_values, locate
+from .lift import lift
 from .texels import LUMA, as_cycles, by_source
 
 __all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
@@ -278,17 +279,24 @@ def located_parts(elements, parts, points, normals, owner, faces=None):
 
 
 def _lit_points(world, normals, tri, bary, flip):
-    """(points, face normals, shading normals) (n, 3) each of texels ``tri``, ``bary`` (n,),
-    (n, 3), the points moved :data:`INSET` of the way toward their triangle's centre (a point on
-    an edge where two walls meet sees neither); shading normals interpolated from ``normals``
-    (T, 3, 3) where given (whichever side of the face they point to, as Cycles shades: only a
-    zero one falls back to the face's), else the faces'."""
-    pts, nrm = texel_points(world, tri, bary * (1.0 - INSET) + INSET / 3.0, flip)
+    """(points, face normals, shading normals, lifted starts or None) (n, 3) each of texels
+    ``tri``, ``bary`` (n,), (n, 3), the points moved :data:`INSET` of the way toward their
+    triangle's centre (a point on an edge where two walls meet sees neither); shading normals
+    interpolated from ``normals`` (T, 3, 3) where given (whichever side of the face they point
+    to, as Cycles shades: only a zero one falls back to the face's), else the faces'; where
+    Cycles' shadow rays toward a light below the face's plane start (:func:`.lift.lift`, with
+    ``normals``)."""
+    w = bary * (1.0 - INSET) + INSET / 3.0
+    pts, nrm = texel_points(world, tri, w, flip)
     if normals is None:
-        return pts, nrm, nrm
-    shading = np.einsum("nk,nkj->nj", bary, np.asarray(normals, dtype=np.float64)[tri])
+        return pts, nrm, nrm, None
+    N = np.asarray(normals, dtype=np.float64)[tri]
+    shading = np.einsum("nk,nkj->nj", bary, N)
     length = np.linalg.norm(shading, axis=1, keepdims=True)
-    return pts, nrm, np.where(length > 1e-12, shading / np.maximum(length, 1e-300), nrm)
+    shading = np.where(length > 1e-12, shading / np.maximum(length, 1e-300), nrm)
+    low = lift(np.asarray(world, dtype=np.float64)[tri], N, nrm, pts, w)
+    low[np.all(shading == nrm, axis=1)] = np.nan          # no light below the plane to see
+    return pts, nrm, shading, low
 
 
 def varying(values, known, ratio=VARIES, surface=None, floor=FLOOR, channels=False):
@@ -363,7 +371,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
                  faces=None, inside=None):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
-    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)``
+    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None) -> (n, S, 3)``
     the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
     texel centres, exact where the light needs it and interpolated where it is smooth
     (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
@@ -383,10 +391,10 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
-    pts, nrm, shading = _lit_points(world, normals, t, b, flip)
+    pts, nrm, shading, low = _lit_points(world, normals, t, b, flip)
     pitch = _pitch(uv, world, width, height)[t]
     own = None if faces is None else faces[t]
-    Ds = by_source(as_cycles(split, pts, nrm, shading, probed), covered,
+    Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
     E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)
@@ -440,7 +448,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     dilated ``margin`` times (:func:`dilate`); an island texel whose value is not finite is
     dilated over too and, if still unset, counted in ``Lightmap.unset``.
 
-    With ``parts`` and ``split(points, normals, samples=None, which=None, facing=None) -> (n, S, 3)`` (the
+    With ``parts`` and ``split(points, normals, samples=None, which=None, facing=None, low=None) -> (n, S, 3)`` (the
     bake's exact direct light of each source apart, times the exposure:
     :meth:`..light.direct.DirectLight.split_at`; ``probed`` (S,) bool the sources a one-ray
     probe stands for), or ``direct(points, normals) -> (n, 3)`` (one source, no probe), the
@@ -462,7 +470,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lighting = None
     t, b = tri[covered], bary[covered]
     if split is None and direct is not None:
-        def split(points, normals, samples=None, which=None, facing=None):      # one source, no probe
+        def split(points, normals, samples=None, which=None, facing=None, low=None):   # one source, no probe
             return np.asarray(direct(points, normals), dtype=np.float64)[:, None, :]
     if parts is None or split is None:
         pts, nrm = texel_points(world, t, b, flip)

@@ -247,17 +247,22 @@ def _facing(faces, shading, ids):
     return None if np.array_equal(f, n) else f
 
 
-def as_cycles(split, pts, nrm, shading, probed):
+def as_cycles(split, pts, nrm, shading, low, probed):
     """``split(ids, samples, which)`` of the texels at ``pts`` (n, 3) with face normals ``nrm``
     and shading normals ``shading`` as Cycles' bake lights them: the world only from in front of
-    the face (:func:`_facing`), and no lamp nor emitter (the ``probed`` (S,) sources; None: no
-    source is left out) where the shading normal turns away from the face (measured on a lone
-    quad whose normals lean 95 or 120 degrees off it: a sun lights it from no direction, the
-    world from those in front of it)."""
+    the face (:func:`_facing`); where the shading normal leans off the face, a lamp below the
+    face's plane by rays from ``low`` (n, 3) (Cycles' lifted start, :func:`.lift.lift`; None:
+    from the texel as the rest), as a leaning vertex corner (:mod:`.crease`): a thin bevel's
+    texel sees a sun below its plane past the bevel's edge; and no lamp nor emitter (the
+    ``probed`` (S,) sources; None: no source is left out) where the shading normal turns away
+    from the face (measured on a lone quad whose normals lean 95 or 120 degrees off it: a sun
+    lights it from no direction, the world from those in front of it)."""
     away = np.einsum("ij,ij->i", shading, nrm) < 0
 
     def lit(ids, samples, which=None):
-        D = split(pts[ids], shading[ids], samples, which, _facing(nrm, shading, ids))
+        facing = _facing(nrm, shading, ids)
+        D = split(pts[ids], shading[ids], samples, which, facing,
+                  None if low is None or facing is None else low[ids])
         off = away[ids]
         if off.any() and probed is not None:
             D[np.ix_(off, np.asarray(probed, bool))] = 0.0
