@@ -294,8 +294,9 @@ def _lit_points(world, normals, tri, bary, flip):
     shading = np.einsum("nk,nkj->nj", bary, N)
     length = np.linalg.norm(shading, axis=1, keepdims=True)
     shading = np.where(length > 1e-12, shading / np.maximum(length, 1e-300), nrm)
-    low = lift(np.asarray(world, dtype=np.float64)[tri], N, nrm, pts, w)
-    low[np.all(shading == nrm, axis=1)] = np.nan          # no light below the plane to see
+    low = np.full(pts.shape, np.nan)                  # none where no light below the plane is seen
+    lean = np.flatnonzero(~np.all(shading == nrm, axis=1))
+    low[lean] = lift(np.asarray(world, dtype=np.float64)[tri[lean]], N[lean], nrm[lean], pts[lean], w[lean])
     return pts, nrm, shading, low
 
 
