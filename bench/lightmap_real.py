@@ -77,6 +77,7 @@ def ours_child(name, out_dir, out_npz, settings_json):
     from hemicube_radiosity.blender.bake import BakeJob
     from hemicube_radiosity.blender.read.scene import GEOMETRY_TYPES
     from hemicube_radiosity.blender.read.visibility import render_visible_objects
+    from hemicube_radiosity.blender import lightmap as blm
     from hemicube_radiosity.core.output import lightmap as core_lightmap
     from hemicube_radiosity.core.settings import BakeSettings
 
@@ -104,12 +105,18 @@ def ours_child(name, out_dir, out_npz, settings_json):
         uv = np.empty(len(me.loops) * 2)
         me.uv_layers[lm["uv_map"]].data.foreach_get("uv", uv)
         tri, _, inside = core_lightmap.rasterize(uv.reshape(-1, 2)[tl].reshape(-1, 3, 2), w, h)
+        # texels of a triangle without area measure no point of the surface (Cycles shades them
+        # with a NaN normal: the sun alone): left out, as the real scenes' corners on such triangles
+        flat = core_lightmap.flat_triangles(blm._world_triangles(me, np.array(by_source[lm["object"]].matrix_world)))
+        on_flat = inside & (tri >= 0) & flat[np.maximum(tri, 0)]
+        inside &= ~on_flat
         src = bpy.data.objects[lm["object"]]
         names = [m.name if m else "" for m in src.data.materials] or [""]
         arrays.update({f"ours{k}": px.reshape(h, w, 4)[..., :3], f"uv{k}": uv.reshape(-1, 2),
                        f"inside{k}": inside, f"material{k}": np.where(tri >= 0, mi[np.maximum(tri, 0)], -1)})
         maps.append({"object": lm["object"], "size": [w, h], "uv_map": lm["uv_map"], "made_uvs": lm["made_uvs"],
-                     "materials": names, "loops": len(me.loops), "unset": lm["unset"]})
+                     "materials": names, "loops": len(me.loops), "unset": lm["unset"],
+                     "flat_texels": int(on_flat.sum())})
     np.savez(out_npz, **arrays)
     r = job.result
     return {"light": light, "load_seconds": load_s, "seconds": seconds, "settings_asked": asked,
@@ -306,7 +313,10 @@ def section(res):
          f" {sizes} texels), against Cycles' own DIFFUSE bake (direct + indirect + colour) of the same objects to"
          f" images of the same size through the copies' lightmap UVs, at {res['cand_spp']} spp and, as the reference,"
          f" {res['ref_spp']} spp (another seed; cached in `bench/cache`). Texels whose centre lies inside a UV triangle"
-         " (not the dilated margin); RMS of the luminance-weighted difference over the reference's mean luminance,"
+         " (not the dilated margin), but not those of a triangle without area in the world (as the real scenes'"
+         " corners Cycles bakes on one: they measure no point of the surface; "
+         + ", ".join(f"`{m['object']}` {m.get('flat_texels', 0):,}" for m in res.get("maps", [])) + " texels);"
+         " RMS of the luminance-weighted difference over the reference's mean luminance,"
          " the reference's own noise taken out, and the median texel's; per object and per material. Ours: the whole"
          " scene's read + bake + write (the lightmaps' texels and files included); Cycles: `bpy.ops.object.bake`"
          " of every object.", ""]

@@ -12,10 +12,12 @@ interpolation of ``BakeResult.corner_values()``, what the vertex-colour copy sho
 
 Steps, all NumPy:
 
-1. :func:`rasterize`: every texel whose centre lies in a UV triangle, or within ``reach`` texels of
-   one (conservative: a sliver triangle thinner than a texel still gets its texels), gets that
-   triangle and the barycentric coordinates of its centre (clamped onto the triangle when the
-   centre is outside it). Where triangles share a texel, the one the centre lies deepest in wins.
+1. :func:`.uv_raster.rasterize`: every texel whose centre lies in a UV triangle, or within
+   ``reach`` texels of one (conservative: a sliver triangle thinner than a texel still gets its
+   texels), gets that triangle and the barycentric coordinates of its centre (clamped onto the
+   triangle when the centre is outside it). Where triangles share a texel, the one the centre
+   lies deepest in wins. A triangle without area in the world (:func:`.uv_raster.flat_triangles`)
+   gets none: its texels go to the triangles beside it and the dilation.
 2. :func:`texel_points`: barycentric -> world point and the triangle's normal.
 3. :func:`texel_values` (or :func:`evaluate`): :func:`.interpolate.locate` among one object's
    output elements (with the normals, so the two sides of a thin wall are told apart), bilinear
@@ -39,16 +41,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from ..util.unique import run_positions
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
+from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
 from .texels import LUMA, as_cycles, by_source
 
-__all__ = ["Lightmap", "image_size", "rasterize", "texel_points", "evaluate", "texel_light", "texel_values",
+__all__ = ["Lightmap", "image_size", "rasterize", "flat_triangles", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
            "FOOTPRINT"]
 
-REACH = 0.75       # texels: a centre this close to a triangle (outside it) still takes its value
 INSET = 1e-3       # texel points are lit this share of the way toward their triangle's centre
 VARIES = 0.1       # light differing this much between neighbours: averaged over the texel,
 FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
@@ -56,7 +57,6 @@ SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
 FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
 SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel)
 MARGIN = 8         # texels of dilation around every island
-_CHUNK = 4_000_000  # candidate texels rasterized at once
 
 
 @dataclass
@@ -89,83 +89,6 @@ def image_size(area, density, max_size, min_size=8) -> int:
     square root of the surface ``area`` (world units squared), clamped to [min_size, max_size]."""
     n = int(np.ceil(float(density) * np.sqrt(max(float(area), 0.0))))
     return int(np.clip(n, min_size, max(int(max_size), min_size)))
-
-
-def _edge_distances(uvp, a, b, c):
-    """(n, 3) signed distances of points ``uvp`` (n, 2) to the three edges of triangles a, b, c
-    (n, 2) each, positive inside, in the units of the coordinates (texels); and (n, 3) the
-    barycentric coordinates of the points (NaN for a degenerate triangle)."""
-    def cross(p, q, r):
-        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
-
-    area = cross(a, b, c)
-    sign = np.where(area < 0, -1.0, 1.0)
-    w = np.stack([cross(b, c, uvp), cross(c, a, uvp), cross(a, b, uvp)], 1) * sign[:, None]
-    lengths = np.stack([np.linalg.norm(c - b, axis=1), np.linalg.norm(a - c, axis=1),
-                        np.linalg.norm(b - a, axis=1)], 1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        dist = w / lengths
-        bary = w / np.abs(area)[:, None]
-    return dist, bary
-
-
-def rasterize(uv, width, height, reach=REACH):
-    """Which triangle each texel centre lies in.
-
-    ``uv`` (T, 3, 2) the UV triangles (0..1 covers the image; outside it is left out, no
-    wrapping). Returns ``tri`` (H, W) int64 (-1: no triangle within ``reach`` texels), ``bary``
-    (H, W, 3) float64 barycentric coordinates of the texel centre in ``tri`` (clamped onto it when
-    the centre lies outside: what the nearest point of the triangle reads), and ``inside``
-    (H, W) bool (the centre lies inside ``tri``). Degenerate UV triangles (no area) are skipped."""
-    uv = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
-    px = uv * np.array([width, height], float)            # texel units; centres at k + 0.5
-    T = len(px)
-    lo = np.ceil(px.min(axis=1) - reach - 0.5).astype(np.int64)    # first centre k + 0.5 >= min - reach
-    hi = np.floor(px.max(axis=1) + reach - 0.5).astype(np.int64)   # last centre <= max + reach
-    lo = np.maximum(lo, 0)
-    hi = np.minimum(hi, [width - 1, height - 1])
-    area2 = np.abs((px[:, 1, 0] - px[:, 0, 0]) * (px[:, 2, 1] - px[:, 0, 1])
-                   - (px[:, 1, 1] - px[:, 0, 1]) * (px[:, 2, 0] - px[:, 0, 0]))
-    nx = np.maximum(hi[:, 0] - lo[:, 0] + 1, 0)
-    ny = np.maximum(hi[:, 1] - lo[:, 1] + 1, 0)
-    count = np.where(area2 > 1e-12, nx * ny, 0)
-    best = np.full(width * height, -np.inf)
-    tri = np.full(width * height, -1, np.int64)
-    bary = np.zeros((width * height, 3))
-    start = 0
-    while start < T:                                       # chunks of triangles, ~_CHUNK candidates each
-        cum = np.cumsum(count[start:])
-        stop = start + max(1, int(np.searchsorted(cum, _CHUNK, side="right")))
-        ids = np.arange(start, min(stop, T))
-        start = ids[-1] + 1
-        n = count[ids]
-        if n.sum() == 0:
-            continue
-        t = np.repeat(ids, n)
-        k = run_positions(n)
-        col = lo[t, 0] + k % nx[t]
-        row = lo[t, 1] + k // nx[t]
-        centre = np.stack([col + 0.5, row + 0.5], 1)
-        dist, b = _edge_distances(centre, px[t, 0], px[t, 1], px[t, 2])
-        score = dist.min(axis=1)
-        ok = score >= -reach
-        t, col, row, score, b = t[ok], col[ok], row[ok], score[ok], b[ok]
-        texel = row * width + col
-        # the deepest triangle per texel (against the chunks before too)
-        order = np.lexsort((score, texel))
-        last = np.ones(order.size, bool)
-        last[:-1] = texel[order][1:] != texel[order][:-1]
-        pick = order[last]
-        better = score[pick] > best[texel[pick]]
-        pick = pick[better]
-        best[texel[pick]] = score[pick]
-        tri[texel[pick]] = t[pick]
-        bary[texel[pick]] = b[pick]
-    inside = best >= 0
-    clamped = np.clip(bary, 0.0, None)
-    clamped /= np.where(clamped.sum(1) > 0, clamped.sum(1), 1.0)[:, None]
-    bary = np.where(inside[:, None], bary, clamped)
-    return tri.reshape(height, width), bary.reshape(height, width, 3), inside.reshape(height, width)
 
 
 def texel_points(world, tri, bary, flip=False):
@@ -344,7 +267,7 @@ def _sub_texels(px, tri, centre, grid=SUBTEXELS):
     n, k = len(tri), len(off)
     texel = np.repeat(np.arange(n), k)
     t = tri[texel]
-    _, b = _edge_distances((centre[:, None, :] + off[None]).reshape(-1, 2), px[t, 0], px[t, 1], px[t, 2])
+    _, b = edge_distances((centre[:, None, :] + off[None]).reshape(-1, 2), px[t, 0], px[t, 1], px[t, 2])
     ok = np.all(b >= 0, axis=1)
     return texel[ok], b[ok]
 
@@ -465,7 +388,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     faces = None if faces is None else np.asarray(faces, dtype=np.int64)
     height = int(width if height is None else height)
     width = int(width)
-    tri, bary, inside = rasterize(uv, width, height, reach)
+    tri, bary, inside = rasterize(uv, width, height, reach, flat_triangles(world))
     covered = tri >= 0
     image = np.zeros((height, width, 3))
     lighting = None

@@ -204,3 +204,37 @@ def test_a_thin_strip_beside_a_wall_reads_its_own_element():
     # a point whose face has no element of its own keeps the first answer, not an error
     kept = lm.evaluate(elements, values, points[:5], normals[:5], 0, faces=np.full(5, 10**6, np.int64))
     np.testing.assert_array_equal(kept, alone[:5])
+
+
+def test_a_triangle_without_area_leaves_its_texels_to_its_neighbours():
+    """A quad with two corners at one place (a bevel's collapsed corner) is a triangle and a
+    triangle without area; its UV island still spans both halves. The flat half's texels measure
+    no point of the surface (Cycles shades them with a NaN normal): they go to the real half
+    within reach and to the dilation, so the seam along the diagonal is not dark. Before, they
+    were lit with a zero normal: 0.1 (no direct light) beside the real half's 0.6."""
+    tri_ = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0]], float)
+    mesh = MeshInput.from_faces(tri_, [[0, 1, 2]], name="corner")
+    elements = build_patches([mesh], 0.1)
+    uv_q = np.array([[0.1, 0.1], [0.9, 0.1], [0.9, 0.5], [0.1, 0.5]])
+    world_q = np.array([[0, 0, 0], [2, 0, 0], [2, 1, 0], [0, 0, 0]], float)      # corner 3 on corner 0
+    uv = np.array([uv_q[[0, 1, 2]], uv_q[[0, 2, 3]]])
+    world = np.array([world_q[[0, 1, 2]], world_q[[0, 2, 3]]])
+    assert list(lm.flat_triangles(world)) == [False, True]
+    c = elements.corners()
+    parts = (np.zeros(c.shape), np.full(c.shape, 0.5), np.zeros(c.shape), np.full(c.shape, 0.2))
+
+    def direct(points, normals):
+        return np.repeat(normals[:, 2:] > 0.5, 3, axis=1).astype(float)
+    size = 64
+    L = lm.bake_lightmap(elements, None, 0, uv, world, size, parts=parts, direct=direct)
+    tri, _, _ = lm.rasterize(uv, size, size)
+    flat_half = tri == 1                                     # texels the flat triangle held
+    assert flat_half.sum() > 300
+    # the real half: 0.5 x (1 + 0.2), everywhere it covers
+    np.testing.assert_allclose(L.image[L.covered], 0.6, atol=1e-6)
+    # the flat half is no island of its own: its texels beside the real half are dilated from it
+    # (8 texels), none of them dark, none counted as covered beyond the real half's reach
+    real = lm.rasterize(uv[:1], size, size)[0] >= 0          # the real half's texels, its rim too
+    near = flat_half & L.filled
+    assert near.sum() > 100 and not (L.covered & ~real).any()
+    np.testing.assert_allclose(L.image[near], 0.6, atol=1e-6)
