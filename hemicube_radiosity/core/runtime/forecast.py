@@ -4,7 +4,8 @@
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
 receiver (one hemi-cube each), and the output, per output vertex (the final gather's rays, the
 exact direct light and what shines; less where no emitting face lights the scene,
-:data:`PER_VERTEX_LAMPS`, or no gather runs, :data:`PER_VERTEX_EMITTERS`, more for every lamp past the first, :data:`PER_EXTRA_LAMP`, and for
+:data:`PER_VERTEX_LAMPS`, or no gather runs, :data:`PER_VERTEX_EMITTERS`, more for every lamp
+past the first, :data:`PER_EXTRA_LAMP`, and for
 what shines where lamps other than suns light it, :data:`PER_VERTEX_SHINE`). The form factors' are measured: the hemi-cube draws a sample of its
 receivers first, spread through the scene, and times them (up to 0.3 s or 2% of them:
 :func:`..form_factors.hemicube._probe`); where there are too few to sample (or another method
@@ -305,7 +306,9 @@ def rays_ahead(patches, mesh, lights, sky=True, sample=SKY_SAMPLE, rays=SKY_RAYS
     from ..hemisphere import cosine_lattice
     from ..rays import embree_available, embree_scene
 
-    lit = [li for li in lights if getattr(li, "cast_shadows", True)]
+    # lamps with a place or a direction (an environment map's light has neither: no edge counted)
+    lit = [li for li in lights if getattr(li, "cast_shadows", True)
+           and (isinstance(li, SunLight) or hasattr(li, "position") or hasattr(li, "matrix_world"))]
     if not embree_available() or not len(patches) or not (sky or lit):
         return None, 0.0
     scene = embree_scene(patches)                      # the form factors' own (built once)
