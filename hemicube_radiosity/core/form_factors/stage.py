@@ -16,7 +16,7 @@ from . import embree as embree_ff
 from ..runtime.cache import cache_key, geometry_key
 from .glossy import specular_stage
 from .hemicube import hemicube_form_factors
-from ..mesh.elements import elements_cut_ahead, output_mesh_ahead
+from ..mesh.elements import output_mesh_ahead
 from ..mesh.patches import PatchSet
 from ..output.shared import joined_ahead
 from ..rays import embree_available
@@ -94,7 +94,7 @@ def form_factor_stage(ctx) -> None:
         def said(per_receiver):             # the forecast, with the sample's time when there is one
             from ..runtime.forecast import forecast
             nonlocal started
-            ctx.forecast = forecast(ctx, recv, ahead, per_receiver, elements_cut_ahead(ctx), joined_ahead(out_mesh))
+            ctx.forecast = forecast(ctx, recv, ahead, per_receiver, out_mesh, joined_ahead(out_mesh))
             ctx.say(0.0, ctx.forecast.describe())
             started = time.perf_counter()       # the ETA counts from here, not the sample
 

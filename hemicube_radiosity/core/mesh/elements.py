@@ -22,7 +22,7 @@ from .patches import PatchSet, meshes_key
 from .subdivide import build_patches, keeps_faces_whole
 
 __all__ = ["meshes_key", "mesh_faces", "output_elements", "output_mesh_ahead", "output_vertices_ahead",
-           "elements_cut_ahead", "cut_elements", "start_elements"]
+           "cut_elements", "start_elements"]
 
 
 def _meshes_key(ctx):
@@ -90,15 +90,6 @@ def output_mesh_ahead(ctx) -> PatchSet:
         return ctx.patches
     _refuse_elements(ctx.settings, len(elements))
     return elements
-
-
-def elements_cut_ahead(ctx) -> int:
-    """How many more output elements than pieces the detail size makes (before the cut along
-    contacts; 0 where the pieces are the output): the forecast's count of the elements' own
-    work (:data:`..runtime.forecast.PER_ELEMENT_CUT`)."""
-    if not ctx.settings.uses_elements():
-        return 0
-    return max(len(_uncut_elements(ctx)) - len(ctx.patches), 0)
 
 
 def _cut(meshes, elements, faces=None) -> PatchSet:

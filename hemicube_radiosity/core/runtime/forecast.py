@@ -4,7 +4,8 @@
 A bake's time goes to two kinds of work (``docs/performance.md``): the form factors, per
 receiver (one hemi-cube each), and the output, per output vertex (the final gather's rays, the
 exact direct light and what shines; less where no emitting face lights the scene,
-:data:`PER_VERTEX_LAMPS`, more for every lamp past the first, :data:`PER_EXTRA_LAMP`, and for
+:data:`PER_VERTEX_LAMPS`, or no gather runs, :data:`PER_VERTEX_EMITTERS`, more for every lamp
+past the first, :data:`PER_EXTRA_LAMP`, and for
 what shines where lamps other than suns light it, :data:`PER_VERTEX_SHINE`). The form factors' are measured: the hemi-cube draws a sample of its
 receivers first, spread through the scene, and times them (up to 0.3 s or 2% of them:
 :func:`..form_factors.hemicube._probe`); where there are too few to sample (or another method
@@ -14,11 +15,16 @@ of polygons seen (1.6 ms in the living room, 1.9 ms on the terrain, 3.3 ms in th
 and the bunny, 6.7 ms in zdm2), which the count alone put 0.6-2x off. The output's rates were
 measured on one worker (``bench/bench_dense.py`` prints the forecast beside the time it took;
 ``docs/performance.md``), from the Cornell box, the box tessellated ever finer and Suzanne
-subdivided, and fitted to the real scenes' sun and sky, per output vertex and per element the
-detail size cuts beyond the pieces (:data:`PER_ELEMENT_CUT`): the output is the stage least
-sure, from 0.7x (the living room) to 1.75x (zdm2, a shadow's edge across most of its rooms) of
-its forecast, and :meth:`Forecast.describe` says so. Where Embree's rays make the form factors
-(:func:`ray_seconds`) they are counted, not timed: within 0.6-1.1x on the real scenes. The
+subdivided, and where lamps, suns and the world light the scene fitted to the real scenes'
+sun and sky from what each part of the output stage took: per vertex, more the more of its
+rays meet a surface, per element a lamp's shadow edge crosses (the abrupt elements'
+corrections) and per corner lit on its own (a shading normal leaning off its triangle's),
+each counted on a sample before the form factors by a few thousand rays
+(:func:`rays_ahead`) and corner normals (:func:`leaning_ahead`). The output is the stage
+least sure, from 0.7x (the terrain) to 1.4x (the truck town, whose cut along contacts adds a
+third to its vertices) of its forecast, and :meth:`Forecast.describe` says so. Where Embree's
+rays make the form factors (:func:`ray_seconds`) they are counted, not timed: within 0.55-1.5x
+on the real scenes. The
 whole bake came out between about 0.6 and 1.8 times the forecast, hence the range :data:`SPREAD`. It is said once the patches are known and before the form factors, with the
 output elements cut already (cached: the vertex stage finds them), and kept on the result
 (``BakeResult.forecast``, the report's 'forecast'); a bake whose form factors come from the
@@ -61,18 +67,41 @@ SEEN_SAMPLE = 64
 #: what shines), where emitting faces light the scene (their transport and what shines are
 #: most of it: the Cornell box, ``bench_dense.py``) ...
 PER_VERTEX = 2.2e-4
-#: ... and where only lamps, suns and the world do (their rays on every core), plus
-#: :data:`PER_ELEMENT_CUT`: fitted to the real scenes' sun and sky (``bench/real_scenes.py``, an
-#: idle machine, 2 workers): the bunny and the terrain, whose output elements are their own faces
-#: (0.063 and 0.078 ms a vertex), and the grey-white room, whose output is its patches (0.070).
-PER_VERTEX_LAMPS = 9.5e-5
-#: Seconds per output element the detail size cuts beyond the pieces (one worker, lamps only):
-#: the elements' own work (what shines, abrupt grids, covered corners, the contact cut), which
-#: a scanned bunny (its faces are its elements) does not have and indoor scenes of large
-#: walls do: the living room, truck town and zdm2 (12,000, 13,000 and 68,000 such elements)
-#: took 0.7, 1.2 and 1.75 times what this and :data:`PER_VERTEX_LAMPS` say (the vertex rate
-#: alone said a fifth of zdm2's output stage).
-PER_ELEMENT_CUT = 4.9e-4
+#: ... where emitting faces light the scene and no gather runs (the patches are the output):
+#: their transport at the vertices, fitted to bitterli_wooden_staircase (255,924 vertices, 31.5 s
+#: of one worker's on an idle machine, less its leaning corners' :data:`PER_LEANING`) ...
+PER_VERTEX_EMITTERS = 1.0e-4
+#: ... and where only lamps, suns and the world do: per vertex, plus per vertex times the share
+#: of the rays from it that meet a surface (:func:`rays_ahead`'s ``hit``: a gather ray that
+#: finds the sky costs little, one that hits is read, corrected and summed). Fitted with
+#: :data:`PER_EDGE` and :data:`PER_LEANING` to the CPU time each part of the output stage took
+#: on the real scenes (``bench/forecast_parts.py``, 2 workers, the machine busy), then scaled
+#: by one factor (0.81) to their idle times (``bench/real_scenes.py``). Per casting vertex, less
+#: the corrections and corners, the bunny (hit 0.09) took 0.092 ms of CPU, the terrain (0.39)
+#: 0.14, the living room (0.62) 0.23, the truck town (0.40) 0.34, zdm2 (0.71) 0.37. The truck
+#: town's and zdm2's cut along contacts adds a third to their vertices (40,200 for the 30,296
+#: counted, 152,134 for 113,789), the living room's a ninth, the terrain's 5%: nothing counted
+#: before the form factors says it.
+PER_VERTEX_LAMPS = 4.9e-5
+PER_VERTEX_HIT = 2.5e-4
+#: Seconds per output element a lamp's shadow edge crosses (:func:`rays_ahead`'s ``edges``),
+#: one worker: the abrupt elements' grids, corrections and cells (``indirect._corrections``:
+#: 1.4 s of CPU in the living room for 1,100 such elements, 6.9 s in the truck town for 2,400,
+#: 20.4 s in zdm2 for 5,300, 0.5 s on the bunny for 850, 0.2 s on the terrain for 150).
+PER_EDGE = 1.39e-3
+#: Seconds per element corner whose shading normal leans more than the crease angle off its
+#: triangle's (:func:`leaning_ahead`), one worker: lit on its own (:mod:`..output.crease`; the
+#: living room took 1.1 s of CPU for its 34,000 such corners, the truck town 3.3 s for 32,000,
+#: zdm2 1.5 s for 26,000).
+PER_LEANING = 4.5e-5
+#: Element corners :func:`leaning_ahead` looks at (evenly spread), elements :func:`rays_ahead`
+#: looks for a shadow's edge across, and the elements it casts :data:`SKY_RAYS` rays each from.
+LEAN_SAMPLE = 8192
+EDGE_SAMPLE = 2048
+SKY_SAMPLE = 256
+SKY_RAYS = 32
+#: The share :data:`PER_VERTEX_HIT` takes where no ray says it (no Embree: no gather either).
+HIT = 0.5
 #: What an output vertex that casts no gather rays of its own costs, as a share of
 #: :data:`PER_VERTEX` or :data:`PER_VERTEX_LAMPS`: a flat-shaded mesh's corners at one place
 #: cast one set between them (:mod:`..output.shared`, counted ahead by
@@ -109,7 +138,9 @@ class Forecast:
     ``workers`` workers, ``seconds`` in all; for ``receivers`` hemi-cubes with ``curved``
     pieces drawn one by one and about ``seen`` polygons drawn in each (:func:`polygons_seen`),
     and ``vertices`` output vertices; ``per_receiver``: the seconds a hemi-cube took in the
-    sample drawn first (None: none drawn, the form factors counted)."""
+    sample drawn first (None: none drawn, the form factors counted); ``hit``, ``edges`` and
+    ``leaning``: the output's counts (:func:`rays_ahead`, :func:`leaning_ahead`), ``joined`` its
+    vertices that cast no gather rays of their own (:data:`PER_JOINED`)."""
 
     seconds: float
     form_factors: float
@@ -120,6 +151,10 @@ class Forecast:
     workers: int
     seen: float = 0.0
     per_receiver: float | None = None
+    hit: float | None = None
+    edges: float = 0.0
+    leaning: float = 0.0
+    joined: int = 0
 
     def describe(self) -> str:
         lo, hi = (_seconds(self.seconds * k) for k in SPREAD)
@@ -190,16 +225,18 @@ def curved_pieces(patches, clusters) -> int:
     return int(_bent(patches, of)[of].sum())
 
 
-def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_cut: int = 0,
+def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
              joined: int = 0) -> Forecast:
     """The :class:`Forecast` of the bake of ``ctx`` (after its patch stage) with ``receivers``
     hemi-cubes to draw (their ids among ``ctx.unknowns``, or how many: then looked at from all
     of them) and ``output_vertices`` to evaluate. ``per_receiver``: the seconds a hemi-cube
     took on one worker in a sample of this scene's (:func:`..form_factors.hemicube._probe`),
     which the form factors' forecast then is; None: the rates :data:`PER_RECEIVER` and
-    :data:`PER_SEEN`. ``elements_cut``: output elements the detail size makes beyond the pieces
-    (:func:`..mesh.elements.elements_cut_ahead`); ``joined``: output vertices that cast no
-    gather rays of their own (:func:`..output.shared.joined_ahead`, :data:`PER_JOINED`)."""
+    :data:`PER_SEEN`. ``mesh``: the output mesh as counted before the form factors
+    (:func:`..mesh.elements.output_mesh_ahead`), whose leaning corners (:func:`leaning_ahead`),
+    shadow edges and rays that meet a surface (:func:`rays_ahead`) are counted; None: none.
+    ``joined``: output vertices that cast no gather rays of their own
+    (:func:`..output.shared.joined_ahead`, :data:`PER_JOINED`)."""
     s = ctx.settings
     workers = resolve_workers(s.workers)
     speed = 1.0 + PER_EXTRA_WORKER * (workers - 1)
@@ -217,16 +254,95 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, elements_c
     lamps = list(getattr(ctx, "lights", ()))
     gathers = s.gather_rays > 0 and s.uses_elements()
     casting = output_vertices - (1 - PER_JOINED) * min(max(int(joined), 0), output_vertices) * gathers
-    out = casting * (PER_VERTEX if emitting else PER_VERTEX_LAMPS) * rays / 128 \
-        + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - 1, 0)
-    if not emitting:
-        out += PER_ELEMENT_CUT * max(int(elements_cut), 0)
-    if not emitting and s.gather_rays > 0 and s.uses_elements() \
-            and any(not isinstance(lamp, SunLight) for lamp in lamps):
+    hit, edges, leaning = None, 0.0, 0.0
+    if mesh is not None:
+        leaning = leaning_ahead(mesh, ctx.meshes)
+        if not emitting:
+            hit, edges = rays_ahead(ctx.patches, mesh, lamps, sky=gathers)
+    if emitting:
+        rate = PER_VERTEX * rays / 128 if gathers else PER_VERTEX_EMITTERS
+    else:
+        rate = (PER_VERTEX_LAMPS + PER_VERTEX_HIT * (HIT if hit is None else hit)) * rays / 128
+    out = casting * rate + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - 1, 0) \
+        + PER_EDGE * edges + PER_LEANING * leaning
+    if not emitting and gathers and any(not isinstance(lamp, SunLight) for lamp in lamps):
         out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
     out /= speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
-                    int(output_vertices), workers, float(seen), per_receiver)
+                    int(output_vertices), workers, float(seen), per_receiver,
+                    None if hit is None else float(hit), float(edges), float(leaning),
+                    int(max(int(joined), 0) * gathers))
+
+
+def leaning_ahead(mesh, meshes, sample=LEAN_SAMPLE) -> float:
+    """About how many corners of ``mesh`` have a shading normal (``meshes``' corner normals,
+    :func:`..output.normals.corner_shading_normals`) leaning more than the crease angle off their
+    triangle's normal (:func:`..output.crease.leans`): the corners lit on their own
+    (:data:`PER_LEANING`), counted on ``sample`` corners evenly spread and scaled to all."""
+    from ..output.crease import leans
+    from ..output.lift import corner_normals
+    from ..output.normals import corner_shading_normals
+
+    p, c = np.nonzero(mesh.polys >= 0)
+    if not len(p):
+        return 0.0
+    pick = np.unique(np.linspace(0, len(p) - 1, min(sample, len(p))).astype(np.int64))
+    shade, has = corner_shading_normals(mesh, meshes, p[pick], c[pick])
+    if shade is None or not has.any():
+        return 0.0
+    geo = corner_normals(mesh, p[pick][has], c[pick][has])
+    return float(leans(shade[has], geo).sum()) * len(p) / len(pick)
+
+
+def rays_ahead(patches, mesh, lights, sky=True, sample=SKY_SAMPLE, rays=SKY_RAYS, elements=EDGE_SAMPLE):
+    """(hit, edges) a few thousand rays say before the form factors: ``hit`` the share of cosine
+    rays (``rays`` each from the centres of ``sample`` elements of the output ``mesh``, evenly
+    spread) that meet a surface of ``patches`` (what the gather's rays read, one minus the sky
+    they see: :data:`PER_VERTEX_HIT`), and ``edges`` how many elements of ``mesh`` a shadow's
+    edge crosses: of ``elements`` of them evenly spread, those whose corners do not all see
+    one of ``lights`` (:data:`PER_EDGE`), scaled to the mesh. ``hit`` is None without ``sky``
+    or Embree (``edges`` 0 then). Geometry only, in the form factors' own Embree scene (made
+    once per geometry): nothing of the bake changes."""
+    from ..hemisphere import cosine_lattice
+    from ..rays import embree_available, embree_scene
+
+    # lamps with a place or a direction (an environment map's light has neither: no edge counted)
+    lit = [li for li in lights if getattr(li, "cast_shadows", True)
+           and (isinstance(li, SunLight) or hasattr(li, "position") or hasattr(li, "matrix_world"))]
+    if not embree_available() or not len(patches) or not (sky or lit):
+        return None, 0.0
+    scene = embree_scene(patches)                      # the form factors' own (built once)
+    eps = 1e-5 * float(scene.scale)
+    hit = None
+    if sky and len(mesh.polys):
+        pick = np.unique(np.linspace(0, len(mesh.polys) - 1, min(sample, len(mesh.polys))).astype(np.int64))
+        x, n = np.asarray(mesh.centers, np.float64)[pick], np.asarray(mesh.normals, np.float64)[pick]
+        t = np.cross(n, np.where(np.abs(n[:, :1]) < 0.9, [[1.0, 0, 0]], [[0, 1.0, 0]]))
+        t /= np.linalg.norm(t, axis=1, keepdims=True)
+        b = np.cross(n, t)
+        loc = cosine_lattice(int(rays))
+        d = (loc[None, :, :1] * t[:, None] + loc[None, :, 1:2] * b[:, None] + loc[None, :, 2:] * n[:, None])
+        o = np.repeat(x + eps * n, len(loc), axis=0)
+        hit = float(np.mean(scene.occluded(o, d.reshape(-1, 3))))
+    edges = 0.0
+    if lit and len(mesh.polys):
+        pick = np.unique(np.linspace(0, len(mesh.polys) - 1, min(elements, len(mesh.polys))).astype(np.int64))
+        polys = mesh.polys[pick]
+        p, c = np.nonzero(polys >= 0)
+        v = polys[p, c]
+        x = mesh.verts[v] + 1e-2 * (mesh.centers[pick][p] - mesh.verts[v]) + eps * mesh.normals[pick][p]
+        cross = np.zeros(len(pick), bool)
+        for li in lit:
+            if isinstance(li, SunLight):
+                d, far = np.broadcast_to(-np.asarray(li.direction, np.float64), x.shape), None
+            else:                               # a point, spot or area light's centre
+                at = li.position if hasattr(li, "position") else np.asarray(li.matrix_world)[:3, 3]
+                d, far = np.asarray(at, np.float64) - x, np.full(len(x), 1.0 - 1e-4)
+            seen = (np.einsum("ij,ij->i", d, mesh.normals[pick][p]) > 0) & ~scene.occluded(x, d, far)
+            some = np.bincount(p, seen, minlength=len(pick))
+            cross |= (some > 0) & (some < np.bincount(p, minlength=len(pick)))
+        edges = float(cross.mean()) * len(mesh.polys)
+    return hit, edges
 
 
 def _seconds(x: float) -> str:

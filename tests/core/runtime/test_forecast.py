@@ -56,9 +56,10 @@ def test_lamps_other_than_suns_count_what_shines(monkeypatch):
     from hemicube_radiosity.core.runtime import forecast as forecast_module
     from hemicube_radiosity.core.runtime.forecast import PER_EXTRA_LAMP, PER_VERTEX_SHINE
 
-    # the elements' own work apart (the lamp refines other patches than the sun: another count
-    # of elements cut; test_the_elements_cut_count_on_their_own)
-    monkeypatch.setattr(forecast_module, "PER_ELEMENT_CUT", 0.0)
+    # the elements' own work apart (the lamp refines other patches than the sun: other shadow
+    # edges and rays that hit; test_the_outputs_terms_follow_what_they_count)
+    monkeypatch.setattr(forecast_module, "PER_EDGE", 0.0)
+    monkeypatch.setattr(forecast_module, "PER_VERTEX_HIT", 0.0)
     # nor the vertices that share a place's gather rays (elements of refined patches meet
     # others' at their corners: another count for another refinement)
     monkeypatch.setattr(forecast_module, "PER_JOINED", 1.0)
@@ -72,28 +73,102 @@ def test_lamps_other_than_suns_count_what_shines(monkeypatch):
     assert np.isclose(two.output, two.vertices * (per_vertex + BUDGET * PER_VERTEX_SHINE + PER_EXTRA_LAMP))
 
 
-def test_the_elements_cut_count_on_their_own(monkeypatch):
-    """Under lamps, each output element the detail size makes beyond the pieces adds its own
-    work to the output's forecast (what shines, abrupt grids, covered corners, the contact cut:
-    indoor scenes of large walls spent 3-7 times a bunny's time per vertex); the pieces' own
-    faces as the output add nothing."""
-    from hemicube_radiosity.core.form_factors import stage
+def test_the_outputs_terms_follow_what_they_count(monkeypatch):
+    """Under lamps the output's forecast is a rate per casting vertex that grows with the share
+    of its rays that meet a surface, plus a rate per element a shadow's edge crosses and per
+    leaning corner: doubling each count adds exactly its term (on one worker), and the counts
+    are those of the bake's own output mesh."""
+    from types import SimpleNamespace
     from hemicube_radiosity.core.light.lamps import SunLight
     from hemicube_radiosity.core.runtime import forecast as forecast_module
-    from hemicube_radiosity.core.runtime.forecast import PER_ELEMENT_CUT
+    from hemicube_radiosity.core.runtime.forecast import (
+        PER_EDGE, PER_LEANING, PER_VERTEX_HIT, PER_VERTEX_LAMPS, forecast)
 
-    cut = []
-    counted = stage.elements_cut_ahead
-    monkeypatch.setattr(stage, "elements_cut_ahead", lambda ctx: cut.append(counted(ctx)) or cut[-1])
     room = scenes.cornell_box(light_radiance=0.0)
     sun = [SunLight((0.0, 0.0, -1.0))]
-    with_cut = bake(room, BakeSettings(workers=1, **SMALL), lights=sun).forecast
-    monkeypatch.setattr(forecast_module, "PER_ELEMENT_CUT", 0.0)
-    without = bake(room, BakeSettings(workers=1, **SMALL), lights=sun).forecast
-    assert cut[0] == cut[1] > 0
-    assert np.isclose(with_cut.output - without.output, PER_ELEMENT_CUT * cut[0])
-    whole = bake(room, BakeSettings(workers=1, **{**SMALL, "element_size": None}), lights=sun)
-    assert cut[2] == 0 and whole.forecast.vertices == len(whole.patches.verts)
+    r = bake(room, BakeSettings(workers=1, **SMALL), lights=sun)
+    f = r.forecast
+    assert f.hit is not None and 0.5 < f.hit < 1.0          # inside a box open on one side
+    assert f.leaning == 0                                   # flat faces: no corner normals
+    ctx = SimpleNamespace(settings=r.settings, patches=r.patches, clusters=r.clusters,
+                          unknowns=r.patches, lights=sun, meshes=None)
+    counts = {}
+    monkeypatch.setattr(forecast_module, "rays_ahead", lambda *a, **k: (counts["hit"], counts["edges"]))
+    monkeypatch.setattr(forecast_module, "leaning_ahead", lambda *a, **k: counts["leaning"])
+
+    def output(hit=0.25, edges=100.0, leaning=300.0):
+        counts.update(hit=hit, edges=edges, leaning=leaning)
+        return forecast(ctx, 10, 1000, mesh=r.patches).output
+    base = output()
+    rays = max(r.settings.gather_rays, 32) / 128                 # (at least 32: forecast())
+    assert np.isclose(base, 1000 * (PER_VERTEX_LAMPS + 0.25 * PER_VERTEX_HIT) * rays + 100 * PER_EDGE + 300 * PER_LEANING)
+    assert np.isclose(output(edges=200.0) - base, 100 * PER_EDGE)
+    assert np.isclose(output(leaning=600.0) - base, 300 * PER_LEANING)
+    assert np.isclose(output(hit=0.5) - base, 1000 * 0.25 * PER_VERTEX_HIT * rays)
+    assert forecast(ctx, 10, 1000).output < base            # no mesh: nothing of it counted
+
+
+def _plate(x0, x1, z, up=True):
+    from hemicube_radiosity.core.mesh.patches import MeshInput
+    v = [[x0, x0, z], [x1, x0, z], [x1, x1, z], [x0, x1, z]]
+    return MeshInput.from_faces(v, [[0, 1, 2, 3] if up else [0, 3, 2, 1]])
+
+
+def test_rays_ahead_count_the_sky_hidden_and_the_shadow_edges():
+    """The share of rays that meet a surface, from the elements of two parallel 2 x 2 squares
+    1 apart facing each other, is their view factor (closed form for parallel rectangles,
+    0.4155); from one square alone, none. A square 3 across a unit above a floor of unit
+    elements, its edges at their middles, shadows the sun straight down: its shadow's edge
+    crosses the ring of 12 elements around it, two such squares 24."""
+    from hemicube_radiosity.core.light.lamps import SunLight
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    from hemicube_radiosity.core.runtime.forecast import rays_ahead
+    X = 2.0
+    q = np.sqrt(1 + X * X)
+    view = 2 / (np.pi * X * X) * (np.log((1 + X * X) / np.sqrt(1 + 2 * X * X))
+                                  + 2 * X * q * np.arctan(X / q) - 2 * X * np.arctan(X))
+    plates = build_patches([_plate(0, 2, 0), _plate(0, 2, 1, up=False)], 0.125)
+    hit, edges = rays_ahead(plates, plates, [])
+    assert abs(hit - view) < 0.02 and edges == 0 and abs(view - 0.4155) < 1e-3
+    alone = build_patches([_plate(0, 2, 0)], 0.125)
+    assert rays_ahead(alone, alone, [])[0] == 0
+    sun = [SunLight((0.0, 0.0, -1.0))]
+    one = [_plate(0, 16, 0), _plate(2.5, 5.5, 1)]
+    two = one + [_plate(9.5, 12.5, 1)]
+    for meshes, ring in ((one, 12), (two, 24)):
+        m = build_patches(meshes, 1.0)
+        assert rays_ahead(m, m, sun, sky=False) == (None, ring)
+
+
+def test_leaning_corners_are_counted_on_a_sample():
+    """Corners whose shading normal leans past the crease angle off their face's: a 16 x 16 grid
+    of quads whose corner normals all point up but for k faces', tilted 30 degrees: 4 k
+    corners lean (counted on every corner, and on a sample of them about as many); tilted 10
+    degrees, none."""
+    from hemicube_radiosity.core.mesh.patches import MeshInput
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    from hemicube_radiosity.core.runtime.forecast import leaning_ahead
+    n = 16
+    g = np.arange(n + 1.0)
+    verts = np.array([[x, y, 0.0] for y in g for x in g])
+    faces = [[j * (n + 1) + i, j * (n + 1) + i + 1, (j + 1) * (n + 1) + i + 1, (j + 1) * (n + 1) + i]
+             for j in range(n) for i in range(n)]
+
+    def grid(k, degrees=30.0):
+        m = MeshInput.from_faces(verts, faces)
+        cn = np.tile([0.0, 0.0, 1.0], (len(m.face_indices), 1))
+        t = np.radians(degrees)
+        cn[: 4 * k] = [np.sin(t), 0.0, np.cos(t)]
+        m.corner_normal = cn
+        return m
+    for k in (10, 20, 40):
+        m = grid(k)
+        mesh = build_patches([m], None)
+        assert leaning_ahead(mesh, [m]) == 4 * k
+        assert abs(leaning_ahead(mesh, [m], sample=256) - 4 * k) <= 0.1 * 4 * k + 4
+    m = grid(40, 10.0)
+    assert leaning_ahead(build_patches([m], None), [m]) == 0
+    assert leaning_ahead(build_patches([m], None), None) == 0
 
 
 def test_curved_pieces_are_those_of_bent_clusters():
