@@ -18,7 +18,11 @@ corner whose sun ray passes under a lip beside it began to be lit at its own poi
 a boundary vertex's fit began to reach no further than its samples' range widened by its width
 (core/output/vertex.py _sample_bounds; cornell_interp: 3 of 4,673 vertices, at most 1.8e-4 of the
 maximum; cornell_defaults: at most 1.6e-5 of the maximum, through the gather; patch solutions
-unchanged).
+unchanged), and when a corner whose sun ray and its vertex's disagree (a shadow's edge through
+the vertex) began to be lit at its own point (core/output/covered.py: cornell_embree_lamps' 8
+vertices on the ceiling's front-edge shadow at y = 0.4 on the floor and at the front corners,
+their lit side's corners now with the sun, up to 0.92% of the maximum; the mean of all its
+vertices 0.04% higher; patch solutions unchanged).
 A change that is meant to alter results regenerates the file in the same commit and says why."""
 import os
 

@@ -17,9 +17,13 @@ centre; any other toward its element's), and a bake point is *covered* where ano
 over it, along its triangle's normal, within its object's ray offset, or between it and where
 its vertex's rays start, or on the ray toward the scene's strongest sun before that ray rises a
 ray offset over the corner's plane (a kerb's lip beside the grass's corner, not over it: our
-sun ray starts over the lip; :func:`covered_corners`; three rays per point, the first and the
-last going on past the corner's own face: a warped face's elements, cut bilinearly, run a hair
-off Blender's triangle the point lies on, in front of what covers it). A covered point is lit
+sun ray starts over the lip), or where that sun reaches the bake point and not where the
+vertex's rays start, or the other way round: a shadow's edge through the vertex (a wall's end
+on the floor it stands on, whose faces meet there: one corner in the wall's shadow, the next in
+the sun; an overhang's edge over a slope's vertex; :func:`covered_corners`; five rays per
+point, those from the point going on past the corner's own face: a warped face's elements,
+cut bilinearly, run a hair off Blender's triangle the point lies on, in front of what covers
+it). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 the light from below its triangle's plane by rays from Cycles' lifted start where its shading
@@ -76,6 +80,12 @@ OPEN_RAYS = 64
 #: The least rise of the strongest sun over a corner's triangle (the sine of its elevation above
 #: the plane) for which its ray is followed until it rises a ray offset: as high as our rays start.
 SUN_RISE = 0.1
+#: The least cosine between a corner's shading normal and its triangle's normal at which the
+#: face counts as flat, so that Cycles' shadow ray toward the sun starts at its bake point.
+FLAT_COS = float(np.cos(np.radians(1.0)))
+#: Cycles' default shadow terminator geometry offset: on a smooth face its shadow ray starts at the
+#: shading point where both the triangle's and the shading normal's cosine to the light reach it.
+TERMINATOR = 0.1
 #: The least share of the open scene a covered corner's vertex is taken to see: where fewer of
 #: its rays leave (its start lies inside a solid: a bevel's foot on a shelf), what it gathered is
 #: mostly what those closed rays read, no measure of the open scene's light.
@@ -93,9 +103,11 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     corner of its source face, where Cycles bakes. None without Embree."""
     if not embree_available() or len(elements) == 0:
         return None
+    sun = strongest_sun(ctx)                  # its rays pick corners: a sun turned picks others
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
-                    + (b"" if buried is None else np.asarray(buried, bool).tobytes()), ("covered-corners", 4))
+                    + (b"" if buried is None else np.asarray(buried, bool).tobytes())
+                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 5))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
@@ -149,8 +161,23 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         rise = geo @ to_sun
         toward = rise > 0.0
         reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
-        shaded, _ = _cover_along(scene, fronts, own, p, origin, np.broadcast_to(to_sun, origin.shape), reach, tie)
+        along = np.broadcast_to(to_sun, origin.shape)
+        shaded, _ = _cover_along(scene, fronts, own, p, origin, along, reach, tie)
         chosen |= toward & shaded
+        # or the sun reaches the bake point and not the vertex's start, or the other way round:
+        # a shadow's edge through the vertex (a wall's end on the floor it stands on)
+        # where Cycles' shadow ray starts at the bake point: a flat face, or a smooth one the sun
+        # shines on well enough (else its shadow terminator offset starts it toward the smooth
+        # surface); not at a leaning corner (:mod:`.crease` lights it on its own)
+        shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
+        shade = geo if shade is None else np.where(has[:, None], shade, geo)
+        flat = np.einsum("ij,ij->i", shade, geo) >= FLAT_COS
+        high = (rise >= TERMINATOR) & (shade @ to_sun >= TERMINATOR)
+        k = np.flatnonzero(toward & (flat | high) & ~leans(shade, geo) & ~leans(shade, nv[v]))
+        here = _sun_reaches(scene, fronts, own, p[k], origin[k], to_sun, tie[k])
+        there = _sun_reaches(scene, None, None, None, xv[v[k]] + eps[k, None] * nv[v[k]], to_sun) \
+            & (nv[v[k]] @ to_sun > 0.0)
+        chosen[k[here != there]] = True
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
@@ -205,6 +232,18 @@ def _cover_along(scene, fronts, own, p, origin, direction, reach, tie):
         left[todo] -= step
         gone[todo] += step
     return covers, dist
+
+
+def _sun_reaches(scene, fronts, own, p, origin, to_sun, tie=None) -> np.ndarray:
+    """(K,) bool: the ray from each ``origin`` (K, 3) toward the sun ``to_sun`` (3,) leaves the
+    scene; with ``p`` (K,) it goes on past the own face of the corner of element ``p``
+    (:func:`_cover_along`), else it starts where a ray offset put it."""
+    along = np.broadcast_to(to_sun, np.shape(origin))
+    far = np.full(len(origin), np.inf)
+    if p is None:
+        hit, _ = scene.intersect(origin, along, far)
+        return np.asarray(hit) < 0
+    return ~_cover_along(scene, fronts, own, p, origin, along, far, tie)[0]
 
 
 def _face_keys(elements) -> np.ndarray:

@@ -247,3 +247,40 @@ def test_a_corner_behind_its_own_warped_face_still_finds_the_floor_under_it():
     assert feet.sum() == 2 and far.sum() >= 4
     np.testing.assert_allclose(val[far], open_floor, rtol=0.05)     # (and what the lid's edge sends)
     assert val[feet].max() < 0.05 * open_floor
+
+
+def _floor_by_a_wall_end(rho_wall=0.0):
+    """The floor of :func:`_floor` and a black block (a wall, 0.2 m thick, 1 m high) standing on
+    it from x = -2 to x = 0, its sunny face at y = -0.2 and its back on the line y = 0; its end
+    stands on the floor's vertex (0, 0). The sun shines from -y, 40 degrees off the zenith: the
+    wall's shadow lies on the floor for x < 0 from y = 0 to y = tan 40 = 0.84, and its edge runs
+    along x = 0 through that vertex."""
+    from hemicube_radiosity.core.builtin_scenes import box
+    return [_floor(), box((-2.0, -0.2, 0.0), (0.0, 0.0, 1.0), (rho_wall,) * 3, name="wall")]
+
+
+def test_a_shadow_s_edge_through_a_vertex_parts_its_corners():
+    """zdm2's floors at a wall's end: Cycles bakes each face corner on its own face, nudged toward
+    its centre, so at the vertex (0, 0) the corner of the floor's face behind the wall
+    ([-1, 0] x [0, 1]) is in the wall's shadow and that of the face beside it ([0, 1] x [0, 1])
+    in the sun. The vertex is lit once, from one point: both corners took its light (the
+    shadowed one the full sun, zdm2's floors at 0.94 where Cycles has 0.31). Closed forms: with
+    the wall black, no sky and a flat floor, nothing reaches the shadowed corner but the sun's
+    penumbra (Blender's default sun angle: none at a corner on the edge's far side); the lit one
+    has rho E cos 40 / pi."""
+    tilt = np.radians(40.0)
+    sun = SunLight((0.0, np.sin(tilt), -np.cos(tilt)), strength=SUN)
+    r = bake(_floor_by_a_wall_end(), BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False,
+                                                  gather_rays=64), lights=[sun])
+    E = r.elements
+    cid, cv = E.corner_ids(), r.corner_values()
+    lit = RHO * SUN * np.cos(tilt) / np.pi
+
+    def corner_at(centre):
+        e = np.flatnonzero((E.owner == 0) & np.all(np.abs(E.centers - centre) < 1e-9, axis=1))
+        assert len(e) == 1
+        k = np.flatnonzero(np.all(np.abs(E.verts[cid[e[0]]]) < 1e-9, axis=1))
+        return cv[e[0], k[0]]
+    behind, beside = corner_at((-0.5, 0.5, 0.0)), corner_at((0.5, 0.5, 0.0))
+    np.testing.assert_allclose(beside, lit, rtol=1e-3)
+    assert behind.max() < 0.01 * lit
