@@ -20,10 +20,12 @@ sun and constant sky). Steps, each in a child process of its own:
 2. **Cycles** (``--cycles-child``): the same scene and light; each baked object gets its own mesh
    with its modifiers applied (the copy's vertices and loops, checked), the copy's lightmap UVs as
    a second UV map, and is baked by ``tools/cycles_reference.bake_image`` (DIFFUSE: direct +
-   indirect + colour, 32 bounces, 2 threads, margin 0) at the lightmap's size: the reference at
+   indirect + colour, 32 bounces, the real scenes' 4 glossy bounces with reflective caustics and
+   Filter Glossy off, ``real_scenes.GLOSSY``, as their vertex references: the glossy layer of the
+   floor's Principled lights the ceiling; 2 threads, margin 0) at the lightmap's size: the reference at
    ``REF_SPP`` samples (seed ``REF_SEED``) and the candidate at ``CAND_SPP`` (seed ``CAND_SEED``).
    Both are cached in ``bench/cache`` (``cycles_lightmap_<key>.npz``; key: the scene as
-   ``cycles_reference.cache_key`` sees it, the UVs, the size, samples and seed).
+   ``cycles_reference.cache_key`` sees it, the UVs, the size, samples, seed and glossy bounces).
 3. **Error** per texel whose centre lies inside a UV triangle (not the dilated margin, which Cycles
    does not write) and that the reference lights (luminance > 1e-4 of the median): the
    luminance-weighted RMS difference over the reference's mean luminance (``speed_vs_error.errors``,
@@ -131,12 +133,14 @@ def cached_image(ob, size, uv_layer, uv_hash, samples, seed):
     import cycles_reference as cr
 
     key = cr.cache_key([ob], {"kind": "lightmap_image", "object": ob.name, "size": size, "uv": uv_hash,
-                              "samples": samples, "seed": seed, "bounces": sve.BOUNCES})
+                              "samples": samples, "seed": seed, "bounces": sve.BOUNCES, "glossy": rs.GLOSSY,
+                              "filter_glossy": rs.FILTER_GLOSSY})
     path = os.path.join(rs.CACHE_DIR, f"cycles_lightmap_{key}.npz")
     if os.path.exists(path):
         with np.load(path) as z:
             return z["image"], float(z["seconds"]), True
-    img, seconds = cr.bake_image(ob, size, samples=samples, uv_layer=uv_layer, seed=seed, threads=2)
+    img, seconds = cr.bake_image(ob, size, samples=samples, uv_layer=uv_layer, seed=seed, threads=2,
+                                 glossy=rs.GLOSSY, filter_glossy=rs.FILTER_GLOSSY)
     os.makedirs(rs.CACHE_DIR, exist_ok=True)
     tmp = path + f".{os.getpid()}.tmp.npz"
     np.savez(tmp, image=img, seconds=seconds)
@@ -310,7 +314,8 @@ def section(res):
     L = ["## Lightmaps", "",
          f"`bench/lightmap_real.py` (`make bench-lightmap`): `{res['scene']}` lit as in the real scenes above, baked"
          f" with `--target lightmap` (the defaults otherwise; lightmap UVs made by Lightmap Pack on the copies:"
-         f" {sizes} texels), against Cycles' own DIFFUSE bake (direct + indirect + colour) of the same objects to"
+         f" {sizes} texels), against Cycles' own DIFFUSE bake (direct + indirect + colour; {rs.GLOSSY} glossy bounces"
+         " with reflective caustics and Filter Glossy off, as the real scenes' references) of the same objects to"
          f" images of the same size through the copies' lightmap UVs, at {res['cand_spp']} spp and, as the reference,"
          f" {res['ref_spp']} spp (another seed; cached in `bench/cache`). Texels whose centre lies inside a UV triangle"
          " (not the dilated margin), but not those of a triangle without area in the world (as the real scenes'"

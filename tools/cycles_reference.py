@@ -214,12 +214,13 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
     return CyclesBake(point, corner, seconds, settings)
 
 
-def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, seed=0, color=True):
+def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, seed=0, color=True, glossy=0,
+               filter_glossy=None):
     """((size, size, 3) float64, seconds): Cycles' bake of mesh object ``ob`` into an image
     through UV map ``uv_layer`` ('' the active one): 'DIFFUSE' (direct + indirect + colour:
     what a render shows of a diffuse surface; ``color=False``: without the colour, the light
     arriving as radiance, irradiance / pi) or 'EMIT' (a baked copy's own look), with noise
-    seed ``seed``. An image node is added to each of its materials for the bake and removed
+    seed ``seed``; ``glossy``, ``filter_glossy`` as :func:`configure_cycles`. An image node is added to each of its materials for the bake and removed
     again; rows bottom-up."""
     import bpy
 
@@ -232,7 +233,7 @@ def bake_image(ob, size, *, kind="DIFFUSE", samples=4, uv_layer="", threads=2, s
         nt.nodes.active = node
         added.append((nt, node))
     sc = bpy.context.scene
-    configure_cycles(sc, samples=samples, seed=seed, threads=threads)
+    configure_cycles(sc, samples=samples, seed=seed, threads=threads, glossy=glossy, filter_glossy=filter_glossy)
     sc.render.bake.target = "IMAGE_TEXTURES"
     sc.render.bake.margin = 0
     vl = bpy.context.view_layer
