@@ -54,6 +54,10 @@ PER_POINT = 4
 MIN_POINTS = 4
 #: Shadow rays per point toward each emitter (the means are over many points).
 SAMPLES = 2
+#: The hits share the world's sky rays out (:meth:`.direct.DirectLight.at`'s ``split``): each
+#: casts this share of them, the hits of one pair all of them between them. The sky's rays
+#: were nine tenths of this stage's time in godot_zdm2 (5.1 of 5.6 s).
+SKY_SPLIT = 16
 #: The steps of the spread points' two parameters from one piece to the next (golden ratio's
 #: and the plastic number's: irrational, so a run of pieces covers its whole square).
 STEPS = (0.6180339887498949, 0.7548776662466927)
@@ -135,7 +139,9 @@ def seen_direct(ctx, stand) -> np.ndarray | None:
         return None
     j = order[at[on]]                                                  # the pair each hit is on
     hx, hp, hw = hx[on], hp[on], hw[on]
-    D = ctx.direct.at(hx, p.normals[hp], "seen-hits", samples=SAMPLES, eps=ray_offsets(p, owner=p.owner[hp]))
+    split = max(1, min(SKY_SPLIT, ctx.settings.sky_rays // 16))      # the world's rays shared out
+    D = ctx.direct.at(hx, p.normals[hp], "seen-hits", samples=SAMPLES, eps=ray_offsets(p, owner=p.owner[hp]),
+                      split=split, part=np.arange(len(hp)) % split)
     refl = p.rho[hp] * D
     seen = np.stack([np.bincount(j, weights=hw * refl[:, k], minlength=len(r_pair)) for k in range(3)], 1)
     # what the rays found of the cluster's direct light, for the form factor's share of its mean
