@@ -24,6 +24,7 @@ from .points import STAND_INS, centres_of, patch_average, stand_ins
 from ..rays import embree_available, embree_scene
 from ..hemisphere import open_fraction
 from .direct import DirectLight, turns_emitters
+from .seen import seen_direct
 
 __all__ = ["direct_stage", "source_term"]
 
@@ -143,6 +144,10 @@ def direct_stage(ctx) -> None:
         ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand)
     # the world is in the direct light: the source does not take it again from F's sky
     ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
+    # what a receiver gathers first from a cluster lit unevenly: the part of it it sees
+    gain = None if stand is None else seen_direct(ctx, stand)
+    if gain is not None:
+        ctx.source += gain
     # emitters and the world seen in a mirror: light reflected once already (not direct_source)
     mirrored = mirrored_source(ctx, u.emission, ctx.direct.world)
     if mirrored is not None:

@@ -35,7 +35,7 @@ def solve_stage(ctx) -> None:
     ctx.say(0.0, s.solver)
     F, d, coloured = solve_matrix(ctx, ctx.form_factors)     # with the light glossy patches mirror
     rho, source, areas, solid = see_through_system(F, p.rho, ctx.source, p.areas)
-    run = _solver(F, rho, d, s, areas, computed, ctx.cancelled)
+    run = _signed(_solver(F, rho, d, s, areas, computed, ctx.cancelled), F, rho, areas, computed)
     sol = run(source, lambda fr: ctx.say(fr, ""))
     for _ in range(COLOUR_PASSES if coloured is not None else 0):   # a coloured metal's own bands
         B = sol.B if solid is None else sol.B * solid[:, None]
@@ -57,6 +57,26 @@ def solve_stage(ctx) -> None:
         ctx.reflected = sol.B
         sol = replace(sol, B=sol.B + p.emission, extra={**sol.extra, "reflected_only": True})
     ctx.solution = replace(sol, energy=energy)
+
+
+def _signed(run, F, rho, areas, computed):
+    """``run`` for a source that may be negative in places (:mod:`..light.seen` takes out of
+    what a receiver gathers first the part of a cluster's mean direct light it does not see;
+    the solution stays positive): by linearity the solution of the source's positive part
+    minus that of its negative part, each solved as any source is (the solvers take sources
+    of one sign). A source of one sign is solved once, as before."""
+    def go(source, progress=None):
+        neg = np.maximum(-np.asarray(source, dtype=np.float64), 0.0)
+        if not neg.any():
+            return run(source, progress)
+        a, b = run(np.asarray(source, dtype=np.float64) + neg, progress), run(neg)
+        B = a.B - b.B
+        scale = max(float(np.abs(B).max()), 1e-300)
+        bound = (a.error_bound * np.abs(a.B).max() + b.error_bound * np.abs(b.B).max()) / scale
+        energy = energy_balance(F, rho, source, B, areas, computed=computed) if areas is not None else a.energy
+        return replace(a, B=B, iterations=a.iterations + b.iterations, converged=bool(a.converged and b.converged),
+                       error_bound=float(bound), energy=energy)
+    return go
 
 
 def _solver(F, rho, d, s, areas, computed, cancelled):
