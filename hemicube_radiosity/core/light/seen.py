@@ -105,7 +105,10 @@ def _varying(ctx, sources, stand):
     W = np.bincount(k, weights=w, minlength=K)
     mean = np.bincount(k, weights=w * y, minlength=K) / np.maximum(W, 1e-300)
     var = np.bincount(k, weights=w * (y - mean[k]) ** 2, minlength=K) / np.maximum(W, 1e-300)
-    return which & (mean > 0) & (np.sqrt(var) >= VARIES * mean)
+    # rounded: a cluster of two equal pieces, one lit, sits on the threshold (exactly 1), where
+    # rounding would decide, and a relight of the same light made brighter must pick the same
+    cv = np.round(np.sqrt(var) / np.maximum(mean, 1e-300), 9)
+    return which & (mean > 0) & (cv >= VARIES)
 
 
 def seen_direct(ctx, stand) -> np.ndarray | None:
