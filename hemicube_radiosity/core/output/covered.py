@@ -157,31 +157,43 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     chosen = crossed | above
     to_sun = strongest_sun(ctx)
     if to_sun is not None:
-        # or the strongest sun's ray meets a surface before it rises as high as our rays start
-        rise = geo @ to_sun
-        toward = rise > 0.0
-        reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
-        along = np.broadcast_to(to_sun, origin.shape)
-        shaded, _ = _cover_along(scene, fronts, own, p, origin, along, reach, tie)
-        chosen |= toward & shaded
-        # or the sun reaches the bake point and not the vertex's start, or the other way round:
-        # a shadow's edge through the vertex (a wall's end on the floor it stands on)
-        # where Cycles' shadow ray starts at the bake point: a flat face, or a smooth one the sun
-        # shines on well enough (else its shadow terminator offset starts it toward the smooth
-        # surface); not at a leaning corner (:mod:`.crease` lights it on its own)
-        shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
-        shade = geo if shade is None else np.where(has[:, None], shade, geo)
-        flat = np.einsum("ij,ij->i", shade, geo) >= FLAT_COS
-        high = (rise >= TERMINATOR) & (shade @ to_sun >= TERMINATOR)
-        k = np.flatnonzero(toward & (flat | high) & ~leans(shade, geo) & ~leans(shade, nv[v]))
-        here = _sun_reaches(scene, fronts, own, p[k], origin[k], to_sun, tie[k])
-        there = _sun_reaches(scene, None, None, None, xv[v[k]] + eps[k, None] * nv[v[k]], to_sun) \
-            & (nv[v[k]] @ to_sun > 0.0)
-        chosen[k[here != there]] = True
+        chosen |= _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun)
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
     return np.column_stack([p, c, start, geo])[chosen].astype(np.float64)
+
+
+def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun):
+    """(K,) bool: the corners ``c`` of elements ``p`` (K,) whose bake point (rays from
+    ``origin``, normal ``geo``) the strongest sun ``to_sun`` lights otherwise than it lights
+    their vertex's rays' start (``xv``, ``nv``, offsets ``eps``), for :func:`_find`."""
+    v = elements.polys[p, c]
+    # the sun's ray meets a surface before it rises as high as our rays start
+    rise = geo @ to_sun
+    toward = rise > 0.0
+    reach = np.where(toward, eps / np.maximum(rise, SUN_RISE), 0.0)
+    along = np.broadcast_to(to_sun, origin.shape)
+    shaded, _ = _cover_along(scene, fronts, own, p, origin, along, reach, tie)
+    picked = toward & shaded
+    # or the sun reaches the bake point and not the vertex's start, or the other way round:
+    # a shadow's edge through the vertex (a wall's end on the floor it stands on)
+    # where Cycles' shadow ray starts at the bake point: a flat face, or a smooth one the sun
+    # shines on well enough (else its shadow terminator offset starts it toward the smooth
+    # surface); not at a leaning corner (:mod:`.crease` lights it on its own)
+    shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
+    shade = geo if shade is None else np.where(has[:, None], shade, geo)
+    flat = np.einsum("ij,ij->i", shade, geo) >= FLAT_COS
+    high = (rise >= TERMINATOR) & (shade @ to_sun >= TERMINATOR)
+    k = np.flatnonzero(toward & (flat | high) & ~leans(shade, geo) & ~leans(shade, nv[v]))
+    here = _sun_reaches(scene, fronts, own, p[k], origin[k], to_sun, tie[k])
+    # each vertex's start once (its corners share it: the same ray)
+    starts, back = np.unique(np.column_stack([v[k], eps[k].view(np.int64)]), axis=0, return_inverse=True)
+    u, e = starts[:, 0], starts[:, 1].copy().view(np.float64)
+    there = _sun_reaches(scene, None, None, None, xv[u] + e[:, None] * nv[u], to_sun)
+    there = there[back.ravel()] & (nv[v[k]] @ to_sun > 0.0)
+    picked[k[here != there]] = True
+    return picked
 
 
 def _fronts(ctx, elements):
