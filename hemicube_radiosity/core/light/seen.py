@@ -33,6 +33,7 @@ import numpy as np
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..util.geometry import tangent_frames
 from ..util.sampling import cosine_directions
+from .direct import LUMA
 
 __all__ = ["F_MIN", "VARIES", "seen_direct"]
 
@@ -61,7 +62,6 @@ SKY_SPLIT = 16
 #: The steps of the spread points' two parameters from one piece to the next (golden ratio's
 #: and the plastic number's: irrational, so a run of pieces covers its whole square).
 STEPS = (0.6180339887498949, 0.7548776662466927)
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def spread_points(patches, rows, index=None) -> np.ndarray:
@@ -119,7 +119,7 @@ def seen_direct(ctx, stand) -> np.ndarray | None:
     if c is None or ctx.direct is None or not embree_available():
         return None
     K = len(c)
-    rows = np.repeat(np.arange(K), np.diff(F.indptr))
+    rows = F.row_ids().astype(np.int64)
     cols = F.indices.astype(np.int64)
     grouped = (c.sizes > 1) & ~np.any(c.emission > 0, axis=1)
     pair = (F.data >= F_MIN) & grouped[cols] & (rows != cols)
