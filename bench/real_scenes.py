@@ -376,16 +376,15 @@ def flat_bake_corners(objects):
     room's wall corner 744 reads 0.265, the sun alone, at its neighbour's place). Zero here: within
     float32 rounding of the products (Cycles' arithmetic), in world space (Cycles applies the
     objects' transforms)."""
+    from hemicube_radiosity.core.output.uv_raster import flat_triangles
+
     out = []
     for ob in objects:
         me = ob.data
         w, lv = _world_corners(ob, np.float32)
         tl = np.empty(len(me.loop_triangles) * 3, np.int64)
         me.loop_triangles.foreach_get("loops", tl)
-        t = w[tl.reshape(-1, 3)]
-        e1, e2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
-        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-        flat = d11 * d22 - d12 * d12 <= 4 * np.finfo(np.float32).eps * d11 * d22
+        flat = flat_triangles(w[tl.reshape(-1, 3)], np.float32)
         loops, first = np.unique(tl, return_index=True)        # first triangle holding each corner
         f = np.zeros(len(lv), bool)
         f[loops] = flat[first // 3]
