@@ -121,6 +121,42 @@ def _agree(a, b, floor):
     return np.abs(a - b) <= AGREE * np.maximum(a, b) + floor
 
 
+def _cells(index, faces, rows, cols, ids, s):
+    """(ok (m,) bool, corners (m, 4), weights (m, 4), middle (m,)) the grid cell of stride ``s``
+    around each texel ``ids`` (m,): its anchors and bilinear weights (:func:`_corners`) and the
+    texel in its middle (its first corner on a 2-texel grid); ``ok`` where all of them are texels
+    of the texel's own face."""
+    corners, w = _corners(index, rows[ids], cols[ids], s)
+    mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
+    ok = np.all(corners >= 0, axis=1) & (mid >= 0)
+    ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
+    return ok, corners, w, mid
+
+
+def _floor(value, exact):
+    """(S,) :data:`AGREE_FLOOR` of each source's 99th percentile over the texels lit exactly in it."""
+    return AGREE_FLOOR * np.array([np.percentile(value[exact[:, k], k] @ LUMA, 99) if exact[:, k].any()
+                                   else 0.0 for k in range(value.shape[1])])
+
+
+def _smooth(value, done, points, pitch, faces, index, rows, cols, ids, corners, w, mid, s, floor):
+    """(m, S) bool: the texels ``ids`` (m,) whose cell of stride ``s`` (``corners``, weights
+    ``w``, middle ``mid``) interpolates each source (module docstring): the texel not yet done in
+    it, its anchors done, the cell affine; on the 8- and 4-texel grids the middle agreeing with
+    the corners' interpolation, on the 2-texel grid the corners agreeing or the light running
+    straight across (:func:`_bend`)."""
+    keep = _affine(points, corners, w, ids, pitch)[:, None] & ~done[ids]            # (m, S)
+    keep &= done[corners].all(axis=1) & done[mid]
+    Y = value[corners] @ LUMA                                         # (m, 4, S)
+    if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
+        keep &= _affine(points, corners, 0.25, mid, pitch)[:, None]
+        keep &= _agree(Y.mean(axis=1), value[mid] @ LUMA, floor)
+    else:          # a cell two texels wide: its corners agree, or the light is straight across it
+        bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
+        keep &= _agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor)
+    return keep
+
+
 def by_source(split, covered, points, normals, faces, pitch, probed=None, inside=None, strides=STRIDES):
     """(n, S, 3) the direct light of each source at the n covered texels (``covered`` (H, W),
     row-major order): exact at the anchors and where that source's light needs it, bilinear
@@ -165,10 +201,7 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         ids = np.flatnonzero(~done.all(axis=1))
         if ids.size == 0:
             break
-        corners, w = _corners(index, rows[ids], cols[ids], s)
-        mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
-        ok = np.all(corners >= 0, axis=1) & (mid >= 0)
-        ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
+        ok, corners, w, mid = _cells(index, faces, rows, cols, ids, s)
         # each anchor in the sources its cells' texels still want
         anchors = np.column_stack([corners[ok], mid[ok]])
         at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
@@ -176,20 +209,11 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         a = np.unique(anchors)
         light(a, want[a])
         if floor is None and exact.any():
-            floor = AGREE_FLOOR * np.array([np.percentile(value[exact[:, k], k] @ LUMA, 99) if exact[:, k].any()
-                                            else 0.0 for k in range(value.shape[1])])
+            floor = _floor(value, exact)
         ids, corners, w, mid = ids[ok], corners[ok], w[ok], mid[ok]
         if ids.size == 0:
             continue
-        keep = _affine(points, corners, w, ids, pitch)[:, None] & ~done[ids]            # (m, S)
-        keep &= done[corners].all(axis=1) & done[mid]
-        Y = value[corners] @ LUMA                                         # (m, 4, S)
-        if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
-            keep &= _affine(points, corners, 0.25, mid, pitch)[:, None]
-            keep &= _agree(Y.mean(axis=1), value[mid] @ LUMA, floor)
-        else:          # a cell two texels wide: its corners agree, or the light is straight across it
-            bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
-            keep &= _agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor)
+        keep = _smooth(value, done, points, pitch, faces, index, rows, cols, ids, corners, w, mid, s, floor)
         interp = np.einsum("mk,mksc->msc", w, value[corners])
         if probed is not None and np.any(probed):
             if probe is None:           # the probed sources only: the world's rays are the costliest
