@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import bpy
 import numpy as np
+from ..core.runtime.cache import inverse
 from ..core.runtime.errors import RadiosityError
 from . import textures
 
@@ -98,11 +99,12 @@ def copies_of(names):
 def remove_bakes(names, unhide=False, keep=()):
     """Delete the baked copies of objects ``names`` (and their meshes, but those named in
     ``keep``); optionally unhide sources."""
-    for ob in copies_of(names):
-        me = ob.data
-        bpy.data.objects.remove(ob, do_unlink=True)
-        if me is not None and me.users == 0 and me.name not in keep:
-            bpy.data.meshes.remove(me)
+    obs = copies_of(names)
+    meshes = {ob.data.name: ob.data for ob in obs if ob.data is not None and ob.data.name not in keep}
+    # one batch: removing the copies one by one scans every object each time (the staircase's
+    # 775 copies took 12-27 s of a relight's write)
+    bpy.data.batch_remove(obs)
+    bpy.data.batch_remove([me for me in meshes.values() if me.users == 0])
     if unhide:
         for n in names:
             src = bpy.data.objects.get(n)
@@ -124,7 +126,7 @@ def _element_layout(patches, owner, matrix_world, flipped):
     remap = np.full(len(patches.verts), -1, np.int64)
     remap[used] = np.arange(used.size)
     M = np.asarray(matrix_world, float)
-    Minv = np.linalg.inv(M)
+    Minv = inverse(M)
     local = patches.verts[used] @ Minv[:3, :3].T + Minv[:3, 3]
     nside = np.where(polys[:, 3] < 0, 3, 4)
     order = np.tile(np.arange(4), (len(polys), 1))

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.mesh.patches import MeshInput
-from ...core.runtime.cache import Memo
+from ...core.runtime.cache import Memo, PER_MESH, inverse
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.notes import Note, note, subject_and_kind
 from . import instances as inst_reader
@@ -254,7 +254,7 @@ def mesh_corner_normals(me) -> np.ndarray:
 def _normals_in_world(n, M):
     """Unit normals ``n`` (L, 3) in local space carried to world space by ``M`` (4, 4): the inverse
     transpose, so they stay on the side of the surface they were on (a mirror included)."""
-    w = np.asarray(n, dtype=np.float64) @ np.linalg.inv(np.asarray(M, dtype=np.float64)[:3, :3])
+    w = np.asarray(n, dtype=np.float64) @ inverse(np.asarray(M, dtype=np.float64)[:3, :3])
     length = np.linalg.norm(w, axis=1, keepdims=True)
     return np.divide(w, length, out=np.zeros_like(w), where=length > 0)
 
@@ -312,7 +312,7 @@ def _in_world(obj, depsgraph, co, lv):
     return co @ M[:3, :3].T + M[:3, 3], used, M, det < 0
 
 
-_WELDED = Memo(64)       # digest of a mesh's arrays in world space -> _welded's (a relight reads them again)
+_WELDED = Memo(PER_MESH)       # digest of a mesh's arrays in world space -> _welded's (a relight reads them again)
 
 
 def _welded(verts_w, used, flipped, lv, le, ps, pt, mi, sm, sh):
