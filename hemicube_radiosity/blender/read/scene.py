@@ -259,6 +259,24 @@ def _normals_in_world(n, M):
     return np.divide(w, length, out=np.zeros_like(w), where=length > 0)
 
 
+_IN_WORLD = Memo(PER_MESH)       # (corner normals, corner loops), matrix -> the world's, read only
+
+
+def _world_corner_normals(cn, M, corner_loop):
+    """``_normals_in_world(cn, M)[corner_loop]``, made once per pair of arrays (a relight reads
+    the same ones: :func:`.split_normals.cycles_corner_normals` and :func:`_welded` keep them)
+    and matrix: the same read-only array, which what the bake keys on it finds again."""
+    M = np.asarray(M, dtype=np.float64)
+
+    def make():
+        out = _normals_in_world(cn, M)[corner_loop]
+        out.flags.writeable = False
+        return out
+    if cn.flags.writeable or corner_loop.flags.writeable:     # may change in place: made every time
+        return _normals_in_world(cn, M)[corner_loop]
+    return _IN_WORLD.of((cn, corner_loop), make, M.tobytes())
+
+
 def _newell(verts, corner_vertex, poly_start, poly_total):
     """(unit face normals (F,3), face areas (F,)) from world-space corners. Taken relative to each
     face's first corner (no cancellation far from the origin): for a triangle and a quad the area
@@ -386,7 +404,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     mesh = MeshInput(verts, offsets, indices, rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi],
-                     corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],
+                     corner_normal=None if cn is None else _world_corner_normals(cn, M, corner_loop),
                      face_triangles=reversed_rings(tris, pt) if flipped else tris,
                      face_glossy=glossy if np.any(glossy > 0) else None,
                      transmit=mesh_transmit(per_slot, mi, mi[loop_face], corner_loop))
