@@ -88,3 +88,36 @@ def test_only_what_changed_is_evaluated_again(monkeypatch):
     warm = shade()
     assert asked[-1] == ["object_coords"], asked[-1]
     _same(warm, fresh())
+
+
+def test_a_cache_folder_keeps_the_evaluations_for_a_new_process(monkeypatch, tmp_path):
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    obs = _scene()
+    glow, p = _glowing("Glow", _image("glow", seed=9), 2.0)
+    obs += [_grid("glow", 3, [glow], seed=10)]
+    bpy.context.view_layer.update()
+    asked = []
+    real = shading.evaluate
+
+    def counting(objects, *a, **k):
+        asked.append(sorted(o.name for o in objects))
+        return real(objects, *a, **k)
+    monkeypatch.setattr(shading, "evaluate", counting)
+
+    def shade(cache=None):
+        return shading.shade(obs, bpy.context.evaluated_depsgraph_get(), cache)
+    shading._EVALUATED.clear()
+    cache = FormFactorCache(tmp_path)
+    first = shade(cache)
+    assert len(asked) == 1 and not cache._mem          # on disk only: the form factors stay
+    shading._EVALUATED.clear()                         # a new process: only the folder
+    again = shade(FormFactorCache(tmp_path))
+    assert len(asked) == 1
+    _same(again, first)
+    p.inputs["Emission Strength"].default_value = 3.0
+    shading._EVALUATED.clear()
+    warm = shade(FormFactorCache(tmp_path))
+    assert len(asked) == 2 and "glow" in asked[-1] and len(asked[-1]) < len(obs), asked[-1]
+    shading._EVALUATED.clear()
+    _same(warm, shade())                               # a fresh evaluation, nothing kept

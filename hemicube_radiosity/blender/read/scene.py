@@ -415,11 +415,12 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
                         corner_rho, corner_em)
 
 
-def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
+def read_scene(depsgraph, objects, others=(), instancers=(), cache=None) -> SceneInput:
     """``objects`` are baked; ``others`` take part as occluders/emitters only, and so do the
     instances (:mod:`.instances`) of the instancers named in ``instancers`` (None: of every
     instancer the render shows). The materials that Cycles must evaluate are evaluated for all of
-    them in one batch (:func:`.shading.shade`).
+    them in one batch (:func:`.shading.shade`; ``cache``: the bake's cache, whose folder keeps
+    those evaluations too).
 
     An object that cannot be baked (no faces, every face of zero area, positions or transform
     not finite, a zero scale: :func:`read_object`'s :class:`ReadError`) is left out with one note
@@ -430,7 +431,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
     protos, made = inst_reader.gather(depsgraph, instancers)
     try:
         protos_obs = [p.ob for p in protos]
-        shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph)
+        shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph, cache)
         out, skipped, problems, only_instancing = [], [], [], []
         for o in objects:
             try:

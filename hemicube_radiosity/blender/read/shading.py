@@ -661,14 +661,27 @@ def _classified(objects, depsgraph, out, stand_ins):
     return need, constants, emit, sampled
 
 
-def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
+def _disk_key(key) -> str:
+    """The cache folder's name for an evaluation kept under ``key`` (an object's or material's,
+    or ('run', object name)): this Blender's build in it (Cycles evaluates)."""
+    import bpy
+
+    from ...core.runtime.cache import cache_key
+    build = f"{bpy.app.version_string} {getattr(bpy.app, 'build_hash', b'')!r}".encode()
+    return cache_key(b"shading " + build, key)
+
+
+def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled, cache=None):
     """Fill ``out``'s corners, materials and face emission from Cycles, or from one of the last
     :data:`.shading_key.KEPT` evaluations where nothing they depend on changed: each object and
     constant material by its own key (:func:`.shading_key.object_keys`), so a relight that
     changed an emitter's strength asks Cycles again for that material's objects only (the
     staircase hall: 5 of 755, where every object's evaluation took 7-13 s). An object is asked
     with every object it was joined with the last time (:func:`_join_batches`), in the same
-    order, so each run is the one a whole evaluation makes, and its values the same, bit for bit."""
+    order, so each run is the one a whole evaluation makes, and its values the same, bit for bit.
+    ``cache``: a :class:`...core.runtime.cache.FormFactorCache`; with a folder the evaluations
+    are kept there too (on disk only), so a relight in a new process (``--cache``) asks Cycles
+    only what changed as well."""
     keys = object_keys(need, depsgraph, constants, emit, stand_ins, sampled)
     if keys is None:                                # cannot be told: ask Cycles for everything
         out.corners, out.materials, out.seconds, out.face_emission = evaluate(
@@ -676,16 +689,23 @@ def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
         return
     ob_keys, mat_keys = keys
 
+    disk = cache if cache is not None and getattr(cache, "directory", None) else None
+    read = {}
+
     def kept(key):
         for gen in reversed(_EVALUATED.values()):
             if key in gen:
                 return gen[key]
+        if disk is not None:
+            if key not in read:
+                read[key] = disk.get(_disk_key(key), remember=False)
+            return read[key]
         return None
     names = [o.name for o in need]
     ask = {n for n, k in zip(names, ob_keys) if kept(k) is None}
-    for gen in reversed(_EVALUATED.values()):       # with the objects of their last runs
-        for n in list(ask):
-            ask.update(gen.get(("run", n), ()))
+    for n in list(ask):                             # with the objects of their last runs
+        run = kept(("run", n))
+        ask.update(run if run is not None else ())
     todo = [o for o in need if o.name in ask]
     todo_c = [m for m, k in zip(constants, mat_keys) if kept(k) is None]
     corners, materials, face_em, runs = {}, {}, {}, []
@@ -708,6 +728,10 @@ def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
     for run in runs:
         for n in run:
             gen[("run", n)] = run
+    if disk is not None:                            # what Cycles was asked, for a new process
+        for k in [k for n, k in zip(names, ob_keys) if n in ask] + [("run", n) for run in runs for n in run] \
+                + [k for m, k in zip(constants, mat_keys) if m.name_full in asked_c]:
+            disk.put(_disk_key(k), gen[k], remember=False)
     for old in _EVALUATED.values():                 # the runs of the objects not asked again
         for n in names:
             if ("run", n) not in gen and ("run", n) in old:
@@ -718,12 +742,12 @@ def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
         _EVALUATED.popitem(last=False)
 
 
-def shade(objects, depsgraph) -> Shaded:
+def shade(objects, depsgraph, cache=None) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
     ones that need it, in one batch, unless nothing that depends on changed since one of the
     last :data:`.shading_key.KEPT` evaluations in this session (:func:`.shading_key.evaluation_key`:
-    a relight of new lamps asks Cycles nothing). Never raises for a Cycles problem: ``failed``
-    says why."""
+    a relight of new lamps asks Cycles nothing; ``cache``: also what a cache folder kept,
+    :func:`_evaluated`). Never raises for a Cycles problem: ``failed`` says why."""
     import bpy
 
     out = Shaded()
@@ -733,7 +757,7 @@ def shade(objects, depsgraph) -> Shaded:
         if not need and not constants:
             return out
         try:
-            _evaluated(out, need, depsgraph, list(constants.values()), emit, stand_ins, sampled)
+            _evaluated(out, need, depsgraph, list(constants.values()), emit, stand_ins, sampled, cache)
         except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
             out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
         return out

@@ -13,7 +13,8 @@ reader keeps the last few evaluations in the session under it (:data:`KEPT`).
 
 Where it cannot be sure, it gives None and Cycles is asked: an image edited in Blender and not
 saved (``is_dirty``: its pixels are not hashed), or an image whose file changed on disk since
-(its modification time is in the key). A relight in a new process asks Cycles again.
+(its modification time is in the key). A relight in a new process asks Cycles again, unless
+the bake's cache folder kept the evaluations (:func:`.shading._evaluated`).
 """
 from __future__ import annotations
 

@@ -207,8 +207,10 @@ class FormFactorCache:
     def _path(self, key):
         return os.path.join(self.directory, key + ".npz")
 
-    def get(self, key: str):
-        """The CSR (or array) stored under ``key``, from memory or disk; None when absent."""
+    def get(self, key: str, remember=True):
+        """The CSR (or array) stored under ``key``, from memory or disk; None when absent.
+        ``remember`` False: an item read from disk is not kept in memory (many small items,
+        the materials' evaluations, must not push the form factors out)."""
         if key in self._mem:
             self._mem.move_to_end(key)
             return self._mem[key]
@@ -220,7 +222,8 @@ class FormFactorCache:
                 return None                     # a class this process does not know
             if item is None:
                 item = CSR.load(self._path(key))
-            self._remember(key, item)
+            if remember:
+                self._remember(key, item)
             return item
         return None
 
@@ -228,12 +231,14 @@ class FormFactorCache:
         """Whether an item is stored under ``key`` (in memory or on disk), without reading it."""
         return key in self._mem or bool(self.directory and os.path.exists(self._path(key)))
 
-    def put(self, key: str, item, disk=True) -> None:
+    def put(self, key: str, item, disk=True, remember=True) -> None:
         """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
         (unless ``disk`` is False) on disk, and so any structure of them :func:`.stored.pack`
         can hold (an output element mesh, a point set's located patches: what a relight in a
-        new process would otherwise make again); anything else in memory only."""
-        self._remember(key, item)
+        new process would otherwise make again); anything else in memory only. ``remember``
+        False: on disk only (see :meth:`get`)."""
+        if remember or not (disk and self.directory):
+            self._remember(key, item)
         if not (disk and self.directory):
             return
         packed = None if isinstance(item, (CSR, np.ndarray)) else pack(item)
