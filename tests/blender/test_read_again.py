@@ -61,3 +61,31 @@ def test_an_edited_mesh_is_read_again():
         assert not np.array_equal(warm.mesh.corner_normal, before.mesh.corner_normal), what
         _same(warm, _fresh(ob))
         before = _read(ob)
+
+
+def test_instances_are_placed_again_from_the_same_arrays_until_they_move():
+    from tests.blender.test_instances import sun_scene
+
+    floor, inst = sun_scene("collection")
+
+    def placed():
+        s = reader.read_scene(bpy.context.evaluated_depsgraph_get(), [floor], instancers=None)
+        return [o for o in s.objects if "[instance" in o.name]
+
+    def fresh():
+        for memo in (reader._WELDED, reader._IN_WORLD, reader._PLACED, split_normals._SHADED):
+            memo.clear()
+        return placed()
+    first = fresh()
+    assert len(first) == 1
+    again = placed()
+    assert again[0].mesh.verts is first[0].mesh.verts and not again[0].mesh.verts.flags.writeable
+    assert again[0].mesh.face_indices is first[0].mesh.face_indices
+    inst.location.x += 0.25                                    # the instancer moved
+    bpy.context.view_layer.update()
+    moved = placed()
+    assert moved[0].mesh.verts is not first[0].mesh.verts
+    np.testing.assert_allclose(moved[0].mesh.verts, first[0].mesh.verts + [0.25, 0, 0], atol=1e-12)
+    ref = fresh()
+    np.testing.assert_array_equal(moved[0].mesh.verts, ref[0].mesh.verts)
+    np.testing.assert_array_equal(moved[0].mesh.face_indices, ref[0].mesh.face_indices)

@@ -500,11 +500,13 @@ def _place_instances(protos, depsgraph, shaded):
     return out, counts, emits, notes
 
 
+_PLACED = Memo(PER_MESH)     # a prototype's arrays, an instance's matrix -> its placed geometry
+
+
 def _placed(src, M, name):
     """A copy of ``src`` (read at the identity) placed by the world matrix ``M``; a mirroring
     matrix reverses every face's ring so faces stay counter-clockwise seen from the front."""
     m = src.mesh
-    verts = m.verts @ M[:3, :3].T + M[:3, 3]
     flipped = float(np.linalg.det(M[:3, :3])) < 0
     L = m.face_indices.size
     if flipped:
@@ -518,9 +520,22 @@ def _placed(src, M, name):
     def corners(a):
         return None if a is None else a[perm]
 
-    mesh = MeshInput(verts, m.face_offsets, m.face_indices[perm], m.face_rho, m.face_emission, name,
+    def geometry():
+        out = (m.verts @ M[:3, :3].T + M[:3, 3], m.face_indices[perm],
+               None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
+        for a in out:                    # read only, as a read mesh's arrays
+            if a is not None:
+                a.flags.writeable = False
+        return out
+    held = (m.verts, m.face_indices, m.face_offsets, m.corner_normal)
+    # a relight places the same prototype's arrays again: the same arrays, so what the bake keys
+    # on them (face spans, the meshes' key) is found, not made for every instance again
+    verts, indices, normals = _PLACED.of(held, geometry, np.asarray(M, dtype=np.float64).tobytes()) \
+        if all(a is None or not a.flags.writeable for a in held) else geometry()
+
+    mesh = MeshInput(verts, m.face_offsets, indices, m.face_rho, m.face_emission, name,
                      corners(m.corner_rho), corners(m.corner_emission), m.face_material,
-                     corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M),
+                     corner_normal=normals,
                      face_triangles=reversed_rings(m.face_triangles, np.diff(m.face_offsets)) if flipped
                      else m.face_triangles, face_glossy=m.face_glossy,
                      transmit=_placed_transmit(m.transmit, perm))
