@@ -160,8 +160,9 @@ class BakeJob:
         instancers = None if settings.include_others else {_source_of(o).name for o in objects
                                                            if _source_of(o) is not None}
         depsgraph = context.evaluated_depsgraph_get()
+        cache = cache if cache is not None else session_cache(settings.cache_dir)
         t = time.perf_counter()
-        scene_input = read.read_scene(depsgraph, targets, others, instancers)
+        scene_input = read.read_scene(depsgraph, targets, others, instancers, cache)
         light_notes = []
         if settings.use_lights:
             from .read.lights import read_lights
@@ -170,7 +171,7 @@ class BakeJob:
             scene_input.lights, scene_input.world = tuple(lights), world
         job = cls(scene_input, settings)
         job.notes += write_notes + light_notes
-        job.cache = cache if cache is not None else session_cache(settings.cache_dir)
+        job.cache = cache
         job.timings["read"] = time.perf_counter() - t
         return job
 

@@ -14,11 +14,11 @@ import hashlib
 import numpy as np
 
 from ...core.mesh.ngons import bent_faces
-from ...core.runtime.cache import Memo
+from ...core.runtime.cache import Memo, PER_MESH
 
 __all__ = ["bent_ngon_triangles", "reversed_rings"]
 
-_ROWS = Memo(64)       # the rows' values -> the same read-only array (a relight reads them again)
+_ROWS = Memo(PER_MESH)       # the rows' values -> the same read-only array (a relight reads them again)
 
 
 def _kept(rows):

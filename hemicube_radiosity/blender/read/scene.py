@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.mesh.patches import MeshInput
-from ...core.runtime.cache import Memo
+from ...core.runtime.cache import Memo, PER_MESH, inverse
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.notes import Note, note, subject_and_kind
 from . import instances as inst_reader
@@ -254,9 +254,27 @@ def mesh_corner_normals(me) -> np.ndarray:
 def _normals_in_world(n, M):
     """Unit normals ``n`` (L, 3) in local space carried to world space by ``M`` (4, 4): the inverse
     transpose, so they stay on the side of the surface they were on (a mirror included)."""
-    w = np.asarray(n, dtype=np.float64) @ np.linalg.inv(np.asarray(M, dtype=np.float64)[:3, :3])
+    w = np.asarray(n, dtype=np.float64) @ inverse(np.asarray(M, dtype=np.float64)[:3, :3])
     length = np.linalg.norm(w, axis=1, keepdims=True)
     return np.divide(w, length, out=np.zeros_like(w), where=length > 0)
+
+
+_IN_WORLD = Memo(PER_MESH)       # (corner normals, corner loops), matrix -> the world's, read only
+
+
+def _world_corner_normals(cn, M, corner_loop):
+    """``_normals_in_world(cn, M)[corner_loop]``, made once per pair of arrays (a relight reads
+    the same ones: :func:`.split_normals.cycles_corner_normals` and :func:`_welded` keep them)
+    and matrix: the same read-only array, which what the bake keys on it finds again."""
+    M = np.asarray(M, dtype=np.float64)
+
+    def make():
+        out = _normals_in_world(cn, M)[corner_loop]
+        out.flags.writeable = False
+        return out
+    if cn.flags.writeable or corner_loop.flags.writeable:     # may change in place: made every time
+        return _normals_in_world(cn, M)[corner_loop]
+    return _IN_WORLD.of((cn, corner_loop), make, M.tobytes())
 
 
 def _newell(verts, corner_vertex, poly_start, poly_total):
@@ -312,7 +330,7 @@ def _in_world(obj, depsgraph, co, lv):
     return co @ M[:3, :3].T + M[:3, 3], used, M, det < 0
 
 
-_WELDED = Memo(64)       # digest of a mesh's arrays in world space -> _welded's (a relight reads them again)
+_WELDED = Memo(PER_MESH)       # digest of a mesh's arrays in world space -> _welded's (a relight reads them again)
 
 
 def _welded(verts_w, used, flipped, lv, le, ps, pt, mi, sm, sh):
@@ -386,7 +404,7 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
     mesh = MeshInput(verts, offsets, indices, rho, em, obj.name,
                      _within_faces(corner_rho, offsets, rho), _within_faces(corner_em, offsets, em),
                      material_ids(mats)[mi],
-                     corner_normal=None if cn is None else _normals_in_world(cn, M)[corner_loop],
+                     corner_normal=None if cn is None else _world_corner_normals(cn, M, corner_loop),
                      face_triangles=reversed_rings(tris, pt) if flipped else tris,
                      face_glossy=glossy if np.any(glossy > 0) else None,
                      transmit=mesh_transmit(per_slot, mi, mi[loop_face], corner_loop))
@@ -397,11 +415,12 @@ def read_object(obj, depsgraph, bake=True, shaded=None) -> ObjectSource:
                         corner_rho, corner_em)
 
 
-def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
+def read_scene(depsgraph, objects, others=(), instancers=(), cache=None) -> SceneInput:
     """``objects`` are baked; ``others`` take part as occluders/emitters only, and so do the
     instances (:mod:`.instances`) of the instancers named in ``instancers`` (None: of every
     instancer the render shows). The materials that Cycles must evaluate are evaluated for all of
-    them in one batch (:func:`.shading.shade`).
+    them in one batch (:func:`.shading.shade`; ``cache``: the bake's cache, whose folder keeps
+    those evaluations too).
 
     An object that cannot be baked (no faces, every face of zero area, positions or transform
     not finite, a zero scale: :func:`read_object`'s :class:`ReadError`) is left out with one note
@@ -412,7 +431,7 @@ def read_scene(depsgraph, objects, others=(), instancers=()) -> SceneInput:
     protos, made = inst_reader.gather(depsgraph, instancers)
     try:
         protos_obs = [p.ob for p in protos]
-        shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph)
+        shaded = shading.shade(list(objects) + list(others) + protos_obs, depsgraph, cache)
         out, skipped, problems, only_instancing = [], [], [], []
         for o in objects:
             try:
@@ -481,11 +500,13 @@ def _place_instances(protos, depsgraph, shaded):
     return out, counts, emits, notes
 
 
+_PLACED = Memo(PER_MESH)     # a prototype's arrays, an instance's matrix -> its placed geometry
+
+
 def _placed(src, M, name):
     """A copy of ``src`` (read at the identity) placed by the world matrix ``M``; a mirroring
     matrix reverses every face's ring so faces stay counter-clockwise seen from the front."""
     m = src.mesh
-    verts = m.verts @ M[:3, :3].T + M[:3, 3]
     flipped = float(np.linalg.det(M[:3, :3])) < 0
     L = m.face_indices.size
     if flipped:
@@ -499,9 +520,22 @@ def _placed(src, M, name):
     def corners(a):
         return None if a is None else a[perm]
 
-    mesh = MeshInput(verts, m.face_offsets, m.face_indices[perm], m.face_rho, m.face_emission, name,
+    def geometry():
+        out = (m.verts @ M[:3, :3].T + M[:3, 3], m.face_indices[perm],
+               None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
+        for a in out:                    # read only, as a read mesh's arrays
+            if a is not None:
+                a.flags.writeable = False
+        return out
+    held = (m.verts, m.face_indices, m.face_offsets, m.corner_normal)
+    # a relight places the same prototype's arrays again: the same arrays, so what the bake keys
+    # on them (face spans, the meshes' key) is found, not made for every instance again
+    verts, indices, normals = _PLACED.of(held, geometry, np.asarray(M, dtype=np.float64).tobytes()) \
+        if all(a is None or not a.flags.writeable for a in held) else geometry()
+
+    mesh = MeshInput(verts, m.face_offsets, indices, m.face_rho, m.face_emission, name,
                      corners(m.corner_rho), corners(m.corner_emission), m.face_material,
-                     corner_normal=None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M),
+                     corner_normal=normals,
                      face_triangles=reversed_rings(m.face_triangles, np.diff(m.face_offsets)) if flipped
                      else m.face_triangles, face_glossy=m.face_glossy,
                      transmit=_placed_transmit(m.transmit, perm))

@@ -59,14 +59,15 @@ import numpy as np
 
 from ...core.runtime.notes import warning
 from .face_emission import sample_faces
-from .shading_key import KEPT, evaluation_key
+from .shading_key import KEPT, object_keys
 from .materials import follow, uses_nodes
 from .visibility import world_matrix
 
 __all__ = ["Shaded", "classify", "may_emit", "shade", "evaluate", "object_independent",
            "missing_images", "output_node"]
 
-# the last evaluations of this session, by :func:`.shading_key.evaluation_key`
+# the last evaluations of this session: {key of an object or constant material
+# (:func:`.shading_key.object_keys`): its values, ('run', object name): the names it was run with}
 _EVALUATED: OrderedDict = OrderedDict()
 
 ATTRIBUTE = "_hr_shading"
@@ -528,20 +529,22 @@ def _remove(scene, made_obs, made_meshes):
     """Remove the temporary objects, then their meshes, then the temporary scene."""
     import bpy
 
-    for _, ob in made_obs:
-        try:
-            bpy.data.objects.remove(ob)
-        except ReferenceError:          # joined into another copy: Blender removed it
-            pass
-    for me in made_meshes:
-        try:
-            bpy.data.meshes.remove(me)
-        except ReferenceError:
-            pass
+    def alive(ids):
+        out = []
+        for i in ids:
+            try:
+                i.name
+            except ReferenceError:      # joined into another copy: Blender removed it
+                continue
+            out.append(i)
+        return out
+    # in batches: one by one, each removal scans every object (5 s of the staircase's relight)
+    bpy.data.batch_remove(alive(ob for _, ob in made_obs))
+    bpy.data.batch_remove(alive(made_meshes))
     bpy.data.scenes.remove(scene)
 
 
-def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sampled=()):
+def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sampled=(), runs_out=None):
     """Bake albedo and emission of ``objects`` (original mesh objects) at every corner of their
     evaluated meshes, and of the ``constants`` materials on a quad each, in one temporary scene.
     ``emit`` False: no material can emit, the EMIT bake is skipped (zeros). ``stand_ins``:
@@ -552,6 +555,7 @@ def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sample
     Returns ({object name: (rho (L,3), emission (L,3), glossy (L,3))}, {material name_full: (rho,
     em, glossy)}, seconds,
     {object name: (L, 3) each loop's face mean emission}).
+    ``runs_out``: a list, given the names of the objects of each run (a join, or one object).
     Raises RuntimeError when Cycles cannot bake (no Cycles, a bake error).
     """
     import bpy
@@ -565,6 +569,8 @@ def evaluate(objects, depsgraph, constants=(), emit=True, stand_ins=None, sample
         for _, ob in made_obs:
             scene.collection.objects.link(ob)
         runs = _join_batches(scene, list(made_obs), made_obs, made_meshes)
+        if runs_out is not None:
+            runs_out += [r.names for r in runs]
         constants = list(constants)
         if constants:
             me = _quad_mesh([_stand_in_for(m, stand_ins) for m in constants])
@@ -604,13 +610,16 @@ def _matrix(M):
     return Matrix([list(map(float, row)) for row in M])
 
 
-def _copied(evaluated):
-    """(corners, materials, face emission) with every array copied: what is kept is never what
-    a reader holds."""
-    def copy(v):
-        return {k: copy(x) for k, x in v.items()} if isinstance(v, dict) else \
-            tuple(np.array(x) for x in v) if isinstance(v, tuple) else np.array(v)
-    return tuple(copy(v) for v in evaluated)
+def _copied(value):
+    """``value`` (dicts and tuples of arrays, None) with every array copied: what is kept is
+    never what a reader holds."""
+    if value is None:
+        return None
+    if isinstance(value, dict):
+        return {k: _copied(x) for k, x in value.items()}
+    if isinstance(value, tuple):
+        return tuple(_copied(x) for x in value)
+    return np.array(value)
 
 
 def _classified(objects, depsgraph, out, stand_ins):
@@ -652,28 +661,93 @@ def _classified(objects, depsgraph, out, stand_ins):
     return need, constants, emit, sampled
 
 
-def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled):
+def _disk_key(key) -> str:
+    """The cache folder's name for an evaluation kept under ``key`` (an object's or material's,
+    or ('run', object name)): this Blender's build in it (Cycles evaluates)."""
+    import bpy
+
+    from ...core.runtime.cache import cache_key
+    build = f"{bpy.app.version_string} {getattr(bpy.app, 'build_hash', b'')!r}".encode()
+    return cache_key(b"shading " + build, key)
+
+
+def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled, cache=None):
     """Fill ``out``'s corners, materials and face emission from Cycles, or from one of the last
-    :data:`.shading_key.KEPT` evaluations when nothing they depend on changed."""
-    key = evaluation_key(need, depsgraph, constants, emit, stand_ins, sampled)
-    if key is not None and key in _EVALUATED:       # nothing it depends on changed
-        _EVALUATED.move_to_end(key)
-        out.corners, out.materials, out.face_emission = _copied(_EVALUATED[key])
+    :data:`.shading_key.KEPT` evaluations where nothing they depend on changed: each object and
+    constant material by its own key (:func:`.shading_key.object_keys`), so a relight that
+    changed an emitter's strength asks Cycles again for that material's objects only (the
+    staircase hall: 5 of 755, where every object's evaluation took 7-13 s). An object is asked
+    with every object it was joined with the last time (:func:`_join_batches`), in the same
+    order, so each run is the one a whole evaluation makes, and its values the same, bit for bit.
+    ``cache``: a :class:`...core.runtime.cache.FormFactorCache`; with a folder the evaluations
+    are kept there too (on disk only), so a relight in a new process (``--cache``) asks Cycles
+    only what changed as well."""
+    keys = object_keys(need, depsgraph, constants, emit, stand_ins, sampled)
+    if keys is None:                                # cannot be told: ask Cycles for everything
+        out.corners, out.materials, out.seconds, out.face_emission = evaluate(
+            need, depsgraph, constants, emit, stand_ins, sampled)
         return
-    out.corners, out.materials, out.seconds, out.face_emission = evaluate(
-        need, depsgraph, constants, emit, stand_ins, sampled)
-    if key is not None:
-        _EVALUATED[key] = _copied((out.corners, out.materials, out.face_emission))
-        while len(_EVALUATED) > KEPT:
-            _EVALUATED.popitem(last=False)
+    ob_keys, mat_keys = keys
+
+    disk = cache if cache is not None and getattr(cache, "directory", None) else None
+    read = {}
+
+    def kept(key):
+        for gen in reversed(_EVALUATED.values()):
+            if key in gen:
+                return gen[key]
+        if disk is not None:
+            if key not in read:
+                read[key] = disk.get(_disk_key(key), remember=False)
+            return read[key]
+        return None
+    names = [o.name for o in need]
+    ask = {n for n, k in zip(names, ob_keys) if kept(k) is None}
+    for n in list(ask):                             # with the objects of their last runs
+        run = kept(("run", n))
+        ask.update(run if run is not None else ())
+    todo = [o for o in need if o.name in ask]
+    todo_c = [m for m, k in zip(constants, mat_keys) if kept(k) is None]
+    corners, materials, face_em, runs = {}, {}, {}, []
+    if todo or todo_c:
+        corners, materials, out.seconds, face_em = evaluate(todo, depsgraph, todo_c, emit, stand_ins, sampled, runs)
+    gen = {}
+    for n, k in zip(names, ob_keys):
+        v = (corners.get(n), face_em.get(n)) if n in ask else kept(k)
+        gen[k] = _copied(v)
+        if v[0] is not None:
+            out.corners[n] = v[0]
+        if v[1] is not None:
+            out.face_emission[n] = v[1]
+    asked_c = {m.name_full for m in todo_c}
+    for m, k in zip(constants, mat_keys):
+        v = materials.get(m.name_full) if m.name_full in asked_c else kept(k)
+        gen[k] = _copied(v)
+        if v is not None:
+            out.materials[m.name_full] = v
+    for run in runs:
+        for n in run:
+            gen[("run", n)] = run
+    if disk is not None:                            # what Cycles was asked, for a new process
+        for k in [k for n, k in zip(names, ob_keys) if n in ask] + [("run", n) for run in runs for n in run] \
+                + [k for m, k in zip(constants, mat_keys) if m.name_full in asked_c]:
+            disk.put(_disk_key(k), gen[k], remember=False)
+    for old in _EVALUATED.values():                 # the runs of the objects not asked again
+        for n in names:
+            if ("run", n) not in gen and ("run", n) in old:
+                gen[("run", n)] = old[("run", n)]
+    out.corners, out.materials, out.face_emission = _copied((out.corners, out.materials, out.face_emission))
+    _EVALUATED[object()] = gen
+    while len(_EVALUATED) > KEPT:
+        _EVALUATED.popitem(last=False)
 
 
-def shade(objects, depsgraph) -> Shaded:
+def shade(objects, depsgraph, cache=None) -> Shaded:
     """Classify the materials of ``objects`` (original mesh objects) and let Cycles evaluate the
     ones that need it, in one batch, unless nothing that depends on changed since one of the
     last :data:`.shading_key.KEPT` evaluations in this session (:func:`.shading_key.evaluation_key`:
-    a relight of new lamps asks Cycles nothing). Never raises for a Cycles problem: ``failed``
-    says why."""
+    a relight of new lamps asks Cycles nothing; ``cache``: also what a cache folder kept,
+    :func:`_evaluated`). Never raises for a Cycles problem: ``failed`` says why."""
     import bpy
 
     out = Shaded()
@@ -683,7 +757,7 @@ def shade(objects, depsgraph) -> Shaded:
         if not need and not constants:
             return out
         try:
-            _evaluated(out, need, depsgraph, list(constants.values()), emit, stand_ins, sampled)
+            _evaluated(out, need, depsgraph, list(constants.values()), emit, stand_ins, sampled, cache)
         except (RuntimeError, AttributeError, TypeError) as ex:   # no Cycles, a bake refused
             out.failed = f"Cycles could not evaluate the materials ({str(ex).splitlines()[0]})"
         return out

@@ -13,7 +13,8 @@ reader keeps the last few evaluations in the session under it (:data:`KEPT`).
 
 Where it cannot be sure, it gives None and Cycles is asked: an image edited in Blender and not
 saved (``is_dirty``: its pixels are not hashed), or an image whose file changed on disk since
-(its modification time is in the key). A relight in a new process asks Cycles again.
+(its modification time is in the key). A relight in a new process asks Cycles again, unless
+the bake's cache folder kept the evaluations (:func:`.shading._evaluated`).
 """
 from __future__ import annotations
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from .materials import uses_nodes
 
-__all__ = ["evaluation_key", "KEPT"]
+__all__ = ["evaluation_key", "object_keys", "KEPT"]
 
 #: Evaluations kept in the session, the most recent ones (each holds per-corner arrays).
 KEPT = 2
@@ -67,6 +68,40 @@ def evaluation_key(objects, depsgraph, constants, emit, stand_ins, sampled):
     except _Unsure:
         return None
     return h.hexdigest()
+
+
+def object_keys(objects, depsgraph, constants, emit, stand_ins, sampled):
+    """(one key per object of ``objects``, one per material of ``constants``): what the
+    evaluation of each alone depends on (as :func:`evaluation_key`: its evaluated mesh, world
+    matrix and materials, and the arguments that shape every run: whether anything may emit, the
+    stand-ins, the materials sampled), each material hashed once; or None where that cannot be
+    told. A relight that changed one emitter's strength asks Cycles again for the objects of
+    that material only (:func:`.shading._evaluated`)."""
+    common = repr((bool(emit), sorted(sampled), sorted(stand_ins or ()))).encode()
+    digests = {}
+
+    def material(m):
+        name = None if m is None else m.name_full
+        if name not in digests:
+            h = hashlib.blake2b(digest_size=20)
+            _material(h, m, set())
+            digests[name] = h.digest()
+        return digests[name]
+    try:
+        keys = []
+        for obj in objects:
+            ob = obj.evaluated_get(depsgraph)
+            h = hashlib.blake2b(common, digest_size=20)
+            h.update(obj.name_full.encode())
+            h.update(np.asarray(ob.matrix_world, dtype=np.float64).tobytes())
+            _mesh(h, ob.data)
+            for s in ob.material_slots:
+                h.update(material(getattr(s.material, "original", s.material)))
+            keys.append("o" + h.hexdigest())
+        consts = ["m" + hashlib.blake2b(common + material(m), digest_size=20).hexdigest() for m in constants]
+    except _Unsure:
+        return None
+    return keys, consts
 
 
 def _mesh(h, me):

@@ -4,9 +4,12 @@ corner normals as Cycles of this Blender stores them, read with the mesh's verte
 triangles."""
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ...core.mesh.cycles_normals import shading_normals
+from ...core.runtime.cache import PER_MESH, Memo
 
 __all__ = ["cycles_corner_normals", "CYCLES_SPLITS_VERTICES"]
 
@@ -33,6 +36,21 @@ def cycles_corner_normals(me, normals, loop_vert, loop_edge, poly_start, poly_to
     vn = np.empty(len(me.vertices) * 3, np.float32)
     if len(vn):
         me.vertices.foreach_get("normal", vn)
-    return shading_normals(normals, vn.reshape(-1, 3), loop_vert, loop_edge, poly_start, poly_total,
-                           face_smooth, edge_sharp, tl.reshape(-1, 3),
-                           custom=bool(getattr(me, "has_custom_normals", False)))
+    custom = bool(getattr(me, "has_custom_normals", False))
+    arrays = (normals, vn, loop_vert, loop_edge, poly_start, poly_total, face_smooth, edge_sharp, tl)
+    h = hashlib.sha256(b"custom" if custom else b"")
+    for a in arrays:
+        a = np.ascontiguousarray(a)
+        h.update(str((a.dtype, a.shape)).encode() + a.tobytes())
+
+    def make():
+        out = shading_normals(normals, vn.reshape(-1, 3), loop_vert, loop_edge, poly_start, poly_total,
+                              face_smooth, edge_sharp, tl.reshape(-1, 3), custom=custom)
+        out.flags.writeable = False
+        return out
+    return _SHADED.get(h.digest(), make)
+
+
+# a mesh's arrays (by value) -> its corner normals as Cycles shades them, read only: a relight
+# reads the same meshes again (0.08 s of godot_zdm2's, 0.6 s of the staircase's 775 meshes)
+_SHADED = Memo(PER_MESH)

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..rays import embree_available, embree_scene, ray_offsets
+from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.geometry import tangent_frames
 from ..util.sampling import cosine_directions
 from .direct import LUMA
@@ -131,7 +132,7 @@ def seen_direct(ctx, stand) -> np.ndarray | None:
     r_pair, c_pair, f_pair = rows[pair], cols[pair], F.data[pair].astype(np.float64)
     receivers = np.zeros(K, bool)
     receivers[r_pair] = True
-    hx, hp, hr, hw = _hits(ctx, *_receiver_points(c, stand, p.areas, receivers))
+    hx, hp, hr, hw = _cached_hits(ctx, *_receiver_points(c, stand, p.areas, receivers))
     key_pair = r_pair * K + c_pair
     key_hit = hr * K + c.of[hp]
     order = np.argsort(key_pair)
@@ -168,6 +169,14 @@ def _receiver_points(clusters, stand, areas, receivers):
     index = rows[rep] * MIN_POINTS + j
     w = w[rep] / m[rep]
     return rows[rep], index, k[rep], w / np.bincount(k[rep], weights=w, minlength=len(clusters))[k[rep]]
+
+
+def _cached_hits(ctx, rows, index, k, w):
+    """:func:`_hits`, kept in ``ctx.cache`` under the patches' geometry and the points: rays
+    only (a relight's points are the same where the same clusters vary; 0.4 s of godot_zdm2's)."""
+    key = cache_key(geometry_key(ctx.patches), ("seen-hits", RAYS, PER_POINT) +
+                    tuple(array_key(a).hex() for a in (ctx.patches.owner, rows, index, k, w)))
+    return tuple(cached(ctx.cache, key, lambda: _hits(ctx, rows, index, k, w)))
 
 
 def _hits(ctx, rows, index, k, w):

@@ -23,9 +23,9 @@ from dataclasses import replace
 import numpy as np
 
 from .patches import MeshInput, read_only
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, PER_MESH
 
-_SPANS = Memo(64, max_bytes=256 << 20)     # a mesh's arrays -> face_spans (the last bakes')
+_SPANS = Memo(PER_MESH, max_bytes=256 << 20)     # a mesh's arrays -> face_spans (the last bakes')
 
 __all__ = ["face_spans", "pieces_at_least", "patches_about", "CLUSTER_SPAN", "passing_size"]
 

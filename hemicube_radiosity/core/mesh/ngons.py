@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .patches import MeshInput, PatchError, check_faces, read_only
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, PER_MESH
 
 __all__ = ["ear_clip", "to_tris_and_quads", "bent_faces", "BENT"]
 
@@ -44,7 +44,7 @@ BENT = 1e-4
 #: Cycles renders it.
 WARPED = 1e-2
 
-_SPLIT = Memo(64, max_bytes=256 << 20)     # a mesh's arrays -> to_tris_and_quads (the last bakes')
+_SPLIT = Memo(PER_MESH, max_bytes=256 << 20)     # a mesh's arrays -> to_tris_and_quads (the last bakes')
 
 
 def _is_convex(p: np.ndarray) -> bool:

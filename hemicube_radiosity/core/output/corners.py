@@ -11,49 +11,78 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from ..runtime.cache import cache_key, cached, geometry_key
+from ..mesh.patches import meshes_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
 from ..util.unique import unique_rows
 
 __all__ = ["corner_values", "vertex_mean", "corner_columns", "corner_sum"]
 
 
-def corner_values(elements: PatchSet, meshes, which) -> np.ndarray | None:
+def corner_values(elements: PatchSet, meshes, which, cache=None) -> np.ndarray | None:
     """(N, 4, 3) ``which`` ('rho' or 'emission') at every corner of the output ``elements``: the
     source mesh's corner value (``MeshInput.corner_<which>``) where an element corner is a corner
     of its source face, elsewhere the mean of its source face's corner values (the face's own
     value where the mesh has none); None when no mesh has corner values. (The mean, not the
     element's own value: with a specular bounce (:mod:`..mesh.specular`) the faces' values are
-    what the solve bounces, the corners' what the surface shows.)"""
+    what the solve bounces, the corners' what the surface shows.) ``cache``: where the
+    geometry-only part (which source corner each element corner is: :func:`_corner_slots`) is
+    kept (a relight's colours change, not that)."""
     if meshes is None or all(getattr(m, "corner_" + which) is None for m in meshes):
         return None
-    keys, vals, means = [], [], []
-    for oi, m in enumerate(meshes):
+    vals, means = [], []
+    for m in meshes:
         sizes = np.diff(m.face_offsets)
-        face = np.repeat(np.arange(sizes.size), sizes)
         v = getattr(m, "corner_" + which)
         per_face = np.asarray(getattr(m, "face_" + which), float)
         if v is None:
-            v = per_face[face]
+            v = per_face[np.repeat(np.arange(sizes.size), sizes)]
         else:
             v = np.asarray(v, float)
             per_face = np.add.reduceat(v, m.face_offsets[:-1], axis=0) / sizes[:, None]
-        pos = np.asarray(m.verts, float)[m.face_indices]
-        keys.append(np.column_stack([np.full(face.size, oi), face, pos]))
         vals.append(v)
         means.append(per_face)
-    first = np.concatenate([[0], np.cumsum([len(a) for a in means])])
-    means = np.concatenate(means)
-    keys, vals = np.concatenate(keys), np.concatenate(vals)
-    ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
-                         elements.verts[elements.corner_ids().reshape(-1)]], axis=1)
-    _, inv = unique_rows(np.concatenate([keys, ek]), return_inverse=True)
-    inv = inv.reshape(-1)
-    slot = np.full(inv.max() + 1, -1)
-    slot[inv[:len(keys)]] = np.arange(len(keys))
-    found = slot[inv[len(keys):]]
-    own = np.repeat(means[first[elements.owner] + elements.source_face], 4, axis=0)
-    out = np.where((found >= 0)[:, None], vals[np.maximum(found, 0)], own)
+    means, vals = np.concatenate(means), np.concatenate(vals)
+    found, own_face = _corner_slots(elements, meshes, cache)
+    out = np.where((found >= 0)[:, None], vals[np.maximum(found, 0)], np.repeat(means[own_face], 4, axis=0))
     return out.reshape(len(elements), 4, 3)
+
+
+_SLOTS = Memo(4)       # (elements' arrays), meshes' geometry -> _corner_slots (rho and emission ask)
+
+
+def _corner_slots(elements, meshes, cache=None):
+    """(found (N * 4,) the source corner (over the meshes' corners, in order) at each element
+    corner, -1 where it is none; own_face (N,) each element's face over the meshes' faces):
+    geometry only, made once per elements and meshes in this process and kept in ``cache``."""
+    def make():
+        keys, first = [], [0]
+        for oi, m in enumerate(meshes):
+            sizes = np.diff(m.face_offsets)
+            face = np.repeat(np.arange(sizes.size), sizes)
+            pos = np.asarray(m.verts, float)[m.face_indices]
+            keys.append(np.column_stack([np.full(face.size, oi), face, pos]))
+            first.append(first[-1] + sizes.size)
+        keys = np.concatenate(keys)
+        ek = np.concatenate([np.repeat(np.column_stack([elements.owner, elements.source_face]), 4, axis=0),
+                             elements.verts[elements.corner_ids().reshape(-1)]], axis=1)
+        _, inv = unique_rows(np.concatenate([keys, ek]), return_inverse=True)
+        inv = inv.reshape(-1)
+        slot = np.full(inv.max() + 1, -1)
+        slot[inv[:len(keys)]] = np.arange(len(keys))
+        out = (slot[inv[len(keys):]], np.asarray(first)[elements.owner] + elements.source_face)
+        for a in out:
+            a.flags.writeable = False
+        return out
+    mk = meshes_key(meshes)
+    arrays = (elements.verts, elements.polys, elements.owner, elements.source_face)
+
+    def stored():
+        if cache is None:
+            return make()
+        key = cache_key(geometry_key(elements) + mk + array_key(elements.owner) + array_key(elements.source_face),
+                        ("corner-slots",))
+        return tuple(cached(cache, key, make))
+    return _SLOTS.of(arrays, stored, mk)
 
 
 def vertex_mean(elements: PatchSet, per_corner) -> np.ndarray:

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..mesh.patches import PatchSet
+from ..mesh.patches import PatchSet, read_only
+from ..runtime.cache import Memo
 from ..util.geometry import barycentric
 from .interpolate import inverse_bilinear
 
@@ -35,6 +36,22 @@ def shading_normals(elements: PatchSet, meshes, normals) -> np.ndarray:
     ``elements.owner``. Returns ``normals`` itself when no mesh has corner normals."""
     if meshes is None or all(getattr(m, "corner_normal", None) is None for m in meshes):
         return normals
+    held = tuple(a for m in meshes for a in (m.corner_normal, m.verts, m.face_offsets, m.face_indices))
+    if not all(read_only(a) for a in held):           # may change in place: made every time
+        return _shading_normals(elements, meshes, normals)
+
+    def make():
+        out = _shading_normals(elements, meshes, normals)
+        out.flags.writeable = False
+        return out
+    # geometry only: a relight's elements, normals and meshes' arrays are the same objects
+    return _SHADED.of((elements.verts, elements.polys, elements.owner, elements.source_face, normals) + held, make)
+
+
+_SHADED = Memo(4)        # the elements', normals' and meshes' arrays -> shading_normals
+
+
+def _shading_normals(elements, meshes, normals):
     out = np.array(normals, dtype=np.float64, copy=True)
     polys = elements.polys
     p, c = np.nonzero(polys >= 0)

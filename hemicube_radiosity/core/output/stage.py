@@ -211,7 +211,7 @@ def _with_corner_colours(ctx, E_v, rho_v, light_v, reflected_v, creased=None):
     vertex's value is then the mean of its corners'; the corners keep what the mean loses where faces meet with
     different colours or light at one vertex (a UV seam, a texture's tiles, a crease): what
     Cycles shows at each face corner, and what the writer writes."""
-    rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w) for w in ("rho", "emission"))
+    rho_c, em_c = (corner_values(ctx.elements, ctx.meshes, w, ctx.cache) for w in ("rho", "emission"))
     ctx.corner_rho = rho_c
     if rho_c is None and em_c is None and creased is None:
         return E_v + rho_v * light_v + reflected_v

@@ -20,7 +20,13 @@ import numpy as np
 from ..util.sparse import CSR
 from .stored import LAYOUT, pack, unpack
 
-__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key"]
+__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key", "PER_MESH",
+           "inverse"]
+
+#: Entries of the memos kept per mesh of a scene (its welded arrays, face spans, n-gon splits):
+#: a scene of hundreds of objects (the staircase hall's 775) must find every one of them again on
+#: a relight, or each is made anew and every product keyed on its arrays' identity is too.
+PER_MESH = 4096
 
 
 #: In every key: a cache folder written by a version that computed some entry differently (how
@@ -54,6 +60,7 @@ class Memo:
         self.max_bytes = max_bytes
         self.refresh = refresh
         self._store: dict = {}
+        self._held = 0                       # bytes of the objects held (:func:`_nbytes_of`)
 
     def get(self, key, make):
         """The value under ``key``, made by ``make()`` when absent."""
@@ -79,7 +86,9 @@ class Memo:
         """The entry (objects held, value) under ``key``, or None (always, with ``keep`` <= 0)."""
         hit = self._store.get(key) if self.keep > 0 else None
         if hit is not None and self.refresh:                # the most recently used last
-            self._store[key] = hit = self._store.pop(key, hit)   # (another thread may have dropped it)
+            if self._store.pop(key, None) is None:          # (another thread dropped it)
+                self._held += _nbytes_of(hit[0])
+            self._store[key] = hit
         return hit
 
     def _put(self, key, objs: tuple, value) -> None:
@@ -88,16 +97,25 @@ class Memo:
         if self.keep <= 0:
             return
         store = self._store
-        store.pop(key, None)
+        self._drop(key)
         size = _nbytes_of(objs)
+        # the bytes held counted as entries come and go (summed over every entry on each put,
+        # a relight of 775 objects spent a second in it)
         while store and (len(store) >= self.keep or self.max_bytes is not None and
-                         sum(_nbytes_of(held) for held, _ in store.values()) + size > self.max_bytes):
-            store.pop(next(iter(store)))
+                         self._held + size > self.max_bytes):
+            self._drop(next(iter(store)))
         store[key] = (objs, value)
+        self._held += size
+
+    def _drop(self, key) -> None:
+        hit = self._store.pop(key, None)
+        if hit is not None:
+            self._held -= _nbytes_of(hit[0])
 
     def clear(self) -> None:
         """Forget every value kept (and let go of the objects held)."""
         self._store.clear()
+        self._held = 0
 
     def __len__(self) -> int:
         return len(self._store)
@@ -105,6 +123,22 @@ class Memo:
 
 def _nbytes_of(objs) -> int:
     return sum(int(getattr(o, "nbytes", 0)) for o in objs)
+
+
+_INVERSES = Memo(PER_MESH)
+
+
+def inverse(M) -> np.ndarray:
+    """``np.linalg.inv(M)`` (read only), once per matrix value: the reader and the writer invert
+    every object's matrix on every bake, and on a busy machine one LAPACK call on a 3 x 3 took
+    a millisecond or more (OpenBLAS's threads; 4 s of the staircase's relight)."""
+    M = np.asarray(M, dtype=np.float64)
+
+    def make():
+        out = np.linalg.inv(M)
+        out.flags.writeable = False
+        return out
+    return _INVERSES.get((M.shape, M.tobytes()), make)
 
 
 _GEOMETRY = Memo(16)     # (verts, polys) -> key: the last few geometries hashed
@@ -173,8 +207,10 @@ class FormFactorCache:
     def _path(self, key):
         return os.path.join(self.directory, key + ".npz")
 
-    def get(self, key: str):
-        """The CSR (or array) stored under ``key``, from memory or disk; None when absent."""
+    def get(self, key: str, remember=True):
+        """The CSR (or array) stored under ``key``, from memory or disk; None when absent.
+        ``remember`` False: an item read from disk is not kept in memory (many small items,
+        the materials' evaluations, must not push the form factors out)."""
         if key in self._mem:
             self._mem.move_to_end(key)
             return self._mem[key]
@@ -186,7 +222,8 @@ class FormFactorCache:
                 return None                     # a class this process does not know
             if item is None:
                 item = CSR.load(self._path(key))
-            self._remember(key, item)
+            if remember:
+                self._remember(key, item)
             return item
         return None
 
@@ -194,12 +231,14 @@ class FormFactorCache:
         """Whether an item is stored under ``key`` (in memory or on disk), without reading it."""
         return key in self._mem or bool(self.directory and os.path.exists(self._path(key)))
 
-    def put(self, key: str, item, disk=True) -> None:
+    def put(self, key: str, item, disk=True, remember=True) -> None:
         """Store a CSR (form factors) or an ndarray (e.g. direct-light transport) in memory and
         (unless ``disk`` is False) on disk, and so any structure of them :func:`.stored.pack`
         can hold (an output element mesh, a point set's located patches: what a relight in a
-        new process would otherwise make again); anything else in memory only."""
-        self._remember(key, item)
+        new process would otherwise make again); anything else in memory only. ``remember``
+        False: on disk only (see :meth:`get`)."""
+        if remember or not (disk and self.directory):
+            self._remember(key, item)
         if not (disk and self.directory):
             return
         packed = None if isinstance(item, (CSR, np.ndarray)) else pack(item)

@@ -27,8 +27,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import hashlib
+
 import numpy as np
 
+from ..runtime.cache import Memo
 from ..runtime.progress import Ticker
 from ..util.sparse import CSR
 from .gauss_seidel import gauss_seidel
@@ -154,6 +157,18 @@ def _progressive(F, rho, S, tol, max_it, ticker, areas, kappa):
     return B, shots, converged, {"ambient": ambient.tolist(), "sweeps": shots / max(n, 1)}
 
 
+def _setup(F, rho, method):
+    """(gamma, kappa, pockets) of F and rho (the source is not in them), kept on F for the last
+    few reflectivities: a relight solves the same F and rho several times (a source's two signed
+    parts, coloured glossy passes: eight solves of the staircase hall, each with eight products
+    for kappa)."""
+    def make():
+        gamma, kappa = gain(F, rho), amplification(F, rho)
+        return gamma, kappa, find_pockets(F, rho, gamma, kappa) if method == "gauss_seidel" else None
+    key = (hashlib.sha256(np.ascontiguousarray(rho).tobytes()).digest(), rho.shape, method)   # by value
+    return F.memo("solve-setups", lambda: Memo(4)).get(key, make)
+
+
 def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=200, areas=None,
           progress=None, cancelled=None, computed=None) -> Solution:
     """Solve ``B = S + rho F B`` for all three bands.
@@ -177,9 +192,8 @@ def solve(F: CSR, rho, source, method="gauss_seidel", tol=1e-4, max_iterations=2
     rho, S = check_inputs(F, rho, source)
     ticker = Ticker(progress, cancelled)
     rid = F.row_ids()
-    gamma, kappa = gain(F, rho), amplification(F, rho)
+    gamma, kappa, pockets = _setup(F, rho, method)
     extra = {"gain": gamma, "amplification": kappa}
-    pockets = find_pockets(F, rho, gamma, kappa) if method == "gauss_seidel" else None
     if pockets is not None:
         extra.update(pockets=len(pockets.rows), pocket_gain=pockets.gain, pocket_amplification=pockets.kappa)
     if method == "gauss_seidel":
