@@ -42,11 +42,8 @@ def _same(a, b):
             np.testing.assert_array_equal(x, y, err_msg=n)
 
 
-def test_only_what_changed_is_evaluated_again(monkeypatch):
-    obs = _scene()
-    glow, p = _glowing("Glow", _image("glow", seed=9), 2.0)
-    obs += [_grid("glow", 3, [glow], seed=10), _grid("glow_too", 2, [glow], seed=11)]
-    bpy.context.view_layer.update()
+def _count_evaluations(monkeypatch):
+    """The list each call of ``shading.evaluate`` appends its objects' sorted names to."""
     asked = []
     real = shading.evaluate
 
@@ -54,6 +51,15 @@ def test_only_what_changed_is_evaluated_again(monkeypatch):
         asked.append(sorted(o.name for o in objects))
         return real(objects, *a, **k)
     monkeypatch.setattr(shading, "evaluate", counting)
+    return asked
+
+
+def test_only_what_changed_is_evaluated_again(monkeypatch):
+    obs = _scene()
+    glow, p = _glowing("Glow", _image("glow", seed=9), 2.0)
+    obs += [_grid("glow", 3, [glow], seed=10), _grid("glow_too", 2, [glow], seed=11)]
+    bpy.context.view_layer.update()
+    asked = _count_evaluations(monkeypatch)
 
     def shade():
         return shading.shade(obs, bpy.context.evaluated_depsgraph_get())
@@ -97,13 +103,7 @@ def test_a_cache_folder_keeps_the_evaluations_for_a_new_process(monkeypatch, tmp
     glow, p = _glowing("Glow", _image("glow", seed=9), 2.0)
     obs += [_grid("glow", 3, [glow], seed=10)]
     bpy.context.view_layer.update()
-    asked = []
-    real = shading.evaluate
-
-    def counting(objects, *a, **k):
-        asked.append(sorted(o.name for o in objects))
-        return real(objects, *a, **k)
-    monkeypatch.setattr(shading, "evaluate", counting)
+    asked = _count_evaluations(monkeypatch)
 
     def shade(cache=None):
         return shading.shade(obs, bpy.context.evaluated_depsgraph_get(), cache)
