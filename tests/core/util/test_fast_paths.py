@@ -63,3 +63,19 @@ def test_summed_entries_all_zero_and_nonzero_entries():
     assert np.array_equal(k2, [1, 3]) and np.array_equal(w2, [1.0, 2.0])
     k3, w3 = nonzero_entries(key, w + 1.0)
     assert k3 is key                                       # nothing left out: the same arrays
+
+
+def test_outside_decides_as_numpys_max_and_min():
+    """mesh.contact_lines.outside (the contact cut's test of a piece against a line, on Python
+    floats) against NumPy's max and min of the same values: NaN, infinities, signed zeros."""
+    from hemicube_radiosity.core.mesh.contact_lines import outside
+    rng = np.random.default_rng(5)
+    specials = [np.nan, np.inf, -np.inf, 0.0, -0.0, 1e-300]
+    for _ in range(4000):
+        v = rng.normal(size=int(rng.integers(3, 7)))
+        for i in np.flatnonzero(rng.random(v.size) < 0.15):
+            v[i] = specials[int(rng.integers(len(specials)))]
+        lo, hi = (float(x) for x in rng.normal(size=2))
+        with np.errstate(invalid="ignore"):
+            want = bool(v.max() <= lo or v.min() >= hi)
+        assert outside(v.tolist(), lo, hi) == want, (v, lo, hi)
