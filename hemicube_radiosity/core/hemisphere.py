@@ -49,7 +49,8 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        pid, t = scene.intersect(np.repeat(x + eps[s:s + step] * n, R, axis=0), d)
+        # Embree's float32 starts rounded before they are repeated (the same values)
+        pid, t = scene.intersect(np.repeat((x + eps[s:s + step] * n).astype(np.float32), R, axis=0), d)
         out[s:s + step] = 1.0 - closed_rays(patches, d, pid, t, reach).reshape(len(x), R).mean(axis=1)
     for _ in ordered_map(chunk, range(0, len(points), step), workers if len(points) > step else 1):
         pass
