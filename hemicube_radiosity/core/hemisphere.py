@@ -49,7 +49,8 @@ def open_fraction(patches: PatchSet, points, normals, scene, reach: float, rays:
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
-        pid, t = scene.intersect(np.repeat(x + eps[s:s + step] * n, R, axis=0), d)
+        # Embree's float32 starts rounded before they are repeated (the same values)
+        pid, t = scene.intersect(np.repeat((x + eps[s:s + step] * n).astype(np.float32), R, axis=0), d)
         out[s:s + step] = 1.0 - closed_rays(patches, d, pid, t, reach).reshape(len(x), R).mean(axis=1)
     for _ in ordered_map(chunk, range(0, len(points), step), workers if len(points) > step else 1):
         pass
@@ -115,8 +116,9 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     see_through = getattr(scene, "see_through", False)
     if workers > 1 and not see_through:
         scene.occluded(points[:1], normals[:1])       # commit the scene before threads share it
-    # Embree takes float32: the directions rounded once from the same float64 sums, the
-    # origins before they are repeated (the same values as a float64 array cast whole)
+    # Embree takes float32: the directions rounded once from the same float64 sums (float64
+    # where they are tested against ``facing``), the origins before they are repeated (the same
+    # values as a float64 array cast whole)
     single = facing is None and not see_through
 
     def chunk(s):
@@ -126,10 +128,12 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
         for k in range(split if split > 1 else 0):
             m = part[s:s + step] == k
             d[m] = in_frames(local[k::split], f[m], dt)
+        # below a point's facing plane: each direction's dot with its point's facing, summed as
+        # einsum sums the repeated rows' (the same values), without repeating them
+        below = None if facing is None else (np.einsum("mrc,mc->mr", d, facing[s:s + step]) <= 0).reshape(-1)
         d = d.reshape(-1, 3)
         o = x + eps[s:s + step] * n
-        o = np.repeat(o.astype(np.float32) if single else o, R, axis=0)
-        below = None if facing is None else np.einsum("ij,ij->i", d, np.repeat(facing[s:s + step], R, axis=0)) <= 0
+        o = np.repeat(o if see_through else o.astype(np.float32), R, axis=0)
         if see_through:
             passed = scene.transmitted(o, d)
             if below is not None:

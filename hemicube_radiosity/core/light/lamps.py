@@ -259,32 +259,38 @@ def _shade(x, n, E0, pts, w, atten, occ, eps, infinite=False, facing=None):
     when ``infinite``). Rays only where E0 > 0 and w > 0; with ``facing`` (N, 3), only toward
     samples on its side (:func:`direct_irradiance`)."""
     N, S = w.shape
-    a = np.ones_like(w) if atten is None else atten
+    # no attenuation (None): a factor of 1, left out (w * 1 is w, bit for bit)
+    a = atten
     if facing is not None:
-        a = a * (np.einsum("nsc,nc->ns", pts if infinite else pts - x[:, None], facing) > 0)
+        up = np.einsum("nsc,nc->ns", pts if infinite else pts - x[:, None], facing) > 0
+        a = (np.ones_like(w) if a is None else a) * up
     wsum = w.sum(axis=1)
     if occ is None:
-        num = (w * a).sum(axis=1)
+        num = (w if a is None else w * a).sum(axis=1)
     else:
-        need = (E0 > 0)[:, None] & (w > 0) & (a > 0)
+        need = (E0 > 0)[:, None] & (w > 0)
+        if a is not None:
+            need &= a > 0
         r, s = np.nonzero(need)
         v = np.zeros((N, S))
         if r.size:
-            org = x[r] + eps[r, None] * n[r]
+            # each point's start once, then one row per ray (the same values as per ray)
+            org = (x + eps[:, None] * n)[r]
             if infinite:
                 vis = visibility(occ, org, pts[r, s], None)
             else:
                 dirs = pts[r, s] - org
                 vis = visibility(occ, org, dirs, np.full(r.size, 1.0 - 1e-4))
             v[r, s] = vis
-        num = (v * w * a).sum(axis=1)
+        num = (v * w if a is None else v * w * a).sum(axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(wsum > 0, E0 * num / wsum, 0.0)
 
 
-def _area_weights(x, n, pts, light_n):
-    """Unshadowed integrand per area sample: cos_receiver+ |cos_light| / t^2."""
-    v = pts - x[:, None]
+def _area_weights(x, n, pts, light_n, v=None):
+    """Unshadowed integrand per area sample: cos_receiver+ |cos_light| / t^2 (``v``: ``pts - x``
+    when the caller has it)."""
+    v = pts - x[:, None] if v is None else v
     t2 = np.einsum("nsc,nsc->ns", v, v)
     t = np.sqrt(t2)
     cr = np.maximum(np.einsum("nsc,nc->ns", v, n), 0.0) / t
@@ -355,10 +361,11 @@ def _sun(light, x, n, rng, samples, occ, eps, facing=None):
     out = np.zeros(len(x))
     if lit.size:
         x, n, m = x[lit], n[lit], m[lit]
-        pts = disk_samples(u[lit], dc[lit], m, dr[lit])
-        w = _area_weights(x, n, pts, m)
-        dirs = pts - x[:, None]
-        dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
+        # the disk's frame once: every receiver's disk faces the same way
+        pts = disk_samples(u[lit], dc[lit], m[:1], dr[lit])
+        v = pts - x[:, None]
+        w = _area_weights(x, n, pts, m, v)
+        dirs = v / np.linalg.norm(v, axis=-1, keepdims=True)
         out[lit] = _shade(x, n, E0[lit], dirs, w, None, occ, eps[lit], infinite=True,
                           facing=None if facing is None else facing[lit])
     return out

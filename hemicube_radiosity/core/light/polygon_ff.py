@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..util.geometry import cross3
 from ..util.unique import run_positions
 from .outline import GroupOutline
 
@@ -62,7 +63,7 @@ def polygon_form_factor(x, n, poly):
     idx = np.maximum(np.where(idx < 0, last, idx), 0)
     q = np.take_along_axis(pts, idx[..., None], axis=1)
     a, b = q, np.roll(q, -1, axis=1)
-    c = np.cross(a, b)
+    c = cross3(a, b)
     cn = np.linalg.norm(c, axis=-1)
     theta = np.arctan2(cn, np.einsum("nkc,nkc->nk", a, b))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -88,7 +89,7 @@ def distant_form_factor(n, rel, margin=1e-9):
     n = np.asarray(n, np.float64)
     rel = np.asarray(rel, np.float64)
     nxt = np.roll(rel, -1, axis=0)
-    c = np.cross(rel, nxt)
+    c = cross3(rel, nxt)
     cn = np.linalg.norm(c, axis=1)
     theta = np.arctan2(cn, np.einsum("kc,kc->k", rel, nxt))
     V = (theta * np.where(cn > 0, 1.0 / np.where(cn > 0, cn, 1.0), 0.0)) @ c
@@ -339,7 +340,7 @@ def _clipped_rows(x, n, edges, plane_normal):
     total = np.where(keep, _edge_terms(ca, cb, n), 0.0).sum(axis=1)
     exits, entries = ia & ~ib, ~ia & ib
     crossing = exits | entries
-    d = np.cross(n, plane_normal)
+    d = cross3(n, plane_normal)
     key = np.where(crossing, np.einsum("pec,pc->pe", q, d), np.inf)
     order = np.argsort(key, axis=1)
     k = crossing.sum(axis=1)
@@ -374,7 +375,7 @@ def _edge_terms_xyz(a, b, n):
 def _edge_terms(a, b, n):
     """Lambert's contour terms angle(a, b) * n . unit(a x b) of edges a -> b (.., E, 3) seen
     from the origin, with the receivers' normals ``n`` (P, 3)."""
-    c = np.cross(a, b)
+    c = cross3(a, b)
     cn = np.linalg.norm(c, axis=-1)
     theta = np.arctan2(cn, np.einsum("pec,pec->pe", a, b))
     with np.errstate(divide="ignore", invalid="ignore"):

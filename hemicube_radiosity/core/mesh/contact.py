@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .contact_pieces import assemble_pieces
-from .contact_lines import face_pieces, pieces_segments, segment_hits, split_polygon
+from .contact_lines import face_pieces, outside, pieces_segments, segment_hits, split_polygon
 from .patches import PatchSet
 from ..util.unique import run_positions, unique_ints, unique_rows
 from ..rays import ray_offsets
@@ -179,8 +179,7 @@ def _split_hits(elements, hits, a_all, m_all, d_all, len_all):
         todo = pieces.get(e) or [(_polygon(elements, e), ())]
         out = []
         for poly, tags in todo:
-            t = (poly - a) @ d
-            if t.max() <= tl or t.min() >= length - tl:
+            if outside(((poly - a) @ d).tolist(), tl, length - tl):
                 out.append((poly, tags))          # this piece lies beyond the segment
                 continue
             sp = split_polygon(poly, a, m_all[s], tl)

@@ -10,7 +10,7 @@ import numpy as np
 from ..util.unique import run_positions
 
 __all__ = ["face_pieces", "pair_segments", "pieces_segments", "row_dots", "segment_hits",
-           "split_polygon"]
+           "split_polygon", "outside"]
 
 
 def face_pieces(elements, ids, normals, faces):
@@ -134,9 +134,11 @@ def pair_segments(origin, n, cutters, face, eps):
 def split_polygon(poly, a, m, tol):
     """A convex polygon (k, 3) split by the line through ``a`` with in-plane unit normal ``m``:
     (positive side, negative side), each None when the polygon lies on the other side (corners
-    within ``tol`` of the line count as on it)."""
-    h = (poly - a) @ m
-    if h.max() <= tol or h.min() >= -tol:
+    within ``tol`` of the line count as on it). The few heights as Python floats (the same
+    doubles: NumPy's scalars and reductions cost more than the arithmetic, and a bake's contact
+    cut splits tens of thousands of pieces)."""
+    h = ((poly - a) @ m).tolist()
+    if outside(h, tol, -tol):
         return None
     pos, neg = [], []
     k = len(poly)
@@ -152,6 +154,17 @@ def split_polygon(poly, a, m, tol):
             pos.append(x)
             neg.append(x)
     return np.array(pos), np.array(neg)
+
+
+def outside(values, lo, hi) -> bool:
+    """``max(values) <= lo or min(values) >= hi`` for a short list of floats (``lo``, ``hi``
+    finite), as NumPy's max and min of their array decide it: False where one is NaN (NumPy's
+    are NaN then; their sum is too, and only then or with both infinities among them, where
+    neither bound holds either)."""
+    if max(values) <= lo or min(values) >= hi:
+        total = sum(values)
+        return total == total
+    return False
 
 
 def row_dots(x, y):

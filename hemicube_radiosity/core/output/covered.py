@@ -60,6 +60,7 @@ import numpy as np
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..util.unique import unique_ints
 from .crease import below_plane, leans, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .normals import corner_shading_normals
@@ -290,8 +291,12 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     def shares():
         scene = embree_scene(elements)
         here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
-        there = open_fraction(elements, xv[v], nv[v], scene, reach, rays=OPEN_RAYS,
-                              eps=ray_offsets(ctx.patches, owner=elements.owner[p]))
+        # once per vertex (and object): a vertex's covered corners are often several, and
+        # each point's fraction is its own rays' alone
+        _, one, of = unique_ints(v * (int(elements.owner.max(initial=0)) + 1) + elements.owner[p],
+                                 return_index=True, return_inverse=True)
+        there = open_fraction(elements, xv[v[one]], nv[v[one]], scene, reach, rays=OPEN_RAYS,
+                              eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
         return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
     k = cached(ctx.cache, key, shares)
     if creased is None:

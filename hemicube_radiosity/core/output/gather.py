@@ -23,7 +23,7 @@ from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..hemisphere import cosine_lattice
-from ..util.sparse import CSR, summed_entries
+from ..util.sparse import CSR, nonzero_entries, summed_entries
 from ..util.unique import unique_ints
 from .shared import cast_shared
 from .through import Through, cast_through
@@ -265,7 +265,9 @@ def _cast(patches, params, scene, points, normals, eps, local, step, hits, out, 
     m = len(x)
     d = in_frames(local, tangent_frames(n)).reshape(-1, 3)
     lifted = x + eps[s:s + step] * n
-    pid, tfar = scene.intersect(np.repeat(lifted, R, axis=0), d)
+    # Embree's float32 starts rounded once and then repeated: the same values as the float64
+    # repeat cast whole, without that (m R, 3) float64 copy
+    pid, tfar = scene.intersect(np.repeat(lifted.astype(np.float32), R, axis=0), d)
     pid = np.asarray(pid)
     hit = pid >= 0
     sky_s = (~hit).reshape(m, R).mean(axis=1)
@@ -278,7 +280,8 @@ def _cast(patches, params, scene, points, normals, eps, local, step, hits, out, 
     ids, w = surface_weights(params, patches.polys, pf, y)
     H = None
     if hits:
-        H = np.column_stack([s + f // R, pf, y]).astype(_hit_dtype(len(points), len(patches)))
+        H = np.empty((f.size, 5), _hit_dtype(len(points), len(patches)))    # (no float64 copy first:
+        H[:, 0], H[:, 1], H[:, 2:] = s + f // R, pf, y                     # ids below 2^24, exact)
     # the chunk's rows of G, duplicates summed (as CSR.from_coo would: float64, then float32)
     counts, cols, vals = summed_entries(f // R, ids, w / R, len(patches.verts), m)
     if out is not None:
@@ -360,10 +363,11 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
             rows.append(np.repeat(row, c.shape[1]))
             cols.append(V + np.asarray(c, np.int64).ravel())
             vals.append(np.asarray(r, np.float64).ravel())
-        rows, cols, vals = (np.concatenate(a) for a in (rows, cols, vals))
-        if not len(rows):
+        # the entries of weight 0 left out (a triangle's fourth corner, a hot cell's): the same sums
+        key, vals = nonzero_entries(np.concatenate(rows) * n + np.concatenate(cols), np.concatenate(vals))
+        if not len(key):
             return np.zeros(0, np.int64), np.zeros(0)
-        key, inv = unique_ints(rows * n + cols, return_inverse=True, grouped=True)   # two runs of rows
+        key, inv = unique_ints(key, return_inverse=True, grouped=True)   # two runs of rows
         summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
         keep = summed != 0
         return key[keep], summed[keep]

@@ -56,8 +56,9 @@ def cosine_directions(u):
 
 
 def disk_samples(u, center, normal, radius):
-    """Points (N,S,3) on the disks ``center`` (N,3), unit ``normal`` (N,3), ``radius`` (N,) from
-    unit-square points ``u`` (N,S,2), uniform by area."""
+    """Points (N,S,3) on the disks ``center`` (N,3), unit ``normal`` (N,3) (or (1, 3): one for
+    every disk, its frame made once), ``radius`` (N,) from unit-square points ``u`` (N,S,2),
+    uniform by area."""
     e1, e2 = orthonormal_basis(normal)
     r = np.sqrt(u[..., 0]) * radius[:, None]
     phi = 2 * np.pi * u[..., 1]

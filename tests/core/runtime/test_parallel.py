@@ -417,6 +417,21 @@ def test_emitter_transport_identical_with_two_workers(box, shadows, pool_kind, m
     assert np.array_equal(T1, T3)
 
 
+@needs_embree
+def test_grouped_transport_is_the_same_for_any_chunk_size(box):
+    """Grouped emitters with shadows (what shines, :func:`.output.shine.shine`, with its larger
+    chunks): the contours run only for the pairs some first ray reaches, per chunk, and the
+    penumbrae are refined; T is the same cut into 7 points a chunk or 40 or all at once."""
+    from hemicube_radiosity.core.rays import occluder
+    x, n, _ = vertex_frames(box)
+    em = np.flatnonzero(box.emission.max(axis=1) > 0)
+    groups = np.arange(em.size) // 2
+    kw = dict(scene=occluder(box, "embree"), samples=4, groups=groups)
+    runs = [emitter_transport(box, x, n, em, chunk_rays=(groups.max() + 1) * 4 * c, **kw) for c in (7, 40, 10 ** 6)]
+    assert runs[0].any() and ((runs[0] > 0) & (runs[0] < emitter_transport(box, x, n, em, samples=4, groups=groups))).any()
+    assert all(np.array_equal(runs[0], r) for r in runs[1:])
+
+
 @needs_fork
 def test_grouped_emitters_shine_on_threads_and_patches_on_forks(box, monkeypatch):
     """A transport of grouped emitters (mostly rays: embreex lets go of the GIL) runs on threads,
