@@ -36,11 +36,13 @@ row first), texel (r, c) centred at uv ((c + 0.5) / W, (r + 0.5) / H). Values ar
 """
 from __future__ import annotations
 
+from contextlib import closing
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..mesh.patches import PatchSet
+from ..runtime.parallel import ordered_map, resolve_workers
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
 from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
@@ -117,7 +119,7 @@ def evaluate(elements, corner_values, points, normals, owner, faces=None):
     return interpolate_corner_values(corner_values, idx, uv)
 
 
-def locate_texels(elements, points, normals, owner, faces=None):
+def locate_texels(elements, points, normals, owner, faces=None, workers=1):
     """(element index (n,), bilinear (u, v) (n, 2)) of world ``points`` (n, 3) with face
     ``normals`` among the output elements of object ``owner`` (:func:`.interpolate.locate`).
 
@@ -127,7 +129,10 @@ def locate_texels(elements, points, normals, owner, faces=None):
     wide beside a large wall, a bevel or a window frame, may all be the wall's): the texel
     shows its own surface's light, not a neighbour's; and a face's few elements are searched
     faster than the object's (a third of the time on the living room's 512,720 texels). The
-    others are located among the object's elements."""
+    others are located among the object's elements. ``workers`` (0 = every core): forked
+    processes (threads where there are none) that take a share of the faces each (a point's
+    result is its face's alone: the same, bit for bit, for any count; NumPy's small steps per
+    face hold the GIL, so threads barely overlap)."""
     owners = np.full(len(points), int(owner), np.int64)
     if faces is None or len(points) == 0:
         return locate(elements, points, owners, normals)
@@ -139,12 +144,29 @@ def locate_texels(elements, points, normals, owner, faces=None):
     if own.any():
         sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
                        elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
-        j, uv[own] = locate(sub, points[own], faces[own], None if normals is None else normals[own])
-        idx[own] = mine[j]
+
+        def one(ids):
+            return locate(sub, points[ids], faces[ids], None if normals is None else normals[ids])
+        shares = _face_shares(faces, np.flatnonzero(own), resolve_workers(workers))
+        with closing(ordered_map(one, shares, len(shares), processes=True)) as found:
+            for ids, (j, at) in zip(shares, found):
+                idx[ids], uv[ids] = mine[j], at
     if not own.all():
         idx[~own], uv[~own] = locate(elements, points[~own], owners[~own],
                                      None if normals is None else normals[~own])
     return idx, uv
+
+
+def _face_shares(faces, ids, workers, least=20000):
+    """``ids`` (m,) cut into at most ``workers`` lists of about as many points, a face's points
+    all in one (one list of them all below ``least`` points a worker)."""
+    count = min(int(workers), len(ids) // least)
+    if count <= 1:
+        return [ids]
+    ids = ids[np.argsort(faces[ids], kind="stable")]
+    f = faces[ids]
+    cut = np.searchsorted(f, f[np.arange(1, count) * len(ids) // count])      # at a face's first point
+    return [s for s in np.split(ids, np.unique(cut)) if s.size]
 
 
 def dilate(image, known, passes=MARGIN):
@@ -191,12 +213,13 @@ def texel_light(elements, parts, points, normals, owner, D, faces=None):
     return E + rho * light, light
 
 
-def located_parts(elements, parts, points, normals, owner, faces=None):
+def located_parts(elements, parts, points, normals, owner, faces=None, workers=1):
     """(E, rho, I) (n, 3) each: the emission, reflectivity and indirect light of ``parts``
-    (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`)."""
+    (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`, on
+    ``workers``)."""
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-    idx, uv = locate_texels(elements, points, normals, owner, faces)
+    idx, uv = locate_texels(elements, points, normals, owner, faces, workers)
     E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
@@ -292,7 +315,7 @@ def _surface(covered, points, normals, pitch):
 
 
 def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, flip=False, probed=None,
-                 faces=None, inside=None):
+                 faces=None, inside=None, workers=1):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
     :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None) -> (n, S, 3)``
@@ -311,7 +334,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     changes, so a relight picks the same texels and finds their transport cached. ``world``
     (T, 3, 3), ``normals`` (T, 3, 3) or None and ``flip`` as for :func:`bake_lightmap`;
     ``inside`` (H, W) bool from :func:`rasterize` or None: a texel whose centre lies outside its
-    triangle takes the direct light of its neighbours inside on the same face where it has any."""
+    triangle takes the direct light of its neighbours inside on the same face where it has any.
+    ``workers``: where the texels are located (:func:`locate_texels`)."""
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
@@ -321,7 +345,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
-    E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)
+    E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own, workers)
     D = np.maximum(Ds.sum(axis=1), 0.0)
     S = Ds.shape[1]
     img = np.zeros(covered.shape + (S + 1,))
@@ -361,7 +385,7 @@ def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None, split=None, probed=None, faces=None) -> Lightmap:
+                  lighting_scale=None, split=None, probed=None, faces=None, workers=1) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -384,7 +408,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
     material's albedo scale), in ``Lightmap.lighting``. ``faces`` (T,) int: each triangle's face in
     the object's mesh (``elements.source_face``): a texel is read on its own face's elements
-    (:func:`locate_texels`)."""
+    (:func:`locate_texels`, on ``workers``: 0 every core)."""
     faces = None if faces is None else np.asarray(faces, dtype=np.int64)
     height = int(width if height is None else height)
     width = int(width)
@@ -401,7 +425,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
         image[covered] = evaluate(elements, corner_values, pts, nrm, owner, None if faces is None else faces[t])
     else:
         image[covered], light = texel_values(elements, parts, split, owner, uv, world, normals, tri, bary,
-                                             flip, probed, faces, inside)
+                                             flip, probed, faces, inside, workers)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]

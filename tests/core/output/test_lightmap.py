@@ -238,3 +238,28 @@ def test_a_triangle_without_area_leaves_its_texels_to_its_neighbours():
     near = flat_half & L.filled
     assert near.sum() > 100 and not (L.covered & ~real).any()
     np.testing.assert_allclose(L.image[near], 0.6, atol=1e-6)
+
+
+def test_texels_located_on_workers_are_the_same_and_on_their_own_face():
+    """Texels located on two workers (forked processes, each a share of the faces) read the
+    same elements and (u, v) as on one, bit for bit; every texel is found on an element of its
+    own face, and the element's bilinear map at (u, v) gives back its point."""
+    from hemicube_radiosity.core.util.geometry import bilinear
+    elements, uv, world = walls()
+    rng = np.random.default_rng(7)
+    m = 60000                                    # above two shares of 20,000 points
+    face = rng.integers(0, 2, m)
+    a, b = rng.uniform(0.0, 1.0, (2, m))
+    floor = np.stack([2 * a, b, np.zeros(m)], 1)
+    wall = np.stack([np.zeros(m), a, b], 1)
+    points = np.where(face[:, None] == 0, floor, wall)
+    normals = np.where(face[:, None] == 0, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    one = lm.locate_texels(elements, points, normals, 0, face, workers=1)
+    two = lm.locate_texels(elements, points, normals, 0, face, workers=2)
+    assert len(lm._face_shares(face, np.arange(m), 2)) == 2
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+    idx, at = two
+    np.testing.assert_array_equal(elements.source_face[idx], face)
+    back = bilinear(elements.corners()[idx], at[:, :1], at[:, 1:])
+    np.testing.assert_allclose(back, points, atol=1e-9)
