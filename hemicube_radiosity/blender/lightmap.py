@@ -259,8 +259,8 @@ def _texel_light(result, scale):
     E, rho, D, I = parts
     light = result.direct
 
-    def split(points, normals, samples=None, which=None, facing=None, low=None):
-        return light.split_at(points, normals, "texels", samples, which, facing, low) * scale
+    def split(points, normals, samples=None, which=None, facing=None, low=None, **shared):
+        return light.split_at(points, normals, "texels", samples, which, facing, low, **shared) * scale
     return (E * scale, rho, D * scale, I * scale), split, light.probed()
 
 

@@ -196,7 +196,7 @@ class DirectLight:
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
     def split_at(self, points, normals, where: str, samples=None, which=None, facing=None,
-                 low=None) -> np.ndarray:
+                 low=None, split=1, part=None) -> np.ndarray:
         """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
         emitting object (its faces together), every lamp, the world, in that order; summed over
         the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
@@ -211,7 +211,8 @@ class DirectLight:
         ``low`` (P, 3) with ``facing``: the lamps' light is split at the plane of ``facing``,
         from above it by rays from the points, from below it by rays from ``low`` (where
         Cycles' shadow rays toward such a light start: :func:`..output.lift.lift`), as
-        :mod:`..output.crease` lights a leaning corner."""
+        :mod:`..output.crease` lights a leaning corner. ``split``, ``part``: the world's rays
+        shared out among runs of points whose mean is what is read, as :meth:`at`'s."""
         x = np.asarray(points, dtype=np.float64)
         owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
         S = len(owners) + len(self.lights) + (self.world is not None)
@@ -230,7 +231,7 @@ class DirectLight:
             if want[len(owners) + i]:
                 out[:, len(owners) + i] = self._lamp_split(i, x, normals, eps, samples, facing, low)
         if self.world is not None and want[-1]:
-            out[:, -1] = self.world_at(x, normals, where, facing=facing)
+            out[:, -1] = self.world_at(x, normals, where, facing=facing, split=split, part=part)
         return out
 
     def _lamp_split(self, i, x, normals, eps, samples, facing, low) -> np.ndarray:

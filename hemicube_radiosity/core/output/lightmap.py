@@ -57,7 +57,8 @@ VARIES = 0.1       # light differing this much between neighbours: averaged over
 FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
 SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
 FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
-SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel)
+SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel),
+SUB_SKY = 16       # ... the world's rays shared out among this many of a texel's points
 MARGIN = 8         # texels of dilation around every island
 
 
@@ -318,8 +319,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
                  faces=None, inside=None, workers=1):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
-    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None) -> (n, S, 3)``
-    the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
+    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None, split=1,
+    part=None) -> (n, S, 3)`` the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
     texel centres, exact where the light needs it and interpolated where it is smooth
     (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
     then, where a source's light varies between neighbours (:func:`varying`: a shadow's edge, a
@@ -369,13 +370,23 @@ def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=
     """(m, 3) the direct light of m texels (triangles ``tri`` (m,)) averaged over their sub-texel
     points (``which`` (k,) texel, ``sub`` (k, 3) barycentric: :func:`_sub_texels`): the sources
     ``need`` (m, S) bool lit again at each point, the others the centre's ``Ds`` (m, S, 3); a
-    texel with no point keeps ``D`` (m, 3)."""
+    texel with no point keeps ``D`` (m, 3). The world (a source not ``probed``) is read as the
+    texel's mean, so its points share the sky's pattern out (:data:`SUB_SKY`: point j of a
+    texel casts rays j, j + 16, ... of the 256, :func:`..hemisphere.sky_fraction`'s ``split``):
+    the texel's rays once over its square, not 16 times (a block's foot: 33,036 points in the
+    living room, 8.5 M sky rays before)."""
     lit = as_cycles(split, *_lit_points(world, normals, tri[which], sub, flip), probed)
     per = Ds[which].copy()                                            # (k, S, 3)
+    wide = np.zeros(Ds.shape[1], bool) if probed is None else ~np.asarray(probed, bool)
     for k in range(Ds.shape[1]):
         at = np.flatnonzero(need[which, k])
-        if at.size:
-            per[at, k] = lit(at, SUB_RAYS, np.arange(Ds.shape[1]) == k)[:, k]
+        if not at.size:
+            continue
+        shared = {}
+        if wide[k] and SUB_SKY > 1:    # the world: a texel's points share its rays out
+            rank = np.arange(at.size) - np.searchsorted(which[at], which[at])
+            shared = {"split": SUB_SKY, "part": rank % SUB_SKY}
+        per[at, k] = lit(at, SUB_RAYS, np.arange(Ds.shape[1]) == k, **shared)[:, k]
     per = np.maximum(per.sum(axis=1), 0.0)
     m = len(tri)
     count = np.bincount(which, minlength=m)
@@ -418,7 +429,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lighting = None
     t, b = tri[covered], bary[covered]
     if split is None and direct is not None:
-        def split(points, normals, samples=None, which=None, facing=None, low=None):   # one source, no probe
+        def split(points, normals, samples=None, which=None, facing=None, low=None, **_):   # one source, no probe
             return np.asarray(direct(points, normals), dtype=np.float64)[:, None, :]
     if parts is None or split is None:
         pts, nrm = texel_points(world, t, b, flip)

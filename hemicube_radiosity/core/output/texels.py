@@ -323,7 +323,8 @@ def _facing(faces, shading, ids):
 
 
 def as_cycles(split, pts, nrm, shading, low, probed):
-    """``split(ids, samples, which)`` of the texels at ``pts`` (n, 3) with face normals ``nrm``
+    """``split(ids, samples, which, **shared)`` (``shared``: the world's ``split`` and ``part``,
+    passed on) of the texels at ``pts`` (n, 3) with face normals ``nrm``
     and shading normals ``shading`` as Cycles' bake lights them: the world only from in front of
     the face (:func:`_facing`); where the shading normal leans off the face, a lamp below the
     face's plane by rays from ``low`` (n, 3) (Cycles' lifted start, :func:`.lift.lift`; None:
@@ -334,10 +335,10 @@ def as_cycles(split, pts, nrm, shading, low, probed):
     lights it from no direction, the world from those in front of it)."""
     away = np.einsum("ij,ij->i", shading, nrm) < 0
 
-    def lit(ids, samples, which=None):
+    def lit(ids, samples, which=None, **shared):
         facing = _facing(nrm, shading, ids)
         D = split(pts[ids], shading[ids], samples, which, facing,
-                  None if low is None or facing is None else low[ids])
+                  None if low is None or facing is None else low[ids], **shared)
         off = away[ids]
         if off.any() and probed is not None:
             D[np.ix_(off, np.asarray(probed, bool))] = 0.0

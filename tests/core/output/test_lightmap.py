@@ -263,3 +263,59 @@ def test_texels_located_on_workers_are_the_same_and_on_their_own_face():
     np.testing.assert_array_equal(elements.source_face[idx], face)
     back = bilinear(elements.corners()[idx], at[:, :1], at[:, 1:])
     np.testing.assert_allclose(back, points, atol=1e-9)
+
+
+def test_a_texel_s_sub_points_share_the_sky_s_rays_and_read_its_view_factor():
+    """A floor meeting a tall wall (both 40 m long): the sky seen from a floor point at
+    distance d from the wall is 1 - (1 - d / sqrt(d^2 + h^2)) / 2 (the view factor to an
+    infinitely long perpendicular plate of height h). Texels 2 cm wide beside the wall averaged
+    over their sub-points (:func:`lightmap._sub_mean`, the world a source not probed) read the
+    closed form's mean over their square, their points sharing the 256 rays out
+    (:data:`lightmap.SUB_SKY`): a sixteenth of the rays of each point casting all of them, to
+    the same answer within the rays' noise."""
+    from hemicube_radiosity.core.light.direct import DirectLight
+    from hemicube_radiosity.core.rays import embree_available
+    if not embree_available():
+        import pytest
+        pytest.skip("the sky's rays need Embree")
+    h, L = 3.0, 20.0
+    floor = MeshInput.from_faces([[-L, 0, 0], [L, 0, 0], [L, 10, 0], [-L, 10, 0]], [[0, 1, 2, 3]], name="floor")
+    wall = MeshInput.from_faces([[-L, 0, 0], [-L, 0, h], [L, 0, h], [L, 0, 0]], [[0, 1, 2, 3]], name="wall")
+    patches = build_patches([floor, wall], 0)
+    light = DirectLight(patches, [], np.zeros(0, np.int64), 1, world=np.ones(3))
+    rays = []
+    real = light.scene().occluded
+
+    class Counting:
+        def occluded(self, o, d, *a):
+            rays.append(len(o))
+            return real(o, d, *a)
+    light._scene = Counting()
+
+    def split(points, normals, samples=None, which=None, facing=None, low=None, **shared):
+        return light.split_at(points, normals, "t", samples, which, facing, low, **shared)
+    pitch, m = 0.02, 8                             # texels along y from the wall: a row of 8
+    tri_w = np.array([[[-1, 0, 0], [1, 0, 0], [1, 1, 0]], [[-1, 0, 0], [1, 1, 0], [-1, 1, 0]]], float)
+    px = np.array([[[0, 0], [100, 0], [100, 50]], [[0, 0], [100, 50], [0, 50]]], float)   # 1 texel = 2 cm
+    cols, rows = np.full(m, 50), np.arange(m)
+    tri = np.zeros(m, np.int64)
+    which, sub = lm._sub_texels(px, tri, np.stack([cols + 0.5, rows + 0.5], 1))
+    assert np.array_equal(np.bincount(which), np.full(m, 16))
+    Ds, need, D = np.zeros((m, 1, 3)), np.ones((m, 1), bool), np.zeros((m, 3))
+    got = {}
+    for share in (1, lm.SUB_SKY):
+        old, lm.SUB_SKY = lm.SUB_SKY, share
+        rays.clear()
+        try:
+            got[share] = lm._sub_mean(split, tri_w, None, False, tri, which, sub, Ds, need, D,
+                                      probed=np.array([False]))[:, 0]
+        finally:
+            lm.SUB_SKY = old
+        got[share, "rays"] = sum(rays)
+    assert got[1, "rays"] == 16 * got[lm.SUB_SKY, "rays"] == 16 * 16 * m * 256 // 16
+    # the closed form's mean over each texel's square (the points' y, off the wall)
+    y = np.linspace(0, 1, 201)[None] * 0.5 * pitch + (rows[:, None] + 0.25) * pitch
+    want = (1 - 0.5 * (1 - y / np.sqrt(y * y + h * h))).mean(axis=1)
+    for share in (1, lm.SUB_SKY):                  # measured: within 0.005 (the lattice's steps)
+        np.testing.assert_allclose(got[share], want, atol=0.01)
+    np.testing.assert_allclose(got[lm.SUB_SKY], got[1], atol=0.005)
