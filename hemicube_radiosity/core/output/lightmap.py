@@ -46,7 +46,7 @@ from ..runtime.parallel import ordered_map, resolve_workers
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
 from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
-from .texels import LUMA, as_cycles, by_source
+from .texels import LUMA, as_cycles, by_source, from_inside
 
 __all__ = ["Lightmap", "image_size", "rasterize", "flat_triangles", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
@@ -346,7 +346,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
-    E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own, workers)
+    E, rho, indirect = _read_parts(elements, parts, pts, nrm, owner, own, workers, covered,
+                                   None if inside is None else inside[covered], t if own is None else own)
     D = np.maximum(Ds.sum(axis=1), 0.0)
     S = Ds.shape[1]
     img = np.zeros(covered.shape + (S + 1,))
@@ -364,6 +365,26 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
                             probed)
     light = D + indirect
     return E + rho * light, light
+
+
+def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces):
+    """(E, rho, I) (n, 3) each at the n covered texels (:func:`located_parts`): a texel whose
+    centre lies outside its triangle (an island's rim, ``inside`` (n,) False) with texels
+    inside on its face (``faces`` (n,)) beside it takes their mean, as its direct light does
+    (:func:`.texels.from_inside`; Cycles' margin extends an island from its texels): only the
+    others are located (the living room's rim: 95,534 of its 507,328 texels)."""
+    if inside is None:
+        return located_parts(elements, parts, pts, nrm, owner, own, workers)
+    got, done = np.zeros((len(pts), 3, 3)), np.zeros((len(pts), 3), bool)
+    for ids in (np.flatnonzero(inside), None):
+        if ids is None:
+            from_inside(got, done, inside, faces, covered)
+            ids = np.flatnonzero(~done[:, 0])
+        if ids.size:
+            got[ids] = np.stack(located_parts(elements, parts, pts[ids], nrm[ids], owner,
+                                              None if own is None else own[ids], workers), 1)
+            done[ids] = True
+    return got[:, 0], got[:, 1], got[:, 2]
 
 
 def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=None):

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["by_source", "as_cycles", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
+__all__ = ["by_source", "as_cycles", "from_inside", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
@@ -284,6 +284,15 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     left = np.flatnonzero(~done.all(axis=1))
     light(left, ~done[left])
     return value, exact
+
+
+def from_inside(value, done, inside, faces, covered):
+    """:func:`_rim` on the ``covered`` (H, W) texels' ``value`` (n, S, k) and ``done`` (n, S)
+    (updated in place): a texel not done whose centre lies outside its triangle takes the
+    mean of its 8 neighbours inside on its face (``inside``, ``faces`` (n,)) that are."""
+    index = np.full(covered.shape, -1, np.int64)
+    index[covered] = np.arange(int(covered.sum()))
+    _rim(value, done, inside, faces, index, *np.nonzero(covered))
 
 
 def _rim(value, done, inside, faces, index, rows, cols):

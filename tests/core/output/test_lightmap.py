@@ -319,3 +319,40 @@ def test_a_texel_s_sub_points_share_the_sky_s_rays_and_read_its_view_factor():
     for share in (1, lm.SUB_SKY):                  # measured: within 0.005 (the lattice's steps)
         np.testing.assert_allclose(got[share], want, atol=0.01)
     np.testing.assert_allclose(got[lm.SUB_SKY], got[1], atol=0.005)
+
+
+def test_rim_texels_take_their_inside_neighbours_parts_and_are_not_located(monkeypatch):
+    """A texel whose centre lies outside its triangle (an island's rim) reads the mean of its
+    8 neighbours inside on its face, its emission, reflectivity and reflected light as its
+    direct light (Cycles' margin extends an island from its texels): with E, rho, I and D
+    linear in position or constant, its value is its neighbours' mean, to rounding; only the
+    inside texels (and a rim texel with no such neighbour) are located."""
+    elements, uv, world = walls()
+    c = elements.corners()
+    parts = (0.1 * f(c), np.full(c.shape, 0.5), np.zeros(c.shape), 0.2 * f(c))
+    located = []
+    real = lm.located_parts
+
+    def counted(elements, parts, points, *a, **k):
+        located.append(len(points))
+        return real(elements, parts, points, *a, **k)
+    monkeypatch.setattr(lm, "located_parts", counted)
+    size, faces = 64, np.array([0, 0, 1, 1])
+    L = lm.bake_lightmap(elements, None, 0, uv, world, size, parts=parts, faces=faces,
+                         direct=lambda p, n: np.ones((len(p), 3)))
+    tri, _, inside = lm.rasterize(uv, size, size)
+    covered = tri >= 0
+    face = np.where(covered, faces[np.maximum(tri, 0)], -1)
+    rim = np.argwhere(covered & ~inside)
+    assert len(rim) > 50
+    alone = 0
+    for r, col in rim:
+        nb = [(r + dr, col + dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr or dc)
+              and 0 <= r + dr < size and 0 <= col + dc < size and inside[r + dr, col + dc]
+              and face[r + dr, col + dc] == face[r, col]]
+        if not nb:
+            alone += 1
+            continue
+        want = np.mean([L.image[p] for p in nb], axis=0)
+        np.testing.assert_allclose(L.image[r, col], want, rtol=1e-6)
+    assert sum(located) == inside[covered].sum() + alone
