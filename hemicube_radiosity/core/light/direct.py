@@ -15,6 +15,7 @@ from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
+from .lamps import SunLight
 from .points import turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
@@ -236,7 +237,10 @@ class DirectLight:
 
     def _lamp_split(self, i, x, normals, eps, samples, facing, low) -> np.ndarray:
         """(P, 3) lamp ``i``'s radiance at ``x`` for :meth:`split_at`: whole, or with ``low``
-        from above the plane of ``facing`` at ``x`` and from below it at ``low``."""
+        from above the plane of ``facing`` at ``x`` and from below it at ``low``. A sun whose
+        disk lies wholly on one side of a point's plane (its direction more than its half angle
+        off the plane) is lit from that side only: the other's every sample is left out (0),
+        and a leaning texel was lit twice for one answer."""
         def lit(at, nrm, off, side):
             return lamp_irradiance(self.patches, [lamp], self.cache, points=at, normals=nrm, eps=off, index=i,
                                    samples=min(samples or self.light_samples, self.light_samples),
@@ -245,10 +249,19 @@ class DirectLight:
         lamp = self.lights[i]
         if low is None or facing is None:
             return lit(x, normals, eps, None)
-        out = lit(x, normals, eps, facing)
-        r = np.flatnonzero(np.all(np.isfinite(low), axis=1))
+        facing, normals = np.asarray(facing, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+        up, down = np.ones(len(x), bool), np.all(np.isfinite(low), axis=1)
+        if isinstance(lamp, SunLight):
+            s, edge = facing @ -np.asarray(lamp.direction, dtype=np.float64), np.sin(0.5 * lamp.angle) + 1e-9
+            up &= s > -edge
+            down &= s < edge
+        out = np.zeros((len(x), 3))
+        a = np.flatnonzero(up)
+        if a.size:
+            out[a] = lit(np.ascontiguousarray(x[a]), normals[a], np.asarray(eps)[a], facing[a])
+        r = np.flatnonzero(down)
         if r.size:
-            out[r] += lit(np.ascontiguousarray(low[r]), np.asarray(normals)[r], np.zeros(r.size), -np.asarray(facing)[r])
+            out[r] += lit(np.ascontiguousarray(low[r]), normals[r], np.zeros(r.size), -facing[r])
         return out
 
     def probed(self) -> np.ndarray:
