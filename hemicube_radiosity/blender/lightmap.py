@@ -259,8 +259,8 @@ def _texel_light(result, scale):
     E, rho, D, I = parts
     light = result.direct
 
-    def split(points, normals, samples=None, which=None, facing=None, low=None):
-        return light.split_at(points, normals, "texels", samples, which, facing, low) * scale
+    def split(points, normals, samples=None, which=None, facing=None, low=None, **shared):
+        return light.split_at(points, normals, "texels", samples, which, facing, low, **shared) * scale
     return (E * scale, rho, D * scale, I * scale), split, light.probed()
 
 
@@ -324,7 +324,7 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
                                      flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, split=split,
                                      normals=_corner_normals(me, M), lighting_scale=k, probed=probed,
-                                     faces=_triangle_faces(me))
+                                     faces=_triangle_faces(me), workers=settings.workers)
     stem = bpy.path.clean_name(src.name)
     exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)
     lit = (None, None) if lm.lighting is None else _save_pass(src.name, folder, stem, "lighting", lm.lighting)

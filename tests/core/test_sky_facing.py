@@ -79,3 +79,50 @@ def test_casting_only_the_rays_above_the_plane_matches_casting_them_all_in_the_c
     below = np.einsum("ij,ij->i", d, np.repeat(f, 64, axis=0)) <= 0
     hit = np.asarray(scene.occluded(np.repeat(x, 64, axis=0), d)) | below
     np.testing.assert_array_equal(kept, 1.0 - hit.reshape(len(x), 64).mean(axis=1))
+
+
+@pytest.mark.skipif(not embree_available(), reason="Embree (embreex) is not installed")
+@pytest.mark.parametrize("split", [1, 4])
+def test_points_whose_facing_is_their_normal_or_a_hair_off_it_cast_every_ray_as_without_one(split):
+    """A point whose facing lies within half the pattern's lowest ray's height of its unit
+    normal has no ray below it (d . f >= z - |f - n|): it is cast as without ``facing``, in
+    float32 from the start; the others as before. Each point against every ray on its own:
+    Embree's answer, and below the plane blocked (an independent per-ray loop), bit for bit,
+    whatever the points beside it in a chunk."""
+    from hemicube_radiosity.core.hemisphere import cosine_lattice
+    from hemicube_radiosity.core.util.geometry import tangent_frames
+    p = build_patches(scenes.cornell_box(), 0.25)
+    scene = embree_scene(p)
+    lo, hi = p.verts.min(axis=0), p.verts.max(axis=0)
+    rng = np.random.default_rng(5)
+    m = 240
+    x = lo + rng.uniform(0.1, 0.9, (m, 3)) * (hi - lo)
+    n = rng.normal(size=(m, 3))
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    f = n.copy()
+    kind = np.arange(m) % 6                  # 0 equal, 1 a hair off, 2 tilted, 3 tilted far,
+    f[kind == 1] += 1e-3 * rng.normal(size=((kind == 1).sum(), 3))               # 4 a zero normal,
+    f[kind == 2] += 0.3 * rng.normal(size=((kind == 2).sum(), 3))                # 5 twice as long
+    f[kind == 3] = -n[kind == 3] + 0.2 * rng.normal(size=((kind == 3).sum(), 3))
+    n[kind == 4] = f[kind == 4] = 0.0
+    n[kind == 5] *= 2.0
+    f[kind == 5] = n[kind == 5]
+    rays = 64
+    part = rng.integers(0, split, m)
+    got = sky_fraction(scene, x, n, rays, eps=np.full(m, 1e-4), facing=f, split=split, part=part,
+                       chunk_rays=rays // split * 7)
+    local, frames = cosine_lattice(rays, 0), tangent_frames(n)
+    assert local[:, 2].min() > 0.05                 # what "a hair off" is measured against
+    want = np.empty(m)
+    for i in range(m):
+        d = local[part[i]::split] @ frames[i]                       # (R, 3), world
+        below = d @ f[i] <= 0
+        o = np.repeat((x[i] + 1e-4 * n[i])[None], len(d), axis=0)
+        hit = np.asarray(scene.occluded(o, d)) | below
+        want[i] = 1.0 - hit.mean()
+    np.testing.assert_array_equal(got, want)
+    # a hair off (within the clearance) or equal: as without facing, bit for bit
+    plain = sky_fraction(scene, x, n, rays, eps=np.full(m, 1e-4), split=split, part=part)
+    same = (kind == 0) | (kind == 1)
+    np.testing.assert_array_equal(got[same], plain[same])
+    assert (got[kind == 4] == 0).all() and (got[kind == 3] < plain[kind == 3]).any()

@@ -15,6 +15,7 @@ from .emitters import emitter_transport
 from ..output.gather import transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
+from .lamps import SunLight
 from .points import turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
@@ -196,7 +197,7 @@ class DirectLight:
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
     def split_at(self, points, normals, where: str, samples=None, which=None, facing=None,
-                 low=None) -> np.ndarray:
+                 low=None, split=1, part=None) -> np.ndarray:
         """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
         emitting object (its faces together), every lamp, the world, in that order; summed over
         the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
@@ -211,7 +212,8 @@ class DirectLight:
         ``low`` (P, 3) with ``facing``: the lamps' light is split at the plane of ``facing``,
         from above it by rays from the points, from below it by rays from ``low`` (where
         Cycles' shadow rays toward such a light start: :func:`..output.lift.lift`), as
-        :mod:`..output.crease` lights a leaning corner."""
+        :mod:`..output.crease` lights a leaning corner. ``split``, ``part``: the world's rays
+        shared out among runs of points whose mean is what is read, as :meth:`at`'s."""
         x = np.asarray(points, dtype=np.float64)
         owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
         S = len(owners) + len(self.lights) + (self.world is not None)
@@ -230,12 +232,15 @@ class DirectLight:
             if want[len(owners) + i]:
                 out[:, len(owners) + i] = self._lamp_split(i, x, normals, eps, samples, facing, low)
         if self.world is not None and want[-1]:
-            out[:, -1] = self.world_at(x, normals, where, facing=facing)
+            out[:, -1] = self.world_at(x, normals, where, facing=facing, split=split, part=part)
         return out
 
     def _lamp_split(self, i, x, normals, eps, samples, facing, low) -> np.ndarray:
         """(P, 3) lamp ``i``'s radiance at ``x`` for :meth:`split_at`: whole, or with ``low``
-        from above the plane of ``facing`` at ``x`` and from below it at ``low``."""
+        from above the plane of ``facing`` at ``x`` and from below it at ``low``. A sun whose
+        disk lies wholly on one side of a point's plane (its direction more than its half angle
+        off the plane) is lit from that side only: the other's every sample is left out (0),
+        and a leaning texel was lit twice for one answer."""
         def lit(at, nrm, off, side):
             return lamp_irradiance(self.patches, [lamp], self.cache, points=at, normals=nrm, eps=off, index=i,
                                    samples=min(samples or self.light_samples, self.light_samples),
@@ -244,10 +249,19 @@ class DirectLight:
         lamp = self.lights[i]
         if low is None or facing is None:
             return lit(x, normals, eps, None)
-        out = lit(x, normals, eps, facing)
-        r = np.flatnonzero(np.all(np.isfinite(low), axis=1))
+        facing, normals = np.asarray(facing, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+        up, down = np.ones(len(x), bool), np.all(np.isfinite(low), axis=1)
+        if isinstance(lamp, SunLight):
+            s, edge = facing @ -np.asarray(lamp.direction, dtype=np.float64), np.sin(0.5 * lamp.angle) + 1e-9
+            up &= s > -edge
+            down &= s < edge
+        out = np.zeros((len(x), 3))
+        a = np.flatnonzero(up)
+        if a.size:
+            out[a] = lit(np.ascontiguousarray(x[a]), normals[a], np.asarray(eps)[a], facing[a])
+        r = np.flatnonzero(down)
         if r.size:
-            out[r] += lit(np.ascontiguousarray(low[r]), np.asarray(normals)[r], np.zeros(r.size), -np.asarray(facing)[r])
+            out[r] += lit(np.ascontiguousarray(low[r]), normals[r], np.zeros(r.size), -facing[r])
         return out
 
     def probed(self) -> np.ndarray:

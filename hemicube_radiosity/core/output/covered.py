@@ -265,11 +265,13 @@ def _face_keys(elements) -> np.ndarray:
     return elements.owner.astype(np.int64) * stride + elements.source_face.astype(np.int64)
 
 
-def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, buried=None):
+def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, buried=None, own=True):
     """(light (N, 4, 3), keep (N, 4)) as :func:`.crease.corner_light`'s, with the corners of
     :func:`covered_corners` lit on their own (module docstring); ``creased``: what
     :func:`.crease.corner_light` gave (None: every corner its vertex's ``light_v`` (V, 3) and
-    all of its light reflected more than once). Returns ``creased`` itself when no corner is covered."""
+    all of its light reflected more than once). Returns ``creased`` itself when no corner is covered.
+    ``own`` False: as :func:`.crease.corner_light`'s, the keep shares only (each covered
+    corner's direct light its vertex's: no ray is cast for it)."""
     found = covered_corners(ctx, elements, xv, nv, opened, buried) if ctx.direct is not None else None
     if found is None:
         return creased
@@ -277,15 +279,16 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
     shade = geo if shade is None else np.where(has[:, None], shade, geo)
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
-    D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo)
+    v = elements.polys[p, c]
+    D = ctx.direct.at(start, shade, "covered", eps=np.zeros(len(p)), facing=geo) if own else \
+        np.array(light_v, dtype=np.float64)[v]
     # and the light below the triangle's plane, from Cycles' lifted start (:mod:`.crease`)
-    lean = leans(shade, geo)
+    lean = leans(shade, geo) & own
     if lean.any():
         low = np.full((len(p), 3), np.nan)
         low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])
         D += below_plane(ctx, low, shade, geo, "covered-below")
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    v = elements.polys[p, c]
     key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
 
     def shares():

@@ -146,7 +146,7 @@ def _turned(elements, meshes, p, c, geo, facing) -> np.ndarray:
     return turned
 
 
-def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_v=None):
+def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_v=None, own=True):
     """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
     (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
     (V, 3)) but at the corners of :func:`crease_corners` their own, lit by ``ctx.direct`` (a
@@ -157,7 +157,10 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_
     ``bsdf_diffuse_sample``), or where that is not known the share of the shading normal's
     cosine-weighted hemisphere above the plane, (1 + N . Ng) / 2 (the sky view factor of a
     plane tilted by their angle: the light arriving taken as even over the hemisphere). None
-    when no corner is lit on its own."""
+    when no corner is lit on its own. ``own`` False: the keep shares only, every corner's light
+    its vertex's (a lightmap finds the direct light again at its texels and reads only the
+    corners' light reflected more than once, :meth:`..pipeline.BakeResult.corner_parts`: no ray
+    is cast for the corners' own)."""
     if ctx.direct is None:
         return None
     found = _corner_rays(ctx, elements, xv, nv, opened, buried)
@@ -167,10 +170,11 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_
     # a corner lit as its vertex was (from the same start, along the same normal, nothing cut)
     # takes the vertex's light: only the others cast rays
     D = np.array(light_v, dtype=np.float64)[elements.polys[p, c]]
-    o = ~same
+    o = ~same & own
     if o.any():
         D[o] = ctx.direct.at(start[o], shade[o], "corners", eps=np.zeros(int(o.sum())), facing=facing[o])
-    D += below_plane(ctx, low, shade, geo, "corners-below")     # Cycles' lifted rays
+    if own:
+        D += below_plane(ctx, low, shade, geo, "corners-below")     # Cycles' lifted rays
     k = (1.0 + np.einsum("ij,ij->i", shade, geo)) / 2           # the hemisphere's share above the plane
     share = above_shares(ctx, elements, p, c, geo, xv, read_v)   # the gather's hits say it,
     # where the vertex gathered about the corner's own shading normal (not where Cycles wrote

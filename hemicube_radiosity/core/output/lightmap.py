@@ -36,15 +36,17 @@ row first), texel (r, c) centred at uv ((c + 0.5) / W, (r + 0.5) / H). Values ar
 """
 from __future__ import annotations
 
+from contextlib import closing
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..mesh.patches import PatchSet
+from ..runtime.parallel import ordered_map, resolve_workers
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
 from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
-from .texels import LUMA, as_cycles, by_source
+from .texels import LUMA, as_cycles, by_source, from_inside
 
 __all__ = ["Lightmap", "image_size", "rasterize", "flat_triangles", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
@@ -55,7 +57,8 @@ VARIES = 0.1       # light differing this much between neighbours: averaged over
 FLOOR = 0.05       # ... and by this much of its 99th percentile over the object
 SUBTEXELS = 4      # ... at SUBTEXELS x SUBTEXELS points of its square
 FOOTPRINT = 0.5    # ... the square this many texels wide around the centre (Cycles' bake's)
-SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel)
+SUB_RAYS = 4       # ... each point with this many shadow rays per emitter and lamp (64 a texel),
+SUB_SKY = 16       # ... the world's rays shared out among this many of a texel's points
 MARGIN = 8         # texels of dilation around every island
 
 
@@ -117,7 +120,7 @@ def evaluate(elements, corner_values, points, normals, owner, faces=None):
     return interpolate_corner_values(corner_values, idx, uv)
 
 
-def locate_texels(elements, points, normals, owner, faces=None):
+def locate_texels(elements, points, normals, owner, faces=None, workers=1):
     """(element index (n,), bilinear (u, v) (n, 2)) of world ``points`` (n, 3) with face
     ``normals`` among the output elements of object ``owner`` (:func:`.interpolate.locate`).
 
@@ -127,7 +130,10 @@ def locate_texels(elements, points, normals, owner, faces=None):
     wide beside a large wall, a bevel or a window frame, may all be the wall's): the texel
     shows its own surface's light, not a neighbour's; and a face's few elements are searched
     faster than the object's (a third of the time on the living room's 512,720 texels). The
-    others are located among the object's elements."""
+    others are located among the object's elements. ``workers`` (0 = every core): forked
+    processes (threads where there are none) that take a share of the faces each (a point's
+    result is its face's alone: the same, bit for bit, for any count; NumPy's small steps per
+    face hold the GIL, so threads barely overlap)."""
     owners = np.full(len(points), int(owner), np.int64)
     if faces is None or len(points) == 0:
         return locate(elements, points, owners, normals)
@@ -139,12 +145,29 @@ def locate_texels(elements, points, normals, owner, faces=None):
     if own.any():
         sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
                        elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
-        j, uv[own] = locate(sub, points[own], faces[own], None if normals is None else normals[own])
-        idx[own] = mine[j]
+
+        def one(ids):
+            return locate(sub, points[ids], faces[ids], None if normals is None else normals[ids])
+        shares = _face_shares(faces, np.flatnonzero(own), resolve_workers(workers))
+        with closing(ordered_map(one, shares, len(shares), processes=True)) as found:
+            for ids, (j, at) in zip(shares, found):
+                idx[ids], uv[ids] = mine[j], at
     if not own.all():
         idx[~own], uv[~own] = locate(elements, points[~own], owners[~own],
                                      None if normals is None else normals[~own])
     return idx, uv
+
+
+def _face_shares(faces, ids, workers, least=20000):
+    """``ids`` (m,) cut into at most ``workers`` lists of about as many points, a face's points
+    all in one (one list of them all below ``least`` points a worker)."""
+    count = min(int(workers), len(ids) // least)
+    if count <= 1:
+        return [ids]
+    ids = ids[np.argsort(faces[ids], kind="stable")]
+    f = faces[ids]
+    cut = np.searchsorted(f, f[np.arange(1, count) * len(ids) // count])      # at a face's first point
+    return [s for s in np.split(ids, np.unique(cut)) if s.size]
 
 
 def dilate(image, known, passes=MARGIN):
@@ -191,12 +214,13 @@ def texel_light(elements, parts, points, normals, owner, D, faces=None):
     return E + rho * light, light
 
 
-def located_parts(elements, parts, points, normals, owner, faces=None):
+def located_parts(elements, parts, points, normals, owner, faces=None, workers=1):
     """(E, rho, I) (n, 3) each: the emission, reflectivity and indirect light of ``parts``
-    (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`)."""
+    (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`, on
+    ``workers``)."""
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
-    idx, uv = locate_texels(elements, points, normals, owner, faces)
+    idx, uv = locate_texels(elements, points, normals, owner, faces, workers)
     E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
@@ -292,11 +316,11 @@ def _surface(covered, points, normals, pitch):
 
 
 def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, flip=False, probed=None,
-                 faces=None, inside=None):
+                 faces=None, inside=None, workers=1):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
-    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None) -> (n, S, 3)``
-    the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
+    :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None, split=1,
+    part=None) -> (n, S, 3)`` the direct light of each source apart (:meth:`..light.direct.DirectLight.split_at`): at the
     texel centres, exact where the light needs it and interpolated where it is smooth
     (:func:`.texels.by_source`; ``probed`` (S,) bool: the sources a one-ray probe stands for);
     then, where a source's light varies between neighbours (:func:`varying`: a shadow's edge, a
@@ -311,7 +335,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     changes, so a relight picks the same texels and finds their transport cached. ``world``
     (T, 3, 3), ``normals`` (T, 3, 3) or None and ``flip`` as for :func:`bake_lightmap`;
     ``inside`` (H, W) bool from :func:`rasterize` or None: a texel whose centre lies outside its
-    triangle takes the direct light of its neighbours inside on the same face where it has any."""
+    triangle takes the direct light of its neighbours inside on the same face where it has any.
+    ``workers``: where the texels are located (:func:`locate_texels`)."""
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
@@ -321,7 +346,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed), covered,
                    texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
                    None if inside is None else inside[covered])[0]
-    E, rho, indirect = located_parts(elements, parts, pts, nrm, owner, own)
+    E, rho, indirect = _read_parts(elements, parts, pts, nrm, owner, own, workers, covered,
+                                   None if inside is None else inside[covered], t if own is None else own)
     D = np.maximum(Ds.sum(axis=1), 0.0)
     S = Ds.shape[1]
     img = np.zeros(covered.shape + (S + 1,))
@@ -341,17 +367,47 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     return E + rho * light, light
 
 
+def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces):
+    """(E, rho, I) (n, 3) each at the n covered texels (:func:`located_parts`): a texel whose
+    centre lies outside its triangle (an island's rim, ``inside`` (n,) False) with texels
+    inside on its face (``faces`` (n,)) beside it takes their mean, as its direct light does
+    (:func:`.texels.from_inside`; Cycles' margin extends an island from its texels): only the
+    others are located (the living room's rim: 95,534 of its 507,328 texels)."""
+    if inside is None:
+        return located_parts(elements, parts, pts, nrm, owner, own, workers)
+    got, done = np.zeros((len(pts), 3, 3)), np.zeros((len(pts), 3), bool)
+    for ids in (np.flatnonzero(inside), None):
+        if ids is None:
+            from_inside(got, done, inside, faces, covered)
+            ids = np.flatnonzero(~done[:, 0])
+        if ids.size:
+            got[ids] = np.stack(located_parts(elements, parts, pts[ids], nrm[ids], owner,
+                                              None if own is None else own[ids], workers), 1)
+            done[ids] = True
+    return got[:, 0], got[:, 1], got[:, 2]
+
+
 def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=None):
     """(m, 3) the direct light of m texels (triangles ``tri`` (m,)) averaged over their sub-texel
     points (``which`` (k,) texel, ``sub`` (k, 3) barycentric: :func:`_sub_texels`): the sources
     ``need`` (m, S) bool lit again at each point, the others the centre's ``Ds`` (m, S, 3); a
-    texel with no point keeps ``D`` (m, 3)."""
+    texel with no point keeps ``D`` (m, 3). The world (a source not ``probed``) is read as the
+    texel's mean, so its points share the sky's pattern out (:data:`SUB_SKY`: point j of a
+    texel casts rays j, j + 16, ... of the 256, :func:`..hemisphere.sky_fraction`'s ``split``):
+    the texel's rays once over its square, not 16 times (a block's foot: 33,036 points in the
+    living room, 8.5 M sky rays before)."""
     lit = as_cycles(split, *_lit_points(world, normals, tri[which], sub, flip), probed)
     per = Ds[which].copy()                                            # (k, S, 3)
+    wide = np.zeros(Ds.shape[1], bool) if probed is None else ~np.asarray(probed, bool)
     for k in range(Ds.shape[1]):
         at = np.flatnonzero(need[which, k])
-        if at.size:
-            per[at, k] = lit(at, SUB_RAYS, np.arange(Ds.shape[1]) == k)[:, k]
+        if not at.size:
+            continue
+        shared = {}
+        if wide[k] and SUB_SKY > 1:    # the world: a texel's points share its rays out
+            rank = np.arange(at.size) - np.searchsorted(which[at], which[at])
+            shared = {"split": SUB_SKY, "part": rank % SUB_SKY}
+        per[at, k] = lit(at, SUB_RAYS, np.arange(Ds.shape[1]) == k, **shared)[:, k]
     per = np.maximum(per.sum(axis=1), 0.0)
     m = len(tri)
     count = np.bincount(which, minlength=m)
@@ -361,7 +417,7 @@ def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None, split=None, probed=None, faces=None) -> Lightmap:
+                  lighting_scale=None, split=None, probed=None, faces=None, workers=1) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -384,7 +440,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
     material's albedo scale), in ``Lightmap.lighting``. ``faces`` (T,) int: each triangle's face in
     the object's mesh (``elements.source_face``): a texel is read on its own face's elements
-    (:func:`locate_texels`)."""
+    (:func:`locate_texels`, on ``workers``: 0 every core)."""
     faces = None if faces is None else np.asarray(faces, dtype=np.int64)
     height = int(width if height is None else height)
     width = int(width)
@@ -394,14 +450,14 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     lighting = None
     t, b = tri[covered], bary[covered]
     if split is None and direct is not None:
-        def split(points, normals, samples=None, which=None, facing=None, low=None):   # one source, no probe
+        def split(points, normals, samples=None, which=None, facing=None, low=None, **_):   # one source, no probe
             return np.asarray(direct(points, normals), dtype=np.float64)[:, None, :]
     if parts is None or split is None:
         pts, nrm = texel_points(world, t, b, flip)
         image[covered] = evaluate(elements, corner_values, pts, nrm, owner, None if faces is None else faces[t])
     else:
         image[covered], light = texel_values(elements, parts, split, owner, uv, world, normals, tri, bary,
-                                             flip, probed, faces, inside)
+                                             flip, probed, faces, inside, workers)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]

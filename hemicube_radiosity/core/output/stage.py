@@ -132,10 +132,13 @@ def vertex_stage(ctx) -> None:
     # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
     buried = None if side is None else side.count > 0
     read_v = None if lighting else rho_v * D_vert + rest_v      # what the gather's rays read
-    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried, read_v)
+    # a lightmap lights its texels again and reads only the corners' reflected light and its
+    # share: no corner's own direct light is found for it (the vertex's stands in)
+    own = ctx.settings.target != "lightmap"
+    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried, read_v, own)
     ctx.gather_rays = ctx.gather_key = None             # its hits go with it
     # where another surface lies between a corner and its vertex's rays, the corner's own light
-    creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried)
+    creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried, own)
     _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
     if lighting:
         ctx.vertex_radiosity = D_vert + rest_v

@@ -2,8 +2,14 @@
 """The direct light at a lightmap's texels, exact only where the light needs it.
 
 A texel's direct light is exact (:meth:`..light.direct.DirectLight.split_at`, each source apart)
-at the corners of a coarse grid of texels (every :data:`STRIDES`-th row and column); a texel
-between four such anchors takes their bilinear interpolation, source by source, where:
+at the corners of a coarse grid of texels (every :data:`STRIDES`-th row and column), laid on
+each face from its first row and column of texels, its last cells cut (narrower) at its last
+row and column: a small island (Lightmap Pack gives every face one; half the living room's
+1,961 are 42 texels or fewer) is covered by cells to its border, and a strip one texel wide by
+cells along it (with the image's fixed grid, whose cells crossed the islands' borders, every
+island's last row and column and the 2-texel grid's anchors were lit exactly: 151,389 of the
+living room's 507,328 texels in the world's light, 62,697 so). A texel between four such
+anchors takes their bilinear interpolation, source by source, where:
 
 * the four anchors and the texel lie on one face of the mesh, and the texel's world point is
   the bilinear interpolation of theirs (within :data:`FLAT` of a texel: the UV map is affine
@@ -17,7 +23,7 @@ between four such anchors takes their bilinear interpolation, source by source, 
   beside a shadow whose centre ray the texel sees).
 
 The grids run from coarse to fine (8 texels, 4, then 2); on the 8- and 4-texel grids a cell's
-middle is lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
+middle (rounded down) is lit exactly too and must read what the corners' interpolation makes of it; a 2-texel cell's
 corners must agree, or the light must run straight across it (its second differences through
 the anchors beyond it, over 8, within the same bound: a linear ramp of the sky toward a window
 is interpolated exactly). A texel no grid settles is lit exactly. Each source is settled
@@ -26,14 +32,14 @@ interpolation where the world's own light is smooth (its hundreds of rays a poin
 its anchors and where it bends: a tenth of a lit floor's texels, not a third).
 Both tests compare each source with itself, relative to its own scale: a relight of new
 strengths or colours picks the same texels (and finds their rays cached). Smooth light (the
-sky on a wall, a lamp's falloff, the sun on a lit floor) costs the anchors; shadow edges,
-contacts and small faces cost what they did.
+sky on a wall, a lamp's falloff, the sun on a lit floor) costs the anchors, on a small face too;
+shadow edges and contacts cost what they did.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["by_source", "as_cycles", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
+__all__ = ["by_source", "as_cycles", "from_inside", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
@@ -43,30 +49,67 @@ FLAT = 1.0           # texels: the texel's point off the anchors' bilinear inter
 MARGIN = 2            # texels around a texel whose probe disagrees that are lit exactly too
 
 
-def _corners(index, rows, cols, s):
-    """(m, 4) texel ids (-1 off the image or not covered) of the anchors around texels at
-    ``rows``, ``cols`` on the grid of stride ``s``, and (m, 4) their bilinear weights."""
+def _span(x, lo, hi, s):
+    """(a, b) (m,) the cell of stride ``s`` along one axis around texel coordinates ``x`` (m,)
+    on a face spanning ``lo``..``hi`` (m,): from ``lo`` in steps of ``s``, the last step cut at
+    ``hi`` (a + s beyond it: a narrower cell ending on the face's last texel); a == b where
+    the face is one texel across (a cell along the other axis only)."""
+    k = np.minimum((x - lo) // s, np.maximum(hi - lo - 1, 0) // s)
+    a = lo + k * s
+    return a, np.minimum(a + s, hi)
+
+
+def _corners(index, rows, cols, s, box):
+    """(m, 4) texel ids (-1 off the image, not covered, or the texel outside its face's
+    ``box``) of the anchors around texels at ``rows``, ``cols`` on the grid of stride ``s``
+    laid from each face's first row and column (``box`` (rmin, rmax, cmin, cmax) (m,) each:
+    the face's texels span those), its last cells cut at the face's last row and column;
+    (m, 4) their bilinear weights; (r0, r1, c0, c1) (m,) each the cell's rows and columns."""
     H, W = index.shape
-    r0, c0 = rows // s * s, cols // s * s
-    fr, fc = (rows - r0) / s, (cols - c0) / s
+    rmin, rmax, cmin, cmax = box
+    (r0, r1), (c0, c1) = _span(rows, rmin, rmax, s), _span(cols, cmin, cmax, s)
+    fr = (rows - r0) / np.maximum(r1 - r0, 1)
+    fc = (cols - c0) / np.maximum(c1 - c0, 1)
     out = np.full((len(rows), 4), -1, np.int64)
-    for k, (dr, dc) in enumerate(((0, 0), (0, s), (s, 0), (s, s))):
-        r, c = r0 + dr, c0 + dc
-        ok = (r < H) & (c < W)
+    inbox = (rows >= rmin) & (rows <= rmax) & (cols >= cmin) & (cols <= cmax)
+    for k, (r, c) in enumerate(((r0, c0), (r0, c1), (r1, c0), (r1, c1))):
+        ok = inbox & (r >= 0) & (r < H) & (c >= 0) & (c < W)
         out[ok, k] = index[r[ok], c[ok]]
     w = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], 1)
+    return out, w, (r0, r1, c0, c1)
+
+
+def _middle(index, span):
+    """(m,) the texel id (-1: none) in the middle of each cell ``span`` (r0, r1, c0, c1) (m,)
+    (rounded down), and (m, 4) its bilinear weights in the cell."""
+    r0, r1, c0, c1 = span
+    r, c = (r0 + r1) // 2, (c0 + c1) // 2
+    fr = (r - r0) / np.maximum(r1 - r0, 1)
+    fc = (c - c0) / np.maximum(c1 - c0, 1)
+    w = np.stack([(1 - fr) * (1 - fc), (1 - fr) * fc, fr * (1 - fc), fr * fc], 1)
+    H, W = index.shape
+    out = np.full(len(r), -1, np.int64)
+    ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
+    out[ok] = index[r[ok], c[ok]]
     return out, w
 
 
-def _middle(index, rows, cols, s):
-    """(m,) the texel id (-1: none) in the middle of the grid cell of stride ``s`` around each
-    texel at ``rows``, ``cols`` (rounded down for a stride of 1... 2: its first inner texel)."""
-    H, W = index.shape
-    r, c = rows // s * s + s // 2, cols // s * s + s // 2
-    out = np.full(len(rows), -1, np.int64)
-    ok = (r < H) & (c < W)
-    out[ok] = index[r[ok], c[ok]]
-    return out
+def _boxes(faces, rows, cols, inside=None):
+    """(rmin, rmax, cmin, cmax) (n,) each: the rows and columns each texel's face spans (over
+    its ``inside`` texels where it has any: an island's rim, clamped onto it, takes its
+    neighbours' light, :func:`_rim`)."""
+    use = np.ones(len(faces), bool) if inside is None else inside
+    out = []
+    for x in (rows, cols):
+        lo = np.full(int(faces.max()) + 1 if len(faces) else 0, np.iinfo(np.int64).max)
+        hi = np.full(lo.shape, -1)
+        np.minimum.at(lo, faces[use], x[use])
+        np.maximum.at(hi, faces[use], x[use])
+        none = hi[faces] < 0                               # a face of rim texels only
+        np.minimum.at(lo, faces[none], x[none])
+        np.maximum.at(hi, faces[none], x[none])
+        out += [lo[faces], hi[faces]]
+    return tuple(out)
 
 
 def _affine(points, corners, w, ids, pitch):
@@ -77,15 +120,16 @@ def _affine(points, corners, w, ids, pitch):
     return np.linalg.norm(off, axis=1) <= FLAT * pitch[ids]
 
 
-def _bend(value, done, faces, index, rows, cols, s, face):
-    """(m, S) the interpolation's error the light's bend suggests across each texel's cell of
-    stride ``s``: the largest second difference of each source's luminance along the cell's
-    two rows and two columns, through the texels ``s`` beyond it on either side (on ``face``
-    and ``done`` (n, S) in that source; one side where the other has none), over 8 (a
-    quadratic's error at a cell's middle); inf where neither side has one."""
+def _bend(value, done, faces, index, span, face):
+    """(m, S) the interpolation's error the light's bend suggests across each texel's cell
+    ``span`` (r0, r1, c0, c1) (m,): the largest second difference of each source's luminance
+    along the cell's two rows and two columns, through the texels a cell's width beyond it on
+    either side (on ``face`` and ``done`` (n, S) in that source; one side where the other has
+    none), over 8 (a quadratic's error at a cell's middle); inf where neither side has one."""
     H, W = index.shape
-    r0, c0 = rows // s * s, cols // s * s
-    out = np.zeros((len(rows), value.shape[1]))
+    r0, r1, c0, c1 = span
+    hr, hc = r1 - r0, c1 - c0
+    out = np.zeros((len(r0), value.shape[1]))
 
     def at(r, c):
         ok = (r >= 0) & (r < H) & (c >= 0) & (c < W)
@@ -95,10 +139,12 @@ def _bend(value, done, faces, index, rows, cols, s, face):
         ok[ok] = faces[i[ok]] == face[ok]
         ok = ok[:, None] & done[np.maximum(i, 0)]
         return np.where(ok, value[np.maximum(i, 0)] @ LUMA, np.nan)
-    for r, c, dr, dc in ((r0, c0, 0, s), (r0 + s, c0, 0, s), (r0, c0, s, 0), (r0, c0 + s, s, 0)):
-        a, b, c1, d = (at(r + k * dr, c + k * dc) for k in (-1, 0, 1, 2))
-        both = np.fmax(np.abs(a - 2 * b + c1), np.abs(b - 2 * c1 + d))       # either side where one lacks
-        out = np.maximum(out, np.where(np.isnan(both), np.inf, both))
+    zero = np.zeros_like(hr)
+    for r, c, dr, dc in ((r0, c0, zero, hc), (r1, c0, zero, hc), (r0, c0, hr, zero), (r0, c1, hr, zero)):
+        a, b, c1_, d = (at(r + k * dr, c + k * dc) for k in (-1, 0, 1, 2))
+        both = np.fmax(np.abs(a - 2 * b + c1_), np.abs(b - 2 * c1_ + d))       # either side where one lacks
+        flat = ((dr == 0) & (dc == 0))[:, None]                               # no extent: no error
+        out = np.maximum(out, np.where(flat, 0.0, np.where(np.isnan(both), np.inf, both)))
     return out / 8
 
 
@@ -121,16 +167,19 @@ def _agree(a, b, floor):
     return np.abs(a - b) <= AGREE * np.maximum(a, b) + floor
 
 
-def _cells(index, faces, rows, cols, ids, s):
-    """(ok (m,) bool, corners (m, 4), weights (m, 4), middle (m,)) the grid cell of stride ``s``
-    around each texel ``ids`` (m,): its anchors and bilinear weights (:func:`_corners`) and the
-    texel in its middle (its first corner on a 2-texel grid); ``ok`` where all of them are texels
-    of the texel's own face."""
-    corners, w = _corners(index, rows[ids], cols[ids], s)
-    mid = _middle(index, rows[ids], cols[ids], s) if s > 2 else corners[:, 0]
+def _cells(index, faces, rows, cols, ids, s, box):
+    """(ok (m,) bool, corners (m, 4), weights (m, 4), middle (m,), its weights (m, 4), span)
+    the grid cell of stride ``s`` around each texel ``ids`` (m,), laid on its face's ``box``
+    (:func:`_corners`): its anchors and bilinear weights and the texel in its middle (its first
+    corner on a 2-texel grid); ``ok`` where all of them are texels of the texel's own face."""
+    corners, w, span = _corners(index, rows[ids], cols[ids], s, tuple(b[ids] for b in box))
+    if s > 2:
+        mid, wm = _middle(index, span)
+    else:
+        mid, wm = corners[:, 0], np.tile([1.0, 0.0, 0.0, 0.0], (len(ids), 1))
     ok = np.all(corners >= 0, axis=1) & (mid >= 0)
     ok[ok] = np.all(faces[np.column_stack([corners[ok], mid[ok]])] == faces[ids[ok], None], axis=1)
-    return ok, corners, w, mid
+    return ok, corners, w, mid, wm, span
 
 
 def _floor(value, exact):
@@ -139,20 +188,20 @@ def _floor(value, exact):
                                    else 0.0 for k in range(value.shape[1])])
 
 
-def _smooth(value, done, points, pitch, faces, index, rows, cols, ids, corners, w, mid, s, floor):
+def _smooth(value, done, points, pitch, faces, index, ids, corners, w, mid, wm, span, s, floor):
     """(m, S) bool: the texels ``ids`` (m,) whose cell of stride ``s`` (``corners``, weights
-    ``w``, middle ``mid``) interpolates each source (module docstring): the texel not yet done in
-    it, its anchors done, the cell affine; on the 8- and 4-texel grids the middle agreeing with
-    the corners' interpolation, on the 2-texel grid the corners agreeing or the light running
-    straight across (:func:`_bend`)."""
+    ``w``, middle ``mid`` with weights ``wm``, ``span``) interpolates each source (module
+    docstring): the texel not yet done in it, its anchors done, the cell affine; on the 8- and
+    4-texel grids the middle agreeing with the corners' interpolation, on the 2-texel grid the
+    corners agreeing or the light running straight across (:func:`_bend`)."""
     keep = _affine(points, corners, w, ids, pitch)[:, None] & ~done[ids]            # (m, S)
     keep &= done[corners].all(axis=1) & done[mid]
     Y = value[corners] @ LUMA                                         # (m, 4, S)
     if s > 2:      # the cell's middle, lit exactly, is what the corners' interpolation makes of it
-        keep &= _affine(points, corners, 0.25, mid, pitch)[:, None]
-        keep &= _agree(Y.mean(axis=1), value[mid] @ LUMA, floor)
+        keep &= _affine(points, corners, wm, mid, pitch)[:, None]
+        keep &= _agree(np.einsum("mk,mks->ms", wm, Y), value[mid] @ LUMA, floor)
     else:          # a cell two texels wide: its corners agree, or the light is straight across it
-        bend = _bend(value, done, faces, index, rows[ids], cols[ids], s, faces[ids])
+        bend = _bend(value, done, faces, index, span, faces[ids])
         keep &= _agree(Y.max(axis=1), Y.min(axis=1), floor) | (bend <= AGREE * Y.max(axis=1) + floor)
     return keep
 
@@ -177,6 +226,7 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     index = np.full((H, W), -1, np.int64)
     index[covered] = np.arange(n)
     rows, cols = np.nonzero(covered)
+    box = _boxes(np.asarray(faces, dtype=np.int64), rows, cols, inside)
     v = split(np.zeros(0, np.int64), None)            # no texel: the sources' count and shape
     value = np.zeros((n,) + v.shape[1:])
     exact = np.zeros(value.shape[:2], bool)
@@ -201,7 +251,7 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         ids = np.flatnonzero(~done.all(axis=1))
         if ids.size == 0:
             break
-        ok, corners, w, mid = _cells(index, faces, rows, cols, ids, s)
+        ok, corners, w, mid, wm, span = _cells(index, faces, rows, cols, ids, s, box)
         # each anchor in the sources its cells' texels still want
         anchors = np.column_stack([corners[ok], mid[ok]])
         at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
@@ -210,10 +260,11 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
         light(a, want[a])
         if floor is None and exact.any():
             floor = _floor(value, exact)
-        ids, corners, w, mid = ids[ok], corners[ok], w[ok], mid[ok]
+        ids, corners, w, mid, wm = ids[ok], corners[ok], w[ok], mid[ok], wm[ok]
+        span = tuple(x[ok] for x in span)
         if ids.size == 0:
             continue
-        keep = _smooth(value, done, points, pitch, faces, index, rows, cols, ids, corners, w, mid, s, floor)
+        keep = _smooth(value, done, points, pitch, faces, index, ids, corners, w, mid, wm, span, s, floor)
         interp = np.einsum("mk,mksc->msc", w, value[corners])
         if probed is not None and np.any(probed):
             if probe is None:           # the probed sources only: the world's rays are the costliest
@@ -233,6 +284,15 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     left = np.flatnonzero(~done.all(axis=1))
     light(left, ~done[left])
     return value, exact
+
+
+def from_inside(value, done, inside, faces, covered):
+    """:func:`_rim` on the ``covered`` (H, W) texels' ``value`` (n, S, k) and ``done`` (n, S)
+    (updated in place): a texel not done whose centre lies outside its triangle takes the
+    mean of its 8 neighbours inside on its face (``inside``, ``faces`` (n,)) that are."""
+    index = np.full(covered.shape, -1, np.int64)
+    index[covered] = np.arange(int(covered.sum()))
+    _rim(value, done, inside, faces, index, *np.nonzero(covered))
 
 
 def _rim(value, done, inside, faces, index, rows, cols):
@@ -272,7 +332,8 @@ def _facing(faces, shading, ids):
 
 
 def as_cycles(split, pts, nrm, shading, low, probed):
-    """``split(ids, samples, which)`` of the texels at ``pts`` (n, 3) with face normals ``nrm``
+    """``split(ids, samples, which, **shared)`` (``shared``: the world's ``split`` and ``part``,
+    passed on) of the texels at ``pts`` (n, 3) with face normals ``nrm``
     and shading normals ``shading`` as Cycles' bake lights them: the world only from in front of
     the face (:func:`_facing`); where the shading normal leans off the face, a lamp below the
     face's plane by rays from ``low`` (n, 3) (Cycles' lifted start, :func:`.lift.lift`; None:
@@ -283,10 +344,10 @@ def as_cycles(split, pts, nrm, shading, low, probed):
     lights it from no direction, the world from those in front of it)."""
     away = np.einsum("ij,ij->i", shading, nrm) < 0
 
-    def lit(ids, samples, which=None):
+    def lit(ids, samples, which=None, **shared):
         facing = _facing(nrm, shading, ids)
         D = split(pts[ids], shading[ids], samples, which, facing,
-                  None if low is None or facing is None else low[ids])
+                  None if low is None or facing is None else low[ids], **shared)
         off = away[ids]
         if off.any() and probed is not None:
             D[np.ix_(off, np.asarray(probed, bool))] = 0.0

@@ -202,3 +202,58 @@ def test_receivers_a_polygon_lies_wholly_below_get_exactly_0_the_others_as_alone
         assert np.all(F[below] == 0.0)
         alone = [polygon_form_factor(x[i:i + 1], n[i:i + 1], per[i:i + 1])[0] for i in np.flatnonzero(~below)]
         np.testing.assert_allclose(F[~below], alone, rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("angle", [0.0, 0.05])
+def test_a_sun_wholly_on_one_side_of_a_leaning_point_s_plane_is_lit_from_that_side_only(monkeypatch, angle):
+    """``split_at`` with ``facing`` and ``low`` (a leaning texel: the lamps from above its
+    plane at the point, from below it at Cycles' lifted start) lights a sun from one side only
+    where its disk lies wholly on that side (its direction more than its half angle off the
+    plane): the other side's samples would all be left out, 0. On an open floor (no shadow)
+    every point gets what both sides summed give (the sun's cosine to the shading normal where
+    it is above the plane, else what the lifted start sees), bit for bit for a sun without
+    size (a disk's samples are drawn per call: to rounding where neither the plane nor the
+    shading normal's horizon cuts the disk), and the below-plane
+    rays are asked for only at the points whose plane the sun's disk reaches below."""
+    from hemicube_radiosity.core.light import direct as direct_mod
+    from hemicube_radiosity.core.light.direct import DirectLight
+    from hemicube_radiosity.core.light.lamps import SunLight
+    from hemicube_radiosity.core.light.lamp_cache import lamp_irradiance
+    from hemicube_radiosity.core.mesh.patches import MeshInput
+    from hemicube_radiosity.core.mesh.subdivide import build_patches
+    floor = MeshInput.from_faces([(-5, -5, 0), (5, -5, 0), (5, 5, 0), (-5, 5, 0)], [(0, 1, 2, 3)], name="floor")
+    patches = build_patches([floor], 0)
+    rng = np.random.default_rng(2)
+    m = 300
+    x = np.column_stack([rng.uniform(-2, 2, (m, 2)), np.zeros(m)])
+    # faces tilted up to 40 degrees (their plane's normal), shading normals leaning off them
+    facing = np.column_stack([rng.uniform(-0.6, 0.6, (m, 2)), np.ones(m)])
+    facing /= np.linalg.norm(facing, axis=1, keepdims=True)
+    shade = facing + np.column_stack([rng.uniform(-0.5, 0.5, (m, 2)), np.zeros(m)])
+    shade /= np.linalg.norm(shade, axis=1, keepdims=True)
+    low = x + 0.01 * shade
+    sun = SunLight(direction=(-np.cos(np.radians(20.0)), 0.0, -np.sin(np.radians(20.0))), strength=3.0, angle=angle)
+    light = DirectLight(patches, [sun], np.zeros(0, np.int64), 1, light_samples=4)
+    asked = []
+
+    def counted(*a, points=None, facing=None, **k):
+        asked.append((len(points), None if facing is None else np.asarray(facing).copy()))
+        return lamp_irradiance(*a, points=points, facing=facing, **k)
+    monkeypatch.setattr(direct_mod, "lamp_irradiance", counted)
+    got = light.split_at(x, shade, "t", facing=facing, low=low)[:, 0]
+    monkeypatch.setattr(direct_mod, "lamp_irradiance", lamp_irradiance)
+    eps = light.offsets(x, shade)
+    kw = dict(samples=4, seed=0, index=0)
+    want = lamp_irradiance(patches, [sun], None, points=x, normals=shade, eps=eps, facing=facing, **kw) / np.pi
+    want += lamp_irradiance(patches, [sun], None, points=low, normals=shade, eps=np.zeros(m), facing=-facing,
+                            **kw) / np.pi
+    s = facing @ -np.asarray(sun.direction)
+    reach = np.sin(0.5 * angle) + 1e-9
+    if angle == 0:
+        np.testing.assert_array_equal(got, want)
+    else:           # the disk's samples drawn per call: the same to rounding where it is not cut
+        clear = (np.abs(s) > reach) & (np.abs(shade @ -np.asarray(sun.direction)) > reach)
+        np.testing.assert_allclose(got[clear], want[clear], rtol=1e-12)
+    assert [n for n, _ in asked] == [int((s > -reach).sum()), int((s < reach).sum())]
+    assert (s > reach).sum() > 100 and (s < -reach).sum() > 20          # both sides are tested
+    assert (got[s < -reach, 0] > 0).any() and (got[s > reach, 0] > 0).mean() > 0.5

@@ -180,3 +180,47 @@ def test_a_corner_normal_a_hair_behind_its_face_is_turned_as_at_cycles_bake_poin
     monkeypatch.setattr(crease, "NEAR_PERPENDICULAR", 0.0)
     before = bake([m], _settings(), lights=[SunLight(-to_sun, strength=3.0)])
     np.testing.assert_array_equal(before.corner_values()[at_edge & (E.polys >= 0)], 0.0)
+
+
+@pytest.mark.parametrize("scene", ["step", "board"])
+def test_a_lightmap_reads_the_corners_reflected_light_and_finds_no_corner_s_own_direct(monkeypatch, scene):
+    """The lightmap target lights its texels again (:mod:`..output.texels`) and reads only the
+    corners' emission, reflectivity and light reflected more than once
+    (``BakeResult.corner_parts``): no corner is lit on its own for it (no ray toward the lamps
+    or the world from a creased or covered corner), and what it reads is the vertex-colour
+    target's, bit for bit (the emission to rounding: it is what is left of each corner's value)."""
+    from hemicube_radiosity.core.builtin_scenes import quad
+    from hemicube_radiosity.core.light.direct import DirectLight
+    from tests.core.output.test_covered import _board, _floor
+
+    if scene == "step":
+        m, _ = _step(((-1.0, 0.6), (-0.5, 0.6), (0.0, 0.6), (0.15, 0.3), (0.3, 0.0)))
+        meshes = [m, quad([(-1.5, -1.5, 0), (1.5, -1.5, 0), (1.5, 1.5, 0), (-1.5, 1.5, 0)], name="floor")]
+        s, sun = _settings(), SunLight(direction=(0.3, -0.5, -0.8), strength=3.0)
+    else:
+        meshes = [_floor(), _board(1e-5)]
+        s = BakeSettings(patch_size=1.0, element_size=1.0, two_sided_reflection=False, gather_rays=64)
+        sun = SunLight((0.0, 0.0, -1.0), strength=3.0)
+    world = np.array([0.35, 0.45, 0.6])
+    lit = []
+    real_at = DirectLight.at
+
+    def at(self, points, normals, where, *a, **k):
+        lit.append(where)
+        return real_at(self, points, normals, where, *a, **k)
+    monkeypatch.setattr(DirectLight, "at", at)
+    vc = bake(meshes, s, lights=[sun], world=world)
+    own = {"step": "corners", "board": "covered"}[scene]
+    assert own in lit and vc.corner_direct is not None
+    lit.clear()
+    from dataclasses import replace
+    lm = bake(meshes, replace(s, target="lightmap", output_mode="copy"), lights=[sun], world=world)
+    assert not {"corners", "corners-below", "covered", "covered-below"} & set(lit), set(lit)
+    (E1, rho1, D1, I1), (E2, rho2, D2, I2) = vc.corner_parts(), lm.corner_parts()
+    np.testing.assert_array_equal(rho1, rho2)
+    np.testing.assert_array_equal(I1, I2)
+    np.testing.assert_allclose(E1, E2, atol=1e-12)
+    # the corners lit on their own for the vertex colours take their vertex's light here
+    cv = lm.elements.corner_ids()
+    np.testing.assert_array_equal(D2, lm.vertex_direct[cv])
+    assert not np.array_equal(D1, D2)

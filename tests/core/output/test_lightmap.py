@@ -238,3 +238,121 @@ def test_a_triangle_without_area_leaves_its_texels_to_its_neighbours():
     near = flat_half & L.filled
     assert near.sum() > 100 and not (L.covered & ~real).any()
     np.testing.assert_allclose(L.image[near], 0.6, atol=1e-6)
+
+
+def test_texels_located_on_workers_are_the_same_and_on_their_own_face():
+    """Texels located on two workers (forked processes, each a share of the faces) read the
+    same elements and (u, v) as on one, bit for bit; every texel is found on an element of its
+    own face, and the element's bilinear map at (u, v) gives back its point."""
+    from hemicube_radiosity.core.util.geometry import bilinear
+    elements, uv, world = walls()
+    rng = np.random.default_rng(7)
+    m = 60000                                    # above two shares of 20,000 points
+    face = rng.integers(0, 2, m)
+    a, b = rng.uniform(0.0, 1.0, (2, m))
+    floor = np.stack([2 * a, b, np.zeros(m)], 1)
+    wall = np.stack([np.zeros(m), a, b], 1)
+    points = np.where(face[:, None] == 0, floor, wall)
+    normals = np.where(face[:, None] == 0, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
+    one = lm.locate_texels(elements, points, normals, 0, face, workers=1)
+    two = lm.locate_texels(elements, points, normals, 0, face, workers=2)
+    assert len(lm._face_shares(face, np.arange(m), 2)) == 2
+    np.testing.assert_array_equal(one[0], two[0])
+    np.testing.assert_array_equal(one[1], two[1])
+    idx, at = two
+    np.testing.assert_array_equal(elements.source_face[idx], face)
+    back = bilinear(elements.corners()[idx], at[:, :1], at[:, 1:])
+    np.testing.assert_allclose(back, points, atol=1e-9)
+
+
+def test_a_texel_s_sub_points_share_the_sky_s_rays_and_read_its_view_factor():
+    """A floor meeting a tall wall (both 40 m long): the sky seen from a floor point at
+    distance d from the wall is 1 - (1 - d / sqrt(d^2 + h^2)) / 2 (the view factor to an
+    infinitely long perpendicular plate of height h). Texels 2 cm wide beside the wall averaged
+    over their sub-points (:func:`lightmap._sub_mean`, the world a source not probed) read the
+    closed form's mean over their square, their points sharing the 256 rays out
+    (:data:`lightmap.SUB_SKY`): a sixteenth of the rays of each point casting all of them, to
+    the same answer within the rays' noise."""
+    from hemicube_radiosity.core.light.direct import DirectLight
+    from hemicube_radiosity.core.rays import embree_available
+    if not embree_available():
+        import pytest
+        pytest.skip("the sky's rays need Embree")
+    h, L = 3.0, 20.0
+    floor = MeshInput.from_faces([[-L, 0, 0], [L, 0, 0], [L, 10, 0], [-L, 10, 0]], [[0, 1, 2, 3]], name="floor")
+    wall = MeshInput.from_faces([[-L, 0, 0], [-L, 0, h], [L, 0, h], [L, 0, 0]], [[0, 1, 2, 3]], name="wall")
+    patches = build_patches([floor, wall], 0)
+    light = DirectLight(patches, [], np.zeros(0, np.int64), 1, world=np.ones(3))
+    rays = []
+    real = light.scene().occluded
+
+    class Counting:
+        def occluded(self, o, d, *a):
+            rays.append(len(o))
+            return real(o, d, *a)
+    light._scene = Counting()
+
+    def split(points, normals, samples=None, which=None, facing=None, low=None, **shared):
+        return light.split_at(points, normals, "t", samples, which, facing, low, **shared)
+    pitch, m = 0.02, 8                             # texels along y from the wall: a row of 8
+    tri_w = np.array([[[-1, 0, 0], [1, 0, 0], [1, 1, 0]], [[-1, 0, 0], [1, 1, 0], [-1, 1, 0]]], float)
+    px = np.array([[[0, 0], [100, 0], [100, 50]], [[0, 0], [100, 50], [0, 50]]], float)   # 1 texel = 2 cm
+    cols, rows = np.full(m, 50), np.arange(m)
+    tri = np.zeros(m, np.int64)
+    which, sub = lm._sub_texels(px, tri, np.stack([cols + 0.5, rows + 0.5], 1))
+    assert np.array_equal(np.bincount(which), np.full(m, 16))
+    Ds, need, D = np.zeros((m, 1, 3)), np.ones((m, 1), bool), np.zeros((m, 3))
+    got = {}
+    for share in (1, lm.SUB_SKY):
+        old, lm.SUB_SKY = lm.SUB_SKY, share
+        rays.clear()
+        try:
+            got[share] = lm._sub_mean(split, tri_w, None, False, tri, which, sub, Ds, need, D,
+                                      probed=np.array([False]))[:, 0]
+        finally:
+            lm.SUB_SKY = old
+        got[share, "rays"] = sum(rays)
+    assert got[1, "rays"] == 16 * got[lm.SUB_SKY, "rays"] == 16 * 16 * m * 256 // 16
+    # the closed form's mean over each texel's square (the points' y, off the wall)
+    y = np.linspace(0, 1, 201)[None] * 0.5 * pitch + (rows[:, None] + 0.25) * pitch
+    want = (1 - 0.5 * (1 - y / np.sqrt(y * y + h * h))).mean(axis=1)
+    for share in (1, lm.SUB_SKY):                  # measured: within 0.005 (the lattice's steps)
+        np.testing.assert_allclose(got[share], want, atol=0.01)
+    np.testing.assert_allclose(got[lm.SUB_SKY], got[1], atol=0.005)
+
+
+def test_rim_texels_take_their_inside_neighbours_parts_and_are_not_located(monkeypatch):
+    """A texel whose centre lies outside its triangle (an island's rim) reads the mean of its
+    8 neighbours inside on its face, its emission, reflectivity and reflected light as its
+    direct light (Cycles' margin extends an island from its texels): with E, rho, I and D
+    linear in position or constant, its value is its neighbours' mean, to rounding; only the
+    inside texels (and a rim texel with no such neighbour) are located."""
+    elements, uv, world = walls()
+    c = elements.corners()
+    parts = (0.1 * f(c), np.full(c.shape, 0.5), np.zeros(c.shape), 0.2 * f(c))
+    located = []
+    real = lm.located_parts
+
+    def counted(elements, parts, points, *a, **k):
+        located.append(len(points))
+        return real(elements, parts, points, *a, **k)
+    monkeypatch.setattr(lm, "located_parts", counted)
+    size, faces = 64, np.array([0, 0, 1, 1])
+    L = lm.bake_lightmap(elements, None, 0, uv, world, size, parts=parts, faces=faces,
+                         direct=lambda p, n: np.ones((len(p), 3)))
+    tri, _, inside = lm.rasterize(uv, size, size)
+    covered = tri >= 0
+    face = np.where(covered, faces[np.maximum(tri, 0)], -1)
+    rim = np.argwhere(covered & ~inside)
+    assert len(rim) > 50
+    alone = 0
+    for r, col in rim:
+        nb = [(r + dr, col + dc) for dr in (-1, 0, 1) for dc in (-1, 0, 1) if (dr or dc)
+              and 0 <= r + dr < size and 0 <= col + dc < size and inside[r + dr, col + dc]
+              and face[r + dr, col + dc] == face[r, col]]
+        if not nb:
+            alone += 1
+            continue
+        want = np.mean([L.image[p] for p in nb], axis=0)
+        np.testing.assert_allclose(L.image[r, col], want, rtol=1e-6)
+    assert sum(located) == inside[covered].sum() + alone
