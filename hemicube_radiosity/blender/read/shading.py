@@ -688,19 +688,8 @@ def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled, cache=
             need, depsgraph, constants, emit, stand_ins, sampled)
         return
     ob_keys, mat_keys = keys
-
     disk = cache if cache is not None and getattr(cache, "directory", None) else None
-    read = {}
-
-    def kept(key):
-        for gen in reversed(_EVALUATED.values()):
-            if key in gen:
-                return gen[key]
-        if disk is not None:
-            if key not in read:
-                read[key] = disk.get(_disk_key(key), remember=False)
-            return read[key]
-        return None
+    kept = _Kept(disk)
     names = [o.name for o in need]
     ask = {n for n, k in zip(names, ob_keys) if kept(k) is None}
     for n in list(ask):                             # with the objects of their last runs
@@ -732,11 +721,36 @@ def _evaluated(out, need, depsgraph, constants, emit, stand_ins, sampled, cache=
         for k in [k for n, k in zip(names, ob_keys) if n in ask] + [("run", n) for run in runs for n in run] \
                 + [k for m, k in zip(constants, mat_keys) if m.name_full in asked_c]:
             disk.put(_disk_key(k), gen[k], remember=False)
-    for old in _EVALUATED.values():                 # the runs of the objects not asked again
+    out.corners, out.materials, out.face_emission = _copied((out.corners, out.materials, out.face_emission))
+    _remember(gen, names)
+
+
+class _Kept:
+    """An evaluation kept under a key: the newest of the session's last :data:`.shading_key.KEPT`
+    that holds it, else the cache folder's (``disk``, read once per key), else None."""
+
+    def __init__(self, disk):
+        self.disk, self.read = disk, {}
+
+    def __call__(self, key):
+        for gen in reversed(_EVALUATED.values()):
+            if key in gen:
+                return gen[key]
+        if self.disk is None:
+            return None
+        if key not in self.read:
+            self.read[key] = self.disk.get(_disk_key(key), remember=False)
+        return self.read[key]
+
+
+def _remember(gen, names):
+    """Keep ``gen`` (key -> evaluation) as the session's newest evaluation, with the runs of the
+    objects ``names`` not asked again carried over from the older ones; the oldest past
+    :data:`.shading_key.KEPT` is dropped."""
+    for old in _EVALUATED.values():
         for n in names:
             if ("run", n) not in gen and ("run", n) in old:
                 gen[("run", n)] = old[("run", n)]
-    out.corners, out.materials, out.face_emission = _copied((out.corners, out.materials, out.face_emission))
     _EVALUATED[object()] = gen
     while len(_EVALUATED) > KEPT:
         _EVALUATED.popitem(last=False)
