@@ -29,7 +29,7 @@ import numpy as np
 
 from ..runtime.cache import cache_key, cached
 from ..util.unique import linked_labels, unique_rows
-from .patches import covering_faces, meshes_key
+from .patches import covering_faces, meshes_key, negated_rows
 from .sizes import mesh_boxes
 from ..rays import START_BACKS, START_SHARE, START_ULPS
 
@@ -154,7 +154,7 @@ def _back(mesh, index, shape, emit: bool):
                    name=f"{mesh.name} (back)", corner_rho=corners(mesh.corner_rho),
                    corner_emission=corner_em,
                    corner_normal=None if getattr(mesh, "corner_normal", None) is None
-                   else -np.asarray(mesh.corner_normal, dtype=np.float64)[corner],
+                   else negated_rows(mesh.corner_normal, corner),
                    face_material=None if material is None else np.asarray(material)[sel],
                    face_triangles=triangles, back_of=index, back_faces=sel,
                    face_glossy=None if getattr(mesh, "face_glossy", None) is None
