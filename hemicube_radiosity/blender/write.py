@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import bpy
 import numpy as np
-from ..core.runtime.cache import Memo, inverse
+from ..core.runtime.cache import PER_MESH, Memo, inverse
 from ..core.runtime.errors import RadiosityError
 from . import textures
 
@@ -134,16 +134,33 @@ def rows_of(patches, owner) -> np.ndarray:
     return parts[0] if len(parts) == 1 else np.sort(np.concatenate(parts))
 
 
+#: :func:`_element_layout` by the identity of the elements' geometry arrays (never changed in
+#: place: a relight's elements are the cached ones), the owners, the matrix and the flip: a
+#: relight writes the same layouts (26 ms of the bunny's relight). Read only.
+_LAYOUTS = Memo(PER_MESH)
+
+
 def _element_layout(patches, owner, matrix_world, flipped):
     """One owner's patches as a mesh: local-space verts (V', 3), loop vertex ids (L,), loop starts
     (F,), each loop's patch corner as an index into the (N * 4) flattened corners (L,), and the
-    patches (F,) (``owner``: an index, or several: an object and its back)."""
+    patches (F,) (``owner``: an index, or several: an object and its back); read only."""
+    M = np.asarray(matrix_world, float)
+    key = (np.asarray(owner, np.int64).tobytes(), M.shape, M.tobytes(), bool(flipped))
+
+    def make():
+        out = _layout(patches, owner, M, flipped)
+        for a in out:
+            a.flags.writeable = False
+        return out
+    return _LAYOUTS.of((patches.verts, patches.polys, patches.owner), make, key=key)
+
+
+def _layout(patches, owner, M, flipped):
     sel = rows_of(patches, owner)
     polys = patches.polys[sel]
     used = np.unique(polys[polys >= 0])
     remap = np.full(len(patches.verts), -1, np.int64)
     remap[used] = np.arange(used.size)
-    M = np.asarray(matrix_world, float)
     Minv = inverse(M)
     local = patches.verts[used] @ Minv[:3, :3].T + Minv[:3, 3]
     nside = np.where(polys[:, 3] < 0, 3, 4)

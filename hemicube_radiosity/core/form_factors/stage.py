@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 
 from . import embree as embree_ff
-from ..runtime.cache import cache_key, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, geometry_key
 from .glossy import specular_stage
 from .hemicube import hemicube_form_factors
 from ..mesh.elements import output_mesh_ahead
@@ -53,6 +53,11 @@ def compute_form_factors(patches: PatchSet, settings, *, receivers=None, progres
                                                     seed=settings.rotate_seed or 0, **kw)
 
 
+#: :func:`.forecast.polygons_seen` by the digest of what it reads (geometry only): a relight
+#: asks it again (20 ms of the bunny's relight)
+_SEEN = Memo(8)
+
+
 def chosen_method(ctx, receivers) -> str:
     """The method of ``ctx.settings``, 'auto' made 'hemicube' or 'embree': Embree's rays through
     the hemi-cube's pixels where a hemi-cube would draw so many polygons (:func:`.forecast.
@@ -67,7 +72,10 @@ def chosen_method(ctx, receivers) -> str:
     if not embree_available() or not len(receivers):
         return "hemicube"
     u = ctx.unknowns
-    seen = polygons_seen(ctx.patches, ctx.clusters, u.centers[receivers], u.normals[receivers])
+    x, n = u.centers[receivers], u.normals[receivers]
+    of = b"" if ctx.clusters is None else array_key(ctx.clusters.of)
+    key = cache_key(geometry_key(ctx.patches) + of + array_key(x) + array_key(n), ("polygons-seen",))
+    seen = _SEEN.get(key, lambda: polygons_seen(ctx.patches, ctx.clusters, x, n))
     return "embree" if hemicube_seconds(seen) > ray_seconds(s.resolution) else "hemicube"
 
 

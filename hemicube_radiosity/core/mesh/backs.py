@@ -27,8 +27,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..runtime.cache import cache_key, cached
 from ..util.unique import linked_labels, unique_rows
-from .patches import covering_faces, meshes_key
+from .patches import covering_faces, meshes_key, negated_rows
+from .sizes import mesh_boxes
 from ..rays import START_BACKS, START_SHARE, START_ULPS
 
 __all__ = ["with_backs", "backs_that_matter", "open_faces", "offset", "cutters", "backs_of_pieces"]
@@ -152,7 +154,7 @@ def _back(mesh, index, shape, emit: bool):
                    name=f"{mesh.name} (back)", corner_rho=corners(mesh.corner_rho),
                    corner_emission=corner_em,
                    corner_normal=None if getattr(mesh, "corner_normal", None) is None
-                   else -np.asarray(mesh.corner_normal, dtype=np.float64)[corner],
+                   else negated_rows(mesh.corner_normal, corner),
                    face_material=None if material is None else np.asarray(material)[sel],
                    face_triangles=triangles, back_of=index, back_faces=sel,
                    face_glossy=None if getattr(mesh, "face_glossy", None) is None
@@ -212,13 +214,14 @@ def with_backs(meshes, two_sided_emission=True, lights=(), world=None, probe_ray
     decide which backs may be lit; ``probe_rays`` per point look for what a back faces. Which
     backs matter depends on geometry and on where the sources are, not on their strength or
     colour: kept in ``cache`` (a relight casts no ray)."""
-    from ..runtime.cache import cache_key, cached
-
     meshes = list(meshes)
-    corners = [np.asarray(m.verts) for m in meshes if len(m.verts)]
-    if not corners:
+    some = [m for m in meshes if len(m.verts)]
+    if not some:
         return meshes
-    tol = 1e-9 * (float(np.linalg.norm(np.ptp(np.concatenate(corners), axis=0))) or 1.0)
+    lo, hi = mesh_boxes(some)       # each mesh's box, kept per verts array: a relight's are the same
+    span = hi.max(axis=0) - lo.min(axis=0) if all(np.asarray(m.verts).dtype == np.float64 for m in some) \
+        else np.ptp(np.concatenate([np.asarray(m.verts) for m in some]), axis=0)   # (the same: the ptp of all)
+    tol = 1e-9 * (float(np.linalg.norm(span)) or 1.0)
     key = meshes_key(meshes)
     opened = _cached_open(meshes, tol, cache, key)
     if not opened:
@@ -236,8 +239,6 @@ def _cached_open(meshes, tol, cache, key) -> dict:
     ``cache`` under their geometry ``key`` (a relight reads the same meshes again). A face of
     zero area (:func:`.patches.covering_faces`) has no back: it covers nothing, and a back of
     only such faces was refused as a mesh of nothing (a real room's degenerate slivers)."""
-    from ..runtime.cache import cache_key, cached
-
     fronts = [i for i, m in enumerate(meshes)
               if getattr(m, "back_of", -1) < 0 and len(m.verts) and len(m.face_offsets) >= 2]
 
@@ -264,8 +265,6 @@ def _sources_key(lights, world) -> str:
 
 def _cached_backs(meshes, opened, lights, world, probe_rays, cache, emit, geometry) -> dict:
     """:func:`backs_that_matter`, kept in ``cache`` under the geometry and the sources' places."""
-    from ..runtime.cache import cache_key, cached
-
     order = sorted(opened)
     key = cache_key(geometry + b"".join(np.packbits(opened[i]).tobytes() for i in order),
                     ("backs", probe_rays, emit, _sources_key(lights, world)))

@@ -9,11 +9,13 @@ on a fixed grid of points per element, which the final gather's rays read where 
 """
 from __future__ import annotations
 
+import hashlib
+
 import numpy as np
 
 from ..mesh.patches import PatchSet
 from ..mesh.refine import LUMA
-from ..runtime.cache import cache_key, cached, geometry_key
+from ..runtime.cache import Memo, cache_key, cached, geometry_key
 from ..util.geometry import bilinear
 from ..util.unique import run_positions
 from .corners import corner_columns
@@ -62,14 +64,8 @@ def shadowed_inside(ctx, elements, xv, nv, light_v, select, opened=None, ratio=2
     # the centres of n x n cells of each element's bilinear map, n its side over the detail size
     # (1 to INSIDE_CELLS), or on a huge object's elements cells of the detail size along each side
     size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
-    corners = elements.corners(ids)
-    nu, nv_ = grid_sides(corners, elements.areas[ids], size, INSIDE_CELLS, INSIDE_CELLS ** 2,
-                         huge_elements(ctx, elements, ids), rounding=np.round)
-    at = np.repeat(np.arange(ids.size), nu * nv_)
-    k = run_positions(nu * nv_)
-    u, v = ((k % nu[at]) + 0.5) / nu[at], ((k // nu[at]) + 0.5) / nv_[at]
-    x = bilinear(corners[at], u[:, None], v[:, None])
-    inside = ctx.direct.sources_at(x, elements.normals[ids[at]], "element-inside", world=False).sum(1)
+    at, x, nx = _inside_points(elements, ids, size, huge_elements(ctx, elements, ids))
+    inside = ctx.direct.sources_at(x, nx, "element-inside", world=False).sum(1)
     at_v = ctx.direct.sources_at(xv, nv, "vertices", world=False).sum(1)
     c = at_v.take(corner_columns(elements, ctx.cache)[0][:, ids])   # (4, M): a triangle's 4th is its 1st
     hi = np.maximum(np.maximum(c[0], c[1]), np.maximum(c[2], c[3]))[at]
@@ -78,6 +74,31 @@ def shadowed_inside(ctx, elements, xv, nv, light_v, select, opened=None, ratio=2
     off = ((inside > ratio * hi) | (inside * ratio < lo)) & (np.abs(inside - c.mean(axis=0)[at]) > bar)
     out[ids[np.unique(at[off])]] = True
     return out
+
+
+#: :func:`_inside_points` by the identity of the elements' geometry arrays (never changed in
+#: place) and the digest of the elements asked: a relight asks for the same points (15 ms of the
+#: bunny's relight), and the light's cache, keyed on the points' array, then hashes them no more
+_INSIDE = Memo(4)
+
+
+def _inside_points(elements, ids, size, huge):
+    """(at, x, normals): :func:`shadowed_inside`'s points, the centres of the cells of elements
+    ``ids`` (cells of the detail ``size``; ``huge`` (M,) bool: cut along each side), the index
+    into ``ids`` of each point's element, and its element's normal; geometry only."""
+    def make():
+        corners = elements.corners(ids)
+        nu, nv_ = grid_sides(corners, elements.areas[ids], size, INSIDE_CELLS, INSIDE_CELLS ** 2,
+                             huge, rounding=np.round)
+        at = np.repeat(np.arange(ids.size), nu * nv_)
+        k = run_positions(nu * nv_)
+        u, v = ((k % nu[at]) + 0.5) / nu[at], ((k // nu[at]) + 0.5) / nv_[at]
+        out = at, bilinear(corners[at], u[:, None], v[:, None]), elements.normals[ids[at]]
+        for a in out:
+            a.flags.writeable = False
+        return out
+    ask = hashlib.sha256(np.asarray(ids, np.int64).tobytes() + np.asarray(huge, bool).tobytes()).digest()
+    return _INSIDE.of((elements.verts, elements.polys), make, key=(size, INSIDE_CELLS, ask))
 
 
 def _place_uniforms(points, verts, count) -> np.ndarray:

@@ -77,3 +77,36 @@ def test_a_relight_of_hundreds_of_open_meshes_keeps_its_form_factors():
     assert warm.form_factor_source == "cached" and warm.form_factors is first.form_factors
     assert len(cache._mem) < 64
     np.testing.assert_allclose(warm.solution.B, 2 * first.solution.B, rtol=1e-6, atol=1e-12)
+
+
+def test_a_back_s_corner_normals_are_kept_per_front_array_and_follow_an_edit():
+    """A card's back shades with its front's corner normals reversed. With read-only fronts a
+    relight's back has the same (read-only) array, so what is keyed on it (the output's shading
+    normals) is found again; new front normals (an edit) give the new ones reversed; a writable
+    front (which may change in place) is read anew every time."""
+    from dataclasses import replace
+
+    card = quad([(0, 0, 0.5), (1, 0, 0.5), (1, 0, 0.7), (0, 0, 0.7)], name="card")
+    floor = quad([(-2, -2, 0), (2, -2, 0), (2, 2, 0), (-2, 2, 0)], rho=(0.6, 0.6, 0.6), name="floor")
+    tilt = np.tile([[0.0, -0.8, 0.6]], (len(card.face_indices), 1))
+    tilt /= np.linalg.norm(tilt, axis=1, keepdims=True)
+    tilt.flags.writeable = False
+    card = replace(card, corner_normal=tilt)
+    cache = FormFactorCache()
+
+    def back(c):
+        out = with_backs([floor, c], world=SKY, cache=cache)
+        backs = [m for m in out if getattr(m, "back_of", -1) == 1]
+        assert len(backs) == 1                                   # the card's back matters
+        return backs[0].corner_normal
+    a = back(card)
+    np.testing.assert_array_equal(a, -tilt)                      # every corner the same: reversed
+    assert back(card) is a and not a.flags.writeable             # a relight: the same array
+    other = np.tile([[0.0, -0.6, 0.8]], (len(card.face_indices), 1))
+    other.flags.writeable = False
+    np.testing.assert_array_equal(back(replace(card, corner_normal=other)), -other)   # an edit
+    loose = tilt.copy()                                          # writable: never kept
+    b1 = back(replace(card, corner_normal=loose))
+    loose[:] = other
+    np.testing.assert_array_equal(back(replace(card, corner_normal=loose)), -other)
+    np.testing.assert_array_equal(b1, -tilt)

@@ -63,3 +63,35 @@ def test_corners_that_share_a_vertex_read_its_hits_each_against_its_own_plane():
     got = above_shares(_Ctx(H), E, p, c, geo, xv, read)
     # a: 4 hits reading 1 above z = 0, 4 reading 3 below; b: 1 reading 1 above, 2 reading 3 below
     np.testing.assert_allclose(got, [4 / 16, 1 / 7, 12 / 16, 4 / 16], rtol=1e-6)
+
+
+def test_a_relight_reads_the_kept_sums_and_an_edit_misses_them():
+    """With a cache the hits' reading and their spread over the corners are kept (a relight reads
+    no hit): a brighter light gives the shares of a call without a cache, bit for bit; moved
+    points (an edit) give the moved points' shares, not the kept ones (truth: the closed form of
+    the test above, 4 hits reading 1 above, 4 reading 3 below)."""
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    E = _two_plates()
+    up = int(np.argmax(E.centers[:, 2]))
+    read = np.where(E.verts[:, 2:3] > 0, 1.0, 3.0) * np.ones((1, 3))
+    v = 0
+    hits = [(v, up, 0.5, 0.5, 1.0)] * 4 + [(v, 1 - up, 0.25, 0.75, -1.0)] * 4 + [(1, up, 0.5, 0.5, 1.0)] * 3
+    H = np.array(sorted(hits), dtype=np.float32)
+    p = np.flatnonzero((E.polys == v).any(axis=1))[:1]
+    c = np.array([int(np.flatnonzero(E.polys[p[0]] == v)[0])])
+    geo = np.array([(0.0, 0.0, 1.0)])
+    ctx = _Ctx(H)
+    ctx.cache, ctx.gather_key = FormFactorCache(), "g"
+    xv = np.zeros((len(E.verts), 3))
+    first = above_shares(ctx, E, p, c, geo, xv, read)
+    np.testing.assert_allclose(first, 0.25, rtol=1e-6)
+    n = len(ctx.cache._mem)
+    relit = above_shares(ctx, E, p, c, geo, xv, 1.5 * read)
+    np.testing.assert_array_equal(relit, above_shares(_Ctx(H), E, p, c, geo, xv, 1.5 * read))
+    assert n >= 2 and len(ctx.cache._mem) == n           # kept (reading, sums); nothing new: found
+    # the points moved to z = 2, above both plates: every hit is below the corner's plane
+    moved = np.zeros((len(E.verts), 3)) + (0.0, 0.0, 2.0)
+    got = above_shares(ctx, E, p, c, geo, moved, read)
+    np.testing.assert_array_equal(got, above_shares(_Ctx(H), E, p, c, geo, moved, read))
+    np.testing.assert_allclose(got, 0.0, atol=1e-12)
