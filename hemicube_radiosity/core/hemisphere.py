@@ -126,32 +126,13 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     clear = (0.5 * max(float(local[:, 2].min()), 0.0)) ** 2
     dt = np.float64 if see_through else np.float32
 
-    def directions(f, p, dtype):
-        if split == 1:
-            return in_frames(local, f, dtype)
-        d = np.empty((len(f), R, 3), dtype)
-        for k in range(split):
-            m = p == k
-            d[m] = in_frames(local[k::split], f[m], dtype)
-        return d
-
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
         f, p = tangent_frames(n), part[s:s + step]
-        d = directions(f, p, dt).reshape(-1, 3)
+        d = _directions(local, split, f, p, dt).reshape(-1, 3)
         o = x + eps[s:s + step] * n
         o = np.repeat(o if see_through else o.astype(np.float32), R, axis=0)
-        below = None
-        if facing is not None:
-            fa = facing[s:s + step]
-            off = fa - n
-            near = (np.abs(np.einsum("ij,ij->i", n, n) - 1.0) < 1e-6) & (np.einsum("ij,ij->i", off, off) < clear)
-            tilt = np.flatnonzero(~near)
-            if tilt.size:           # the same float64 directions and products as for the whole chunk
-                dd = directions(f[tilt], p[tilt], np.float64).reshape(-1, 3)
-                below = np.zeros((len(x), R), bool)
-                below[tilt] = (np.einsum("ij,ij->i", dd, np.repeat(fa[tilt], R, axis=0)) <= 0).reshape(-1, R)
-                below = below.reshape(-1)
+        below = None if facing is None else _below(local, split, f, p, n, facing[s:s + step], clear)
         if see_through:
             passed = scene.transmitted(o, d)
             if below is not None:
@@ -162,6 +143,36 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
         pass
     return out
+
+
+def _directions(local, split, frames, part, dtype) -> np.ndarray:
+    """(P, R, 3) world directions of :func:`sky_fraction`'s pattern ``local`` (R * split, 3) in
+    each point's ``frames``: all of it, or with ``split`` > 1 rays ``part[p]``, ``part[p] + split``,
+    ... of it at point p; float64 sums rounded once to ``dtype``."""
+    if split == 1:
+        return in_frames(local, frames, dtype)
+    d = np.empty((len(frames), len(local) // split, 3), dtype)
+    for k in range(split):
+        m = part == k
+        d[m] = in_frames(local[k::split], frames[m], dtype)
+    return d
+
+
+def _below(local, split, frames, part, normals, facing, clear):
+    """(P * R,) bool or None: the rays of :func:`_directions` at or below each point's ``facing``
+    plane, found in float64 for the points whose unit normal lies ``clear`` (a squared distance)
+    or further from their facing; None where no point does (no ray lies below)."""
+    off = facing - normals
+    near = (np.abs(np.einsum("ij,ij->i", normals, normals) - 1.0) < 1e-6) & (np.einsum("ij,ij->i", off, off) < clear)
+    tilt = np.flatnonzero(~near)
+    if not tilt.size:
+        return None
+    R = len(local) // split
+    # the same float64 directions and products as for the whole chunk
+    dd = _directions(local, split, frames[tilt], part[tilt], np.float64).reshape(-1, 3)
+    below = np.zeros((len(frames), R), bool)
+    below[tilt] = (np.einsum("ij,ij->i", dd, np.repeat(facing[tilt], R, axis=0)) <= 0).reshape(-1, R)
+    return below.reshape(-1)
 
 
 def _hits(scene, o, d, below):
