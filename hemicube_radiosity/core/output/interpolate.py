@@ -153,20 +153,7 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
     by_owner = owner is not None
     owner = np.asarray(owner, np.int64) if by_owner else np.zeros(P, np.int64)
     powner = patches.owner if by_owner else np.zeros(len(patches), np.int64)
-    normals = None if normals is None else np.asarray(normals, dtype=np.float64)
-    corners = patches.corners()
-    size = np.sqrt(patches.areas)
-    out_idx = np.full(P, -1, np.int64)
-    out_uv = np.zeros((P, 2))
-
-    def settle(ids, cand):
-        best, uc, vc, tied = _pick(patches, corners, size, cand, points[ids],
-                                   None if normals is None else normals[ids])
-        r = np.arange(ids.size)
-        out_idx[ids] = cand[r, best]
-        out_uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
-        return tied
-
+    loc = _Located(patches, points, None if normals is None else np.asarray(normals, dtype=np.float64))
     # objects of at most ``candidates`` patches (a face's few elements, when keyed by face): every
     # patch a candidate, in index order, for all the objects of one count at once
     groups, count = np.unique(powner, return_counts=True)
@@ -182,13 +169,39 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
         pts_ids = np.flatnonzero(few & (count[g] == N))
         cand = order[start[g[pts_ids]][:, None] + np.arange(N)[None]]
         for s in range(0, pts_ids.size, chunk):
-            settle(pts_ids[s:s + chunk], cand[s:s + chunk])
+            loc.settle(pts_ids[s:s + chunk], cand[s:s + chunk])
     for o in np.unique(owner[~few]):
-        pts_ids = np.flatnonzero(owner == o)
-        cand_all = np.flatnonzero(powner == o)
+        loc.in_object(np.flatnonzero(owner == o), np.flatnonzero(powner == o), candidates, chunk, workers)
+    return loc.idx, loc.uv
+
+
+class _Located:
+    """:func:`locate`'s points and what it has found for them: ``idx`` (P,) patch, ``uv`` (P, 2)."""
+
+    def __init__(self, patches, points, normals):
+        self.patches, self.points, self.normals = patches, points, normals
+        self.corners = patches.corners()
+        self.size = np.sqrt(patches.areas)
+        self.idx = np.full(len(points), -1, np.int64)
+        self.uv = np.zeros((len(points), 2))
+
+    def settle(self, ids, cand):
+        """Place the points ``ids`` (n,) in the best of their candidate patches ``cand`` (n, k);
+        (n,) bool: where two candidates fitted equally well."""
+        best, uc, vc, tied = _pick(self.patches, self.corners, self.size, cand, self.points[ids],
+                                   None if self.normals is None else self.normals[ids])
+        r = np.arange(ids.size)
+        self.idx[ids] = cand[r, best]
+        self.uv[ids] = np.stack([uc[r, best], vc[r, best]], 1)
+        return tied
+
+    def in_object(self, pts_ids, cand_all, candidates, chunk, workers):
+        """Place the points ``pts_ids`` among one object's patches ``cand_all`` (ascending): the
+        grid's nearest centres first where the object is large, the brute force where it is small
+        or where the grid's choice is open (:func:`locate`)."""
         N = cand_all.size
         k = min(candidates, N)
-        cc = patches.centers[cand_all]
+        cc = self.patches.centers[cand_all]
         if N <= _BRUTE:
             redo = pts_ids
         else:
@@ -196,12 +209,12 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
             # few dozen (the area-weighted size, led by a level's few large floors, made cells
             # 35 times zdm2's median patch and 5 M pairs a chunk); points among larger patches
             # settle on the grid's coarser levels. The k nearest are exact for any cell.
-            grid = Grid(cc, _CELL * float(np.median(size[cand_all])))
+            grid = Grid(cc, _CELL * float(np.median(self.size[cand_all])))
 
-            def nearest(s, grid=grid, cand_all=cand_all, pts_ids=pts_ids, k=k):
+            def nearest(s):
                 ids = pts_ids[s:s + chunk]
-                near, d2 = grid.k_nearest(points[ids], k + 1)
-                tied = settle(ids, cand_all[np.sort(near[:, :k], axis=1)])
+                near, d2 = grid.k_nearest(self.points[ids], k + 1)
+                tied = self.settle(ids, cand_all[np.sort(near[:, :k], axis=1)])
                 return ids[tied | (d2[:, k - 1] == d2[:, k])]
             w = min(resolve_workers(workers), -(-pts_ids.size // chunk))
             if w > 1:
@@ -211,9 +224,8 @@ def locate(patches: PatchSet, points, owner=None, normals=None, candidates=8, ch
         rows = max(1, MAX_PAIRS // N)
         for s in range(0, redo.size, rows):
             ids = redo[s:s + rows]
-            d2 = sq_dist(points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
-            settle(ids, cand_all[np.argpartition(d2, k - 1, axis=1)[:, :k]])
-    return out_idx, out_uv
+            d2 = sq_dist(self.points[ids][:, None, :], cc[None, :, :])     # as ((p - cc) ** 2).sum(-1), to the bit
+            self.settle(ids, cand_all[np.argpartition(d2, k - 1, axis=1)[:, :k]])
 
 
 def interpolate_at(patches: PatchSet, vertex_values, points, owner=None, normals=None) -> np.ndarray:

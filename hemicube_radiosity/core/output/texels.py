@@ -227,45 +227,27 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
     index[covered] = np.arange(n)
     rows, cols = np.nonzero(covered)
     box = _boxes(np.asarray(faces, dtype=np.int64), rows, cols, inside)
-    v = split(np.zeros(0, np.int64), None)            # no texel: the sources' count and shape
-    value = np.zeros((n,) + v.shape[1:])
-    exact = np.zeros(value.shape[:2], bool)
-    done = np.zeros(value.shape[:2], bool)
+    lit = _Lit(split, n)
     floor = probe = None
-
-    def light(ids, need=None):
-        """Light texels ``ids`` exactly in the sources ``need`` (len(ids), S) bool (None: all)
-        they are not lit in yet, one call per set of sources."""
-        if not ids.size:
-            return
-        need = ~exact[ids] if need is None else need & ~exact[ids]
-        sets, of = np.unique(need, axis=0, return_inverse=True)
-        for k, which in enumerate(sets):
-            if not which.any():
-                continue
-            sel, src = ids[of.ravel() == k, None], np.flatnonzero(which)[None]
-            value[sel, src] = split(sel[:, 0], None, None if which.all() else which)[:, which]
-            exact[sel, src] = done[sel, src] = True
-
     for s in strides:
-        ids = np.flatnonzero(~done.all(axis=1))
+        ids = np.flatnonzero(~lit.done.all(axis=1))
         if ids.size == 0:
             break
         ok, corners, w, mid, wm, span = _cells(index, faces, rows, cols, ids, s, box)
         # each anchor in the sources its cells' texels still want
         anchors = np.column_stack([corners[ok], mid[ok]])
-        at, left = anchors.ravel(), np.repeat(~done[ids[ok]], anchors.shape[1], axis=0)
-        want = np.stack([np.bincount(at, weights=left[:, k], minlength=n) > 0 for k in range(done.shape[1])], 1)
+        at, left = anchors.ravel(), np.repeat(~lit.done[ids[ok]], anchors.shape[1], axis=0)
+        want = np.stack([np.bincount(at, weights=left[:, k], minlength=n) > 0 for k in range(lit.done.shape[1])], 1)
         a = np.unique(anchors)
-        light(a, want[a])
-        if floor is None and exact.any():
-            floor = _floor(value, exact)
+        lit.light(a, want[a])
+        if floor is None and lit.exact.any():
+            floor = _floor(lit.value, lit.exact)
         ids, corners, w, mid, wm = ids[ok], corners[ok], w[ok], mid[ok], wm[ok]
         span = tuple(x[ok] for x in span)
         if ids.size == 0:
             continue
-        keep = _smooth(value, done, points, pitch, faces, index, ids, corners, w, mid, wm, span, s, floor)
-        interp = np.einsum("mk,mksc->msc", w, value[corners])
+        keep = _smooth(lit.value, lit.done, points, pitch, faces, index, ids, corners, w, mid, wm, span, s, floor)
+        interp = np.einsum("mk,mksc->msc", w, lit.value[corners])
         if probed is not None and np.any(probed):
             if probe is None:           # the probed sources only: the world's rays are the costliest
                 probe = split(np.arange(n), 1, np.asarray(probed, bool)) @ LUMA        # (n, S)
@@ -273,17 +255,44 @@ def by_source(split, covered, points, normals, faces, pitch, probed=None, inside
                 off = ~_agree(probe[ids, k], interp[:, k] @ LUMA, floor[k])
                 keep[:, k] &= ~_near(ids[off], rows, cols, (H, W), MARGIN)[rows[ids], cols[ids]]
         m, k = np.nonzero(keep)
-        value[ids[m], k] = interp[m, k]
-        done[ids[m], k] = True
-    if not exact.any():                         # no cell anywhere: every texel exact
-        light(np.arange(n))
+        lit.value[ids[m], k] = interp[m, k]
+        lit.done[ids[m], k] = True
+    if not lit.exact.any():                         # no cell anywhere: every texel exact
+        lit.light(np.arange(n))
     if inside is not None:
-        left = np.flatnonzero(~done.all(axis=1) & inside)
-        light(left, ~done[left])
-        _rim(value, done, inside, faces, index, rows, cols)
-    left = np.flatnonzero(~done.all(axis=1))
-    light(left, ~done[left])
-    return value, exact
+        left = np.flatnonzero(~lit.done.all(axis=1) & inside)
+        lit.light(left, ~lit.done[left])
+        _rim(lit.value, lit.done, inside, faces, index, rows, cols)
+    left = np.flatnonzero(~lit.done.all(axis=1))
+    lit.light(left, ~lit.done[left])
+    return lit.value, lit.exact
+
+
+class _Lit:
+    """:func:`by_source`'s texels so far: ``value`` (n, S, 3) their light per source, ``exact``
+    (n, S) where it was found exactly, ``done`` (n, S) where it is settled (exactly or between
+    anchors)."""
+
+    def __init__(self, split, n):
+        self.split = split
+        v = split(np.zeros(0, np.int64), None)            # no texel: the sources' count and shape
+        self.value = np.zeros((n,) + v.shape[1:])
+        self.exact = np.zeros(self.value.shape[:2], bool)
+        self.done = np.zeros(self.value.shape[:2], bool)
+
+    def light(self, ids, need=None):
+        """Light texels ``ids`` exactly in the sources ``need`` (len(ids), S) bool (None: all)
+        they are not lit in yet, one call per set of sources."""
+        if not ids.size:
+            return
+        need = ~self.exact[ids] if need is None else need & ~self.exact[ids]
+        sets, of = np.unique(need, axis=0, return_inverse=True)
+        for k, which in enumerate(sets):
+            if not which.any():
+                continue
+            sel, src = ids[of.ravel() == k, None], np.flatnonzero(which)[None]
+            self.value[sel, src] = self.split(sel[:, 0], None, None if which.all() else which)[:, which]
+            self.exact[sel, src] = self.done[sel, src] = True
 
 
 def from_inside(value, done, inside, faces, covered):
