@@ -89,11 +89,43 @@ def _straighten(edges, eg, start, end, single, coplanar, normals):
     itself, or enclose an area off by half or more, keeps its borders (and so do its neighbours
     along them): the groups' sum is exact only for outlines that bound their regions."""
     E = len(edges)
+    partner = _partners(eg, start, end, single, coplanar)
+    chains = _chains(edges, eg, start, end, partner)
+    if not chains:
+        return None
+    # closed borders (an island in a group) and borders nothing shortens are kept as they are
+    area = _signed_areas(edges, eg, normals)
+    while chains:
+        keep = np.ones(E, bool)
+        new_e, new_g = [], []
+        for g, h, chain, line in chains:
+            keep[chain] = keep[partner[chain]] = False
+            a, b = line[:-1], line[1:]
+            new_e += [np.stack([a, b], axis=1), np.stack([b, a], axis=1)]
+            new_g += [np.full(len(a), g), np.full(len(a), h)]
+        out_e = np.concatenate([edges[keep]] + new_e)
+        out_g = np.concatenate([eg[keep]] + new_g)
+        order = np.argsort(out_g, kind="stable")
+        out_e, out_g = out_e[order], out_g[order]
+        # a group whose straightened outline crosses itself or lost much of its area (a few
+        # scattered faces): its borders are kept as they were, on both sides
+        touched = np.unique([c[0] for c in chains] + [c[1] for c in chains])
+        new_area = _signed_areas(out_e, out_g, normals)
+        bad = {g for g in touched if not (abs(new_area[g] - area[g]) <= 0.5 * abs(area[g])
+                                          and np.sign(new_area[g]) == np.sign(area[g]))
+               or _crosses(out_e[out_g == g], normals[g])}
+        if not bad:
+            return _merge_collinear(out_e, out_g)
+        chains = [c for c in chains if c[0] not in bad and c[1] not in bad]
+    return None
+
+
+def _partners(eg, start, end, single, coplanar):
+    """(E,) for each boundary edge the same edge walked back by another, coplanar group (an edge
+    in exactly two groups' boundaries, walked once each way), -1 for none."""
     und = np.stack([np.minimum(start, end), np.maximum(start, end)], axis=1)
     _, inv, cnt = unique_rows(und, return_inverse=True, return_counts=True)
     inv = inv.reshape(-1)
-    # the other group along each edge: an edge in exactly two groups' boundaries, walked once
-    # each way
     order = np.argsort(inv, kind="stable")
     two = np.flatnonzero(cnt[inv[order]] == 2)
     i, j = order[two[0::2]], order[two[1::2]]
@@ -102,8 +134,15 @@ def _straighten(edges, eg, start, end, single, coplanar, normals):
     if i.size:
         ok = coplanar(eg[i], eg[j])
         i, j = i[ok], j[ok]
-    partner = np.full(E, -1)
+    partner = np.full(len(eg), -1)
     partner[i], partner[j] = j, i
+    return partner
+
+
+def _chains(edges, eg, start, end, partner):
+    """The borders between two groups that Douglas-Peucker shortens, each once (walked by its
+    lower group): a list of (group, other group, its edges (k,), polyline (m, 3)); None where no
+    edge is shared."""
     shared = partner >= 0
     mine = np.flatnonzero(shared & (eg < eg[np.maximum(partner, 0)]))  # each border once, from its lower group
     if mine.size == 0:
@@ -134,31 +173,7 @@ def _straighten(edges, eg, start, end, single, coplanar, normals):
         idx = _douglas_peucker(pts, tol)
         if len(idx) < len(pts):
             chains.append((eg[k], h, np.array(chain), pts[idx]))
-    # closed borders (an island in a group) and borders nothing shortens are kept as they are
-    area = _signed_areas(edges, eg, normals)
-    while chains:
-        keep = np.ones(E, bool)
-        new_e, new_g = [], []
-        for g, h, chain, line in chains:
-            keep[chain] = keep[partner[chain]] = False
-            a, b = line[:-1], line[1:]
-            new_e += [np.stack([a, b], axis=1), np.stack([b, a], axis=1)]
-            new_g += [np.full(len(a), g), np.full(len(a), h)]
-        out_e = np.concatenate([edges[keep]] + new_e)
-        out_g = np.concatenate([eg[keep]] + new_g)
-        order = np.argsort(out_g, kind="stable")
-        out_e, out_g = out_e[order], out_g[order]
-        # a group whose straightened outline crosses itself or lost much of its area (a few
-        # scattered faces): its borders are kept as they were, on both sides
-        touched = np.unique([c[0] for c in chains] + [c[1] for c in chains])
-        new_area = _signed_areas(out_e, out_g, normals)
-        bad = {g for g in touched if not (abs(new_area[g] - area[g]) <= 0.5 * abs(area[g])
-                                          and np.sign(new_area[g]) == np.sign(area[g]))
-               or _crosses(out_e[out_g == g], normals[g])}
-        if not bad:
-            return _merge_collinear(out_e, out_g)
-        chains = [c for c in chains if c[0] not in bad and c[1] not in bad]
-    return None
+    return chains
 
 
 def _signed_areas(edges, eg, normals):
