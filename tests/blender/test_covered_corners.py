@@ -161,3 +161,35 @@ def test_a_buried_vertex_s_corner_takes_the_light_at_cycles_point():
     np.testing.assert_allclose(ours, theirs, rtol=0.05)
     # the open wall below as before
     np.testing.assert_allclose(c.ours[low].mean(axis=1), c.cycles[low].mean(axis=1), rtol=0.03)
+
+
+def test_a_covered_corner_s_sun_ray_starts_as_low_as_cycles_one():
+    """Truck town's road corner beside the grass: its sun ray from Cycles' bake point meets the
+    grass 0.3 mm on, a few hundredths of a millimetre up; started 16 float32 steps off the road
+    (5.7e-5 m there) it passed over the grass's edge: 0.35 where Cycles has 0.12. Here a floor
+    at x = 28..32 m (a float32 step is 3.6e-6 m at its vertex (30, 0, 0)) and a board 6e-5 m
+    over it, its edge 4 mm short of that vertex toward a sun 0.23 deg high (tan 0.004): Cycles'
+    rays from the vertex's corners (each 3 mm in toward its triangle, 1-6 mm from the edge)
+    rise 4-24 um by the edge and meet the board. A start 8 steps up (2.9e-5 m) still meets it
+    out to 7.9 mm from the edge, one 16 steps up (5.7e-5 m) only within 0.7 mm: the corners
+    read the full sun (0.80 against Cycles' 0.04), now 0.04. (From 7.9 to 15 mm, Cycles' dark
+    corners would still read the sun.)"""
+    h, edge, tan_e = 6e-5, -0.004, 0.004
+    cr.new_empty_scene()
+    grey = cr.diffuse_material((RHO,) * 3)
+    v, f = cr.grid_arrays(4, 4, 28.0, 32.0, -2.0, 2.0, 0.0)
+    floor = cr.mesh_object(v, f, grey, "floor")
+    v, f = cr.grid_arrays(1, 1, 29.0, 31.0, -1.0, edge, h)
+    board = cr.mesh_object(v, f, grey, "board")
+    zen = math.atan2(1.0, tan_e)
+    cr.add_light("SUN", (30, 0, 5), (zen, 0.0, 0.0), energy=IRRADIANCE / math.cos(zen), angle=0.0)
+    cr.set_world((0.05, 0.05, 0.05), 1.0)
+    c = Comparison([floor, board], samples=64, settings={"light_samples": 16})
+    at = (c.owner == 0) & (np.linalg.norm(c.pos - [30.0, 0.0, 0.0], axis=1) < 1e-6)
+    lit = (c.owner == 0) & (np.linalg.norm(c.pos - [30.0, 1.0, 0.0], axis=1) < 1e-6)
+    assert at.sum() == 4 and lit.sum() == 4
+    sun = RHO * IRRADIANCE / math.pi                    # the floor in the open: the sun, and sky
+    assert np.all(c.cycles[lit].mean(axis=1) > sun)
+    assert np.all(c.cycles[at].mean(axis=1) < 0.1 * sun)        # Cycles: the board shades them
+    np.testing.assert_allclose(c.ours[at].mean(axis=1), c.cycles[at].mean(axis=1), rtol=0.05)
+    np.testing.assert_allclose(c.ours[lit].mean(axis=1), c.cycles[lit].mean(axis=1), rtol=0.03)
