@@ -124,3 +124,72 @@ def test_a_shadow_s_edge_through_a_vertex_parts_its_corners_as_in_cycles():
     # (0.84 against 0.27), now its own: 0.21 (its sky and bounced light a little under Cycles')
     np.testing.assert_allclose(ours_s, theirs_s, rtol=0.06)
     np.testing.assert_allclose(ours_b, theirs_b, rtol=0.25)
+
+
+def test_a_buried_vertex_s_corner_takes_the_light_at_cycles_point():
+    """Truck town's slivers of a house's ledge in a nook of its walls: their vertices see less
+    than a quarter of the open scene (:func:`core.output.sides.buried_side`) and took the light
+    where their edges from the open side meet what buries them, a hair off a wall and in its
+    shadow (0.02), where Cycles' corners have the sun (0.21). Here a 2 x 1 m wall (facing -y,
+    2 x 2 quads) under a black plate that leans over its top: from a hair off the wall at
+    z = 0.95 out to 6.25 cm off it at z = 1.2. A sun 11.5 deg off the zenith toward -y passes
+    between the two; the two corners at the top of the wall's middle (a buried vertex: the
+    plate closes its hemisphere, open only up the slit and past the plate's ends) see it and
+    almost no sky: Cycles reads the sun's rho E cos / pi (0.153) and 0.004 more. Their edges
+    from the open wall below meet the plate's foot, in its shadow and open to the sky below it:
+    ours read that, 0.275 (75% over). Now each such corner (of its source face) is lit at its
+    own bake point (core/output/covered.py): 0.158. (The top corners at the wall's ends, not
+    buried, read 0.24 against Cycles' 0.30, before and after.)"""
+    cr.new_empty_scene()
+    v = [(x, 0.0, z) for z in (0.0, 0.5, 1.0) for x in (-1.0, 0.0, 1.0)]
+    f = [(a, a + 1, a + 4, a + 3) for a in (0, 1, 3, 4)]
+    wall = cr.mesh_object(v, f, cr.diffuse_material((RHO,) * 3), "wall")
+    gap, foot, top, lean = 1e-5, 0.95, 1.2, 0.25
+    pv = [(-1.0, -gap, foot), (1.0, -gap, foot), (1.0, -gap - (top - foot) * lean, top),
+          (-1.0, -gap - (top - foot) * lean, top)]
+    plate = cr.mesh_object(pv, [(0, 1, 2, 3)], cr.diffuse_material((0.0,) * 3), "plate")
+    sun = 0.2                                   # the sun's cosine to the wall's normal
+    cr.add_light("SUN", (0, 0, 5), (math.asin(sun), 0.0, 0.0), energy=IRRADIANCE, angle=0.0)
+    cr.set_world(SKY, 1.0)
+    c = Comparison([wall, plate], samples=64, settings={"light_samples": 16})
+    middle = (c.owner == 0) & (np.abs(c.pos[:, 2] - 1.0) < 1e-9) & (np.abs(c.pos[:, 0]) < 1e-9)
+    low = (c.owner == 0) & (c.pos[:, 2] < 0.6)
+    assert middle.sum() == 2 and low.sum() == 12
+    direct = RHO * IRRADIANCE * sun / math.pi
+    theirs, ours = c.cycles[middle].mean(axis=1), c.ours[middle].mean(axis=1)
+    assert np.all((theirs > direct) & (theirs < 1.1 * direct))        # the sun, and little sky
+    np.testing.assert_allclose(ours, theirs, rtol=0.05)
+    # the open wall below as before
+    np.testing.assert_allclose(c.ours[low].mean(axis=1), c.cycles[low].mean(axis=1), rtol=0.03)
+
+
+def test_a_covered_corner_s_sun_ray_starts_as_low_as_cycles_one():
+    """Truck town's road corner beside the grass: its sun ray from Cycles' bake point meets the
+    grass 0.3 mm on, a few hundredths of a millimetre up; started 16 float32 steps off the road
+    (5.7e-5 m there) it passed over the grass's edge: 0.35 where Cycles has 0.12. Here a floor
+    at x = 28..32 m (a float32 step is 3.6e-6 m at its vertex (30, 0, 0)) and a board 6e-5 m
+    over it, its edge 4 mm short of that vertex toward a sun 0.23 deg high (tan 0.004): Cycles'
+    rays from the vertex's corners (each 3 mm in toward its triangle, 1-6 mm from the edge)
+    rise 4-24 um by the edge and meet the board. A start 8 steps up (2.9e-5 m) still meets it
+    out to 7.9 mm from the edge, one 16 steps up (5.7e-5 m) only within 0.7 mm: the corners
+    read the full sun (0.80 against Cycles' 0.04), now 0.04. (From 7.9 to 15 mm, Cycles' dark
+    corners would still read the sun.)"""
+    h, edge, tan_e = 6e-5, -0.004, 0.004
+    cr.new_empty_scene()
+    grey = cr.diffuse_material((RHO,) * 3)
+    v, f = cr.grid_arrays(4, 4, 28.0, 32.0, -2.0, 2.0, 0.0)
+    floor = cr.mesh_object(v, f, grey, "floor")
+    v, f = cr.grid_arrays(1, 1, 29.0, 31.0, -1.0, edge, h)
+    board = cr.mesh_object(v, f, grey, "board")
+    zen = math.atan2(1.0, tan_e)
+    cr.add_light("SUN", (30, 0, 5), (zen, 0.0, 0.0), energy=IRRADIANCE / math.cos(zen), angle=0.0)
+    cr.set_world((0.05, 0.05, 0.05), 1.0)
+    c = Comparison([floor, board], samples=64, settings={"light_samples": 16})
+    at = (c.owner == 0) & (np.linalg.norm(c.pos - [30.0, 0.0, 0.0], axis=1) < 1e-6)
+    lit = (c.owner == 0) & (np.linalg.norm(c.pos - [30.0, 1.0, 0.0], axis=1) < 1e-6)
+    assert at.sum() == 4 and lit.sum() == 4
+    sun = RHO * IRRADIANCE / math.pi                    # the floor in the open: the sun, and sky
+    assert np.all(c.cycles[lit].mean(axis=1) > sun)
+    assert np.all(c.cycles[at].mean(axis=1) < 0.1 * sun)        # Cycles: the board shades them
+    np.testing.assert_allclose(c.ours[at].mean(axis=1), c.cycles[at].mean(axis=1), rtol=0.05)
+    np.testing.assert_allclose(c.ours[lit].mean(axis=1), c.cycles[lit].mean(axis=1), rtol=0.03)

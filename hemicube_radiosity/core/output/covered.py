@@ -41,12 +41,16 @@ not see at a vertex of one it sees (a floor's under a block on it) keep their ve
 whose mean they are part of, unless they are corners of their source face: Cycles bakes a face
 corner on its own triangle, so where a face folds down from the open under another surface
 (truck town's grass under its ground ring, its road's edge under the grass) the fold's corner is
-dark and the open face's corner beside it lit (:func:`.lift.source_corners`). So are the corners of
-buried vertices (:func:`.sides.buried_side`) that are corners of their source face (a bevel's
-foot on the shelf the bevelled box rests on); their other corners keep their vertex's light. A
-buried vertex's is the light where its edge from the open side meets what buries it (the bevel's
-edge, a little up it: the open room's light, where Cycles' point at the foot sees the shelf a
-hair under it and little else), and the rays from that point start no
+dark and the open face's corner beside it lit (:func:`.lift.source_corners`). The corners of
+buried vertices (:func:`.sides.buried_side`) that are corners of their source face are all lit
+at their own bake point, covered or not (a bevel's foot on the shelf the bevelled box rests on:
+dark; truck town's slivers of a house's ledge in a nook of its walls, whose open neighbours lie
+in a wall's shadow a hair off it: lit, 0.02 where Cycles has 0.21), and one lit there with
+nothing over it keeps its vertex's light reflected more than once whole (that was spread from
+the open side, not gathered where the vertex's rays start); their other corners keep their
+vertex's light. A buried vertex's is the light where its edge from the open side meets what
+buries it (the bevel's edge, a little up it: the open room's light, where Cycles' point at the
+foot sees the shelf a hair under it and little else), and the rays from that point start no
 further off it than half way to a face over it (:func:`start_offsets`): the point lies against
 the burying surface, and rays started past a lip over it read the sun. Geometry only, cached:
 a relight casts no ray. World units.
@@ -72,8 +76,11 @@ __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_o
 TIE_ULPS = 1
 #: Float32 steps of a point's largest coordinate its rays start off its surface (or half way to
 #: the surface over it, if nearer): as near as Cycles' start, at the corner itself, as a ray off a
-#: plane can start without meeting it again.
-LIFT_ULPS = 16
+#: plane can start without meeting it again. Cycles' shadow ray toward a sun low over the point
+#: that meets a face a few hundredths of a millimetre up passes over its edge from a start lifted
+#: higher (truck town's road corner beside the grass: 16 steps, 5.7e-5 m there, lit it, 0.35
+#: where Cycles has 0.12; 8 steps: 0.11).
+LIFT_ULPS = 8
 #: How many times a covering ray goes on past its own face's hits (:func:`_cover_along`).
 OWN_PASSES = 3
 #: Cosine rays per covered corner for the share of the open scene it sees.
@@ -96,28 +103,30 @@ OPEN_FLOOR = 0.5
 def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     """The element corners lit at their own bake point (module docstring), or None:
     (p (K,) element, c (K,) corner 0..3, start (K, 3) where it is lit from, geo (K, 3) the
-    corner triangle's unit normal). ``xv``, ``nv`` (V, 3): where each vertex was lit and
-    its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
+    corner triangle's unit normal, alone (K,) bool: a corner of a buried vertex lit there only
+    for being Cycles' own point, nothing over it). ``xv``, ``nv`` (V, 3): where each vertex was
+    lit and its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
     vertex of an element it sees (a floor's under a block resting on it) are not looked at,
     they count in that vertex's mean; nor are the corners of ``buried`` (V,) bool vertices,
     which take the open side's light (:func:`.sides.buried_side`); either unless it is a
-    corner of its source face, where Cycles bakes. None without Embree."""
+    corner of its source face, where Cycles bakes (a buried vertex's such corners are all
+    lit there). None without Embree."""
     if not embree_available() or len(elements) == 0:
         return None
     sun = strongest_sun(ctx)                  # its rays pick corners: a sun turned picks others
     key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
                     + (b"" if buried is None else np.asarray(buried, bool).tobytes())
-                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 5))
+                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 6))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
     p, c = code[:, 0].astype(np.int64), code[:, 1].astype(np.int64)
-    return p, c, code[:, 2:5], code[:, 5:8]
+    return p, c, code[:, 2:5], code[:, 5:8], code[:, 8] > 0
 
 
 def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
-    """(K, 8) rows (element, corner, start (3), geo (3)) of :func:`covered_corners`."""
+    """(K, 9) rows (element, corner, start (3), geo (3), alone) of :func:`covered_corners`."""
     polys = elements.polys
     p, c = np.nonzero(polys >= 0)
     keep = np.ones(len(p), bool)
@@ -132,11 +141,14 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
         left = ~seen & shared[polys[p, c]]
         left[left] = inner(left)
         keep &= ~left
+    alone = np.zeros(len(p), bool)       # corners of buried vertices lit where Cycles bakes them
     if buried is not None:
         left = np.asarray(buried, bool)[polys[p, c]]
+        alone = left.copy()
         left[left] = inner(left)
+        alone &= ~left
         keep &= ~left
-    p, c = p[keep], c[keep]
+    p, c, alone = p[keep], c[keep], alone[keep]
     point = bake_points(elements, ctx.meshes, p, c)
     v = polys[p, c]
     tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(point).max(axis=1), 1.0)
@@ -155,14 +167,16 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     hit = np.asarray(hit)
     crossed = (hit >= 0) & (length > 0)
     crossed[crossed] = own[fronts[hit[crossed]]] != own[p[crossed]]
-    chosen = crossed | above
+    picked = crossed | above
     to_sun = strongest_sun(ctx)
     if to_sun is not None:
-        chosen |= _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun)
+        picked |= _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun)
+    chosen = picked | alone
+    alone &= ~picked
     if not chosen.any():
         return np.zeros((0, 9))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
-    return np.column_stack([p, c, start, geo])[chosen].astype(np.float64)
+    return np.column_stack([p, c, start, geo, alone])[chosen].astype(np.float64)
 
 
 def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun):
@@ -275,7 +289,7 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     found = covered_corners(ctx, elements, xv, nv, opened, buried) if ctx.direct is not None else None
     if found is None:
         return creased
-    p, c, start, geo = found
+    p, c, start, geo, alone = found
     shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
     shade = geo if shade is None else np.where(has[:, None], shade, geo)
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
@@ -302,6 +316,10 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
                               eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
         return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
     k = cached(ctx.cache, key, shares)
+    # a buried vertex's corner lit here only for being Cycles' own point (nothing over it): the
+    # vertex's light reflected more than once was spread from the open side, not gathered at
+    # the vertex's start that the shares compare against; kept whole
+    k = np.where(alone, 1.0, k)
     if creased is None:
         light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
         keep = np.ones(light.shape[:2])
