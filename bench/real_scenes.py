@@ -512,6 +512,15 @@ def relight(objs, settings, first):
             "max_deviation": dev}
 
 
+def _cpu_seconds():
+    """CPU seconds of this process and of its children it has reaped (the forked workers): user
+    plus system, every thread (the machine is shared: compare this, not the wall time)."""
+    import resource
+
+    return sum(r.ru_utime + r.ru_stime for r in (resource.getrusage(resource.RUSAGE_SELF),
+                                                 resource.getrusage(resource.RUSAGE_CHILDREN)))
+
+
 def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
     import bpy
     from hemicube_radiosity.blender.bake import BakeJob
@@ -526,12 +535,12 @@ def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
     rec = {"light": light, "settings_asked": json.loads(settings_json), "load_seconds": load_s}
     if relit == "scaled":                     # a relight in a new process: the light changed first
         rec["scaled"] = scale_light(RELIGHT)
-    t = time.perf_counter()
+    t, cpu = time.perf_counter(), _cpu_seconds()
     job = BakeJob.prepare(bpy.context, objs, settings)
     job.run()
     job.write(bpy.context)
     r = job.result
-    rec.update(seconds=time.perf_counter() - t, peak_mb=_vm_hwm_mb(),
+    rec.update(seconds=time.perf_counter() - t, cpu_seconds=_cpu_seconds() - cpu, peak_mb=_vm_hwm_mb(),
                stages={k: float(v) for k, v in job.timings.items()}, patches=int(r.unknowns),
                pieces=int(len(r.patches)), elements=int(len(r.elements)), iterations=int(r.solution.iterations),
                converged=bool(r.solution.converged), nnz=int(r.form_factors.nnz),
@@ -774,7 +783,7 @@ def run_scene(spec, args):
         row[label] = rec
         if label == "defaults" and not failed(rec) and not args.bake_only:
             row["relight_cache"] = relight_through_cache(spec, args, base, asked)
-        brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "peak_mb", "max_rss_mb", "relight")}
+        brief = {k: rec.get(k) for k in ("error", "patches", "seconds", "cpu_seconds", "peak_mb", "max_rss_mb", "relight")}
         log(f"{label}: {json.dumps(brief, default=float)[:500]}")
         if label == "defaults" and not args.bake_only:
             coarser = coarser_settings(rec, cyc_npz if have_ref else None)

@@ -32,8 +32,8 @@ def counted_points(monkeypatch, module, name) -> list:
     calls = []
     real = getattr(module, name)
 
-    def counting(first, points, *args, **kwargs):
+    def counting(head, points, /, *args, **kwargs):
         calls.append(len(points))
-        return real(first, points, *args, **kwargs)
+        return real(head, points, *args, **kwargs)
     monkeypatch.setattr(module, name, counting)
     return calls

@@ -20,7 +20,7 @@ from .points import turned_around
 from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
-from ..hemisphere import sky_fraction
+from ..hemisphere import SKY_FIRST, sky_fraction
 from ..runtime.cache import Memo
 from ..util.unique import unique_ints
 
@@ -159,19 +159,29 @@ class DirectLight:
             return T
         return cached(self.cache if key else None, key and key + "-t", lambda: transposed_transport(T), disk=False)
 
-    def world_at(self, points, normals, where: str, eps=None, facing=None, split=1, part=None) -> np.ndarray:
+    def world_at(self, points, normals, where: str, eps=None, facing=None, split=1, part=None,
+                 first=None) -> np.ndarray:
         """(P, 3) the world's radiance arriving at ``points``: ``world`` times the cosine-weighted
         fraction of the hemisphere where rays find no surface (:func:`.hemisphere.sky_fraction`,
         ``sky_rays`` per point; geometry only, cached). ``eps`` (P,): the rays' start offsets
-        (default :meth:`offsets`); ``facing`` (P, 3), ``split``, ``part``: as :meth:`at`."""
+        (default :meth:`offsets`); ``facing`` (P, 3), ``split``, ``part``: as :meth:`at`.
+        ``first``: :func:`.hemisphere.sky_fraction`'s; None: :data:`.hemisphere.SKY_FIRST` for
+        points lit one by one (no ``facing``, no ``split``), else 1."""
+        if split > 1 and self.sky_rays % split:      # the pattern does not share out evenly
+            split, part = 1, None
         own = b"" if eps is None else array_key(np.asarray(eps, dtype=np.float64))
         own += b"" if facing is None else array_key(np.asarray(facing, dtype=np.float64))
         own += b"" if part is None else array_key(np.asarray(part, dtype=np.int64))
-        key = cache_key(_shadow_key(self.patches) + array_key(points) + own, ("sky", where, self.sky_rays, split))
+        # points lit one by one (no ``facing``, no ``split``): a share of the rays first, the
+        # rest where those are mixed (:data:`.hemisphere.SKY_FIRST`)
+        if first is None:
+            first = SKY_FIRST if facing is None and split == 1 else 1
+        key = cache_key(_shadow_key(self.patches) + array_key(points) + own,
+                        ("sky", where, self.sky_rays, split) + ((first,) if first > 1 else ()))
         eps = self.offsets(points, normals) if eps is None else eps
         f = cached(self.cache, key, lambda: sky_fraction(self.scene(), np.ascontiguousarray(points, dtype=np.float64),
                                                          normals, self.sky_rays, eps=eps, facing=facing,
-                                                         workers=self.workers, split=split, part=part))
+                                                         workers=self.workers, split=split, part=part, first=first))
         return f[:, None] * self.world[None, :]
 
     def sources_at(self, points, normals, where: str, world: bool = True) -> np.ndarray:
@@ -192,8 +202,8 @@ class DirectLight:
                                         eps=self.offsets(points, normals), index=i,
                                         cancelled=self.cancelled, samples=self.light_samples,
                                         seed=self.light_seed, workers=self.workers) @ LUMA / np.pi)
-        if self.world is not None and world:
-            cols.append(self.world_at(points, normals, where) @ LUMA)
+        if self.world is not None and world:   # every ray: the columns' shapes decide (a refinement)
+            cols.append(self.world_at(points, normals, where, first=1) @ LUMA)
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
     def split_at(self, points, normals, where: str, samples=None, which=None, facing=None,

@@ -20,7 +20,7 @@ from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker
-from .lamps import UNBOUNDED, AreaLight, PointLight, SpotLight, SunLight, light_irradiance
+from .lamps import SUN_FIRST, UNBOUNDED, AreaLight, PointLight, SpotLight, SunLight, light_irradiance
 
 __all__ = ["lamp_irradiance", "shadow_key", "SCALE"]
 
@@ -79,7 +79,8 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
             continue
         else:
             unit = replace(light, **{scale: 1.0}, color=(1.0, 1.0, 1.0))
-            key = cache_key(base, ("lamp", _shape_key(light), i, int(samples), seed, shadows))
+            first = ("first", SUN_FIRST) if isinstance(light, SunLight) else ()   # (:func:`.lamps.sun_first`)
+            key = cache_key(base, ("lamp", _shape_key(light), i, int(samples), seed, shadows) + first)
             E = cached(cache, key, lambda: light_irradiance(patches, unit, _index=i, **kw)) * getattr(light, scale)
         E = (E if E.ndim == 2 else E[:, None]) * np.asarray(light.color, np.float64)[None, :]
         H += E

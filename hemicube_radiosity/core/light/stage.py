@@ -123,25 +123,28 @@ def direct_stage(ctx) -> None:
     seen, memo = _seen_weight(ctx), {}
     far = any(isinstance(li, UNBOUNDED) for li in ctx.lights)
 
-    def at(x, n, where, part=0):              # the same points twice: light them once
+    def at(x, n, where, which=0, **share):   # the same points twice: light them once
         key = (where, array_key(x))
         if key not in memo:
             U = np.zeros((len(x), 3)) if far else None
-            memo[key] = (ctx.direct.at(x, n, where, unbounded=U), U)
-        return memo[key][part]
+            memo[key] = (ctx.direct.at(x, n, where, unbounded=U, **share), U)
+        return memo[key][which]
     # the plain area mean is what lands on the patches (the energy report, the irradiance);
     # the solve takes the mean over the part of each patch the scene sees
-    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped, stand=stand)
+    # (the points averaged share the sky's rays out: :data:`.points.SKY_SHARE`)
+    groups = None if ctx.clusters is None else ctx.clusters.of
+    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped, stand=stand, groups=groups, share=True)
     ctx.irradiance = np.pi * ctx.direct_patch
     # the suns' and maps' share of it, from the same rays (the energy report counts it as emitted)
-    ctx.unbounded_patch = patch_average(p, s.patch_light_points, lambda x, n, w: at(x, n, w, 1), grouped,
-                                        stand=stand) if far else None
+    ctx.unbounded_patch = patch_average(p, s.patch_light_points, lambda x, n, w, **k: at(x, n, w, 1, **k), grouped,
+                                        stand=stand, groups=groups, share=True) if far else None
     seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen,
-                                                                stand=stand)
+                                                                stand=stand, groups=groups, share=True)
     ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch, stand)
     memo.clear()
     if ctx.direct.world is not None:          # the world's light, exact at the points above
-        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand)
+        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand,
+                                      groups=groups, share=True)
     # the world is in the direct light: the source does not take it again from F's sky
     ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
     # what a receiver gathers first from a cluster lit unevenly: the part of it it sees

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["AlphaImage", "Transmit", "SeeThrough", "SeeThroughScene", "see_through", "visibility", "LAYERS"]
+__all__ = ["AlphaImage", "Transmit", "SeeThrough", "SeeThroughScene", "see_through", "visibility", "first_visible", "LAYERS"]
 
 #: at most this many see-through surfaces a shadow ray crosses (Cycles' transparent_max_bounces
 #: default); a ray meeting more is blocked, as Cycles' is
@@ -309,3 +309,19 @@ def visibility(scene, origins, directions, tfar=None) -> np.ndarray:
     if getattr(scene, "see_through", False):
         return scene.transmitted(origins, directions, tfar)
     return ~np.asarray(scene.occluded(origins, directions, tfar), bool)
+
+
+def first_visible(occ, org, d, tf, r, head, N, k):
+    """(M,) :func:`visibility` of M rays (``org``, ``d``, ``tf`` or None) of points ``r``
+    (M,) in [0, N): the ``head`` (M,) bool rays first; a point with all ``k`` of them that all
+    pass (or none does) takes 1 (or 0) for its other rays, the others cast theirs."""
+    vis = np.empty(len(r))
+    h, rest = np.flatnonzero(head), np.flatnonzero(~head)
+    vis[h] = visibility(occ, org[h], d[h], None if tf is None else tf[h])
+    count = np.bincount(r[h], minlength=N)
+    lit = np.bincount(r[h], weights=vis[h], minlength=N)
+    known = ((count == k) & ((lit == 0) | (lit == k)))[r[rest]]
+    vis[rest[known]] = (lit[r[rest[known]]] > 0).astype(np.float64)
+    cast = rest[~known]
+    vis[cast] = visibility(occ, org[cast], d[cast], None if tf is None else tf[cast])
+    return vis

@@ -244,49 +244,58 @@ def test_a_cells_points_sharing_the_sky_rays_read_its_mean_within_one_points_noi
                                   shared)
 
 
-def test_a_grid_whose_2x2_blocks_share_the_sky_rays_reads_each_cells_middle_within_one_points_noise():
-    """The abrupt grid's points (:class:`.abrupt.AbruptGrid`) cast a quarter of the 256 sky rays
-    each, by (row % 2) * 2 + column % 2 (:meth:`~.abrupt.AbruptGrid._sky_parts`): every cell's
-    four corners cast the pattern once. Cells 5 cm square on a floor row under the edge of a
-    1 m plate 0.5 m up, read at their middle (the mean of the corners, as a gather ray landing
-    there reads them): within 1 sigma of one point's 256-ray estimate of the same read with
-    all 256 rays at every corner (measured: at most 0.61 sigma), and against the closed-form
-    truth an RMS under 0.8% and under twice one 256-ray point's at each middle (measured
-    0.67%; all rays at every corner 0.26%, one point 0.42%)."""
+def test_a_grid_whose_4x4_blocks_share_the_sky_rays_reads_each_blocks_mean_within_one_points_noise():
+    """The abrupt grid's points (:class:`.abrupt.AbruptGrid`) cast a sixteenth of the 256 sky
+    rays each, by (row % 4) * 4 + column % 4 (:meth:`~.abrupt.AbruptGrid._sky_parts`): any 4 x 4
+    points in a row and a column cast the pattern once, a cell's four corners four sixteenths
+    of it. Blocks of 4 x 4 points 5 cm apart (3 x 3 cells) on a floor row under the edge of a
+    1 m plate 0.5 m up, read as the mean of their points (the light a gather ray landing in
+    the block's cells reads, on the mean): within 1 sigma of one point's 256-ray estimate of the
+    same mean with all 256 rays at every point (measured: at most 0.84 sigma), and against the
+    closed-form truth an RMS under 1.6% and under four times one 256-ray point's at each
+    block's middle (measured 1.33%, against 0.42% for one point and 0.20% for all rays at every
+    point: each point's sixteenth of the lattice samples the plate's edge from its own place;
+    in 2 x 2 blocks of cells, a quarter each, 0.67%). What the grid's points cast is read by the
+    gather's rays landing on abrupt elements, light reflected once more: on the bench's real
+    scenes the RMS against Cycles moved by less than 0.01 points."""
     from hemicube_radiosity.core.output.abrupt import AbruptGrid
 
+    assert AbruptGrid.SKY_SPLIT == 16
     grid = AbruptGrid.__new__(AbruptGrid)                 # its layout only: elements of nu x nv cells
-    grid.nu, grid.nv = np.array([3, 2, 1, 5]), np.array([3, 2, 1, 2])
+    grid.nu, grid.nv = np.array([3, 2, 1, 5, 7]), np.array([3, 2, 1, 2, 6])
     points = (grid.nu + 1) * (grid.nv + 1)
     grid.offset = np.concatenate([[0], np.cumsum(points)[:-1]])
     part = grid._sky_parts(int(points.sum()))
-    for m, (nu, nv) in enumerate(zip(grid.nu, grid.nv)):   # every cell's corners: all four parts
+    for m, (nu, nv) in enumerate(zip(grid.nu, grid.nv)):   # every 4 x 4 window: all sixteen parts
         p = part[grid.offset[m]:grid.offset[m] + points[m]].reshape(nu + 1, nv + 1)
-        for i in range(nu):
-            for j in range(nv):
-                assert sorted(p[i:i + 2, j:j + 2].ravel()) == [0, 1, 2, 3]
+        for i in range(nu + 1):
+            for j in range(nv + 1):
+                w = p[i:i + 4, j:j + 4].ravel()
+                assert len(set(w)) == len(w)             # no part twice in a window
+                if w.size == 16:
+                    assert sorted(w) == list(range(16))
     plate = quad([(0, 0, 0.5), (0, 1, 0.5), (1, 1, 0.5), (1, 0, 0.5)], name="Plate")      # faces down
     floor = quad([(-2, -2, 0), (3, -2, 0), (3, 3, 0), (-2, 3, 0)], name="Floor")
     ps = build_patches([plate, floor], 0.25)
     centres = np.linspace(-0.6, 0.6, 49)
-    grid.nu = grid.nv = np.ones(len(centres), np.int64)   # one cell an element, corner i * 2 + j
-    grid.offset = 4 * np.arange(len(centres))
-    a, b = (g.ravel() for g in np.meshgrid([-0.025, 0.025], [-0.025, 0.025], indexing="ij"))
+    grid.nu = grid.nv = np.full(len(centres), 3, np.int64)    # one block an element, point i * 4 + j
+    grid.offset = 16 * np.arange(len(centres))
+    a, b = (g.ravel() * 0.05 - 0.075 for g in np.meshgrid(np.arange(4), np.arange(4), indexing="ij"))
     pts = np.column_stack([(centres[:, None] + a).ravel(), (0.37 + b[None] + 0 * centres[:, None]).ravel(),
-                           np.zeros(4 * len(centres))])
+                           np.zeros(16 * len(centres))])
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
-    truth = (1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5)).reshape(-1, 4).mean(1)
+    truth = (1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5)).reshape(-1, 16).mean(1)
     scene = _Counting(embree_scene(ps))
     eps = ray_offsets(ps, pts, up)
-    full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 4).mean(1)
+    full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 16).mean(1)
     scene.rays = 0
-    shared = sky_fraction(scene, pts, up, 256, eps=eps, split=4, part=grid._sky_parts(len(pts))).reshape(-1, 4).mean(1)
-    assert scene.rays == 64 * len(pts)
+    shared = sky_fraction(scene, pts, up, 256, eps=eps, split=16, part=grid._sky_parts(len(pts))).reshape(-1, 16).mean(1)
+    assert scene.rays == 16 * len(pts)
     sigma = np.sqrt(truth * (1 - truth) / 256)
     assert np.all(np.abs(shared - full) <= sigma + 1e-12)
-    # one point at each cell's middle with all 256 rays, against its own truth
+    # one point at each block's middle with all 256 rays, against its own truth
     mid = np.column_stack([centres, np.full_like(centres, 0.37), np.zeros_like(centres)])
     one = sky_fraction(scene, mid, up[:len(mid)], 256, eps=ray_offsets(ps, mid, up[:len(mid)]))
     one_truth = 1 - _rectangle_above(-centres, 1 - centres, -0.37, 0.63, 0.5)
     rms = np.sqrt(np.mean((shared - truth) ** 2))
-    assert rms < 0.008 and rms < 2 * np.sqrt(np.mean((one - one_truth) ** 2))
+    assert rms < 0.016 and rms < 4 * np.sqrt(np.mean((one - one_truth) ** 2))

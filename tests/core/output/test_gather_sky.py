@@ -36,6 +36,7 @@ def test_the_gathers_rays_light_the_vertices_as_their_own_sky_rays_of_the_same_c
     # the former way: the vertices' own sky rays, beside a gather of as many rays
     for module in (indirect, output_stage):
         monkeypatch.setattr(module, "gather_finds_world", lambda ctx: False)
+    monkeypatch.setattr(light_direct, "SKY_FIRST", 1)   # every sky ray at every vertex, as the gather's
     old = bake(_scene(), replace(s, gather_rays=128), world=WORLD)
     V = len(new.elements.verts)
     assert len(old.elements.verts) == V
