@@ -10,19 +10,9 @@ from hemicube_radiosity.core.builtin_scenes import box, quad
 from hemicube_radiosity.core.hemisphere import SKY_FIRST, sky_fraction
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_available, embree_scene, ray_offsets
+from tests.support.patching import CountingScene
 
 pytestmark = pytest.mark.skipif(not embree_available(), reason="Embree (embreex) is not installed")
-
-
-class Counting:
-    """A scene that counts the rays cast through it."""
-
-    def __init__(self, scene):
-        self.scene, self.rays = scene, 0
-
-    def occluded(self, o, d, *a):
-        self.rays += len(o)
-        return self.scene.occluded(o, d, *a)
 
 
 def _rectangle_above(x1, x2, y1, y2, c):
@@ -39,7 +29,7 @@ def test_points_in_a_closed_box_see_no_sky_and_cast_only_the_first_share():
     x = rng.uniform([0.1, 0.1, 0.1], [1.9, 0.9, 1.4], (300, 3))
     n = rng.normal(size=(300, 3))
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    scene = Counting(embree_scene(ps))
+    scene = CountingScene(embree_scene(ps))
     got = sky_fraction(scene, x, n, 256, eps=np.zeros(len(x)), first=SKY_FIRST)
     np.testing.assert_array_equal(got, 0.0)                      # truth: no sky at all
     assert scene.rays == len(x) * 256 // SKY_FIRST               # the first share only
@@ -48,7 +38,7 @@ def test_points_in_a_closed_box_see_no_sky_and_cast_only_the_first_share():
     bottomless = build_patches([box((0, 0, 0), (2.0, 1.0, 1.5), inward=True, bottom=False)], 0.25)
     down = np.tile([0.0, 0.0, -1.0], (50, 1))
     y = np.column_stack([rng.uniform(0.3, 1.7, 50), rng.uniform(0.3, 0.7, 50), np.full(50, 1.45)])
-    s2 = Counting(embree_scene(bottomless))
+    s2 = CountingScene(embree_scene(bottomless))
     early = sky_fraction(s2, y, down, 256, eps=np.zeros(50), first=SKY_FIRST)
     assert s2.rays == 50 * 256                                   # none stopped early
     np.testing.assert_array_equal(early, sky_fraction(embree_scene(bottomless), y, down, 256, eps=np.zeros(50)))
@@ -71,7 +61,7 @@ def test_a_floor_row_from_under_a_plate_to_far_beside_it_keeps_the_closed_form(s
     pts = np.column_stack([xs, np.full_like(xs, 0.3), np.zeros_like(xs)])
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     truth = 1 - _rectangle_above(-xs, 10 - xs, -5.3, 4.7, 0.1)
-    scene = Counting(embree_scene(ps))
+    scene = CountingScene(embree_scene(ps))
     eps = ray_offsets(ps, pts, up)
     got = sky_fraction(scene, pts, up, 256, seed=seed, eps=eps, first=SKY_FIRST)
     full = sky_fraction(embree_scene(ps), pts, up, 256, seed=seed, eps=eps)

@@ -4,7 +4,8 @@
 the defining module alone leaves every caller on the original: a test that forbids the call
 ("a relight casts no ray") would then check nothing. :func:`everywhere` patches every loaded
 module of the package that holds the same object, and returns how many it patched.
-:func:`counted_points` counts the points a function is called with.
+:func:`counted_points` counts the points a function is called with; :class:`CountingScene` the
+rays cast through a scene.
 """
 from __future__ import annotations
 
@@ -37,3 +38,14 @@ def counted_points(monkeypatch, module, name) -> list:
         return real(head, points, *args, **kwargs)
     monkeypatch.setattr(module, name, counting)
     return calls
+
+
+class CountingScene:
+    """A ray scene (anything with ``occluded``) that counts the rays cast through it: ``rays``."""
+
+    def __init__(self, scene):
+        self.scene, self.rays = scene, 0
+
+    def occluded(self, o, d, *a):
+        self.rays += len(o)
+        return self.scene.occluded(o, d, *a)

@@ -9,19 +9,9 @@ from hemicube_radiosity.core.light import lamps
 from hemicube_radiosity.core.light.lamps import SunLight, light_irradiance, sun_first
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_available, embree_scene, ray_offsets
+from tests.support.patching import CountingScene
 
 pytestmark = pytest.mark.skipif(not embree_available(), reason="Embree (embreex) is not installed")
-
-
-class Counting:
-    """A scene that counts the rays cast through it."""
-
-    def __init__(self, scene):
-        self.scene, self.rays = scene, 0
-
-    def occluded(self, o, d, *a):
-        self.rays += len(o)
-        return self.scene.occluded(o, d, *a)
 
 
 def test_the_first_samples_are_the_disks_rim_one_a_sector():
@@ -57,7 +47,7 @@ def test_a_row_across_a_roofs_shadow_edge_keeps_the_closed_form_penumbra(monkeyp
     def lit(first):
         if not first:
             monkeypatch.setattr(lamps, "SUN_FIRST", 100)              # every ray cast
-        scene = Counting(embree_scene(ps))
+        scene = CountingScene(embree_scene(ps))
         E = light_irradiance(ps, sun, points=pts, normals=up, eps=eps, samples=16, seed=seed, _occ=scene)
         monkeypatch.undo()
         return E, scene.rays

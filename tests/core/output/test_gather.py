@@ -11,6 +11,7 @@ from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.rays import embree_scene, ray_offsets
 from hemicube_radiosity.core.hemisphere import sky_fraction
 from hemicube_radiosity.core.builtin_scenes import closed_box, quad
+from tests.support.patching import CountingScene
 
 
 def test_constant_field_in_a_closed_room_is_gathered_exactly():
@@ -197,17 +198,6 @@ def test_directions_rounded_to_float32_once_are_the_float64_ones_cast():
     np.testing.assert_array_equal(d32, in_frames(local, frames).astype(np.float32))
 
 
-class _Counting:
-    """A scene that counts the rays cast through it."""
-
-    def __init__(self, scene):
-        self.scene, self.rays = scene, 0
-
-    def occluded(self, o, d, *a):
-        self.rays += len(o)
-        return self.scene.occluded(o, d, *a)
-
-
 def test_a_cells_points_sharing_the_sky_rays_read_its_mean_within_one_points_noise():
     """An abrupt cell's mean sky fraction (:meth:`.abrupt.AbruptGrid._means`) from its 16
     jittered points each casting 16 of the 256 rays (``split``), against each casting all 256:
@@ -228,7 +218,7 @@ def test_a_cells_points_sharing_the_sky_rays_read_its_mean_within_one_points_noi
     pts = np.column_stack([xy.reshape(-1, 2), np.zeros(xy.size // 2)])
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     truth = 1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5).reshape(-1, 16).mean(1)
-    scene = _Counting(embree_scene(ps))
+    scene = CountingScene(embree_scene(ps))
     eps = ray_offsets(ps, pts, up)
     full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 16).mean(1)
     assert scene.rays == 256 * len(pts)
@@ -285,7 +275,7 @@ def test_a_grid_whose_4x4_blocks_share_the_sky_rays_reads_each_blocks_mean_withi
                            np.zeros(16 * len(centres))])
     up = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
     truth = (1 - _rectangle_above(-pts[:, 0], 1 - pts[:, 0], -pts[:, 1], 1 - pts[:, 1], 0.5)).reshape(-1, 16).mean(1)
-    scene = _Counting(embree_scene(ps))
+    scene = CountingScene(embree_scene(ps))
     eps = ray_offsets(ps, pts, up)
     full = sky_fraction(scene, pts, up, 256, eps=eps).reshape(-1, 16).mean(1)
     scene.rays = 0
