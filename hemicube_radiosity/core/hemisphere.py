@@ -141,6 +141,7 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
     clear = (0.5 * max(float(local[:, 2].min()), 0.0)) ** 2
     dt = np.float64 if see_through else np.float32
     early = first > 1 and split == 1 and facing is None and not see_through and R % first == 0
+    first = first if early else 1
 
     def chunk(s):
         x, n = points[s:s + step], normals[s:s + step]
@@ -149,19 +150,24 @@ def sky_fraction(scene, points, normals, rays: int = 256, seed: int = 0, chunk_r
         o = x + eps[s:s + step] * n
         o = np.repeat(o if see_through else o.astype(np.float32), R, axis=0)
         below = None if facing is None else _below(local, split, f, p, n, facing[s:s + step], clear)
-        if see_through:
-            passed = scene.transmitted(o, d)
-            if below is not None:
-                passed = np.where(below, 0.0, passed)
-            out[s:s + step] = passed.reshape(len(x), R).mean(axis=1)
-            return
-        if early:
-            out[s:s + step] = _early_fraction(scene, o, d, len(x), R, first)
-            return
-        out[s:s + step] = 1.0 - _hits(scene, o, d, below).reshape(len(x), R).mean(axis=1)
+        out[s:s + step] = _fraction(scene, o, d, below, len(x), R, see_through, first)
     for _ in ordered_map(chunk, range(0, len(points), step), 1 if see_through else workers):
         pass
     return out
+
+
+def _fraction(scene, o, d, below, P, R, see_through, first) -> np.ndarray:
+    """(P,) :func:`sky_fraction` of P points from their R rays each, ``o``, ``d`` (P R, 3):
+    what passes a see-through scene (``below`` (P R,) bool or None: rays counted blocked), a
+    ``first`` share first (:func:`_early_fraction`), or every ray's hit."""
+    if see_through:
+        passed = scene.transmitted(o, d)
+        if below is not None:
+            passed = np.where(below, 0.0, passed)
+        return passed.reshape(P, R).mean(axis=1)
+    if first > 1:
+        return _early_fraction(scene, o, d, P, R, first)
+    return 1.0 - _hits(scene, o, d, below).reshape(P, R).mean(axis=1)
 
 
 def _early_fraction(scene, o, d, P, R, first) -> np.ndarray:

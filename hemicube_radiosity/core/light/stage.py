@@ -13,6 +13,8 @@ Units: radiance (W m^-2 sr^-1 per unit of colour); ``H`` is irradiance (W m^-2) 
 """
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
@@ -85,6 +87,27 @@ def _unknowns_direct(ctx, seen, rd, stand) -> np.ndarray:
     return np.where(unseen[:, None], ctx.to_unknowns(rd), out) if unseen.any() else out
 
 
+def _paper_source(ctx) -> None:
+    """:func:`direct_stage` without an exact plan (the paper's 'hemicube' direct light, or nothing
+    that emits): the lamps' light at the patch centres in ``ctx.irradiance``, and the solve's
+    source ``ctx.source``: the emitters and the world through F, and the lamps' light reflected."""
+    p, s, u = ctx.patches, ctx.settings, ctx.unknowns
+    if turns_emitters(s) and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
+        ctx.notes.append("emitters light their front only with the paper's direct light "
+                         "('hemicube'); 'exact' lights both sides as Cycles does")
+    if ctx.lights:
+        ctx.say(0.0, f"{len(ctx.lights)} lights")
+        ctx.irradiance = lamp_irradiance(p, ctx.lights, ctx.cache, cancelled=ctx.cancelled,
+                                         samples=s.light_samples, seed=s.light_seed, workers=s.workers)
+    ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
+    mirrored = mirrored_source(ctx, np.zeros_like(u.emission), ctx.world)   # the world in a mirror
+    if mirrored is not None:
+        ctx.source += mirrored
+    if ctx.irradiance is not None:
+        ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi
+        np.maximum(ctx.source, 0.0, out=ctx.source)   # a map's signed variation: as in at()
+
+
 def direct_stage(ctx) -> None:
     """Fill ``ctx.direct`` (the exact plan or None), ``ctx.direct_patch`` (radiance arriving at
     the patch centres, exact path), ``ctx.irradiance`` (N, 3) at the patch centres and the
@@ -97,20 +120,7 @@ def direct_stage(ctx) -> None:
                                  "off): every vertex bakes black", topic="scene"))
     ctx.direct = DirectLight.plan(p, s, ctx.lights, ctx.cancelled, ctx.cache, ctx.clusters, ctx.world)
     if ctx.direct is None:
-        if turns_emitters(s) and s.direct == "hemicube" and p.emission.max(initial=0) > 0:
-            ctx.notes.append("emitters light their front only with the paper's direct light "
-                             "('hemicube'); 'exact' lights both sides as Cycles does")
-        if ctx.lights:
-            ctx.say(0.0, f"{len(ctx.lights)} lights")
-            ctx.irradiance = lamp_irradiance(p, ctx.lights, ctx.cache, cancelled=ctx.cancelled,
-                                             samples=s.light_samples, seed=s.light_seed, workers=s.workers)
-        ctx.source = source_term(u, ctx.form_factors, world=ctx.world)
-        mirrored = mirrored_source(ctx, np.zeros_like(u.emission), ctx.world)   # the world in a mirror
-        if mirrored is not None:
-            ctx.source += mirrored
-        if ctx.irradiance is not None:
-            ctx.source += ctx.to_unknowns(p.rho * ctx.irradiance) / np.pi
-            np.maximum(ctx.source, 0.0, out=ctx.source)   # a map's signed variation: as in at()
+        _paper_source(ctx)
         return
     # direct light (emitters and lamps) arrives by the exact path; the solve carries only
     # reflected light R, and B = E + R (F would otherwise carry E a second time)
@@ -132,19 +142,17 @@ def direct_stage(ctx) -> None:
     # the plain area mean is what lands on the patches (the energy report, the irradiance);
     # the solve takes the mean over the part of each patch the scene sees
     # (the points averaged share the sky's rays out: :data:`.points.SKY_SHARE`)
-    groups = None if ctx.clusters is None else ctx.clusters.of
-    ctx.direct_patch = patch_average(p, s.patch_light_points, at, grouped, stand=stand, groups=groups, share=True)
+    average = partial(patch_average, p, s.patch_light_points, centre_only=grouped, stand=stand,
+                      groups=None if ctx.clusters is None else ctx.clusters.of, share=True)
+    ctx.direct_patch = average(at)
     ctx.irradiance = np.pi * ctx.direct_patch
     # the suns' and maps' share of it, from the same rays (the energy report counts it as emitted)
-    ctx.unbounded_patch = patch_average(p, s.patch_light_points, lambda x, n, w, **k: at(x, n, w, 1, **k), grouped,
-                                        stand=stand, groups=groups, share=True) if far else None
-    seen_patch = ctx.direct_patch if seen is None else patch_average(p, s.patch_light_points, at, grouped, seen,
-                                                                stand=stand, groups=groups, share=True)
+    ctx.unbounded_patch = average(lambda x, n, w, **k: at(x, n, w, 1, **k)) if far else None
+    seen_patch = ctx.direct_patch if seen is None else average(at, weight_at=seen)
     ctx.direct_source = _unknowns_direct(ctx, seen, p.rho * seen_patch, stand)
     memo.clear()
     if ctx.direct.world is not None:          # the world's light, exact at the points above
-        ctx.sky_patch = patch_average(p, s.patch_light_points, ctx.direct.world_at, grouped, stand=stand,
-                                      groups=groups, share=True)
+        ctx.sky_patch = average(ctx.direct.world_at)
     # the world is in the direct light: the source does not take it again from F's sky
     ctx.source = source_term(u, ctx.form_factors) - u.emission + ctx.direct_source
     # what a receiver gathers first from a cluster lit unevenly: the part of it it sees
