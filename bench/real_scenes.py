@@ -65,7 +65,9 @@ textured face's corners each their own colour) interpolated bilinearly. Left out
 zero-area faces (a point-domain Cycles bake would average their black corners in), corners Cycles
 shades on a triangle without area (:func:`flat_bake_corners`: it bakes them at another vertex with
 an undefined normal), of emitters (EMIT bake > 0), corners the reference never lights (its
-luminance <= 1e-4 x the median) and those of objects we did not bake. ``errors`` of
+luminance <= 1e-4 x the median) where the geometry says why (``dark_corners``: another face passes
+through Cycles' bake point, or no ray from it reaches light; the others are compared, and counted in
+``cycles.never_lit``), and those of objects we did not bake. ``errors`` of
 ``speed_vs_error.py``: RMS of the luminance-weighted difference / the reference's mean luminance.
 ``rms`` has the reference's own noise taken out, estimated from Cycles 64 against 256 samples
 (independent seeds, variance ~ 1/spp: sigma_256^2 = rms_64^2 / 5); ``rms_raw`` is as measured.
@@ -96,6 +98,7 @@ for p in (ROOT, HERE, os.path.join(ROOT, "tools")):
     if p not in sys.path:
         sys.path.insert(0, p)
 
+import dark_corners  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 from hemicube_radiosity.core.settings import QUALITY  # noqa: E402
 
@@ -440,7 +443,8 @@ def cycles_child(name, out_npz, ref_spp, cand_spp, glossy=str(GLOSSY), filter_gl
     arrays = {}
     for key, kw in (("ref", dict(samples=ref_spp, seed=sve.REF_SEED)), ("cand", dict(samples=cand_spp,
                                                                                      seed=sve.CAND_SEED)),
-                    ("emit", dict(samples=1, seed=0, mode="EMIT"))):
+                    ("emit", dict(samples=1, seed=0, mode="EMIT")),
+                    ("point", dict(samples=1, seed=0, mode="POSITION"))):
         t = time.perf_counter()
         b = cr.cached_bake(objs, CACHE_DIR, bounces=sve.BOUNCES, threads=2, glossy=int(glossy),
                            filter_glossy=None if filter_glossy == "default" else float(filter_glossy), **kw)
@@ -701,15 +705,38 @@ def child_main(kind, argv):
     os._exit(0)   # skip Blender's teardown (slow on big scenes); everything is written
 
 
+def compared_corners(cyc_npz):
+    """(L,) bool: the Cycles corners the errors are measured at (see the module's "Error"), and the
+    counts of never-lit corners left out as explained (``dark_corners``): {"covered", "sealed",
+    "counted"}. Worked out once per reference file."""
+    key = (cyc_npz, os.path.getmtime(cyc_npz))
+    if key not in _COMPARED:
+        with np.load(cyc_npz) as z:
+            z = {k: z[k] for k in z.files}
+        ref, emit, area = z["ref"], z["emit"], z["area"]
+        flat = z.get("flat", np.zeros(len(area), bool))
+        diag = float(np.linalg.norm(np.ptp(z["pos"], axis=0))) if len(z["pos"]) else 1.0
+        Yr = ref @ sve.LUMA
+        mask = (area > 1e-12 * diag * diag) & ~flat & ((emit @ sve.LUMA) <= 0) & np.all(np.isfinite(ref), 1)
+        lit = Yr > 1e-4 * np.median(Yr[mask]) if mask.any() else np.zeros(len(Yr), bool)
+        never = mask & ~lit
+        covered, sealed = dark_corners.explained(z, never, lit | ((emit @ sve.LUMA) > 0))
+        mask &= ~(covered | sealed)
+        counts = {"covered": int(covered.sum()), "sealed": int(sealed.sum()),
+                  "counted": int((never & mask).sum())}
+        _COMPARED.clear()
+        _COMPARED[key] = (mask, counts)
+    return _COMPARED[key]
+
+
+_COMPARED = {}
+
+
 def compare(cyc_npz, vals):
     """(errors against the reference, Cycles 64's errors, corners compared) at the Cycles corners."""
     with np.load(cyc_npz) as z:
-        ref, cand, emit, area = z["ref"], z["cand"], z["emit"], z["area"]
-        flat = z["flat"] if "flat" in z.files else np.zeros(len(area), bool)
-        diag = float(np.linalg.norm(np.ptp(z["pos"], axis=0))) if len(z["pos"]) else 1.0
-    Yr = ref @ sve.LUMA
-    mask = (area > 1e-12 * diag * diag) & ~flat & ((emit @ sve.LUMA) <= 0) & np.all(np.isfinite(ref), 1)
-    mask &= Yr > 1e-4 * np.median(Yr[mask]) if mask.any() else mask
+        ref, cand = z["ref"], z["cand"]
+    mask = compared_corners(cyc_npz)[0].copy()
     if vals is not None:   # inf: not matched; NaN: our bake gave NaN there (counted in the row)
         mask &= np.all(np.isfinite(vals), 1)
     if mask.sum() < 10:
@@ -792,6 +819,8 @@ def run_scene(spec, args):
     if have_ref and row["cycles"].get("error") is None:   # Cycles' own error, when no bake of ours ran
         _, c, n = compare(cyc_npz, None)
         row["cycles"].update(error=c, compared=n)
+    if have_ref:
+        row["cycles"]["never_lit"] = compared_corners(cyc_npz)[1]
     row["load_avg"].append(os.getloadavg()[0])   # a shared machine: how busy it was around the scene
     return row
 

@@ -397,8 +397,10 @@ def real_section(res):
             if str(res.get("filter_glossy", "default")) not in ("default", "None") else "")
          + ". RMS at Cycles' face"
          " corners matched by position and normal, zero-area faces, corners Cycles shades on a triangle without area"
-         " (it bakes them at another vertex with an undefined normal), emitters and never-lit corners left out, the"
-         " reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
+         " (it bakes them at another vertex with an undefined normal), emitters, and corners Cycles never lights where"
+         " the geometry says why (another face passes through its bake point, a duplicated or back-to-back face, or no"
+         " ray from it reaches light, a solid buried in another: `bench/dark_corners.py`; the other never-lit corners"
+         " are compared) left out, the reference's own noise taken out. Ours: read + bake + write (s); Cycles: `bpy.ops.object.bake` (the run that"
          " filled the cache). Relight: after the defaults' bake, every lamp, emitting material and the world's strength x"
          f" {real_scenes.RELIGHT:g} and the bake again, in the same process (the session's cache) and through"
          " `--cache` in a new process (a first child fills the folder), against Cycles' 64-spp time (a re-bake"
@@ -413,6 +415,10 @@ def real_section(res):
             bits.append(f"{d.get('compared', 0):,} of {c.get('corners', 0):,} corners compared")
             if c.get("flat_corners"):
                 bits.append(f"{c['flat_corners']:,} on triangles without area left out")
+            nl = c.get("never_lit")
+            if nl and sum(nl.values()):
+                bits.append(f"never lit by Cycles: {nl['covered']:,} on another face and {nl['sealed']:,} sealed"
+                            f" left out, {nl['counted']:,} compared")
             if d.get("corners_unmatched"):
                 bits.append(f"{d['corners_unmatched']:,} not matched to a face of ours")
             if d.get("vertices_nan"):

@@ -75,6 +75,7 @@ PASS_FILTERS = {
     "COMBINED": {"EMIT", "DIRECT", "INDIRECT", "DIFFUSE"},
     "DIFFUSE": {"DIRECT", "INDIRECT", "COLOR"},
     "LIGHTING": {"DIRECT", "INDIRECT"},
+    "POSITION": set(),      # where Cycles shades each corner (world space), not light
 }
 BAKE_TYPES = {"LIGHTING": "DIFFUSE"}
 ATTRIBUTE = "_cycles_reference_bake"
@@ -156,8 +157,9 @@ def bake_vertex_radiance(objects, *, samples=256, seed=0, mode="COMBINED", bounc
 
     Objects must be mesh objects linked to ``scene`` (default: the context scene). Their meshes
     get a temporary FLOAT_COLOR CORNER attribute that is removed again; the previously active
-    colour attribute is restored. ``mode``: 'COMBINED' (B = E + rho H / pi) or 'DIFFUSE'
-    (rho H / pi). Returns a :class:`CyclesBake`.
+    colour attribute is restored. ``mode``: 'COMBINED' (B = E + rho H / pi), 'DIFFUSE'
+    (rho H / pi), 'LIGHTING' (H / pi), 'POSITION' (where Cycles shades each corner, world space,
+    metres) or another key of ``PASS_FILTERS``. Returns a :class:`CyclesBake`.
     """
     import bpy
 
