@@ -21,7 +21,7 @@ from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
 from ..hemisphere import SKY_FIRST, sky_fraction
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, frozen
 from ..util.unique import unique_ints
 
 __all__ = ["DirectLight", "LUMA", "turns_emitters"]
@@ -138,8 +138,7 @@ class DirectLight:
                 G = int(self.groups.max()) + 1
                 L = np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
                     / np.bincount(self.groups, weights=a, minlength=G)[:, None]
-            L.flags.writeable = False
-            self._emitted = L
+            self._emitted = frozen(L)
         return self._emitted
 
     def _emitters_at(self, points, normals, where, samples=None, transposed=False, eps=None):

@@ -18,7 +18,7 @@ from ..mesh.contact import OpenSide, open_side
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
-from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, frozen, geometry_key
 from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
 from .shared import corner_sharing, shared_open_fraction
@@ -42,12 +42,7 @@ def open_elements(ctx, elements):
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach,
                                                      workers=ctx.settings.workers, eps=ray_offsets(elements)))
-
-    def weights():
-        w = (f > 0.05).astype(np.float64)
-        w.flags.writeable = False
-        return w
-    return cached(ctx.cache, key + "-weights", weights, disk=False)
+    return cached(ctx.cache, key + "-weights", lambda: frozen((f > 0.05).astype(np.float64)), disk=False)
 
 
 def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:

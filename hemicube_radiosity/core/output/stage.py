@@ -24,7 +24,7 @@ from ..form_factors.glossy import mirrored_arrival
 from ..light.emitters import vertex_frames
 from ..mesh.elements import cut_elements
 from ..rays import embree_available
-from ..runtime.cache import array_key
+from ..runtime.cache import array_key, frozen
 from .corners import corner_values, vertex_mean
 from .covered import covered_light, start_offsets
 from .crease import corner_light
@@ -50,11 +50,7 @@ def vertex_stage(ctx) -> None:
     F = ctx.form_factors
     key = ("exposure-weights", array_key(u.areas), None if ctx.clusters is None else array_key(ctx.clusters.of))
 
-    def make():
-        w = np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)
-        w.flags.writeable = False
-        return w
-    weights = F.memo(key, make)
+    weights = F.memo(key, lambda: frozen(np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)))
     ctx.elements = patches
     ctx.corner_radiosity = ctx.corner_lighting = ctx.corner_rho = None
     ctx.vertex_direct = ctx.vertex_indirect = ctx.vertex_rho = None
