@@ -35,7 +35,7 @@ from .through import Through, cast_through
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
-           "product", "surface_values", "surface_weights", "transport_product", "transposed_transport"]
+           "product", "surface_values", "surface_weights"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -467,24 +467,3 @@ def _row_runs(ip, r0, r1, chunk) -> list:
         rows = slice(a, b) if nz.size == b - a else a + nz
         runs.append((s, e, rows, ip[a:b][nz] - s))
     return runs
-
-
-def transport_product(T, L, transposed=False) -> np.ndarray:
-    """``T @ L`` for a dense (P, M) transport (float32) and (M, 3) radiances, in float64, equal
-    bit for bit to :func:`.emitters.apply_transport` (each sum runs over m in order; with one
-    band einsum sums otherwise, to the last bit) and, without BLAS either, several times
-    faster: the sums run down the rows of T transposed, whole rows at a time (einsum's
-    mixed-precision loop is the slow part). ``transposed``: ``T`` is given as
-    :func:`transposed_transport` made it, (M, P) float64 (kept with a cached transport, so a
-    relight neither transposes nor casts it), the same sums."""
-    L = np.asarray(L, dtype=np.float64)
-    Tt = np.asarray(T) if transposed else np.ascontiguousarray(np.asarray(T).T)
-    if Tt.shape[0] == 0:
-        return np.zeros((Tt.shape[1], L.shape[1]))
-    return np.stack([np.add.reduce(Tt * L[:, k, None], axis=0) for k in range(L.shape[1])], 1)
-
-
-def transposed_transport(T) -> np.ndarray:
-    """(M, P) float64, contiguous: a (P, M) transport as :func:`transport_product` reads it with
-    ``transposed=True`` (float32 to float64 is exact: the same products)."""
-    return np.ascontiguousarray(np.asarray(T).T, dtype=np.float64)
