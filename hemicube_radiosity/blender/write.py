@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import bpy
 import numpy as np
-from ..core.runtime.cache import PER_MESH, Memo, inverse
+from ..core.runtime.cache import PER_MESH, Memo, frozen, inverse
 from ..core.runtime.errors import RadiosityError
 from . import textures
 
@@ -148,10 +148,7 @@ def _element_layout(patches, owner, matrix_world, flipped):
     key = (np.asarray(owner, np.int64).tobytes(), M.shape, M.tobytes(), bool(flipped))
 
     def make():
-        out = _layout(patches, owner, M, flipped)
-        for a in out:
-            a.flags.writeable = False
-        return out
+        return frozen(*_layout(patches, owner, M, flipped))
     return _LAYOUTS.of((patches.verts, patches.polys, patches.owner), make, key=key)
 
 

@@ -14,7 +14,7 @@ import hashlib
 import numpy as np
 
 from ...core.mesh.ngons import bent_faces
-from ...core.runtime.cache import Memo, PER_MESH
+from ...core.runtime.cache import Memo, PER_MESH, frozen
 
 __all__ = ["bent_ngon_triangles", "reversed_rings"]
 
@@ -27,11 +27,7 @@ def _kept(rows):
     meshes' key) takes ``face_triangles`` with the rest, by identity, and only read-only."""
     rows = np.ascontiguousarray(rows, dtype=np.int64)
     key = hashlib.sha256(str(rows.shape).encode() + rows.tobytes()).digest()
-
-    def make():
-        rows.flags.writeable = False
-        return rows
-    return _ROWS.get(key, make)
+    return _ROWS.get(key, lambda: frozen(rows))
 
 
 def bent_ngon_triangles(me, co, loop_vertex, poly_start, poly_total):

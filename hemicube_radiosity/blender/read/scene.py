@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...core.mesh.patches import MeshInput
-from ...core.runtime.cache import Memo, PER_MESH, inverse
+from ...core.runtime.cache import Memo, PER_MESH, frozen, inverse
 from ...core.runtime.errors import RadiosityError
 from ...core.runtime.notes import Note, note, subject_and_kind
 from . import instances as inst_reader
@@ -269,9 +269,7 @@ def _world_corner_normals(cn, M, corner_loop):
     M = np.asarray(M, dtype=np.float64)
 
     def make():
-        out = _normals_in_world(cn, M)[corner_loop]
-        out.flags.writeable = False
-        return out
+        return frozen(_normals_in_world(cn, M)[corner_loop])
     if cn.flags.writeable or corner_loop.flags.writeable:     # may change in place: made every time
         return _normals_in_world(cn, M)[corner_loop]
     return _IN_WORLD.of((cn, corner_loop), make, M.tobytes())
@@ -354,11 +352,9 @@ def _welded(verts_w, used, flipped, lv, le, ps, pt, mi, sm, sh):
         loop_face = np.repeat(np.arange(ps.size), pt)
         pos = np.arange(lv.size) - ps[loop_face]
         corner_loop = ps[loop_face] + (pt[loop_face] - 1 - pos if flipped else pos)
-        out = (normals, areas, np.ptp(verts_w[used], axis=0), corner_vertex, src_vertex,
-               np.concatenate([[0], np.cumsum(pt)]), corner_loop, verts_w[src_vertex], corner_vertex[corner_loop])
-        for a in out:
-            a.flags.writeable = False
-        return out
+        return frozen(normals, areas, np.ptp(verts_w[used], axis=0), corner_vertex, src_vertex,
+                      np.concatenate([[0], np.cumsum(pt)]), corner_loop, verts_w[src_vertex],
+                      corner_vertex[corner_loop])
     return _WELDED.get(h.digest(), make)
 
 
@@ -521,12 +517,9 @@ def _placed(src, M, name):
         return None if a is None else a[perm]
 
     def geometry():
-        out = (m.verts @ M[:3, :3].T + M[:3, 3], m.face_indices[perm],
-               None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
-        for a in out:                    # read only, as a read mesh's arrays
-            if a is not None:
-                a.flags.writeable = False
-        return out
+        # read only, as a read mesh's arrays
+        return frozen(m.verts @ M[:3, :3].T + M[:3, 3], m.face_indices[perm],
+                      None if m.corner_normal is None else _normals_in_world(m.corner_normal[perm], M))
     held = (m.verts, m.face_indices, m.face_offsets, m.corner_normal)
     # a relight places the same prototype's arrays again: the same arrays, so what the bake keys
     # on them (face spans, the meshes' key) is found, not made for every instance again

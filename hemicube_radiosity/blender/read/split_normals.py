@@ -9,7 +9,7 @@ import hashlib
 import numpy as np
 
 from ...core.mesh.cycles_normals import shading_normals
-from ...core.runtime.cache import PER_MESH, Memo
+from ...core.runtime.cache import PER_MESH, Memo, frozen
 
 __all__ = ["cycles_corner_normals", "CYCLES_SPLITS_VERTICES"]
 
@@ -44,10 +44,8 @@ def cycles_corner_normals(me, normals, loop_vert, loop_edge, poly_start, poly_to
         h.update(str((a.dtype, a.shape)).encode() + a.tobytes())
 
     def make():
-        out = shading_normals(normals, vn.reshape(-1, 3), loop_vert, loop_edge, poly_start, poly_total,
-                              face_smooth, edge_sharp, tl.reshape(-1, 3), custom=custom)
-        out.flags.writeable = False
-        return out
+        return frozen(shading_normals(normals, vn.reshape(-1, 3), loop_vert, loop_edge, poly_start, poly_total,
+                                      face_smooth, edge_sharp, tl.reshape(-1, 3), custom=custom))
     return _SHADED.get(h.digest(), make)
 
 

@@ -11,8 +11,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from .emitters import emitter_transport
-from ..output.gather import transport_product, transposed_transport
+from .emitters import emitter_transport, transport_product, transposed_transport
 from .environment import EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
 from .lamps import SunLight
@@ -21,7 +20,7 @@ from ..mesh.patches import PatchSet
 from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
 from ..hemisphere import SKY_FIRST, sky_fraction
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, frozen
 from ..util.unique import unique_ints
 
 __all__ = ["DirectLight", "LUMA", "turns_emitters"]
@@ -138,13 +137,12 @@ class DirectLight:
                 G = int(self.groups.max()) + 1
                 L = np.stack([np.bincount(self.groups, weights=a * L[:, k], minlength=G) for k in range(3)], 1) \
                     / np.bincount(self.groups, weights=a, minlength=G)[:, None]
-            L.flags.writeable = False
-            self._emitted = L
+            self._emitted = frozen(L)
         return self._emitted
 
     def _emitters_at(self, points, normals, where, samples=None, transposed=False, eps=None):
         """(P, units) the emitters' transport to ``points`` (cached: geometry only);
-        ``transposed``: (units, P) float64 instead, as :func:`.gather.transport_product` reads
+        ``transposed``: (units, P) float64 instead, as :func:`.emitters.transport_product` reads
         it fastest (cached beside it); ``eps`` (P,): the rays' start offsets (default
         :meth:`offsets`)."""
         samples = None if samples is None else min(samples, self.samples)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, frozen
 from ..util.spatial import morton_order
 from ..util.unique import unique_ints
 
@@ -75,8 +75,7 @@ def _stand_ins(patches: PatchSet, clusters, k: int) -> np.ndarray:
         near = np.lexsort((d, rid))
         best = near[np.r_[0, np.flatnonzero(np.diff(rid[near])) + 1]]
         stand[rows] = rows[best[rid]]
-    stand.flags.writeable = False
-    return stand
+    return frozen(stand)
 
 
 #: The points whose light is averaged (a patch's n x n grid, a cluster's stand-ins) share the
@@ -153,12 +152,7 @@ def _grid_parts(N, K) -> np.ndarray:
     """(N K,) the share of the sky's rays each of N patches' K grid points casts (:data:`SKY_SHARE`):
     point k its k % SKY_SHARE-th, so a patch's points cast every ray at least once. Read-only
     and the same array for the same (N, K) (its hash keys the light's cache)."""
-    return _PARTS.get(("grid", int(N), int(K)), lambda: _frozen(np.tile(np.arange(K) % SKY_SHARE, N)))
-
-
-def _frozen(a):
-    a.flags.writeable = False
-    return a
+    return _PARTS.get(("grid", int(N), int(K)), lambda: frozen(np.tile(np.arange(K) % SKY_SHARE, N)))
 
 
 def shared_parts(groups) -> tuple:
@@ -187,9 +181,7 @@ def _shared_centres(patches: PatchSet, lit, groups, light_at) -> np.ndarray:
     def make():
         full, part = shared_parts(np.asarray(groups)[lit])
         rows = [np.flatnonzero(full), np.flatnonzero(~full)]
-        made = [(r, _frozen(np.ascontiguousarray(x[r])), _frozen(np.ascontiguousarray(nrm[r])),
-                 _frozen(part[r])) for r in rows]
-        return made
+        return [(r, *frozen(np.ascontiguousarray(x[r]), np.ascontiguousarray(nrm[r]), part[r])) for r in rows]
     sets = _PARTS.of((x, groups), make, "grouped")
     out = np.empty((len(x), 3))
     if not len(sets[0][0]):                   # no cluster shares: the centres as they are
@@ -227,10 +219,7 @@ def grid_of(patches: PatchSet, rows, n: int):
         sub = patches if rows is None else rows_of(patches, rows)
         x, w = grid_points(sub, n)
         N, K = x.shape[:2]
-        grid = (x, x.reshape(N * K, 3), np.repeat(sub.normals, K, axis=0), w)
-        for a in grid:
-            a.flags.writeable = False
-        return grid
+        return frozen(x, x.reshape(N * K, 3), np.repeat(sub.normals, K, axis=0), w)
     return _GRIDS.of((patches.verts, patches.polys), make, (int(n), len(patches), rk))
 
 
@@ -252,13 +241,7 @@ def centres_of(patches: PatchSet, select) -> tuple:
     the same patch arrays and selection (a relight's: its transports' keys hash them once,
     :func:`.cache.array_key`). The arrays are read-only."""
     c, n = patches.centers, patches.normals
-
-    def make():
-        rows = (c[select], n[select])
-        for a in rows:
-            a.flags.writeable = False
-        return rows
-    return _CENTRES.of((c, n), make, (np.packbits(select).tobytes(), len(select)))
+    return _CENTRES.of((c, n), lambda: frozen(c[select], n[select]), (np.packbits(select).tobytes(), len(select)))
 
 
 def turned_around(patches: PatchSet) -> PatchSet:

@@ -27,7 +27,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..runtime.cache import cache_key, cached
+from ..runtime.cache import cache_key, cached, frozen
 from ..util.unique import linked_labels, unique_rows
 from .patches import covering_faces, meshes_key, negated_rows
 from .sizes import mesh_boxes
@@ -180,12 +180,8 @@ def _back_geometry(mesh, faces):
     remap = np.full(len(mesh.verts), -1, dtype=np.int64)
     remap[used] = np.arange(used.size)
     verts = np.asarray(mesh.verts, dtype=np.float64)[used] - offset(mesh.verts) * normals[used]
-    out = (verts, new_offsets, remap[indices[corner]], corner, sel,
-           _back_triangles(getattr(mesh, "face_triangles", None), sel, counts))
-    for a in out:
-        if a is not None:
-            a.flags.writeable = False
-    return out
+    return frozen(verts, new_offsets, remap[indices[corner]], corner, sel,
+                  _back_triangles(getattr(mesh, "face_triangles", None), sel, counts))
 
 
 def _back_triangles(rows, sel, counts):

@@ -23,7 +23,7 @@ from dataclasses import replace
 import numpy as np
 
 from .patches import MeshInput, read_only
-from ..runtime.cache import Memo, PER_MESH
+from ..runtime.cache import Memo, PER_MESH, frozen
 
 _SPANS = Memo(PER_MESH, max_bytes=256 << 20)     # a mesh's arrays -> face_spans (the last bakes')
 
@@ -69,9 +69,7 @@ def _face_spans(mesh: MeshInput):
     if quad.size:
         q = length[off[quad][:, None] + np.arange(4)]
         sides[quad] = np.stack([np.maximum(q[:, 0], q[:, 2]), np.maximum(q[:, 1], q[:, 3])], 1)
-    for x in (areas, sides, k):
-        x.flags.writeable = False
-    return areas, sides, k
+    return frozen(areas, sides, k)
 
 
 def _spans(length, size):

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from .patches import MeshInput, PatchError, check_faces, read_only
-from ..runtime.cache import Memo, PER_MESH
+from ..runtime.cache import Memo, PER_MESH, frozen
 
 __all__ = ["ear_clip", "to_tris_and_quads", "bent_faces", "BENT"]
 
@@ -263,12 +263,7 @@ def to_tris_and_quads(mesh: MeshInput):
     if not all(read_only(a) for a in arrays):          # may change in place: made every time
         return _to_tris_and_quads(mesh)
 
-    def make():
-        out = _to_tris_and_quads(mesh)
-        for a in out:
-            a.flags.writeable = False
-        return out
-    return _SPLIT.of(arrays, make)
+    return _SPLIT.of(arrays, lambda: frozen(*_to_tris_and_quads(mesh)))
 
 
 def _to_tris_and_quads(mesh: MeshInput):

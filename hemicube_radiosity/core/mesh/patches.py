@@ -21,7 +21,7 @@ import hashlib
 from dataclasses import dataclass, field
 
 import numpy as np
-from ..runtime.cache import PER_MESH, Memo
+from ..runtime.cache import PER_MESH, Memo, frozen
 from ..runtime.stored import storable
 from ..runtime.errors import RadiosityError
 from ..light.transmit import see_through
@@ -135,9 +135,7 @@ def negated_rows(a, rows) -> np.ndarray:
     normals, its front's reversed (a relight's backs are the same arrays; made anew, the shading
     normals keyed on them were made anew too: 20 ms of the terrain's relight)."""
     def make():
-        out = -np.asarray(a, dtype=np.float64)[rows]
-        out.flags.writeable = False
-        return out
+        return frozen(-np.asarray(a, dtype=np.float64)[rows])
     return _NEGATED.of((a, rows), make) if read_only(a) and read_only(rows) else make()
 
 

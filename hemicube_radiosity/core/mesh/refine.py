@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, frozen, geometry_key
 from .clusters import make_clusters
 from ..light.points import grid_of
 from ..light.direct import LUMA, DirectLight
@@ -94,10 +94,7 @@ def _split_geometry(patches: PatchSet, select):
     polys = np.concatenate([patches.polys[keep], children])
     centers, normals, areas = poly_geometry(verts, polys)
     normals = patches.normals[parent]            # children lie in their parent's plane
-    out = (verts, polys, centers, normals, areas, patches.owner[parent], patches.source_face[parent], parent)
-    for a in out:
-        a.flags.writeable = False
-    return out
+    return frozen(verts, polys, centers, normals, areas, patches.owner[parent], patches.source_face[parent], parent)
 
 
 def _subset(patches: PatchSet, ids) -> PatchSet:
@@ -198,8 +195,7 @@ def _regrouped(of, parent, refined: PatchSet, before: int):
         child = np.flatnonzero(np.bincount(parent, minlength=before)[parent] > 1)
         out[child] = out.max() + 1 + np.arange(child.size)
         grouped = make_clusters(refined, unique_ints(out, return_inverse=True)[1].reshape(-1))
-        for a in (grouped.of, grouped.centers, grouped.normals, grouped.areas, grouped.owner):
-            a.flags.writeable = False
+        frozen(grouped.of, grouped.centers, grouped.normals, grouped.areas, grouped.owner)
         return grouped
     return _REGROUP.of((of, parent, refined.verts, refined.areas), make).with_materials(refined)
 

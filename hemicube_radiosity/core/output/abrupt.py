@@ -15,7 +15,7 @@ import numpy as np
 
 from ..mesh.patches import PatchSet
 from ..mesh.refine import LUMA
-from ..runtime.cache import Memo, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, cache_key, cached, frozen, geometry_key
 from ..util.geometry import bilinear
 from ..util.unique import run_positions
 from .corners import corner_columns
@@ -93,10 +93,7 @@ def _inside_points(elements, ids, size, huge):
         at = np.repeat(np.arange(ids.size), nu * nv_)
         k = run_positions(nu * nv_)
         u, v = ((k % nu[at]) + 0.5) / nu[at], ((k // nu[at]) + 0.5) / nv_[at]
-        out = at, bilinear(corners[at], u[:, None], v[:, None]), elements.normals[ids[at]]
-        for a in out:
-            a.flags.writeable = False
-        return out
+        return frozen(at, bilinear(corners[at], u[:, None], v[:, None]), elements.normals[ids[at]])
     ask = hashlib.sha256(np.asarray(ids, np.int64).tobytes() + np.asarray(huge, bool).tobytes()).digest()
     return _INSIDE.of((elements.verts, elements.polys), make, key=(size, INSIDE_CELLS, ask))
 

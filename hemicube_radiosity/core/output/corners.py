@@ -12,7 +12,7 @@ import numpy as np
 
 from ..mesh.patches import PatchSet
 from ..mesh.patches import meshes_key
-from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, frozen, geometry_key
 from ..util.unique import unique_rows
 
 __all__ = ["corner_values", "vertex_mean", "corner_columns", "corner_sum"]
@@ -69,10 +69,7 @@ def _corner_slots(elements, meshes, cache=None):
         inv = inv.reshape(-1)
         slot = np.full(inv.max() + 1, -1)
         slot[inv[:len(keys)]] = np.arange(len(keys))
-        out = (slot[inv[len(keys):]], np.asarray(first)[elements.owner] + elements.source_face)
-        for a in out:
-            a.flags.writeable = False
-        return out
+        return frozen(slot[inv[len(keys):]], np.asarray(first)[elements.owner] + elements.source_face)
     mk = meshes_key(meshes)
     arrays = (elements.verts, elements.polys, elements.owner, elements.source_face)
 

@@ -12,6 +12,7 @@ that hit the back of a patch see nothing.
 from __future__ import annotations
 
 from contextlib import closing
+from dataclasses import dataclass
 from functools import partial
 
 import numpy as np
@@ -35,7 +36,7 @@ from .through import Through, cast_through
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
-           "product", "surface_values", "surface_weights", "transport_product", "transposed_transport"]
+           "product", "surface_values", "surface_weights"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -129,16 +130,13 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     """
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
-    P, V = len(points), len(patches.verts)
+    P = len(points)
     # one even pattern for every point, in a frame that depends on the normal alone:
     # neighbouring points on a surface cast parallel rays, so what remains of the sampling error
     # varies smoothly over the surface instead of as per-vertex speckle
     local = cosine_lattice(rays, seed)
     R = len(local)
     step = max(1, chunk_rays // R)
-    counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
-    written = []                              # forked: (start, entries, hits) of each chunk
-    sky = np.zeros(P)
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads (or forks) share it
     workers = resolve_workers(workers)
@@ -168,8 +166,40 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
     # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
     results = (started_map if background and forked else ordered_map)(cast, starts, workers, processes=forked)
+    rows = _GatheredRows(P, len(patches.verts), R, seed, hits, share, out)
+    if not background:
+        return rows.collect(results, tick=ticker)
+    if not forked:                   # threads or serial: nothing would be left to overlap
+        return Background.ready(rows.collect(results, tick=ticker))
+    # the workers were forked on this thread (started_map), not beside the caller's code
+    # running on; their chunks are collected on a thread while the caller goes on
+    return Background(partial(rows.collect, results))
 
-    def collect(stop=None, tick=ticker):
+
+@dataclass
+class _GatheredRows:
+    """The chunks of :func:`gather_matrix` put together: ``P`` points, ``V`` patch vertices,
+    ``R`` rays a point of the pattern ``seed``; ``hits``: kept too; ``share``: the points'
+    :class:`.shared.Sharing` (their chunks come in its order) or None; ``out``: the forked
+    workers' :class:`_SharedRows` (the chunks send back counts) or None (their rows)."""
+
+    P: int
+    V: int
+    R: int
+    seed: int
+    hits: bool
+    share: object
+    out: object
+
+    def collect(self, results, stop=None, tick=None):
+        """``(G, sky)`` (``(G, sky, H)`` with ``hits``) of :func:`gather_matrix` from the
+        chunks' ``results`` (:func:`_cast`'s), in the points' own order; None when ``stop`` (an
+        Event) is set between two chunks. ``tick``: a :class:`.progress.Ticker` told the points
+        done."""
+        P, out = self.P, self.out
+        counts, cols, vals, found = np.zeros(P + 1, dtype=np.int64), [], [], []
+        written = []                              # forked: (start, entries, hits) of each chunk
+        sky = np.zeros(P)
         with closing(results):
             for s, m, sky_s, n, c, w, H in results:
                 sky[s:s + m] = sky_s
@@ -189,20 +219,13 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
         else:
             c = np.concatenate(cols) if cols else np.zeros(0, np.int32)
             w = np.concatenate(vals) if vals else np.zeros(0, np.float32)
-            H = (np.concatenate(found) if found else np.zeros((0, 5 if share is None else 6), np.float32)) \
-                if hits else None
+            H = (np.concatenate(found) if found else np.zeros((0, 5 if self.share is None else 6), np.float32)) \
+                if self.hits else None
         indptr, s_ = np.cumsum(counts), sky
-        if share is not None:                          # back in the points' own order
-            indptr, c, w, s_, H = share.restore(np.diff(indptr), c, w, sky, H)
-        G = CSR(indptr, c, w, (P, V), {"rays": R, "seed": seed})
-        return (G, s_, H) if hits else (G, s_)
-    if not background:
-        return collect()
-    if not forked:                   # threads or serial: nothing would be left to overlap
-        return Background.ready(collect())
-    # the workers were forked on this thread (started_map), not beside the caller's code
-    # running on; their chunks are collected on a thread while the caller goes on
-    return Background(partial(collect, tick=None))
+        if self.share is not None:                     # back in the points' own order
+            indptr, c, w, s_, H = self.share.restore(np.diff(indptr), c, w, sky, H)
+        G = CSR(indptr, c, w, (P, self.V), {"rays": self.R, "seed": self.seed})
+        return (G, s_, H) if self.hits else (G, s_)
 
 
 def _hit_dtype(points, patches):
@@ -467,24 +490,3 @@ def _row_runs(ip, r0, r1, chunk) -> list:
         rows = slice(a, b) if nz.size == b - a else a + nz
         runs.append((s, e, rows, ip[a:b][nz] - s))
     return runs
-
-
-def transport_product(T, L, transposed=False) -> np.ndarray:
-    """``T @ L`` for a dense (P, M) transport (float32) and (M, 3) radiances, in float64, equal
-    bit for bit to :func:`.emitters.apply_transport` (each sum runs over m in order; with one
-    band einsum sums otherwise, to the last bit) and, without BLAS either, several times
-    faster: the sums run down the rows of T transposed, whole rows at a time (einsum's
-    mixed-precision loop is the slow part). ``transposed``: ``T`` is given as
-    :func:`transposed_transport` made it, (M, P) float64 (kept with a cached transport, so a
-    relight neither transposes nor casts it), the same sums."""
-    L = np.asarray(L, dtype=np.float64)
-    Tt = np.asarray(T) if transposed else np.ascontiguousarray(np.asarray(T).T)
-    if Tt.shape[0] == 0:
-        return np.zeros((Tt.shape[1], L.shape[1]))
-    return np.stack([np.add.reduce(Tt * L[:, k, None], axis=0) for k in range(L.shape[1])], 1)
-
-
-def transposed_transport(T) -> np.ndarray:
-    """(M, P) float64, contiguous: a (P, M) transport as :func:`transport_product` reads it with
-    ``transposed=True`` (float32 to float64 is exact: the same products)."""
-    return np.ascontiguousarray(np.asarray(T).T, dtype=np.float64)

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet, read_only
-from ..runtime.cache import Memo
+from ..runtime.cache import Memo, frozen
 from ..util.geometry import barycentric
 from .interpolate import inverse_bilinear
 
@@ -41,9 +41,7 @@ def shading_normals(elements: PatchSet, meshes, normals) -> np.ndarray:
         return _shading_normals(elements, meshes, normals)
 
     def make():
-        out = _shading_normals(elements, meshes, normals)
-        out.flags.writeable = False
-        return out
+        return frozen(_shading_normals(elements, meshes, normals))
     # geometry only: a relight's elements, normals and meshes' arrays are the same objects
     return _SHADED.of((elements.verts, elements.polys, elements.owner, elements.source_face, normals) + held, make)
 

@@ -14,7 +14,7 @@ import hashlib
 
 import numpy as np
 
-from ..light.emitters import emitter_transport
+from ..light.emitters import emitter_transport, transport_product, transposed_transport
 from ..mesh.clusters import connected_components
 from ..mesh.patches import PatchSet, poly_geometry
 from ..mesh.refine import LUMA
@@ -23,7 +23,6 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker
 from ..util.unique import unique_ints, unique_rows
 from .corners import corner_columns, corner_sum
-from .gather import transport_product, transposed_transport
 
 __all__ = ["HOT", "BUDGET", "mean_light", "hot_elements", "shine"]
 

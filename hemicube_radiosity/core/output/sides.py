@@ -11,6 +11,8 @@ scenes), cached: a relight casts no ray. Without Embree every element counts as 
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..light.emitters import vertex_frames
@@ -18,7 +20,7 @@ from ..mesh.contact import OpenSide, open_side
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
-from ..runtime.cache import Memo, array_key, cache_key, cached, geometry_key
+from ..runtime.cache import Memo, array_key, cache_key, cached, frozen, geometry_key
 from ..runtime.stored import storable
 from ..util.unique import linked_labels, unique_rows
 from .shared import corner_sharing, shared_open_fraction
@@ -42,12 +44,7 @@ def open_elements(ctx, elements):
     f = cached(ctx.cache, key, lambda: open_fraction(elements, elements.centers, elements.normals,
                                                      embree_scene(elements), reach,
                                                      workers=ctx.settings.workers, eps=ray_offsets(elements)))
-
-    def weights():
-        w = (f > 0.05).astype(np.float64)
-        w.flags.writeable = False
-        return w
-    return cached(ctx.cache, key + "-weights", weights, disk=False)
+    return cached(ctx.cache, key + "-weights", lambda: frozen((f > 0.05).astype(np.float64)), disk=False)
 
 
 def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:
@@ -91,21 +88,41 @@ def sided_mesh(ctx, mesh: PatchSet) -> PatchSet:
 
 
 def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
-    """(polys (N, 4), origin (V',)) of :func:`sided_mesh`, or None when no vertex is split.
+    """(polys (N, 4), origin (V',)) of :func:`sided_mesh`, or None when no vertex is split:
+    the elements' corners renumbered, and the vertex of ``mesh`` each of the V' is a copy of.
 
     Two elements seen by the scene that share a vertex are parted there when the segment
     between points a hair inside each (``inset`` of the way from the vertex to their centres,
     as the vertices are evaluated), lifted off the surface along their mean normal (by the two
     insets' length times a hundredth plus the sine of half the angle between their normals),
-    crosses another surface. Each element is tested against the first at its
+    crosses another surface (:class:`_Parting`). Each element is tested against the first at its
     vertex; where one is parted, every pair there (elements refined on one side meet the other
     side's at a corner, not an edge), and the corners are grouped by the pairs not parted, one
     vertex a group (a buried element's corner is a group of its own)."""
     opened = open_elements(ctx, mesh)
     if opened is None:
         return None
-    polys = mesh.polys
-    N, V = len(polys), len(mesh.verts)
+    N, V = len(mesh.polys), len(mesh.verts)
+    p, c, v, first = _seen_corners(mesh.polys, opened)
+    head = p[np.maximum.accumulate(np.where(first, np.arange(len(v)), 0))]
+    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    parted = _Parting(mesh, embree_scene(mesh), reach, ctx.settings.workers, inset)
+    rest = ~first
+    cut = parted(head[rest], p[rest], v[rest])
+    if not cut.any():
+        return None
+    split_v = np.zeros(V, bool)
+    split_v[v[rest][cut]] = True
+    label, split_v = _corner_groups(parted, p, c, v, split_v, N)
+    if not split_v.any():
+        return None
+    return _renumbered(mesh.polys, split_v, label, V)
+
+
+def _seen_corners(polys, opened):
+    """(element, corner, vertex, first) (C,) of every corner of the elements the scene sees
+    (``opened`` (N,) > 0), sorted by vertex then element; ``first``: the first corner at its
+    vertex."""
     p, c = np.nonzero(polys >= 0)
     v = polys[p, c]
     on = opened[p] > 0
@@ -114,13 +131,46 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
     p, c, v = p[order], c[order], v[order]
     first = np.ones(len(v), bool)
     first[1:] = v[1:] != v[:-1]
-    head = p[np.maximum.accumulate(np.where(first, np.arange(len(v)), 0))]
-    scene = embree_scene(mesh)
-    reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
+    return p, c, v, first
 
-    def parted(e1, e2, at):
+
+@dataclass
+class _Parting:
+    """Whether elements meeting at a vertex lie on two sides of another surface: called with
+    elements ``e1``, ``e2`` and their shared vertex ``at`` (K,), (K,) bool parted.
+
+    ``mesh``'s Embree ``scene`` is cast between points ``inset`` (a fraction) of the way from
+    the vertex to each element's centre, lifted off the surface; a pair counts as parted only
+    where the scene sees both points (:func:`.hemisphere.open_fraction` over 0.05, its rays
+    reaching ``reach`` world units, cast on ``workers``)."""
+
+    mesh: PatchSet
+    scene: object
+    reach: float
+    workers: int
+    inset: float
+
+    def __call__(self, e1, e2, at) -> np.ndarray:
+        mesh = self.mesh
         x = mesh.verts[at]
-        d1, d2 = inset * (mesh.centers[e1] - x), inset * (mesh.centers[e2] - x)
+        d1, d2 = self.inset * (mesh.centers[e1] - x), self.inset * (mesh.centers[e2] - x)
+        p1, p2 = self._lifted(e1, e2, x, d1, d2)
+        out = self.scene.occluded(p1, p2 - p1, np.ones(len(p1))) if len(p1) else np.zeros(0, bool)
+        # only between points the scene sees: two floor patches whose corners meet under a
+        # block standing on them are parted by the block, but nothing sees either corner
+        k = np.flatnonzero(out)
+        if k.size:
+            x2 = np.concatenate([x[k] + d1[k], x[k] + d2[k]])
+            n2 = np.concatenate([mesh.normals[e1[k]], mesh.normals[e2[k]]])
+            f = open_fraction(mesh, x2, n2, self.scene, self.reach, workers=self.workers,
+                              eps=ray_offsets(mesh, owner=mesh.owner[np.concatenate([e1[k], e2[k]])])).reshape(2, -1)
+            out[k] = (f > 0.05).all(axis=0)
+        return out
+
+    def _lifted(self, e1, e2, x, d1, d2):
+        """(p1, p2) (K, 3): the vertices ``x`` (K, 3) moved by ``d1``, ``d2`` (K, 3) toward the
+        two elements' centres and lifted off the surface along their mean normal."""
+        mesh = self.mesh
         n = mesh.normals[e1] + mesh.normals[e2]
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         # over a convex crease the segment dips below the edge by about an inset times
@@ -131,48 +181,46 @@ def _split_sides(ctx, mesh: PatchSet, inset=1e-2):
         half = np.sqrt(np.clip((1.0 - np.einsum("ij,ij->i", mesh.normals[e1], mesh.normals[e2])) / 2, 0.0, 1.0))
         lift = np.maximum((0.01 + half) * (np.linalg.norm(d1, axis=1) + np.linalg.norm(d2, axis=1)),
                           ray_offsets(mesh, owner=mesh.owner[e1]))[:, None] * n
-        p1, p2 = x + d1 + lift, x + d2 + lift
-        out = scene.occluded(p1, p2 - p1, np.ones(len(p1))) if len(p1) else np.zeros(0, bool)
-        # only between points the scene sees: two floor patches whose corners meet under a
-        # block standing on them are parted by the block, but nothing sees either corner
-        k = np.flatnonzero(out)
-        if k.size:
-            x2 = np.concatenate([x[k] + d1[k], x[k] + d2[k]])
-            n2 = np.concatenate([mesh.normals[e1[k]], mesh.normals[e2[k]]])
-            f = open_fraction(mesh, x2, n2, scene, reach, workers=ctx.settings.workers,
-                              eps=ray_offsets(mesh, owner=mesh.owner[np.concatenate([e1[k], e2[k]])])).reshape(2, -1)
-            out[k] = (f > 0.05).all(axis=0)
-        return out
+        return x + d1 + lift, x + d2 + lift
 
-    rest = ~first
-    cut = parted(head[rest], p[rest], v[rest])
-    if not cut.any():
-        return None
-    split_v = np.zeros(V, bool)
-    split_v[v[rest][cut]] = True
-    # every pair of seen elements at a split vertex
+
+def _corner_groups(parted, p, c, v, split_v, N):
+    """(label (4 N,), split (V,) bool): at the vertices ``split_v`` (V,) bool, every pair of the
+    seen corners there (element ``p``, corner ``c``, vertex ``v`` (C,), sorted by vertex) tested
+    by ``parted``; the corner slots (element * 4 + corner) linked by the pairs not parted, and
+    the vertices whose corners fall into more than one group. A vertex whose seen elements all
+    join up (a floor around a block's corner, whose edge grazes the segment across the corner)
+    is not split: not even its buried corners."""
     at = np.flatnonzero(split_v[v])
     sv, sp, sc = v[at], p[at], c[at]
-    start = np.flatnonzero(np.r_[True, sv[1:] != sv[:-1]])
-    size = np.diff(np.r_[start, len(sv)])
+    i, j = _pairs_within_runs(sv)
+    joined = ~parted(sp[i], sp[j], sv[i])
+    slot = sp * 4 + sc
+    sa, sb = slot[i[joined]], slot[j[joined]]
+    label = linked_labels(4 * N, sa, sb)      # label propagation over the joined corner slots
+    pairs = unique_rows(np.column_stack([sv, label[slot]]))
+    split = np.zeros(len(split_v), bool)
+    split[pairs[1:, 0][pairs[1:, 0] == pairs[:-1, 0]]] = True
+    return label, split
+
+
+def _pairs_within_runs(keys):
+    """(i, j) (K,): every pair of positions i < j in one run of equal ``keys`` (sorted)."""
+    start = np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]])
+    size = np.diff(np.r_[start, len(keys)])
     i_l, j_l = [], []
     for k in np.unique(size):
         base = start[size == k]
         i, j = np.triu_indices(k, 1)
         i_l.append((base[:, None] + i[None]).ravel())
         j_l.append((base[:, None] + j[None]).ravel())
-    i, j = np.concatenate(i_l), np.concatenate(j_l)
-    joined = ~parted(sp[i], sp[j], sv[i])
-    slot = sp * 4 + sc
-    sa, sb = slot[i[joined]], slot[j[joined]]
-    label = linked_labels(4 * N, sa, sb)      # label propagation over the joined corner slots
-    # a vertex whose seen elements all join up (a floor around a block's corner, whose edge
-    # grazes the segment across the corner) is not split: not even its buried corners
-    pairs = unique_rows(np.column_stack([sv, label[slot]]))
-    split_v[:] = False
-    split_v[pairs[1:, 0][pairs[1:, 0] == pairs[:-1, 0]]] = True
-    if not split_v.any():
-        return None
+    return np.concatenate(i_l), np.concatenate(j_l)
+
+
+def _renumbered(polys, split_v, label, V):
+    """(polys (N, 4), origin (V',)): the corners at the vertices ``split_v`` (V,) bool given one
+    vertex per group ``label`` (4 N,) of corner slots, the first group keeping the vertex's id,
+    each other a new one from V on; ``origin``: the vertex each of the V' copies."""
     flat = polys.reshape(-1).copy()
     at = np.flatnonzero((flat >= 0) & split_v[np.maximum(flat, 0)])
     groups, inv = unique_rows(np.column_stack([flat[at], label[at]]), return_inverse=True)

@@ -18,13 +18,15 @@ the paper's vertex rule (:mod:`.vertex`) and corner colours (:mod:`.corners`).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ..form_factors.glossy import mirrored_arrival
 from ..light.emitters import vertex_frames
 from ..mesh.elements import cut_elements
 from ..rays import embree_available
-from ..runtime.cache import array_key
+from ..runtime.cache import array_key, frozen
 from .corners import corner_values, vertex_mean
 from .covered import covered_light, start_offsets
 from .crease import corner_light
@@ -36,6 +38,36 @@ from .vertex import exposure, fill_buried, frames, vertex_radiosity
 __all__ = ["vertex_stage"]
 
 
+@dataclass
+class _AtVertices:
+    """What the stage finds at the V output vertices (``ctx.elements.verts``).
+
+    Attributes
+    ----------
+    xv, nv : ndarray
+        (V, 3) where each vertex is evaluated (world units) and its unit shading normal there.
+    rho_v : ndarray
+        (V, 3) reflectivity of each vertex (its elements' mean, :func:`.vertex.frames`).
+    opened : ndarray or None
+        (N,) 1 for an element the scene sees (:func:`.sides.open_elements`); None without Embree.
+    D : ndarray
+        (V, 3) direct light arriving (radiance: irradiance / pi).
+    rest : ndarray
+        (V, 3) light reflected more than once: leaving the vertex (radiance), or with
+        ``output_pass='lighting'`` arriving there.
+    side : OpenSide or None
+        The buried vertices' open side (:func:`.sides.buried_side`).
+    """
+
+    xv: np.ndarray
+    nv: np.ndarray
+    rho_v: np.ndarray
+    opened: object
+    D: np.ndarray
+    rest: np.ndarray
+    side: object
+
+
 def vertex_stage(ctx) -> None:
     """Fill ``ctx.elements`` (the output mesh) and ``ctx.vertex_radiosity`` (V, 3) per its verts:
     radiosity, or with ``output_pass='lighting'`` the light arriving (direct + indirect, as
@@ -43,111 +75,143 @@ def vertex_stage(ctx) -> None:
     meshes have corner colours (a texture) or a corner is lit on its own (:mod:`.crease`),
     ``ctx.corner_radiosity`` (N, 4, 3): each element corner's own colour times its light
     (:func:`_with_corner_colours`)."""
-    patches, u = ctx.patches, ctx.unknowns
     lighting = ctx.settings.output_pass == "lighting"
-    # F's and the geometry's only: kept on F, the same array every relight (the fits, frames and
-    # rings keyed on it hash it once)
-    F = ctx.form_factors
-    key = ("exposure-weights", array_key(u.areas), None if ctx.clusters is None else array_key(ctx.clusters.of))
-
-    def make():
-        w = np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)
-        w.flags.writeable = False
-        return w
-    weights = F.memo(key, make)
-    ctx.elements = patches
+    weights = _exposure_weights(ctx)
+    ctx.elements = ctx.patches
     ctx.corner_radiosity = ctx.corner_lighting = ctx.corner_rho = None
     ctx.vertex_direct = ctx.vertex_indirect = ctx.vertex_rho = None
     ctx.corner_direct = ctx.corner_keep = None
     if ctx.direct is None:
-        textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
-        if lighting or textured:
-            B = ctx.to_patches(_incoming(ctx.solution.B - u.emission, u.rho))
-        else:
-            B = patches.emission + _reflected_by_patches(ctx, ctx.solution.B - u.emission) \
-                if ctx.clusters is not None else ctx.solution.B
-        ctx.vertex_radiosity = vertex_radiosity(patches, B, weights=weights, cache=ctx.cache)
-        if textured:                          # each vertex its own colour times the light there
-            _, _, rho_v = vertex_frames(patches)
-            E_v = vertex_radiosity(patches, patches.emission, cache=ctx.cache)
-            ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, ctx.vertex_radiosity, 0.0)
+        _from_patches_alone(ctx, weights, lighting)
         return
     # direct light again at every output vertex (sharp shadows, exact falloff); only the
     # smoother light reflected more than once comes from the patches (or their clusters), as in
     # the paper
     rest = ctx.reflected - ctx.direct_source
-    sided = sided_mesh(ctx, patches)         # each side of a partition its own vertices
+    sided = sided_mesh(ctx, ctx.patches)     # each side of a partition its own vertices
     rest_v = vertex_radiosity(sided, _reflected_by_patches(ctx, rest), weights=weights, cache=ctx.cache)
     in_v = None
     if lighting:
-        in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, u.rho)), weights=weights,
+        in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, ctx.unknowns.rho)), weights=weights,
                                 cache=ctx.cache)
     if ctx.settings.uses_elements():
-        if ctx.settings.gather_rays > 0 and embree_available():
-            # what the gather's rays read: buried vertices take their open neighbours' light
-            # (the output never shows it: it is each vertex's exact direct light and gather)
-            rest_v = fill_buried(sided, rest_v, weights, cache=ctx.cache)
-        elements = cut_elements(ctx)
-        ctx.elements = sided if elements is patches else sided_mesh(ctx, elements)
-        opened = open_elements(ctx, ctx.elements)
-        xv, nv, rho_v = frames(ctx.elements, opened, ctx.cache)
-        nv = shading_normals(ctx.elements, ctx.meshes, nv)     # as Cycles shades: smooth, custom
-        # the gather's rays (geometry only) cast on the workers while this thread finds the
-        # direct light, the open side and what shines (else a core idles through them)
-        pending = start_gather(ctx, ctx.elements, xv, nv)
-        got = [pending]       # what the gather's reader takes: the gather, or (G, H) once collected
-
-        def sky():            # the gather's rays that hit nothing find the world: no sky rays
-            found, got[0] = gathered_sky(ctx, ctx.elements, xv, nv, pending)
-            return found
-        try:
-            side = buried_side(ctx, ctx.elements, xv, nv)
-            if side is not None:                            # before the gather: its rays read it
-                eps = start_offsets(ctx, ctx.elements, side.points, side.normals)
-                open_D = ctx.direct.at(side.points, side.normals, "open-side", eps=eps)
-            if gather_finds_world(ctx):       # the sky last: it waits for the gather's rays
-                D_vert = ctx.direct.at(xv, nv, "vertices", sky=sky)
-            else:
-                D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
-            if side is not None:
-                D_vert = side.spread(D_vert, open_D)
-            rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side, got[0],
-                                      _mirrored(ctx, sided, weights))
-        finally:
-            if pending is not None:                     # stopped early: the workers with it
-                pending.close()
+        at = _at_elements(ctx, sided, weights, rest_v, in_v)
     else:
-        ctx.elements = sided
-        opened = open_elements(ctx, sided)
-        xv, nv, rho_v = frames(sided, opened, ctx.cache)
-        nv = shading_normals(sided, ctx.meshes, nv)
-        rest_v = rest_v if in_v is None else in_v
-        D_vert = ctx.direct.at(xv, nv, "vertices")
-        side = buried_side(ctx, sided, xv, nv)
-        if side is not None:
-            eps = start_offsets(ctx, sided, side.points, side.normals)
-            D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side", eps=eps))
-    if side is not None:                                # what a buried vertex gathered: the inside
-        rest_v = side.spread(rest_v)
-    # where the faces at a vertex disagree, each corner's own direct light (Cycles' per corner)
-    buried = None if side is None else side.count > 0
-    read_v = None if lighting else rho_v * D_vert + rest_v      # what the gather's rays read
-    # a lightmap lights its texels again and reads only the corners' reflected light and its
-    # share: no corner's own direct light is found for it (the vertex's stands in)
-    own = ctx.settings.target != "lightmap"
-    creased = corner_light(ctx, ctx.elements, xv, nv, D_vert, opened, buried, read_v, own)
-    ctx.gather_rays = ctx.gather_key = None             # its hits go with it
-    # where another surface lies between a corner and its vertex's rays, the corner's own light
-    creased = covered_light(ctx, ctx.elements, xv, nv, D_vert, creased, opened, buried, own)
-    _keep_light(ctx, D_vert, rest_v, None if lighting else rho_v, creased)
+        at = _at_sided_patches(ctx, sided, rest_v if in_v is None else in_v)
+    if at.side is not None:                             # what a buried vertex gathered: the inside
+        at.rest = at.side.spread(at.rest)
+    creased = _own_corner_light(ctx, at, lighting)
+    _keep_light(ctx, at.D, at.rest, None if lighting else at.rho_v, creased)
     if lighting:
-        ctx.vertex_radiosity = D_vert + rest_v
+        ctx.vertex_radiosity = at.D + at.rest
         if creased is not None:
-            ctx.corner_radiosity = creased[0] + rest_v[ctx.elements.corner_ids()] * creased[1][..., None]
+            ctx.corner_radiosity = creased[0] + at.rest[ctx.elements.corner_ids()] * creased[1][..., None]
             ctx.vertex_radiosity = vertex_mean(ctx.elements, ctx.corner_radiosity)
         return
     E_v = vertex_radiosity(ctx.elements, ctx.elements.emission, cache=ctx.cache)
-    ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, D_vert, rest_v, creased)
+    ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, at.rho_v, at.D, at.rest, creased)
+
+
+def _exposure_weights(ctx) -> np.ndarray:
+    """(N,) read-only weight of each patch in its vertices' means and fits: its unknown's
+    :func:`.vertex.exposure` (0 for one buried in a solid, else the share of its hemisphere
+    that sees front faces or the sky, in [0, 1]). F's and the geometry's only: kept on F, the
+    same array every relight (the fits, frames and rings keyed on it hash it once)."""
+    F, u = ctx.form_factors, ctx.unknowns
+    key = ("exposure-weights", array_key(u.areas), None if ctx.clusters is None else array_key(ctx.clusters.of))
+    return F.memo(key, lambda: frozen(np.array(ctx.to_patches(exposure(F, u.areas)), dtype=np.float64)))
+
+
+def _from_patches_alone(ctx, weights, lighting) -> None:
+    """``ctx.vertex_radiosity`` (V, 3) at the patches' vertices without a direct light to find
+    again there (``ctx.direct`` None): the patch solution averaged and extrapolated to them
+    (``weights`` (N,): :func:`_exposure_weights`); with corner colours (a texture), each
+    vertex's own colour times the light arriving there (:func:`_with_corner_colours`)."""
+    patches, u = ctx.patches, ctx.unknowns
+    textured = not lighting and corner_values(patches, ctx.meshes, "rho") is not None
+    if lighting or textured:
+        B = ctx.to_patches(_incoming(ctx.solution.B - u.emission, u.rho))
+    else:
+        B = patches.emission + _reflected_by_patches(ctx, ctx.solution.B - u.emission) \
+            if ctx.clusters is not None else ctx.solution.B
+    ctx.vertex_radiosity = vertex_radiosity(patches, B, weights=weights, cache=ctx.cache)
+    if textured:                          # each vertex its own colour times the light there
+        _, _, rho_v = vertex_frames(patches)
+        E_v = vertex_radiosity(patches, patches.emission, cache=ctx.cache)
+        ctx.vertex_radiosity = _with_corner_colours(ctx, E_v, rho_v, ctx.vertex_radiosity, 0.0)
+
+
+def _at_elements(ctx, sided, weights, rest_v, in_v) -> _AtVertices:
+    """The elements cut finer than the patches made ``ctx.elements`` (split per side of a
+    partition) and lit at their vertices: the direct light found there, and the light reflected
+    more than once gathered by rays from ``rest_v`` (V', 3), the patches' at ``sided``'s
+    vertices (``in_v`` (V', 3): what arrives there, for the lighting pass; else None)."""
+    if ctx.settings.gather_rays > 0 and embree_available():
+        # what the gather's rays read: buried vertices take their open neighbours' light
+        # (the output never shows it: it is each vertex's exact direct light and gather)
+        rest_v = fill_buried(sided, rest_v, weights, cache=ctx.cache)
+    elements = cut_elements(ctx)
+    ctx.elements = sided if elements is ctx.patches else sided_mesh(ctx, elements)
+    opened = open_elements(ctx, ctx.elements)
+    xv, nv, rho_v = frames(ctx.elements, opened, ctx.cache)
+    nv = shading_normals(ctx.elements, ctx.meshes, nv)     # as Cycles shades: smooth, custom
+    # the gather's rays (geometry only) cast on the workers while this thread finds the
+    # direct light, the open side and what shines (else a core idles through them)
+    pending = start_gather(ctx, ctx.elements, xv, nv)
+    got = [pending]       # what the gather's reader takes: the gather, or (G, H) once collected
+
+    def sky():            # the gather's rays that hit nothing find the world: no sky rays
+        found, got[0] = gathered_sky(ctx, ctx.elements, xv, nv, pending)
+        return found
+    try:
+        side = buried_side(ctx, ctx.elements, xv, nv)
+        if side is not None:                            # before the gather: its rays read it
+            eps = start_offsets(ctx, ctx.elements, side.points, side.normals)
+            open_D = ctx.direct.at(side.points, side.normals, "open-side", eps=eps)
+        if gather_finds_world(ctx):       # the sky last: it waits for the gather's rays
+            D_vert = ctx.direct.at(xv, nv, "vertices", sky=sky)
+        else:
+            D_vert = ctx.direct.at(xv, nv, "vertices")     # once: the gather reads it too
+        if side is not None:
+            D_vert = side.spread(D_vert, open_D)
+        rest_v = element_indirect(ctx, ctx.elements, rest_v, xv, nv, rho_v, in_v, D_vert, side, got[0],
+                                  _mirrored(ctx, sided, weights))
+    finally:
+        if pending is not None:                     # stopped early: the workers with it
+            pending.close()
+    return _AtVertices(xv, nv, rho_v, opened, D_vert, rest_v, side)
+
+
+def _at_sided_patches(ctx, sided, rest_v) -> _AtVertices:
+    """The patches themselves (split per side of a partition: ``sided``) made ``ctx.elements``
+    and lit at their vertices: the direct light found there, and ``rest_v`` (V, 3) the light
+    reflected more than once, averaged from the patches."""
+    ctx.elements = sided
+    opened = open_elements(ctx, sided)
+    xv, nv, rho_v = frames(sided, opened, ctx.cache)
+    nv = shading_normals(sided, ctx.meshes, nv)
+    D_vert = ctx.direct.at(xv, nv, "vertices")
+    side = buried_side(ctx, sided, xv, nv)
+    if side is not None:
+        eps = start_offsets(ctx, sided, side.points, side.normals)
+        D_vert = side.spread(D_vert, ctx.direct.at(side.points, side.normals, "open-side", eps=eps))
+    return _AtVertices(xv, nv, rho_v, opened, D_vert, rest_v, side)
+
+
+def _own_corner_light(ctx, at: _AtVertices, lighting):
+    """Where the faces at a vertex disagree, each corner's own direct light (Cycles' per
+    corner): None, or (direct (N, 4, 3) radiance at every element corner, the share (N, 4) of
+    its vertex's indirect light each corner keeps) (:func:`.crease.corner_light`, and
+    :func:`.covered.covered_light` where another surface lies between a corner and its
+    vertex's rays). The gather's rays are let go after."""
+    buried = None if at.side is None else at.side.count > 0
+    read_v = None if lighting else at.rho_v * at.D + at.rest      # what the gather's rays read
+    # a lightmap lights its texels again and reads only the corners' reflected light and its
+    # share: no corner's own direct light is found for it (the vertex's stands in)
+    own = ctx.settings.target != "lightmap"
+    creased = corner_light(ctx, ctx.elements, at.xv, at.nv, at.D, at.opened, buried, read_v, own)
+    ctx.gather_rays = ctx.gather_key = None             # its hits go with it
+    return covered_light(ctx, ctx.elements, at.xv, at.nv, at.D, creased, at.opened, buried, own)
 
 
 def _mirrored(ctx, sided, weights):

@@ -119,13 +119,29 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
     the dense Cornell room, whose worst fit's condition number is 3e12.)
     """
     B = np.asarray(B, dtype=np.float64)
+    fit = _kept_fits(patches, weights, extrapolate, cache)
+    avg, sparse = _weighted_means(fit[:5], B)
+    if len(fit) == 5:
+        return avg
+    return _fitted(fit[5:], B, avg, sparse)
+
+
+def _kept_fits(patches: PatchSet, weights, extrapolate, cache):
+    """:func:`_fits` of ``patches`` with ``weights`` (N,) (or None), kept in ``cache`` (a
+    :class:`.cache.FormFactorCache`, or None: made every time) by geometry and weights."""
     if cache is None:
-        fit = _fits(patches, weights, extrapolate)
-    else:
-        wkey = b"" if weights is None else array_key(np.asarray(weights, dtype=np.float64))
-        key = cache_key(geometry_key(patches) + wkey, ("vertex-fits-lu", weights is None, bool(extrapolate)))
-        fit = cached(cache, key, lambda: _fits(patches, weights, extrapolate))
-    p, v, wp, safe, V = fit[:5]
+        return _fits(patches, weights, extrapolate)
+    wkey = b"" if weights is None else array_key(np.asarray(weights, dtype=np.float64))
+    key = cache_key(geometry_key(patches) + wkey, ("vertex-fits-lu", weights is None, bool(extrapolate)))
+    return cached(cache, key, lambda: _fits(patches, weights, extrapolate))
+
+
+def _weighted_means(incidence, B):
+    """(avg (V, k), sparse): at every vertex the weighted mean of its patches' ``B`` (N, k)
+    (radiosity, or any per-patch field), from :func:`_fits`' ``incidence`` (patch p, vertex v,
+    weight wp (I,), weight sums (V,), V); ``sparse``: most rows of ``B`` are 0, and only the
+    rest were summed."""
+    p, v, wp, safe, V = incidence
     Bt = np.ascontiguousarray(B.T)              # a band's values contiguous: B[p, k], taken faster
     # a field that is 0 on most patches (an emission field: only the lamps glow) sums only the
     # rest: a sum in order that skips terms of 0 is the same sum, bit for bit (it starts at +0,
@@ -139,25 +155,27 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
         i = np.repeat(a - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
         p, v, wp = p[i], v[i], wp[i]
     avg = np.stack([np.bincount(v, weights=wp * Bt[k].take(p), minlength=V) for k in range(B.shape[1])], 1) / safe[:, None]
-    if len(fit) == 5:
-        return avg
-    pp, iv, slot, targets, Xw, M, lu = fit[5:]
+    return avg, sparse
+
+
+def _fitted(fits, B, avg, sparse):
+    """(V, k): ``avg`` (V, k) with each boundary vertex given its plane fit's value there,
+    within its samples' bounds (:func:`_sample_bounds`): the fit of its patches' ``B`` (N, k) at
+    their centres and its interior neighbours' ``avg``. ``fits``: :func:`_fits`' (patches
+    sampled, interior vertices sampled (S,), each sample's fit (S,), the fitted vertices (T,),
+    the samples' weighted [1, dx, dy, dz] (S, 4) (world units), normal matrices (T, 4, 4) and
+    their factors); ``sparse``: only B's rows not 0 count (:func:`_weighted_means`)."""
+    pp, iv, slot, targets, Xw, M, lu = fits
     sb = np.concatenate([B.take(pp, axis=0), avg.take(iv, axis=0)])
     lo, hi = _sample_bounds(sb, slot, targets.size)
     if sparse:
         i = np.flatnonzero(_nonzero_rows(np.ascontiguousarray(sb.T)))
         sb, slot, Xw = sb[i], slot[i], Xw[i]
-    # the normal equations' right-hand sides, (T, 4, bands): per entry, the samples summed in
-    # order (as np.add.at sums them, bit for bit), every entry in one bincount (its samples
-    # come in the same order as in a bincount of its own), the terms made as (4, bands, S)
-    T, k = targets.size, B.shape[1]
-    terms = (np.ascontiguousarray(Xw.T)[:, None, :] * np.ascontiguousarray(sb.T)[None, :, :]).reshape(-1)
-    bins = (np.arange(4 * k)[:, None] + slot[None, :] * (4 * k)).reshape(-1)
-    rhs = np.bincount(bins, weights=terms, minlength=T * 4 * k).reshape(T, 4, k)
+    rhs = _fit_sums(Xw, sb, slot, targets.size)
     out = avg.copy()
     # a fit whose samples are all 0 (most of an emission field: only the lamps glow) is 0: solved
     # only where some sample is not (each 4 x 4 system is solved alone: the same values)
-    flat = rhs.reshape(T, -1)
+    flat = rhs.reshape(targets.size, -1)
     some = flat[:, 0] != 0                      # rhs.any(axis=1), a column at a time
     for c in range(1, flat.shape[1]):
         some |= flat[:, c] != 0
@@ -170,6 +188,18 @@ def vertex_radiosity(patches: PatchSet, B, extrapolate=True, weights=None, cache
             out[targets[some]] = np.clip(_fit_solve(None if lu else M[some], lu_some, rhs[some])[:, 0, :],
                                          lo[some], hi[some])
     return out
+
+
+def _fit_sums(Xw, sb, slot, T):
+    """(T, 4, k) the normal equations' right-hand sides: per fit, ``sum_s Xw[s] sb[s]`` over its
+    samples (``slot`` (S,)), from their weighted [1, dx, dy, dz] ``Xw`` (S, 4) and values
+    ``sb`` (S, k). Per entry the samples are summed in order (as np.add.at sums them, bit for
+    bit), every entry in one bincount (its samples come in the same order as in a bincount of
+    its own), the terms made as (4, k, S)."""
+    k = sb.shape[1]
+    terms = (np.ascontiguousarray(Xw.T)[:, None, :] * np.ascontiguousarray(sb.T)[None, :, :]).reshape(-1)
+    bins = (np.arange(4 * k)[:, None] + slot[None, :] * (4 * k)).reshape(-1)
+    return np.bincount(bins, weights=terms, minlength=T * 4 * k).reshape(T, 4, k)
 
 
 def _sample_bounds(sb, slot, T):

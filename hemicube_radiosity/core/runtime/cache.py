@@ -20,8 +20,8 @@ import numpy as np
 from ..util.sparse import CSR
 from .stored import LAYOUT, pack, unpack
 
-__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "geometry_key", "PER_MESH",
-           "inverse"]
+__all__ = ["FormFactorCache", "Memo", "array_key", "cache_key", "cached", "frozen", "geometry_key",
+           "PER_MESH", "inverse"]
 
 #: Entries of the memos kept per mesh of a scene (its welded arrays, face spans, n-gon splits):
 #: a scene of hundreds of objects (the staircase hall's 775) must find every one of them again on
@@ -125,6 +125,17 @@ def _nbytes_of(objs) -> int:
     return sum(int(getattr(o, "nbytes", 0)) for o in objs)
 
 
+def frozen(*arrays):
+    """``arrays`` made read-only (``flags.writeable = False`` on every ndarray among them; None
+    and anything else passed through as is) and returned: the one array when given one, else
+    the tuple. What a memo keeps is frozen so: :meth:`Memo.of` keys on arrays that are never
+    changed in place, and a product made from them is shared by every caller."""
+    for a in arrays:
+        if isinstance(a, np.ndarray):
+            a.flags.writeable = False
+    return arrays[0] if len(arrays) == 1 else arrays
+
+
 _INVERSES = Memo(PER_MESH)
 
 
@@ -134,11 +145,7 @@ def inverse(M) -> np.ndarray:
     a millisecond or more (OpenBLAS's threads; 4 s of the staircase's relight)."""
     M = np.asarray(M, dtype=np.float64)
 
-    def make():
-        out = np.linalg.inv(M)
-        out.flags.writeable = False
-        return out
-    return _INVERSES.get((M.shape, M.tobytes()), make)
+    return _INVERSES.get((M.shape, M.tobytes()), lambda: frozen(np.linalg.inv(M)))
 
 
 _GEOMETRY = Memo(16)     # (verts, polys) -> key: the last few geometries hashed

@@ -104,10 +104,9 @@ def test_product_is_matvec_bit_for_bit(dtype):
 
 
 def test_transport_product_transposed_is_apply_transport_bit_for_bit():
-    # the relight keeps its cached transports transposed to float64 (gather.transposed_transport):
+    # the relight keeps its cached transports transposed to float64 (emitters.transposed_transport):
     # the same sums as the (P, M) float32 transport and as emitters.apply_transport's einsum
-    from hemicube_radiosity.core.light.emitters import apply_transport
-    from hemicube_radiosity.core.output.gather import transport_product, transposed_transport
+    from hemicube_radiosity.core.light.emitters import apply_transport, transport_product, transposed_transport
     rng = np.random.default_rng(3)
     T = rng.random((5000, 37)).astype(np.float32)
     T[rng.random(T.shape) < 0.3] = 0

@@ -1,12 +1,19 @@
 """The in-process memos (``core/runtime/cache.py``): the bytes a :class:`Memo` holds are counted
 as entries come and go (not summed again on every put) and stay within ``max_bytes``, the oldest
 dropped first; a scene of hundreds of meshes keeps every mesh's entry (:data:`PER_MESH`);
-:func:`inverse` is ``np.linalg.inv``, made once per matrix value."""
+:func:`inverse` is ``np.linalg.inv``, made once per matrix value; :func:`frozen` makes what a
+memo keeps read-only, and no module hand-writes that loop again."""
 from __future__ import annotations
 
-import numpy as np
+import os
+import re
 
-from hemicube_radiosity.core.runtime.cache import PER_MESH, Memo, _nbytes_of, inverse
+import numpy as np
+import pytest
+
+from hemicube_radiosity.core.runtime.cache import PER_MESH, Memo, _nbytes_of, frozen, inverse
+
+PKG = os.path.join(os.path.dirname(__file__), "..", "..", "..", "hemicube_radiosity")
 
 
 def _held(m):
@@ -56,3 +63,29 @@ def test_inverse_is_numpys_once_per_matrix():
     N = M.copy()
     N[0, 0] = 2.5
     np.testing.assert_array_equal(inverse(N), np.linalg.inv(N))
+
+
+def test_frozen_makes_every_array_read_only_and_passes_the_rest_through():
+    a, b = np.arange(3.0), np.zeros((2, 2), np.int64)
+    view = a[1:]
+    out = frozen(a, None, b, (1, 2), view)
+    assert out[0] is a and out[1] is None and out[2] is b and out[3] == (1, 2) and out[4] is view
+    assert not a.flags.writeable and not b.flags.writeable and not view.flags.writeable
+    with pytest.raises(ValueError):
+        a[0] = 1.0
+    np.testing.assert_array_equal(a, [0.0, 1.0, 2.0])        # values untouched
+    c = np.ones(2)
+    assert frozen(c) is c and not c.flags.writeable        # one array: itself, not a tuple
+    assert frozen(None) is None and frozen() == ()
+
+
+def test_no_module_freezes_by_hand():
+    """Every memoised product is frozen through :func:`frozen` (one place to read and change)."""
+    found = []
+    for folder, _, files in os.walk(PKG):
+        for f in files:
+            path = os.path.join(folder, f)
+            if f.endswith(".py") and not path.endswith(os.path.join("runtime", "cache.py")):
+                text = open(path, encoding="utf-8").read()
+                found += [f"{path}: {m.group(0)}" for m in re.finditer(r"flags\.writeable\s*=\s*False", text)]
+    assert not found, found
