@@ -438,9 +438,9 @@ def summary(res):
                      f"<= Cycles {CAND_SPP} spp {_pct(a['cycles']['rms_true'])}")
         c = next((r for r in m["rows"] if r["part"] == COINCIDENT_PART), None)
         if c is not None:
-            lines.append(f"  (`{m['object']}`: {a['texels'] - c['texels']:,} texels on coincident surfaces carry "
+            lines.append(f"[apart] `{m['object']}`: {a['texels'] - c['texels']:,} texels on coincident surfaces carry "
                          f"{_pct(c['left_out_share'])} of ours' squared error; without them RMS ours "
-                         f"{_pct(c['ours']['rms_true'])}, Cycles {CAND_SPP} spp {_pct(c['cycles']['rms_true'])})")
+                         f"{_pct(c['ours']['rms_true'])}, Cycles {CAND_SPP} spp {_pct(c['cycles']['rms_true'])}")
     lines.append(f"[{'HOLDS' if o['seconds'] < t_cyc else 'FAILS'}] time: ours {o['seconds']:.1f} s < Cycles "
                  f"{CAND_SPP} spp {t_cyc:.1f} s")
     return lines
@@ -461,13 +461,18 @@ def section(res):
          " corners Cycles bakes on one: they measure no point of the surface; "
          + ", ".join(f"`{m['object']}` {m.get('flat_texels', 0):,}" for m in res.get("maps", [])) + " texels);"
          " RMS of the luminance-weighted difference over the reference's mean luminance,"
-         " the reference's own noise taken out, and the median texel's; per object and per material. Ours: the whole"
+         " the reference's own noise taken out, and the median texel's; per object and per material, and the object"
+         f" without the texels on coincident surfaces (\"{COINCIDENT_PART}\": a point of the square Cycles' bake"
+         " jitters over lies on another face's triangle in its plane, within 0.1 mm; Cycles' rays hit that face at"
+         " once and its bake is black there, ours lit: `tests/blender/test_lightmap_coincident.py`; the verdict"
+         " stays on every texel). Ours: the whole"
          " scene's read + bake + write (the lightmaps' texels and files included); Cycles: `bpy.ops.object.bake`"
          " of every object.", ""]
     L += table(res) + [""] + [f"- {line}" for line in summary(res)]
     stages = o.get("stages", {})
     if stages:
-        L.append("- Our stages (s): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items() if k != "total") + ".")
+        L.append("- Our stages (s): " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items() if k != "total")
+                 + " (texels: the bake read at every texel of the lightmaps; write: the copies, files and materials).")
     return L + [""]
 
 
