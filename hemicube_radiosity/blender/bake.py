@@ -202,6 +202,12 @@ class BakeJob:
             self.written = write.write_copies(context, self.scene_input, self.result,
                                               s.attribute_name, s.exposure, s.keep_textures)
         self.timings["write"] = time.perf_counter() - t
+        if s.target == "lightmap" and s.output_mode != "in_place":
+            # the lightmaps' texels (the bake read at every texel: the direct light again, the
+            # rest located among the elements) are most of it, not the files: a stage of their own
+            texels = sum(r.get("texel_seconds", 0.0) for r in self.lightmaps)
+            self.timings["texels"] = texels
+            self.timings["write"] = max(self.timings["write"] - texels, 0.0)
         if progress:
             what = (f"{len(self.lightmaps)} lightmap(s)" if s.target == "lightmap"
                     else f"attribute '{s.attribute_name}'")

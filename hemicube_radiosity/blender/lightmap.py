@@ -47,6 +47,7 @@ import contextlib
 import io
 import os
 import tempfile
+import time
 
 import bpy
 import numpy as np
@@ -268,7 +269,8 @@ def write_lightmaps(context, scene_input, result, settings):
     """Baked copies with lightmaps (see the module docstring). Returns (copies, records, notes):
     records one dict per lightmap (object, uv_map, made_uvs, size, exr, png, lighting_exr,
     lighting_png (None without the exact direct light), covered, filled, unset texels, passes:
-    which file holds which pass), notes plain lines."""
+    which file holds which pass, texel_seconds: the time its texels took,
+    :func:`..core.output.lightmap.bake_lightmap`), notes plain lines."""
     baked = [s for s in scene_input.objects if s.bake]
     write.remove_bakes([s.name for s in baked])
     coll = write.copies_collection(context.scene)
@@ -321,10 +323,12 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     user = bpy.data.objects.get(src.name)
     k = None if scales is None or user is None else _lighting_scale(user, me, scales)
     corners, parts, split, probed = light
+    t = time.perf_counter()
     lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
                                      flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, split=split,
                                      normals=_corner_normals(me, M), lighting_scale=k, probed=probed,
                                      faces=_triangle_faces(me), workers=settings.workers)
+    texel_seconds = time.perf_counter() - t
     stem = bpy.path.clean_name(src.name)
     exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)
     lit = (None, None) if lm.lighting is None else _save_pass(src.name, folder, stem, "lighting", lm.lighting)
@@ -339,7 +343,8 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
                        "lighting": None if lit[0] is None else
                        "lighting_exr, lighting_png: " + LIGHTING_NOTE + "; glTF: the material's "
                        "extras.hemicube_radiosity.lightMap"},
-            "covered": int(lm.covered.sum()), "filled": int(lm.filled.sum()), "unset": int(lm.unset)}
+            "covered": int(lm.covered.sum()), "filled": int(lm.filled.sum()), "unset": int(lm.unset),
+            "texel_seconds": texel_seconds}
 
 
 def _save_pass(name, folder, stem, kind, pixels):

@@ -106,9 +106,15 @@ def test_texels_against_cycles_through_the_users_second_uv_map(tmp_path):
     job = bake.BakeJob.prepare(bpy.context, [r, b], bake.BakeSettings(**SETTINGS, lightmap_dir=str(tmp_path)))
     t = time.perf_counter()
     job.run()
+    w = time.perf_counter()
     copy, _ = job.write(bpy.context)
+    write_seconds = time.perf_counter() - w
     ours_seconds = time.perf_counter() - t
     rec = job.lightmaps[0]
+    # the texels are a stage of their own, the files and materials the rest of the write
+    texels = job.timings["texels"]
+    assert texels == sum(r["texel_seconds"] for r in job.lightmaps) and texels > 0
+    assert job.timings["write"] >= 0 and texels + job.timings["write"] == pytest.approx(write_seconds, abs=0.05)
     assert rec["object"] == "Room" and rec["uv_map"] == "LightmapUV" and not rec["made_uvs"]
     assert rec["unset"] == 0 and os.path.isfile(rec["exr"]) and os.path.isfile(rec["png"])
     ours = image_rgb("Room.lightmap.exr")
