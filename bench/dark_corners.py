@@ -115,12 +115,12 @@ def covered(points, keys, tris, tri_key, diag):
         d = np.einsum("ij,ij->i", points[p_] - tris[t_, 0], n[t_])
         near = np.abs(d) <= tol
         p_, t_, d = p_[near], t_[near], d[near]
-        hit = _inside(points[p_] - d[:, None] * n[t_], tris[t_])
+        hit = inside_triangles(points[p_] - d[:, None] * n[t_], tris[t_])
         out[p_[hit]] = True
     return out
 
 
-def _inside(p, t, eps=1e-6):
+def inside_triangles(p, t, eps=1e-6):
     """(K,) bool: ``p`` (3,) or (K, 3) lies inside triangles ``t`` (K, 3, 3) (barycentric, ``eps``
     slack)."""
     v0, v1, v2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0], p - t[:, 0]   # p: (3,) or (K, 3)

@@ -65,6 +65,7 @@ for p in (ROOT, HERE, os.path.join(ROOT, "tools")):
     if p not in sys.path:
         sys.path.insert(0, p)
 
+import dark_corners  # noqa: E402
 import real_scenes as rs  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 
@@ -220,12 +221,7 @@ def coincident_texels(world, faces, uv, tri, others=None, other_faces=None, eps=
         inbox = np.all((p >= lo_m[j]) & (p <= hi_m[j]), axis=1)
         p, a, j, point = p[inbox], a[inbox], j[inbox], point[inbox]
         close = np.abs(np.einsum("nj,nj->n", p - a[:, 0], m[j])) < eps
-        e1, e2, d = a[:, 1] - a[:, 0], a[:, 2] - a[:, 0], p - a[:, 0]       # inside the other triangle
-        d11, d12, d22 = (e1 * e1).sum(1), (e1 * e2).sum(1), (e2 * e2).sum(1)
-        d1, d2 = (d * e1).sum(1), (d * e2).sum(1)
-        den = np.maximum(d11 * d22 - d12 * d12, 1e-300)
-        v, w = (d22 * d1 - d12 * d2) / den, (d11 * d2 - d12 * d1) / den
-        hit[point[close & (v >= 0) & (w >= 0) & (v + w <= 1)]] = True
+        hit[point[close & dark_corners.inside_triangles(p, a, 0.0)]] = True      # inside the other
         start = stop
     texel = np.zeros(len(t), bool)
     texel[which[hit]] = True

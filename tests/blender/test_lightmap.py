@@ -114,7 +114,7 @@ def test_texels_against_cycles_through_the_users_second_uv_map(tmp_path):
     # the texels are a stage of their own, the files and materials the rest of the write
     texels = job.timings["texels"]
     assert texels == sum(r["texel_seconds"] for r in job.lightmaps) and texels > 0
-    assert job.timings["write"] >= 0 and texels + job.timings["write"] == pytest.approx(write_seconds, abs=0.05)
+    assert job.timings["write"] >= 0 and texels + job.timings["write"] <= write_seconds
     assert rec["object"] == "Room" and rec["uv_map"] == "LightmapUV" and not rec["made_uvs"]
     assert rec["unset"] == 0 and os.path.isfile(rec["exr"]) and os.path.isfile(rec["png"])
     ours = image_rgb("Room.lightmap.exr")
