@@ -46,3 +46,21 @@ def test_texels_on_a_coincident_face_are_found_and_no_others():
     alone = lightmap_real.coincident_texels(room, faces[:2], uv, tri, np.concatenate(others[:1] + others[2:4]),
                                             np.concatenate([faces[:2], faces[4:8]]))
     assert not alone.any()
+
+
+def test_never_lit_texels_count_unless_on_a_coincident_surface():
+    """The verdict's texels: one the reference never lights counts (ours lights it: error), unless
+    it lies on a coincident surface, where Cycles' rays hit the other face at once."""
+    H = W = 8
+    ref = np.full((H, W, 3), 0.5)
+    ours = ref.copy()
+    ref[0, 0] = ref[0, 1] = 0.0                 # never lit by the reference; ours 0.5 there
+    inside = np.ones((H, W), bool)
+    material = np.zeros((H, W), int)
+    coincident = np.zeros((H, W), bool)
+    coincident[0, 0] = True                     # only the first on a coincident surface
+    rows = lightmap_real.texel_errors(ours, ref, ref, inside, material, ["m"], 1024, 64, coincident)
+    every = {r["part"]: r for r in rows}["all"]
+    assert every["texels"] == H * W - 1         # (0, 1) compared, (0, 0) left out
+    mean = (H * W - 2) * 0.5 / (H * W - 1)
+    assert np.isclose(every["ours"]["rms_raw"], np.sqrt(0.25 / (H * W - 1)) / mean)
