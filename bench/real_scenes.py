@@ -559,7 +559,6 @@ def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
             names = [str(n) for n in z["names"]]
             index = {n: i for i, n in enumerate(r.elements.object_names)}
             owner = np.array([index.get(names[o], -1) for o in z["owner"]])
-            ok = owner >= 0
             vals, matched = values_at_corners(r.elements, r.corner_values(), z["pos"], z["centroid"], z["normal"],
                                               owner, z["face"] if "face" in z.files else None)
         np.save(out_npz, np.where(matched[:, None], vals, np.inf))   # inf: not matched, NaN: ours is NaN
