@@ -281,14 +281,21 @@ def _face_keys(elements) -> np.ndarray:
 
 def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, buried=None, own=True):
     """(light (N, 4, 3), keep (N, 4)) as :func:`.crease.corner_light`'s, with the corners of
-    :func:`covered_corners` lit on their own (module docstring); ``creased``: what
-    :func:`.crease.corner_light` gave (None: every corner its vertex's ``light_v`` (V, 3) and
-    all of its light reflected more than once). Returns ``creased`` itself when no corner is covered.
+    :func:`covered_corners` lit on their own (module docstring), but those the crease turned
+    around; ``creased``: what :func:`.crease.corner_light` gave (None: every corner its vertex's
+    ``light_v`` (V, 3) and all of its light reflected more than once). Returns ``creased``'s
+    light and keep when no corner is covered.
     ``own`` False: as :func:`.crease.corner_light`'s, the keep shares only (each covered
     corner's direct light its vertex's: no ray is cast for it)."""
     found = covered_corners(ctx, elements, xv, nv, opened, buried) if ctx.direct is not None else None
+    if found is not None and creased is not None:
+        # a corner Cycles turns around sees the lune behind its face, not what covers its front
+        # (:mod:`.lune`): its light is the crease's
+        p, c, start, geo, alone = found
+        front = ~creased[2][p, c]
+        found = (p[front], c[front], start[front], geo[front], alone[front]) if front.any() else None
     if found is None:
-        return creased
+        return None if creased is None else creased[:2]
     p, c, start, geo, alone = found
     shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
     shade = geo if shade is None else np.where(has[:, None], shade, geo)

@@ -25,14 +25,18 @@ vertex: :func:`.normals.corner_shading_normals`) leans more than :data:`CREASE_A
 own triangle's geometric normal, or off the normal its vertex was lit with, the direct light is
 found again for that corner alone, the cosine taken to its shading normal
 (:func:`corner_light`), and its light reflected more than once (per vertex) scaled by the share
-of its hemisphere above the triangle's plane. A turned-around corner has both normals negated
-and takes no light from below its triangle's plane. The lamps' and the world's light from above
-the plane (``facing`` of :meth:`.light.direct.DirectLight.at`; an emitting face's is not limited:
-its shadow rays start above the plane) is found by rays from a point :data:`INSET` of the way
-into the corner's element, off it by its object's offset (:func:`.rays.ray_offsets`) along the
-two normals' bisector; the lamps' from below the plane by rays from Cycles' lifted start
-(:func:`.lift.lifted_starts`, where Cycles bakes the corner: the first of Blender's triangles of
-its face holding it), and the world's so too, :data:`BELOW_WORLD` of it (:func:`below_plane`).
+of its hemisphere above the triangle's plane; a turned-around corner's by what its own rays
+read in its lune, which lies behind the face, where the vertex's gather did not look
+(:mod:`.lune`: inside a game level's brushes, nothing), and it is lit so even where its element
+is one the scene does not see or its vertex is buried. A turned-around corner has both normals
+negated and takes no light from below its triangle's plane. The lamps' and the world's light
+from above the plane (``facing`` of :meth:`.light.direct.DirectLight.at`; an emitting face's is
+not limited: its shadow rays start above the plane) is found by rays from a point :data:`INSET`
+of the way into the corner's element, off it by its object's offset (:func:`.rays.ray_offsets`)
+along the two normals' bisector; the lamps' from below the plane by rays from Cycles' lifted
+start (:func:`.lift.lifted_starts`, where Cycles bakes the corner: the first of Blender's
+triangles of its face holding it), and the world's so too, :data:`BELOW_WORLD` of it
+(:func:`below_plane`).
 Where Cycles' bake point is not known (an element corner inside its face), the rays start at
 the vertex's own point (on the front of all its elements), as Cycles' leave the corner itself,
 nothing cut. Only meshes with corner normals (smooth or custom-normal faces as Blender reads
@@ -49,6 +53,8 @@ from ..mesh.patches import meshes_key
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .above import above_shares
 from .lift import ON_PLANE_ULPS, bake_points, corner_normals, lifted_starts
+from .indirect import gather_count
+from .lune import lune_shares
 from .normals import corner_shading_normals
 
 __all__ = ["CREASE_ANGLE", "INSET", "crease_corners", "corner_light", "leans", "strongest_sun"]
@@ -84,26 +90,51 @@ def crease_corners(elements, meshes, nv, opened=None, buried=None):
     the two faced apart and are both negated, to the side Cycles shades (module docstring)).
     ``nv`` (V, 3) the normals the vertices were lit with; ``opened`` (N,) 0 for elements the
     scene does not see and ``buried`` (V,) bool vertices that take the open side's light
-    (:func:`.sides.buried_side`): neither is lit again."""
+    (:func:`.sides.buried_side`): neither is lit again, but where Cycles turns the corner
+    around (those rows last)."""
     polys = elements.polys
     p, c = np.nonzero(polys >= 0)
     shade, has = corner_shading_normals(elements, meshes, p, c)
     if shade is None:
         return None
-    keep = has if opened is None else has & (np.asarray(opened)[p] > 0)
-    p, c, shade = p[keep], c[keep], shade[keep]
+    p, c, shade = p[has], c[has], shade[has]
     v = polys[p, c]
+    seen = np.ones(len(p), bool)
+    if opened is not None:
+        seen &= np.asarray(opened)[p] > 0
     if buried is not None:
-        open_v = ~np.asarray(buried, bool)[v]
-        p, c, v, shade = p[open_v], c[open_v], v[open_v], shade[open_v]
+        seen &= ~np.asarray(buried, bool)[v]
+    # the corners the scene does not see are lit again only where Cycles turns them around:
+    # their lune lies behind the face, where the vertex's light says nothing (:mod:`.lune`);
+    # after the others, which are found as before
+    rows = [_fired(elements, meshes, p[seen], c[seen], shade[seen], nv, False),
+            _fired(elements, meshes, p[~seen], c[~seen], shade[~seen], nv, True)]
+    rows = [r for r in rows if r is not None]
+    if not rows:
+        return None
+    return tuple(np.concatenate(a) for a in zip(*rows))
+
+
+def _fired(elements, meshes, p, c, shade, nv, turned_only):
+    """:func:`crease_corners`' rows among corners ``c`` (K,) of elements ``p`` (K,) with
+    shading normals ``shade`` (K, 3), or None; ``turned_only``: only those turned around."""
+    v = elements.polys[p, c]
     geo = corner_normals(elements, p, c)
     cos_max = np.cos(np.radians(CREASE_ANGLE))
     facing = np.einsum("ij,ij->i", shade, geo)
-    fire = (facing < cos_max) | (np.einsum("ij,ij->i", shade, nv[v]) < cos_max)
+    if turned_only:
+        fire = facing < NEAR_PERPENDICULAR
+    else:
+        fire = (facing < cos_max) | (np.einsum("ij,ij->i", shade, nv[v]) < cos_max)
     if not fire.any():
         return None
     p, c, v, shade, geo, facing = p[fire], c[fire], v[fire], shade[fire], geo[fire], facing[fire]
     turned = _turned(elements, meshes, p, c, geo, facing)
+    if turned_only:
+        if not turned.any():
+            return None
+        p, c, v, shade, geo = p[turned], c[turned], v[turned], shade[turned], geo[turned]
+        turned = turned[turned]
     shade = _at_bake_points(elements, meshes, p, c, shade)
     turn = np.where(turned, -1.0, 1.0)[:, None]
     x = elements.verts[v] + INSET * (elements.centers[p] - elements.verts[v])
@@ -146,27 +177,31 @@ def _turned(elements, meshes, p, c, geo, facing) -> np.ndarray:
     return turned
 
 
-def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_v=None, own=True):
-    """(light (N, 4, 3), keep (N, 4)) at every corner of ``elements``: the direct light
-    (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3) along ``nv``
-    (V, 3)) but at the corners of :func:`crease_corners` their own, lit by ``ctx.direct`` (a
-    triangle's fourth corner its third); and the share of the light reflected more than once that each corner keeps: 1, but
-    at those corners the share of what the vertex's gather read (as ``read_v`` (V, 3), the
-    light leaving the vertices) that arrived from above the triangle's plane
-    (:func:`.above.above_shares`; Cycles' diffuse bounce takes nothing from below that plane,
-    ``bsdf_diffuse_sample``), or where that is not known the share of the shading normal's
-    cosine-weighted hemisphere above the plane, (1 + N . Ng) / 2 (the sky view factor of a
-    plane tilted by their angle: the light arriving taken as even over the hemisphere). None
-    when no corner is lit on its own. ``own`` False: the keep shares only, every corner's light
-    its vertex's (a lightmap finds the direct light again at its texels and reads only the
-    corners' light reflected more than once, :meth:`..pipeline.BakeResult.corner_parts`: no ray
-    is cast for the corners' own)."""
+def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_v=None, own=True,
+                 arriving_v=None):
+    """(light (N, 4, 3), keep (N, 4), turned (N, 4) bool) at every corner of ``elements``: the
+    direct light (radiance arriving), each vertex's ``light_v`` (V, 3) (lit at ``xv`` (V, 3)
+    along ``nv`` (V, 3)) but at the corners of :func:`crease_corners` their own, lit by
+    ``ctx.direct`` (a triangle's fourth corner its third); and the share of the light reflected
+    more than once that each corner keeps: 1, but at those corners the share of what the
+    vertex's gather read (as ``read_v`` (V, 3), the light leaving the vertices) that arrived
+    from above the triangle's plane (:func:`.above.above_shares`; Cycles' diffuse bounce takes
+    nothing from below that plane, ``bsdf_diffuse_sample``), or where that is not known the
+    share of the shading normal's cosine-weighted hemisphere above the plane, (1 + N . Ng) / 2
+    (the sky view factor of a plane tilted by their angle: the light arriving taken as even
+    over the hemisphere); at a turned-around corner, what its own rays read in the lune behind
+    its face over the light reflected more than once arriving at its vertex, ``arriving_v`` (V,
+    3) (:func:`.lune.lune_shares`; the vertex's gather looked the other way); and which corners
+    are turned around. None when no corner is lit on its own. ``own`` False: the keep shares
+    only, every corner's light its vertex's (a lightmap finds the direct light again at its
+    texels and reads only the corners' light reflected more than once,
+    :meth:`..pipeline.BakeResult.corner_parts`: no ray is cast for the corners' own)."""
     if ctx.direct is None:
         return None
     found = _corner_rays(ctx, elements, xv, nv, opened, buried)
     if not found:
         return None
-    p, c, start, shade, geo, facing, same, low = found
+    p, c, start, shade, geo, facing, same, low, turned = found
     # a corner lit as its vertex was (from the same start, along the same normal, nothing cut)
     # takes the vertex's light: only the others cast rays
     D = np.array(light_v, dtype=np.float64)[elements.polys[p, c]]
@@ -181,13 +216,20 @@ def corner_light(ctx, elements, xv, nv, light_v, opened=None, buried=None, read_
     # another face's normal over the vertex, :mod:`..mesh.cycles_normals`)
     about = ~leans(shade, nv[elements.polys[p, c]])
     k = np.where(np.isfinite(share) & about, share, k)
+    if turned.any():               # the lune lies behind the face, where the vertex did not look
+        t = np.flatnonzero(turned)
+        lune = lune_shares(ctx, elements, bake_points(elements, ctx.meshes, p[t], c[t]),
+                           ray_offsets(ctx.patches, owner=elements.owner[p[t]]), shade[t], geo[t],
+                           elements.polys[p[t], c[t]], read_v, arriving_v, gather_count(ctx))
+        k[t] = np.where(np.isfinite(lune), lune, k[t])
     light = np.array(light_v, dtype=np.float64)[elements.corner_ids()]
     keep = np.ones(light.shape[:2])
     tri = (elements.polys[p, 3] < 0) & (c == 2)
-    for out, value in ((light, D), (keep, k)):
+    around = np.zeros(light.shape[:2], bool)
+    for out, value in ((light, D), (keep, k), (around, turned)):
         out[p, c] = value
         out[p[tri], 3] = value[tri]
-    return light, keep
+    return light, keep, around
 
 
 def _corner_rays(ctx, elements, xv, nv, opened, buried):
@@ -198,15 +240,15 @@ def _corner_rays(ctx, elements, xv, nv, opened, buried):
     shading normal the vertex's (to 1e-9) and the rays' start its (the offsets equal to a
     millionth: only corners whose bake point is not known), low (K, 3) where the rays toward
     the light below the triangle's plane start (:func:`.lift.lifted_starts`, NaN: none, the
-    corner turned around or its bake point not known). Geometry only: cached (a relight in a
-    new process reads them from the cache folder)."""
+    corner turned around or its bake point not known), turned (K,) bool: turned around.
+    Geometry only: cached (a relight in a new process reads them from the cache folder)."""
     mk = ctx.meshes_key() if hasattr(ctx, "meshes_key") else meshes_key(ctx.meshes)
     for m in ctx.meshes or ():
         mk += b"|" + repr(getattr(m, "back_of", -1)).encode()
         if getattr(m, "corner_normal", None) is not None:
             mk += array_key(np.asarray(m.corner_normal))
     mk += b"".join(b"-" if a is None else array_key(np.asarray(a)) for a in (xv, nv, opened, buried))
-    key = cache_key(geometry_key(elements) + geometry_key(ctx.patches) + mk, ("crease-rays-low", CREASE_ANGLE, INSET, ON_PLANE_ULPS))
+    key = cache_key(geometry_key(elements) + geometry_key(ctx.patches) + mk, ("crease-rays-turned", CREASE_ANGLE, INSET, ON_PLANE_ULPS))
     return cached(ctx.cache, key, lambda: _make_corner_rays(ctx, elements, xv, nv, opened, buried))
 
 
@@ -237,7 +279,7 @@ def _make_corner_rays(ctx, elements, xv, nv, opened, buried):
     start = np.where(cut[:, None], x + eps[:, None] * up, xv[v] + eps[:, None] * along)
     own = ctx.direct.offsets(xv, nv)[v]         # the vertex's rays' (a hit: it was lit with them)
     same = ~cut & (np.abs(shade - nv[v]).max(axis=1) <= 1e-9) & (np.abs(eps - own) <= 1e-6 * own)
-    return p, c, start, shade, geo, np.where(cut[:, None], geo, shade), same, low
+    return p, c, start, shade, geo, np.where(cut[:, None], geo, shade), same, low, turned
 
 
 #: The share of the world's light from below a corner's triangle's plane that counts (the lamps'
