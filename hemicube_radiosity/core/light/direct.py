@@ -12,7 +12,7 @@ import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from .emitters import emitter_transport, transport_product, transposed_transport
-from .environment import EnvironmentLight
+from .environment import RAYS_PER_SKY_RAY, EnvironmentLight
 from .lamp_cache import lamp_irradiance, shadow_key as _shadow_key
 from .lamps import SunLight
 from .points import turned_around
@@ -94,9 +94,9 @@ class DirectLight:
                 # patches ask for finer shadows), at most 4 x its budget
                 grid = int(np.ceil(np.sqrt(samples))) ** 2
                 samples = max(budget, min(per_face * grid, 4 * budget))
-        # an environment map's directions per point: the bake's Sky Rays, as the constant world's
-        lights = [replace(li, rays=settings.sky_rays) if isinstance(li, EnvironmentLight) else li
-                  for li in lights]
+        # an environment map's directions per point: RAYS_PER_SKY_RAY x the bake's Sky Rays
+        lights = [replace(li, rays=RAYS_PER_SKY_RAY * settings.sky_rays) if isinstance(li, EnvironmentLight)
+                  else li for li in lights]
         return cls(patches, list(lights), emitters, samples, settings.light_samples,
                    settings.light_seed, cancelled, cache, groups, turns_emitters(settings),
                    workers=settings.workers, world=world, sky_rays=settings.sky_rays)
