@@ -240,7 +240,8 @@ class BakeSettings:
                                  "size (radius, angle, area); a point of zero size uses one",
                                  "light", min=1, soft_max=1024)
     sky_rays: int = setting(256, "Sky Rays", "Rays per point that look for the world (its light "
-                            "is exact at every output vertex and patch point)", "light", min=1,
+                            "is exact at every output vertex and patch point); an environment "
+                            "texture's variation takes 4 times as many directions", "light", min=1,
                             soft_max=4096)
     light_seed: int = setting(0, "Lamp Seed", "Random seed of the lamps' shadow rays", None, min=0)
     gather_rays: int = setting(128, "Gather Rays", "With a detail size: gather bounced light at "
