@@ -28,7 +28,8 @@ from .shine import HOT, hot_elements, mean_light, shine
 from .sides import open_elements, sided_mesh
 from .through import through_key
 
-__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "start_gather"]
+__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "gathers_faces",
+           "start_gather"]
 
 
 #: Passes of :func:`_bounce_again`. Measured against Cycles (raw RMS / bias): one pass, yard
@@ -93,7 +94,7 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
 
     ``pending``: the gather's rays started by :func:`start_gather`; what does not read them
     (the corrections' choice of elements, what shines) is done before waiting for them."""
-    rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
+    rest_e = rest_v if _the_patches(ctx, elements) else _interpolated(ctx, elements, rest_v, xv, nv)
     if side is not None:          # buried vertices on an outline read as their open side
         rest_e = side.spread(rest_e)
     light_v = ctx.direct.at(xv, nv, "vertices") if light_v is None else light_v
@@ -112,10 +113,17 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += corrections
     if mirror_v is not None:      # what glossy patches mirror: the patch solution's, interpolated
-        mirror_e = mirror_v if elements is ctx.patches else _interpolated(ctx, elements, mirror_v, xv, nv)
+        mirror_e = mirror_v if _the_patches(ctx, elements) else _interpolated(ctx, elements, mirror_v, xv, nv)
         out += mirror_e if side is None else side.spread(mirror_e)
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
                          spread=None if side is None else side.spread)
+
+
+def _the_patches(ctx, elements) -> bool:
+    """Whether ``elements`` are the patches themselves (or their :func:`.sides.sided_mesh`,
+    the same faces with some vertices split), whose vertices the patch solution's fields are
+    at already: nothing to interpolate."""
+    return elements is ctx.patches or elements.centers is ctx.patches.centers
 
 
 def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1, spread=None):
@@ -151,7 +159,8 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     opened = open_elements(ctx, elements)
     select |= shadowed_inside(ctx, elements, xv, nv, light_v, select, opened)
     bar = HOT * mean_light(elements, light_v, opened, ctx.cache)
-    grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar) if select.any() else None
+    grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar,
+                      whole=gathers_faces(ctx)) if select.any() else None
     # at most a budget of groups shines, the grid's hot cells counted (those left out: read)
     hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened, grid=grid)
     if not (select.any() or hot.any()):
@@ -172,7 +181,8 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
-                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size))
+                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size)
+                    + (("whole",) if gathers_faces(ctx) else ()))     # the grid's cells (AbruptGrid)
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
         shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
@@ -186,6 +196,21 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
 
 def _gather_key(ctx, elements):
     return cache_key(geometry_key(elements) + through_key(elements), ("gather-elements", gather_count(ctx)))
+
+
+def gathers_faces(ctx) -> bool:
+    """Whether the patches themselves gather at their vertices as elements do: where the 'auto'
+    detail size found the scene's faces finer than any detail size the elements' limit allows
+    (``ctx.dense``: :func:`..mesh.sizes.fitted_detail` gave None; ../shared/scenes' staircase
+    hall, 262,663 triangles), so no element is cut, yet the solve grouped the faces into
+    clusters of one value each. Without a gather every face of a cluster showed that one value
+    of the light reflected more than once: a candle's flame base 0.1 to 3 mm over its top, dark
+    there under the flame, read the top's mean. Needs gather rays and Embree; not in place, nor
+    for a lightmap (its texels read the corners' parts)."""
+    s = ctx.settings
+    return (bool(getattr(ctx, "dense", False)) and getattr(ctx, "clusters", None) is not None
+            and s.gather_rays > 0 and s.output_mode != "in_place" and s.direct == "exact"
+            and s.target != "lightmap" and embree_available())
 
 
 def gather_finds_world(ctx) -> bool:

@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..light.lamps import SunLight
+from ..output.indirect import gathers_faces
 from ..output.shine import BUDGET
 from .parallel import resolve_workers
 
@@ -252,7 +253,7 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
     emitting = ctx.patches.emitting().any()
     lamps = list(getattr(ctx, "lights", ()))
-    gathers = s.gather_rays > 0 and s.uses_elements()
+    gathers = s.gather_rays > 0 and (s.uses_elements() or gathers_faces(ctx))
     casting = output_vertices - (1 - PER_JOINED) * min(max(int(joined), 0), output_vertices) * gathers
     hit, edges, leaning = None, 0.0, 0.0
     if mesh is not None:
