@@ -172,6 +172,8 @@ class BakeContext:
     irradiance: np.ndarray | None = None     # (N, 3) W/m^2 direct irradiance at patch centres
     direct_source: np.ndarray | None = None  # (K, 3) exact path: direct light each unknown reflects
     given: bool = False                      # patches handed in ready: used as they are (not refined)
+    dense: bool = False                      # 'auto' found no detail size the elements' limit allows
+                                             # (output.indirect.gathers_faces)
     sky_patch: np.ndarray | None = None      # (N, 3) the world's part of direct_patch (exact path)
     unbounded_patch: np.ndarray | None = None  # (N, 3) the suns' and maps' part of direct_patch (exact path)
     source: np.ndarray | None = None         # (N, 3) the solve's source term
@@ -319,6 +321,7 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
     settings = (settings or BakeSettings()).with_quality()
     settings.validate()
     notes = []
+    dense = False
     if meshes is not None:
         if settings.specular_bounce:             # light off metal reaches the rest
             meshes = _specular(meshes, notes)
@@ -332,12 +335,13 @@ def bake(meshes, settings: BakeSettings | None = None, *, progress=None, cancell
         if auto_detail and settings.element_size:   # as fine as the elements' limit allows
             settings = replace(settings, element_size=fitted_detail(
                 meshes, settings.element_size, settings.patch_size, settings.max_elements))
+            dense = settings.element_size is None     # the faces are the output, gathered
     elif "auto" in (settings.patch_size, settings.element_size):
         raise SettingsError("'auto' sizes need the meshes")
     # without a cache to keep, one for this bake alone: stages that ask for the same
     # geometry-only work (the direct light at the output vertices) do it once
     ctx = BakeContext(meshes, settings, list(lights or ()), world, cache if cache is not None else FormFactorCache(),
-                      progress, cancelled, patches=patches, given=patches is not None)
+                      progress, cancelled, patches=patches, given=patches is not None, dense=dense)
     ctx.notes.extend(notes)
     t0 = time.perf_counter()
     with small_pages(), one_blas_thread(), kept_heap():   # (runtime/native.py says why)

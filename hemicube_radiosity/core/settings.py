@@ -244,10 +244,12 @@ class BakeSettings:
                             "texture's variation takes 4 times as many directions", "light", min=1,
                             soft_max=4096)
     light_seed: int = setting(0, "Lamp Seed", "Random seed of the lamps' shadow rays", None, min=0)
-    gather_rays: int = setting(128, "Gather Rays", "With a detail size: gather bounced light at "
-                               "every vertex with this many rays, or the Sky Rays where more and "
-                               "the world lights the scene: the same rays find the world (0: "
-                               "interpolate it from the patches). Needs Embree", "light", min=0,
+    gather_rays: int = setting(128, "Gather Rays", "With a detail size (or 'auto' finding the faces "
+                               "too many to cut finer): gather bounced light at every vertex with "
+                               "this many rays, or the Sky Rays where more and the world lights "
+                               "the scene: the same rays find the world; a dense scene's faces half "
+                               "as many (0: interpolate it from the patches). Needs Embree",
+                               "light", min=0,
                                soft_max=4096)
     # -- solver
     solver: str = setting("gauss_seidel", "Solver", "Iterative solver for the radiosity equation",

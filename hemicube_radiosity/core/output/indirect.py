@@ -24,11 +24,13 @@ from .abrupt import AbruptGrid, abrupt_elements, shadowed_inside
 from .gather import apply_gather, correction_matrix, gather_matrix, product
 from .interpolate import interpolate_corners, located_corners, locate
 from .shared import corner_sharing
-from .shine import HOT, hot_elements, mean_light, shine
-from .sides import open_elements, sided_mesh
+from .shine import BUDGET, HOT, hot_elements, mean_light, shine
+from .corners import corner_columns
+from .sides import open_elements, seen_fraction, sided_mesh
 from .through import through_key
 
-__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "start_gather"]
+__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "gathers_faces",
+           "start_gather"]
 
 
 #: Passes of :func:`_bounce_again`. Measured against Cycles (raw RMS / bias): one pass, yard
@@ -36,6 +38,11 @@ __all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_
 #: 1.10% and 3.18% with the room's bias at -0.55%: at the elements' level each bounce loses a
 #: little more (rays through the cracks of touching objects) than the patch solution does.
 GATHER_PASSES = 1
+
+#: The gather at a dense scene's faces (:func:`gathers_faces`) casts the Gather Rays setting
+#: over this: the staircase's 256,004 vertices with 128 rays each peaked at 4.7 GB (its hits and
+#: matrix), with 64 at 3.6 GB in 85% of the CPU time, its RMS against Cycles 16.25% -> 16.78% raw.
+DENSE_RAY_DIVISOR = 2
 
 #: The most sky rays per gather ray for which the gather's rays find the world as well
 #: (:func:`gather_finds_world`).
@@ -93,7 +100,7 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
 
     ``pending``: the gather's rays started by :func:`start_gather`; what does not read them
     (the corrections' choice of elements, what shines) is done before waiting for them."""
-    rest_e = rest_v if elements is ctx.patches else _interpolated(ctx, elements, rest_v, xv, nv)
+    rest_e = rest_v if _the_patches(ctx, elements) else _interpolated(ctx, elements, rest_v, xv, nv)
     if side is not None:          # buried vertices on an outline read as their open side
         rest_e = side.spread(rest_e)
     light_v = ctx.direct.at(xv, nv, "vertices") if light_v is None else light_v
@@ -112,10 +119,17 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
     out = apply_gather(G, G.sky, direct_e + rest_e, world, ctx.settings.workers)
     out += corrections
     if mirror_v is not None:      # what glossy patches mirror: the patch solution's, interpolated
-        mirror_e = mirror_v if elements is ctx.patches else _interpolated(ctx, elements, mirror_v, xv, nv)
+        mirror_e = mirror_v if _the_patches(ctx, elements) else _interpolated(ctx, elements, mirror_v, xv, nv)
         out += mirror_e if side is None else side.spread(mirror_e)
     return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
                          spread=None if side is None else side.spread)
+
+
+def _the_patches(ctx, elements) -> bool:
+    """Whether ``elements`` are the patches themselves (or their :func:`.sides.sided_mesh`,
+    the same faces with some vertices split), whose vertices the patch solution's fields are
+    at already: nothing to interpolate."""
+    return elements is ctx.patches or elements.centers is ctx.patches.centers
 
 
 def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers=1, spread=None):
@@ -149,11 +163,17 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # their grids and shine in the cache (no ray)
     select = abrupt_elements(elements, light_v, cache=ctx.cache)
     opened = open_elements(ctx, elements)
-    select |= shadowed_inside(ctx, elements, xv, nv, light_v, select, opened)
+    faces = gathers_faces(ctx)
+    small = _open_small_faces(ctx, elements, xv, nv, opened) if faces else np.zeros(len(elements), bool)
+    select &= ~small
+    select |= shadowed_inside(ctx, elements, xv, nv, light_v, select | small, opened)
     bar = HOT * mean_light(elements, light_v, opened, ctx.cache)
-    grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar) if select.any() else None
-    # at most a budget of groups shines, the grid's hot cells counted (those left out: read)
-    hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened, grid=grid)
+    grid = AbruptGrid(ctx, elements, np.flatnonzero(select), 0.02 * bar / HOT, bar,
+                      whole=faces) if select.any() else None
+    # at most a budget of groups shines, the grid's hot cells counted (those left out: read);
+    # a dense scene's faces none (:func:`_open_small_faces` says why)
+    hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened, grid=grid,
+                                  budget=0 if faces else BUDGET)
     if not (select.any() or hot.any()):
         return out
     cells = None
@@ -172,7 +192,8 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
-                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size))
+                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size)
+                    + (("whole",) if gathers_faces(ctx) else ()))     # the grid's cells (AbruptGrid)
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
         shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
@@ -184,8 +205,46 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     return out
 
 
+def _open_small_faces(ctx, elements, xv, nv, opened) -> np.ndarray:
+    """(N,) bool: the faces of a scene too dense for elements (:func:`gathers_faces`) whose
+    light the gather reads interpolated from their vertices' exact light, even where it changes
+    abruptly: no larger than a cell of an abrupt element's grid (a quarter of the patch size
+    across) and every corner fully seen (:func:`.sides.seen_fraction`: nothing stands within
+    its reach). The vertices are as fine as such a grid; what the grid adds there is only that
+    its points read what the scene sees of them, and that counts where something stands over a
+    corner: a candle top's centre under its flame, which read the rim's light through its
+    buried vertex and lit the flame's base 0.1 to 3 mm above (0.43 where Cycles has 0.17).
+
+    Measured on ../shared/scenes' staircase (262,663 triangles; its 54,315 abrupt faces, 36,980
+    of them small and open): every abrupt face with a 4 x 4 grid, 1.36 million points, took
+    156 s of the grid's light under load; these interpolated, 428,000 points and 49 s, at
+    16.25% raw RMS against Cycles instead of 16.45%. Nor does anything shine in such a scene
+    (:func:`.shine.hot_elements`' budget 0): its 14,797 hot faces in 64 groups cost every vertex
+    a form factor to each (179 s), and with the small faces not abrupt, 22,588 of them 661 s;
+    read by the gather's rays instead the RMS went 16.45% -> 16.25% with the choice above."""
+    size = float(ctx.settings.element_size or ctx.settings.patch_size or 1.0)
+    small = np.sqrt(elements.areas) <= size / AbruptGrid.CELLS
+    seen = seen_fraction(ctx, elements, xv, nv, corner_sharing(ctx.cache, elements, xv, nv, opened))
+    return small & (seen.take(corner_columns(elements, ctx.cache)[0]).min(axis=0) >= 1.0)
+
+
 def _gather_key(ctx, elements):
     return cache_key(geometry_key(elements) + through_key(elements), ("gather-elements", gather_count(ctx)))
+
+
+def gathers_faces(ctx) -> bool:
+    """Whether the patches themselves gather at their vertices as elements do: where the 'auto'
+    detail size found the scene's faces finer than any detail size the elements' limit allows
+    (``ctx.dense``: :func:`..mesh.sizes.fitted_detail` gave None; ../shared/scenes' staircase
+    hall, 262,663 triangles), so no element is cut, yet the solve grouped the faces into
+    clusters of one value each. Without a gather every face of a cluster showed that one value
+    of the light reflected more than once: a candle's flame base 0.1 to 3 mm over its top, dark
+    there under the flame, read the top's mean. Needs gather rays and Embree; not in place, nor
+    for a lightmap (its texels read the corners' parts)."""
+    s = ctx.settings
+    return (bool(getattr(ctx, "dense", False)) and getattr(ctx, "clusters", None) is not None
+            and s.gather_rays > 0 and s.output_mode != "in_place" and s.direct == "exact"
+            and s.target != "lightmap" and embree_available())
 
 
 def gather_finds_world(ctx) -> bool:
@@ -216,6 +275,8 @@ def gather_count(ctx) -> int:
     same rays make the sky's and the gather's errors cancel: a ray that finds a wall instead
     of the sky reads the wall (the terrain's noise went from 0.24% to 0.05%)."""
     s = ctx.settings
+    if gathers_faces(ctx):                # a dense scene's faces: a share of the setting
+        return max(1, int(s.gather_rays) // DENSE_RAY_DIVISOR)
     return max(int(s.gather_rays), int(s.sky_rays)) if gather_finds_world(ctx) else int(s.gather_rays)
 
 

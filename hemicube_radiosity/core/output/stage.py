@@ -9,7 +9,9 @@ patch solution". Per output vertex (V, 3), radiance units:
 with D_v the exact direct light at the vertex (:class:`.light.direct.DirectLight`) and R_v the
 light reflected more than once, from the patch solution: averaged to the vertices as in the paper,
 then for elements gathered by cosine rays that read it where they land (needs Embree) or
-interpolated bilinearly (:mod:`.indirect`).
+interpolated bilinearly (:mod:`.indirect`). A scene too dense for elements (the 'auto' detail
+size found none) gathers the same way at its faces' own vertices where the solve grouped them
+(:func:`.indirect.gathers_faces`).
 
 Here only the stage; beside it: the elements' geometry (:mod:`.mesh.elements`), what the scene
 sees of them (:mod:`.sides`), the gather and interpolation (:mod:`.indirect`, :mod:`.gather`,
@@ -31,7 +33,7 @@ from .corners import corner_values, vertex_mean
 from .covered import covered_light, start_offsets
 from .crease import corner_light
 from .normals import shading_normals
-from .indirect import element_indirect, gather_finds_world, gathered_sky, start_gather
+from .indirect import element_indirect, gather_finds_world, gathered_sky, gathers_faces, start_gather
 from .sides import buried_side, open_elements, sided_mesh
 from .vertex import exposure, fill_buried, frames, vertex_radiosity
 
@@ -94,7 +96,7 @@ def vertex_stage(ctx) -> None:
     if lighting:
         in_v = vertex_radiosity(sided, ctx.to_patches(_incoming(rest, ctx.unknowns.rho)), weights=weights,
                                 cache=ctx.cache)
-    if ctx.settings.uses_elements():
+    if ctx.settings.uses_elements() or gathers_faces(ctx):
         at = _at_elements(ctx, sided, weights, rest_v, in_v)
     else:
         at = _at_sided_patches(ctx, sided, rest_v if in_v is None else in_v)
@@ -142,15 +144,17 @@ def _from_patches_alone(ctx, weights, lighting) -> None:
 
 
 def _at_elements(ctx, sided, weights, rest_v, in_v) -> _AtVertices:
-    """The elements cut finer than the patches made ``ctx.elements`` (split per side of a
-    partition) and lit at their vertices: the direct light found there, and the light reflected
+    """The elements cut finer than the patches (a dense scene's faces themselves:
+    :func:`.indirect.gathers_faces`) made ``ctx.elements`` (split per side of a partition) and
+    lit at their vertices: the direct light found there, and the light reflected
     more than once gathered by rays from ``rest_v`` (V', 3), the patches' at ``sided``'s
     vertices (``in_v`` (V', 3): what arrives there, for the lighting pass; else None)."""
     if ctx.settings.gather_rays > 0 and embree_available():
         # what the gather's rays read: buried vertices take their open neighbours' light
         # (the output never shows it: it is each vertex's exact direct light and gather)
         rest_v = fill_buried(sided, rest_v, weights, cache=ctx.cache)
-    elements = cut_elements(ctx)
+    # a dense scene's faces are the output, gathered (:func:`.indirect.gathers_faces`)
+    elements = ctx.patches if gathers_faces(ctx) else cut_elements(ctx)
     ctx.elements = sided if elements is ctx.patches else sided_mesh(ctx, elements)
     opened = open_elements(ctx, ctx.elements)
     xv, nv, rho_v = frames(ctx.elements, opened, ctx.cache)

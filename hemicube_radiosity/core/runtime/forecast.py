@@ -37,6 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..light.lamps import SunLight
+from ..output.indirect import DENSE_RAY_DIVISOR, gathers_faces
 from ..output.shine import BUDGET
 from .parallel import resolve_workers
 
@@ -250,9 +251,11 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
         per_receiver_said = per_receiver
     ff = len(ids) * per_receiver_said / speed
     rays = max(int(getattr(s, "gather_rays", 0) or 0), 32)
+    if gathers_faces(ctx):                # a dense scene's faces gather with a share of them
+        rays = max(rays // DENSE_RAY_DIVISOR, 1)
     emitting = ctx.patches.emitting().any()
     lamps = list(getattr(ctx, "lights", ()))
-    gathers = s.gather_rays > 0 and s.uses_elements()
+    gathers = s.gather_rays > 0 and (s.uses_elements() or gathers_faces(ctx))
     casting = output_vertices - (1 - PER_JOINED) * min(max(int(joined), 0), output_vertices) * gathers
     hit, edges, leaning = None, 0.0, 0.0
     if mesh is not None:
