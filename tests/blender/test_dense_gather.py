@@ -26,6 +26,7 @@ from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
 from hemicube_radiosity.blender.read.lights import read_lights  # noqa: E402
 from hemicube_radiosity.core.pipeline import BakeSettings, bake  # noqa: E402
+from tests.support.cycles_scenes import face_corner_values  # noqa: E402
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
@@ -63,21 +64,9 @@ def _ours(objs, settings=SETTINGS):
 def strip_corners(strip, result):
     """(ours (L, 3), x (L,)) at every face corner of ``strip`` (object 0), in its loop order:
     the output is the faces themselves; a corner takes its face's element's value there."""
-    E = result.elements
-    cv = result.corner_values()
     me = strip.data
-    co = np.array([v.co[:] for v in me.vertices])
-    mine = np.flatnonzero(E.owner == 0)
-    by_face = dict(zip(E.source_face[mine], mine))
-    ours, x = [], []
-    for p in me.polygons:
-        e = by_face[p.index]
-        ids = E.polys[e][E.polys[e] >= 0]
-        for vi in p.vertices:
-            j = int(np.argmin(np.linalg.norm(E.verts[ids] - co[vi], axis=1)))
-            ours.append(cv[e, j])
-            x.append(co[vi][0])
-    return np.array(ours), np.array(x)
+    x = [me.vertices[vi].co[0] for p in me.polygons for vi in p.vertices]
+    return face_corner_values(result, 0, me), np.array(x)
 
 
 def halves(values, x, edge=0.05):

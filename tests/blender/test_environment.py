@@ -23,7 +23,7 @@ bpy = pytest.importorskip("bpy")
 from tools import cycles_reference as cr  # noqa: E402
 from hemicube_radiosity.core.light.environment import EnvironmentLight, equirect_uv  # noqa: E402
 from tests.support.cycles_scenes import (  # noqa: E402
-    BOX_HI, BOX_LO, RHO, SUN_ELEVATION, Comparison, box_arrays, floor_object, shadowed)
+    BOX_HI, BOX_LO, RHO, SUN_ELEVATION, Comparison, box_arrays, environment_world, floor_object, shadowed)
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
@@ -45,15 +45,7 @@ def hdri_pixels():
 
 
 def hdri_world(rotation_z=0.0):
-    img = bpy.data.images.new("sky.hdr", W, H, float_buffer=True)
-    px = np.concatenate([hdri_pixels(), np.ones((H, W, 1), np.float32)], axis=2)
-    img.pixels.foreach_set(px.ravel())
-    w = bpy.data.worlds.new("hdri")
-    nt = cr.node_tree(w)
-    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
-    tex = nt.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = img
-    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    w, nt, tex = environment_world(hdri_pixels(), "sky")
     if rotation_z:
         m = nt.nodes.new("ShaderNodeMapping")
         co = nt.nodes.new("ShaderNodeTexCoord")

@@ -27,7 +27,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from tests.support.cycles_scenes import Comparison, box_arrays  # noqa: E402
+from tests.support.cycles_scenes import Comparison, box_arrays, environment_world  # noqa: E402
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
@@ -61,16 +61,7 @@ def sky_pixels():
 
 
 def sky_world():
-    img = bpy.data.images.new("clouds.hdr", W, H, float_buffer=True)
-    px = np.concatenate([sky_pixels(), np.ones((H, W, 1), np.float32)], axis=2)
-    img.pixels.foreach_set(px.ravel())
-    w = bpy.data.worlds.new("clouds")
-    nt = cr.node_tree(w)
-    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
-    tex = nt.nodes.new("ShaderNodeTexEnvironment")
-    tex.image = img
-    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
-    bpy.context.scene.world = w
+    environment_world(sky_pixels(), "clouds")
 
 
 def window_room():

@@ -25,6 +25,7 @@ from hemicube_radiosity.blender.read import scene as reader  # noqa: E402
 from hemicube_radiosity.blender.read.lights import read_lights  # noqa: E402
 from hemicube_radiosity.core.light import seen  # noqa: E402
 from hemicube_radiosity.core.pipeline import BakeSettings, bake  # noqa: E402
+from tests.support.cycles_scenes import face_corner_values  # noqa: E402
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 
@@ -74,24 +75,15 @@ def corners(objects, result):
     their loop order (Cycles' order), from ``result``: the output is the faces themselves, each
     side of a two-sided surface its own elements; a corner takes the front element's value
     there, and weighs its face's area over its corner count."""
-    E = result.elements
-    cv = result.corner_values()
     ours, own, weight = [], [], []
     for k, ob in enumerate(objects):
         me = ob.data
-        co = np.array([v.co[:] for v in me.vertices])
-        mine = np.flatnonzero(E.owner == k)
-        assert mine.size == len(me.polygons)
-        by_face = dict(zip(E.source_face[mine], mine))
+        assert np.count_nonzero(result.elements.owner == k) == len(me.polygons)
+        ours.append(face_corner_values(result, k, me))
         for p in me.polygons:
-            e = by_face[p.index]
-            ids = E.polys[e][E.polys[e] >= 0]
-            for vi in p.vertices:
-                j = int(np.argmin(np.linalg.norm(E.verts[ids] - co[vi], axis=1)))
-                ours.append(cv[e, j])
-                own.append(k)
-                weight.append(p.area / len(p.vertices))
-    return np.array(ours), np.array(own), np.array(weight)
+            own += [k] * len(p.vertices)
+            weight += [p.area / len(p.vertices)] * len(p.vertices)
+    return np.concatenate(ours), np.array(own), np.array(weight)
 
 
 def _ours(objs, settings=SETTINGS):

@@ -281,3 +281,38 @@ def case_emitter():
     lamp = cr.mesh_object(v, f[:, ::-1], cr.diffuse_material((0.0,) * 3, emission=5.0), "lamp")
     c = Comparison([fl, lamp], samples=64)
     return c
+
+
+def face_corner_values(result, k, me):
+    """(L, 3) ``result``'s value at every face corner of mesh ``me`` (object ``k`` of the bake),
+    in its loop order (Cycles'), where the output is the faces themselves: a corner takes its
+    face's element's value at the element vertex nearest it."""
+    E = result.elements
+    cv = result.corner_values()
+    co = np.array([v.co[:] for v in me.vertices])
+    mine = np.flatnonzero(E.owner == k)
+    by_face = dict(zip(E.source_face[mine], mine))
+    out = []
+    for p in me.polygons:
+        e = by_face[p.index]
+        ids = E.polys[e][E.polys[e] >= 0]
+        for vi in p.vertices:
+            out.append(cv[e, int(np.argmin(np.linalg.norm(E.verts[ids] - co[vi], axis=1)))])
+    return np.array(out)
+
+
+def environment_world(pixels, name):
+    """A world whose Background's colour is an Environment Texture of ``pixels`` (H, W, 3)
+    float32 (a new float image), made the scene's. Returns (world, its node tree, the texture
+    node)."""
+    H, W = pixels.shape[:2]
+    img = bpy.data.images.new(name + ".hdr", W, H, float_buffer=True)
+    img.pixels.foreach_set(np.concatenate([pixels, np.ones((H, W, 1), np.float32)], axis=2).ravel())
+    w = bpy.data.worlds.new(name)
+    nt = cr.node_tree(w)
+    bg = next(n for n in nt.nodes if n.type == "BACKGROUND")
+    tex = nt.nodes.new("ShaderNodeTexEnvironment")
+    tex.image = img
+    nt.links.new(tex.outputs["Color"], bg.inputs["Color"])
+    bpy.context.scene.world = w
+    return w, nt, tex
