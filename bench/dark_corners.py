@@ -39,6 +39,7 @@ LIFT = 1e-6        # of the scene's diagonal: off the face before the sealed tes
 PLANE = 1e-7       # of the scene's diagonal: a face this close to the plane lies in it
 CELLS = 128        # grid cells along the scene's longest side, to find the faces over a point
 SPAN = 64          # a triangle whose box spans more cells is tested against every point
+CHUNK = 16384      # never-lit points whose rays are cast at once
 
 
 def fan_triangles(pos, owner, face):
@@ -102,21 +103,26 @@ def covered(points, keys, tris, tri_key, diag):
     order = np.argsort(cid, kind="stable")
     cid, rep = cid[order], rep[order]
     first, last = np.searchsorted(cid, pid, "left"), np.searchsorted(cid, pid, "right")
-    cnt = last - first
-    pi = np.repeat(np.arange(N), cnt)
-    ti = rep[np.repeat(first, cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
     big = np.flatnonzero((a > 0) & (size > SPAN))
-    pi = np.r_[pi, np.repeat(np.arange(N), len(big))]
-    ti = np.r_[ti, np.tile(big, N)]
-    for s in range(0, len(pi), 1 << 20):
-        p_, t_ = pi[s:s + (1 << 20)], ti[s:s + (1 << 20)]
-        keep = tri_key[t_] != keys[p_]
-        p_, t_ = p_[keep], t_[keep]
-        d = np.einsum("ij,ij->i", points[p_] - tris[t_, 0], n[t_])
-        near = np.abs(d) <= tol
-        p_, t_, d = p_[near], t_[near], d[near]
-        hit = inside_triangles(points[p_] - d[:, None] * n[t_], tris[t_])
-        out[p_[hit]] = True
+    step = max(1, min(N, (1 << 22) // max(len(big), 1)))      # points at a time: bounded memory
+    for s in range(0, N, step):
+        ps = np.arange(s, min(s + step, N))
+        cnt = last[ps] - first[ps]
+        pi = np.repeat(ps, cnt)
+        ti = rep[np.repeat(first[ps], cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+        if len(big):                          # the big triangles whose box holds the point
+            inbox = np.all((points[ps, None] >= lo[big][None]) & (points[ps, None] <= hi[big][None]), axis=2)
+            bp, bt = np.nonzero(inbox)
+            pi, ti = np.r_[pi, ps[bp]], np.r_[ti, big[bt]]
+        for u in range(0, len(pi), 1 << 20):
+            p_, t_ = pi[u:u + (1 << 20)], ti[u:u + (1 << 20)]
+            keep = tri_key[t_] != keys[p_]
+            p_, t_ = p_[keep], t_[keep]
+            d = np.einsum("ij,ij->i", points[p_] - tris[t_, 0], n[t_])
+            near = np.abs(d) <= tol
+            p_, t_, d = p_[near], t_[near], d[near]
+            hit = inside_triangles(points[p_] - d[:, None] * n[t_], tris[t_])
+            out[p_[hit]] = True
     return out
 
 
@@ -133,20 +139,25 @@ def inside_triangles(p, t, eps=1e-6):
         return (den > 0) & (v >= -eps) & (w >= -eps) & (v + w <= 1 + eps)
 
 
-def sealed(points, normals, tris, tri_lit, diag, rays=RAYS, seed=0):
+def sealed(points, normals, tris, tri_lit, diag, rays=RAYS, seed=0, scene=None):
     """(N,) bool: of ``rays`` cosine-weighted rays from ``points`` (N, 3), lifted :data:`LIFT` x
     ``diag`` along their unit ``normals``, none escapes the scene, and either at most :data:`LEAK`
     of them meet the front of a triangle whose face ``tri_lit`` (T,) bool says the reference
     lights, or at least :data:`INSIDE` of them meet backs (the point is inside a solid; faces of
-    other solids buried in it, lit where they come out, take the rest)."""
+    other solids buried in it, lit where they come out, take the rest). ``scene``: an Embree
+    scene of ``tris`` already made."""
     from embreex import rtcore_scene as rtcs
     from embreex.mesh_construction import TriangleMesh
 
     N = len(points)
+    if scene is None:
+        scene = rtcs.EmbreeScene()
+        TriangleMesh(scene, np.ascontiguousarray(tris, np.float32))
+    if N > CHUNK:                                 # bounded memory: a chunk of points at a time
+        return np.concatenate([sealed(points[s:s + CHUNK], normals[s:s + CHUNK], tris, tri_lit, diag,
+                                      rays, seed, scene) for s in range(0, N, CHUNK)])
     if N == 0:
         return np.zeros(0, bool)
-    scene = rtcs.EmbreeScene()
-    TriangleMesh(scene, np.ascontiguousarray(tris, np.float32))
     tn = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     u = np.random.default_rng(seed).random((rays, 2))
     r, phi = np.sqrt(u[:, 0]), 2 * np.pi * u[:, 1]
