@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from hemicube_radiosity.core.util.unique import run_positions
+
 RAYS = 64          # rays per never-lit corner for the sealed test (cosine-weighted, one pattern)
 LEAK = 1 / 16      # share of those rays that may meet a lit face's front through a solid's seams
 INSIDE = 1 / 2     # share of those rays meeting backs that puts the point inside a solid
@@ -50,11 +52,9 @@ def fan_triangles(pos, owner, face):
     (``owner * 2**32 + face``, as :func:`face_keys`)."""
     key = face_keys(owner, face)
     start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    size = np.diff(np.r_[start, len(key)])
-    first = np.repeat(start, np.maximum(size - 2, 0))
-    k = np.arange(len(first)) - np.repeat(np.cumsum(np.maximum(size - 2, 0)) - np.maximum(size - 2, 0),
-                                          np.maximum(size - 2, 0))
-    b = first + 1 + k
+    fan = np.maximum(np.diff(np.r_[start, len(key)]) - 2, 0)     # triangles per face
+    first = np.repeat(start, fan)
+    b = first + 1 + run_positions(fan)
     tris = np.stack([pos[first], pos[b], pos[b + 1]], 1).astype(np.float64)
     return tris, key[first]
 
@@ -96,7 +96,7 @@ def covered(points, keys, tris, tri_key, diag):
     # small triangles: one (cell, triangle) pair per cell of their box, sorted by cell
     small = np.flatnonzero((a > 0) & (size <= SPAN))
     rep = np.repeat(small, size[small])
-    k = np.arange(len(rep)) - np.repeat(np.cumsum(size[small]) - size[small], size[small])
+    k = run_positions(size[small])
     sy, sz = span[rep, 1], span[rep, 2]
     cc = c0[rep] + np.stack([k // (sy * sz), (k // sz) % sy, k % sz], 1)
     cid = (cc[:, 0] * G + cc[:, 1]) * G + cc[:, 2]
@@ -109,7 +109,7 @@ def covered(points, keys, tris, tri_key, diag):
         ps = np.arange(s, min(s + step, N))
         cnt = last[ps] - first[ps]
         pi = np.repeat(ps, cnt)
-        ti = rep[np.repeat(first[ps], cnt) + np.arange(cnt.sum()) - np.repeat(np.cumsum(cnt) - cnt, cnt)]
+        ti = rep[np.repeat(first[ps], cnt) + run_positions(cnt)]
         if len(big):                          # the big triangles whose box holds the point
             inbox = np.all((points[ps, None] >= lo[big][None]) & (points[ps, None] <= hi[big][None]), axis=2)
             bp, bt = np.nonzero(inbox)
@@ -194,16 +194,13 @@ def explained(z, never, lit):
     tris, tri_key = fan_triangles(pos, owner, face)
     keys = face_keys(owner, face)
     nrm = np.asarray(z["normal"], float)[idx]
-    nrm = nrm / np.maximum(np.linalg.norm(nrm, axis=1, keepdims=True), 1e-30)
+    length = np.linalg.norm(nrm, axis=1)
+    nrm = nrm / np.maximum(length, 1e-30)[:, None]
     if "point" in z:                   # Cycles' own bake points (a POSITION bake)
         p = np.asarray(z["point"], float)[idx]
     else:
         p = bake_points(pos[idx], np.asarray(z["centroid"], float)[idx])
     cov[idx] = covered(p, keys[idx], tris, tri_key, diag)
-    lit_keys = np.unique(keys[lit])
-    rest = idx[~cov[idx]]
-    good = np.linalg.norm(np.asarray(z["normal"], float)[rest], axis=1) > 0
-    rest = rest[good]
-    seal[rest] = sealed(p[np.isin(idx, rest)], nrm[np.isin(idx, rest)], tris,
-                        np.isin(tri_key, lit_keys), diag)
+    rest = ~cov[idx] & (length > 0)              # not covered, with a normal to cast about
+    seal[idx[rest]] = sealed(p[rest], nrm[rest], tris, np.isin(tri_key, np.unique(keys[lit])), diag)
     return cov, seal

@@ -71,6 +71,7 @@ for p in (ROOT, HERE, os.path.join(ROOT, "tools")):
 import dark_corners  # noqa: E402
 import real_scenes as rs  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
+from hemicube_radiosity.core.util.unique import run_positions  # noqa: E402
 
 OUT_DIR = os.path.join(ROOT, "bench", "out")
 WORK_DIR = os.path.join(OUT_DIR, "lightmap_real")
@@ -219,7 +220,7 @@ def coincident_texels(world, faces, uv, tri, others=None, other_faces=None, eps=
         stop = min(stop, len(points))
         c = count[start:stop]
         point = np.repeat(np.arange(start, stop), c)
-        j = pj[np.repeat(first[start:stop], c) + (np.arange(c.sum()) - np.repeat(np.cumsum(c) - c, c))]
+        j = pj[np.repeat(first[start:stop], c) + run_positions(c)]
         p, a = points[point], others[j]
         inbox = np.all((p >= lo_m[j]) & (p <= hi_m[j]), axis=1)
         p, a, j, point = p[inbox], a[inbox], j[inbox], point[inbox]
