@@ -193,7 +193,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", gather_count(ctx), s.element_size, s.patch_size)
-                    + (("whole",) if gathers_faces(ctx) else ()))     # the grid's cells (AbruptGrid)
+                    + (("whole",) if faces else ()))     # the grid's cells (AbruptGrid)
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
         shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
