@@ -182,8 +182,9 @@ def sealed(points, normals, tris, tri_lit, diag, rays=RAYS, seed=0, scene=None):
 def explained(z, never, lit):
     """The never-lit corners whose 0 the geometry explains, from ``real_scenes.cycles_child``'s
     arrays ``z`` (pos, centroid, normal, owner, face), ``never`` (L,) bool: the corners the
-    reference never lights, and ``lit`` (L,) bool: those it lights (or that emit). Returns (covered (L,) bool, sealed (L,) bool), False outside
-    ``never``; a corner both covered and sealed counts as covered."""
+    reference never lights, and ``lit`` (L,) bool: those it lights (or that emit). Returns
+    (covered (L,) bool, sealed (L,) bool), False outside ``never``; a corner both covered and
+    sealed counts as covered."""
     pos, owner, face = np.asarray(z["pos"], float), z["owner"], z["face"]
     L = len(pos)
     cov, seal = np.zeros(L, bool), np.zeros(L, bool)
