@@ -104,3 +104,36 @@ def test_each_surface_of_a_window_lit_room_is_as_bright_as_in_cycles(comparison)
         errs[name] = ours / theirs - 1
     print({k: f"{100 * v:+.1f}%" for k, v in errs.items()})
     assert max(abs(e) for e in errs.values()) < 0.05, errs
+
+
+def test_the_window_lit_room_relit_brighter_casts_no_ray(monkeypatch):
+    """The world's Strength x 1.5 in the same session: the map's light is kept (at unit mean
+    luminance, core/light/lamp_cache.py) and what shines on the floor through the window is
+    ranked to 9 digits (core/output/shine.py: in this symmetric room, groups alike but for
+    rounding swapped places at the budget's edge when scaled, and the relight cast their shadow
+    rays again). Nothing is cast again and the result is the first times 1.5."""
+    from hemicube_radiosity.blender.bake import BakeJob
+    from hemicube_radiosity.core.light import lamp_cache
+    from hemicube_radiosity.core.output import shine
+    from hemicube_radiosity.core.settings import BakeSettings
+
+    cr.new_empty_scene()
+    objs = list(window_room())
+    sky_world()
+
+    def baked():
+        job = BakeJob.prepare(bpy.context, objs, BakeSettings())
+        job.run()
+        return np.asarray(job.result.corner_values())
+    calls = []
+    for mod, name in ((lamp_cache, "light_irradiance"), (shine, "emitter_transport")):
+        real = getattr(mod, name)
+        monkeypatch.setattr(mod, name, lambda *x, _r=real, _n=name, **k: calls.append(_n) or _r(*x, **k))
+    first = baked()
+    assert {"light_irradiance", "emitter_transport"} <= set(calls), calls   # the map lights, the floor shines
+    calls.clear()
+    bg = next(n for n in bpy.context.scene.world.node_tree.nodes if n.type == "BACKGROUND")
+    bg.inputs["Strength"].default_value *= 1.5
+    again = baked()
+    assert calls == []
+    np.testing.assert_allclose(again, 1.5 * first, rtol=1e-7, atol=1e-12 * first.max())

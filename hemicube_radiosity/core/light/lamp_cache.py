@@ -8,7 +8,9 @@ cone alone. :func:`lamp_irradiance` computes each lamp at unit strength in white
 :func:`.lamps.direct_irradiance`), keeps that in the bake's cache under what it depends on, and
 scales it. So a relight that changes a lamp's strength or colour, the world's or a material's
 casts no shadow ray toward the lamps again, and the energy report's sun-only pass finds the
-direct light's own rays. An environment map (a light of its own colours) is computed as it is.
+direct light's own rays. An environment map (a light of its own colours) is kept the same way:
+its light is linear in its pixels and its directions follow their shape alone, so it is kept
+for the map scaled to a mean luminance of 1 and scaled back (:func:`_unit_map`).
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker
+from .environment import LUMA, EnvironmentLight
 from .lamps import SUN_FIRST, UNBOUNDED, AreaLight, PointLight, SpotLight, SunLight, light_irradiance
 
 __all__ = ["lamp_irradiance", "shadow_key", "SCALE"]
@@ -41,6 +44,18 @@ def _shape_key(light) -> str:
     vals = {f.name: getattr(light, f.name) for f in fields(light) if f.name not in skip}
     return type(light).__name__ + repr({k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
                                         for k, v in vals.items()})
+
+
+def _unit_map(light: EnvironmentLight) -> tuple:
+    """(the map scaled to a mean luminance of 1, that scale, the key of its shape): a world
+    made brighter or dimmer (its Strength) has the same unit map, to float32's precision, so
+    a relight finds its light kept. (None, 0, b"") for a dark map."""
+    scale = float(light.mean() @ LUMA)
+    if not scale > 0:
+        return None, 0.0, b""
+    unit = replace(light, pixels=light.pixels / scale, color=(1.0, 1.0, 1.0))
+    shape = array_key(unit.pixels.astype(np.float32)) + array_key(np.asarray(light.rotation, np.float32))
+    return unit, scale, shape + repr((int(light.rays), bool(light.cast_shadows))).encode()
 
 
 def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples=16, seed=0, points=None,
@@ -73,8 +88,14 @@ def lamp_irradiance(patches: PatchSet, lights, cache, *, shadows="auto", samples
     for i, light in enumerate(lights, start=index):
         ticker.tick(i - index, len(lights), force=True)
         scale = SCALE.get(type(light))
-        if scale is None:                      # an environment map: its own colours, not kept
-            E = light_irradiance(patches, light, _index=i, **kw)
+        if isinstance(light, EnvironmentLight):   # its own colours: kept for its unit map
+            unit, s, shape = _unit_map(light)
+            if unit is None:
+                continue
+            key = cache_key(base + shape, ("environment", i, int(samples), seed, shadows))
+            E = cached(cache, key, lambda: light_irradiance(patches, unit, _index=i, **kw)) * s
+        elif scale is None:
+            raise TypeError(f"unknown light type {type(light).__name__}")
         elif getattr(light, scale) == 0:       # dark: no light, no ray
             continue
         else:

@@ -101,6 +101,9 @@ def hot_elements(ctx, elements, light_v, bar, smooth, opened=None, budget=BUDGET
         a, Y = np.concatenate([a, cell_a]), np.concatenate([Y, cell_Y])
     if groups.size and groups.max() >= budget:
         mean = np.bincount(groups, weights=a * Y) / np.maximum(np.bincount(groups, weights=a), 1e-300)
+        # ranked to 9 digits of the brightest: groups alike but for rounding (a symmetric room)
+        # keep their order when a relight scales the light, and the relight finds its shine kept
+        mean = np.round(mean / max(float(mean.max()), 1e-300), 9)
         keep = np.isin(groups, np.argsort(-mean, kind="stable")[:budget])
         hot[ids[~keep[:ids.size]]] = False
         if cells.size:

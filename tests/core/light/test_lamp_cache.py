@@ -7,6 +7,7 @@ import numpy as np
 from hemicube_radiosity.core import builtin_scenes as scenes
 from hemicube_radiosity.core.light import lamp_cache
 from hemicube_radiosity.core.light.lamps import AreaLight, PointLight, SpotLight, SunLight, direct_irradiance
+from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.pipeline import BakeSettings, bake
 from hemicube_radiosity.core.runtime.cache import FormFactorCache
@@ -81,3 +82,61 @@ def test_a_bake_relit_in_strength_is_the_first_times_the_factor_and_casts_no_lam
     a, b = np.asarray(first.corner_values()), np.asarray(again.corner_values())
     assert a.max() > 0
     np.testing.assert_allclose(b, 2.5 * a, rtol=1e-9, atol=1e-12 * a.max())
+
+
+def _sky(w=128, h=64):
+    """(h, w, 3) an equirectangular map (rows bottom-up): a dim ground, a sky brightening to the
+    zenith and a small sun of 2,000 (most of the light) (its peaks): a world that varies by direction."""
+    lat = (np.arange(h) + 0.5) / h * np.pi - np.pi / 2
+    lon = 2 * np.pi * (0.5 - (np.arange(w) + 0.5) / w)
+    LAT, LON = np.meshgrid(lat, lon, indexing="ij")
+    d = np.stack([np.cos(LAT) * np.cos(LON), np.cos(LAT) * np.sin(LON), np.sin(LAT)], -1)
+    L = 1.0 + 2.0 * np.sin(np.maximum(LAT, 0.0))
+    sun = np.array([0.3, 0.2, 0.93]) / np.linalg.norm([0.3, 0.2, 0.93])
+    L = L + 2000.0 * (d @ sun > np.cos(np.radians(4.0)))
+    L = np.where(LAT < 0, 0.3, L)
+    return np.repeat(L[..., None], 3, axis=2) * np.array([0.9, 1.0, 1.1])
+
+
+def _court():
+    """A square court open to the sky (four walls and a floor, symmetric about x = 0 and y = 0)
+    with a block in its middle: light from the map's sun and sky falls on parts of it."""
+    v = np.array([[-2, -2, 0], [2, -2, 0], [2, 2, 0], [-2, 2, 0],
+                  [-2, -2, 2], [2, -2, 2], [2, 2, 2], [-2, 2, 2]], float)
+    faces = [(0, 1, 2, 3), (0, 4, 5, 1), (1, 5, 6, 2), (2, 6, 7, 3), (3, 7, 4, 0)]   # facing in
+    court = MeshInput.from_faces(v, faces, rho=(0.7,) * 3, name="court")
+    return [court, scenes.box((-0.4, -0.4, 0.0), (0.4, 0.4, 0.8), bottom=False, name="block")]
+
+
+@needs_embree
+def test_an_environment_map_made_brighter_relights_without_a_ray(monkeypatch):
+    """A world's Strength changed: its map's light is kept for the map at unit mean luminance
+    (lamp_cache._unit_map), and what shines is ranked to 9 digits (output/shine.py), so the
+    relight casts no ray, toward the map or from what it lights, and equals a fresh bake of
+    the brighter world."""
+    from hemicube_radiosity.core.light.environment import EnvironmentLight
+    from hemicube_radiosity.core.output import shine
+
+    px = _sky()
+    s = BakeSettings(patch_size=0.5, element_size=0.25, sky_rays=16)
+    cache = FormFactorCache()
+
+    def world(k):
+        env = EnvironmentLight(px * k, rays=64)
+        return dict(lights=[env], world=env.base())
+    calls = []
+    for mod, name in ((lamp_cache, "light_irradiance"), (shine, "emitter_transport")):
+        real = getattr(mod, name)
+        monkeypatch.setattr(mod, name, lambda *x, _r=real, _n=name, **k: calls.append(_n) or _r(*x, **k))
+    first = bake(_court(), s, cache=cache, **world(1.0))
+    a = np.asarray(first.corner_values())
+    assert a.max() > 3 * np.median(a) > 0                        # lit unevenly, by direction
+    assert "emitter_transport" in calls                          # the sunlit floor shines
+    calls.clear()
+    again = np.asarray(bake(_court(), s, cache=cache, **world(1.5)).corner_values())
+    assert calls == []
+    # (to rounding: the map's light is kept at unit mean luminance and scaled back; rays drawn
+    # anew would differ by per cent)
+    np.testing.assert_allclose(again, 1.5 * a, rtol=1e-7, atol=1e-12 * a.max())
+    fresh = np.asarray(bake(_court(), s, **world(1.5)).corner_values())
+    np.testing.assert_allclose(again, fresh, rtol=1e-7, atol=1e-12 * a.max())
