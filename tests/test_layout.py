@@ -143,6 +143,36 @@ def test_the_core_map_names_every_stage_and_its_entry():
         assert fn.__name__ == func and fn.__module__.endswith(f"core.{module}"), (stage, entry)
 
 
+LUMA_HOME = f"{PKG}.core.util.colour"
+LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)
+_LUMA_TEXT = re.compile(r"(?<![\w.])0?\.(2126|7152|0722)(?!\d)")
+
+
+def _luma_copies(path):
+    """Lines of ``path`` that write a Rec. 709 weight out (a float constant of that value in the
+    code, or the number in any text: a comment, a docstring) or bind the name ``LUMA`` by
+    assignment rather than by import."""
+    source = open(path, encoding="utf-8").read()
+    lines = {i for i, line in enumerate(source.splitlines(), 1) if _LUMA_TEXT.search(line)}
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, float) and node.value in LUMA_WEIGHTS:
+            lines.add(node.lineno)
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AnnAssign, ast.AugAssign)) else []
+        if any(isinstance(t, ast.Name) and t.id == "LUMA" for t in targets):
+            lines.add(node.lineno)
+    return sorted(lines)
+
+
+def test_the_luminance_weights_are_written_once():
+    """The Rec. 709 weights live in ``core/util/colour.py``; every other module of the package
+    (``blender/`` too) imports ``LUMA`` from there, so the weights cannot drift apart."""
+    home = _luma_copies(MODULES[LUMA_HOME])
+    assert home, "the check finds no weights even where they are defined: it would pass on anything"
+    copies = [f"{n}:{line}" for n, p in MODULES.items() if n != LUMA_HOME for line in _luma_copies(p)]
+    assert not copies, f"Rec. 709 weights written out again (import LUMA from {LUMA_HOME}): {copies}"
+
+
 TOPS = ("hemicube_radiosity", "core", "blender", "tests", "bench", "tools", "docs", "bin")
 
 
