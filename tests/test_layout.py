@@ -1,8 +1,9 @@
 """The layout the code promises, checked over its source (``ast``; nothing is imported but the
-stage list): core modules stay small, no module imports another's private name, the modules
-import each other without a cycle, the core never imports bpy, the map in ``core/__init__.py``
-names every stage of ``pipeline.STAGES`` with an entry function that exists, and every path
-that ``docs/CONTRIBUTING.md`` and the README's layout table name exists.
+stage list): core modules and every function stay small, the luminance weights are written
+once, no module imports another's private name, the modules import each other without a
+cycle, the core never imports bpy, the map in ``core/__init__.py`` names every stage of
+``pipeline.STAGES`` with an entry function that exists, and every path that
+``docs/CONTRIBUTING.md`` and the README's layout table name exists.
 
     .venv/bin/python -m pytest -q tests/test_layout.py
 """
@@ -72,6 +73,23 @@ def test_core_modules_stay_small():
     big = {n: sum(1 for _ in open(p, encoding="utf-8")) for n, p in MODULES.items() if n.startswith(f"{PKG}.core")}
     over = {n: lines for n, lines in big.items() if lines > MAX_CORE_LINES}
     assert not over, f"core modules over {MAX_CORE_LINES} lines: {over}"
+
+
+MAX_FUNCTION_LINES = 60
+
+
+def test_functions_stay_short():
+    """Every function of the package, its docstring included, fits on a screen: longer ones
+    are split into named parts (``gather_matrix``, ``correction_matrix``,
+    ``hemicube_form_factors`` and ``group_form_factors`` were, with the same results bit for bit)."""
+    lengths = {}
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lengths[f"{name}.{node.name}:{node.lineno}"] = node.end_lineno - node.lineno + 1
+    assert len(lengths) > 1000, "the check sees almost no functions: it would pass on anything"
+    long = {f: n for f, n in lengths.items() if n > MAX_FUNCTION_LINES}
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines: {long}"
 
 
 def test_no_private_name_is_imported_across_modules():
