@@ -1,8 +1,9 @@
 """The layout the code promises, checked over its source (``ast``; nothing is imported but the
-stage list): core modules stay small, no module imports another's private name, the modules
-import each other without a cycle, the core never imports bpy, the map in ``core/__init__.py``
-names every stage of ``pipeline.STAGES`` with an entry function that exists, and every path
-that ``docs/CONTRIBUTING.md`` and the README's layout table name exists.
+stage list): core modules and every function stay small, the luminance weights are written
+once, no module imports another's private name, the modules import each other without a
+cycle, the core never imports bpy, the map in ``core/__init__.py`` names every stage of
+``pipeline.STAGES`` with an entry function that exists, and every path that
+``docs/CONTRIBUTING.md`` and the README's layout table name exists.
 
     .venv/bin/python -m pytest -q tests/test_layout.py
 """
@@ -74,6 +75,23 @@ def test_core_modules_stay_small():
     assert not over, f"core modules over {MAX_CORE_LINES} lines: {over}"
 
 
+MAX_FUNCTION_LINES = 60
+
+
+def test_functions_stay_short():
+    """Every function of the package, its docstring included, fits on a screen: longer ones
+    are split into named parts (``gather_matrix``, ``correction_matrix``,
+    ``hemicube_form_factors`` and ``group_form_factors`` were, with the same results bit for bit)."""
+    lengths = {}
+    for name, path in MODULES.items():
+        for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lengths[f"{name}.{node.name}:{node.lineno}"] = node.end_lineno - node.lineno + 1
+    assert len(lengths) > 1000, "the check sees almost no functions: it would pass on anything"
+    long = {f: n for f, n in lengths.items() if n > MAX_FUNCTION_LINES}
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines: {long}"
+
+
 def test_no_private_name_is_imported_across_modules():
     bad = []
     for name, path in MODULES.items():
@@ -141,6 +159,36 @@ def test_the_core_map_names_every_stage_and_its_entry():
         module, func = entry.rsplit(".", 1)
         fn = stage_functions[stage]
         assert fn.__name__ == func and fn.__module__.endswith(f"core.{module}"), (stage, entry)
+
+
+LUMA_HOME = f"{PKG}.core.util.colour"
+LUMA_WEIGHTS = (0.2126, 0.7152, 0.0722)
+_LUMA_TEXT = re.compile(r"(?<![\w.])0?\.(2126|7152|0722)(?!\d)")
+
+
+def _luma_copies(path):
+    """Lines of ``path`` that write a Rec. 709 weight out (a float constant of that value in the
+    code, or the number in any text: a comment, a docstring) or bind the name ``LUMA`` by
+    assignment rather than by import."""
+    source = open(path, encoding="utf-8").read()
+    lines = {i for i, line in enumerate(source.splitlines(), 1) if _LUMA_TEXT.search(line)}
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, float) and node.value in LUMA_WEIGHTS:
+            lines.add(node.lineno)
+        targets = node.targets if isinstance(node, ast.Assign) else \
+            [node.target] if isinstance(node, (ast.AnnAssign, ast.AugAssign)) else []
+        if any(isinstance(t, ast.Name) and t.id == "LUMA" for t in targets):
+            lines.add(node.lineno)
+    return sorted(lines)
+
+
+def test_the_luminance_weights_are_written_once():
+    """The Rec. 709 weights live in ``core/util/colour.py``; every other module of the package
+    (``blender/`` too) imports ``LUMA`` from there, so the weights cannot drift apart."""
+    home = _luma_copies(MODULES[LUMA_HOME])
+    assert home, "the check finds no weights even where they are defined: it would pass on anything"
+    copies = [f"{n}:{line}" for n, p in MODULES.items() if n != LUMA_HOME for line in _luma_copies(p)]
+    assert not copies, f"Rec. 709 weights written out again (import LUMA from {LUMA_HOME}): {copies}"
 
 
 TOPS = ("hemicube_radiosity", "core", "blender", "tests", "bench", "tools", "docs", "bin")

@@ -20,7 +20,8 @@ Beside the stages: ``settings.py`` (every setting, once), ``pipeline.py`` (the s
 :func:`pipeline.bake`), ``rays.py`` (the ray scenes every stage casts into), ``hemisphere.py``
 (rays over a point's hemisphere: the sky's share, the open share), ``builtin_scenes.py``
 (the demo Cornell box and closed-form scenes as arrays), ``formats/`` (file formats without
-Blender: glTF made valid), ``util/`` (no radiosity knowledge: sparse rows, nearest neighbours,
-distinct rows, geometry and sampling) and ``runtime/`` (how a bake runs: errors, progress and
-cancellation, workers, caches, the time forecast).
+Blender: glTF made valid), ``util/`` (no radiosity knowledge: sparse rows and their products,
+nearest neighbours, distinct rows, geometry, sampling and the luminance weights) and
+``runtime/`` (how a bake runs: errors, progress and cancellation, workers, caches, the time
+forecast).
 """

@@ -321,12 +321,15 @@ def receiver_ids(n, receivers):
     return r
 
 
-def _batch_size(n, resolution, requested):
+def _batch_size(n, resolution, requested, workers=1):
+    """Receivers per batch over ``n`` drawn items at ``resolution``: ``requested`` (>= 1) or,
+    when None, as many as :data:`PATCHES_PER_BATCH` and :data:`PIXELS_PER_BATCH` allow, shared
+    among ``workers`` (with several batches drawn at once the peak memory stays one worker's)."""
     if requested is not None:
         if int(requested) < 1:
             raise ValueError(f"batch must be >= 1, got {requested}")
         return int(requested)
-    return max(1, min(PATCHES_PER_BATCH // max(n, 1), PIXELS_PER_BATCH // (3 * resolution ** 2)))
+    return max(1, max(1, min(PATCHES_PER_BATCH // max(n, 1), PIXELS_PER_BATCH // (3 * resolution ** 2))) // workers)
 
 
 def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None, receivers=None,
@@ -378,25 +381,39 @@ def hemicube_form_factors(patches: PatchSet, resolution=64, *, rotate_seed=None,
     delta_form_factors(R)  # validates the resolution
     n = len(patches) if clusters is None else len(clusters)
     recv = receiver_ids(n, receivers)
-    scene = _Scene(patches, R, clusters)
-    _behind(scene, patches, clusters)
-    frames = receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
+    scene, frames = _scene_and_frames(patches, R, clusters, rotate_seed)
     workers = resolve_workers(workers)
-    # with several batches drawn at once, smaller ones: the peak memory stays that of one worker
-    B = _batch_size(scene.n, R, batch) if batch is not None else max(1, _batch_size(scene.n, R, None) // workers)
-    ticker = Ticker(progress, cancelled)
+    B = _batch_size(scene.n, R, batch, workers)
     rows_of = partial(_batch_rows, scene, frames, n)
     if probe is not None:
         probe(_probe(rows_of, recv, B, cancelled))
+    indptr, indices, data, sky = _draw_batches(rows_of, recv, B, n, workers, Ticker(progress, cancelled))
+    meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed,
+            **({} if scene.passes is None else {"passes": scene.passes})}
+    return CSR(indptr, indices, data, (n, n), meta, sky)
+
+
+def _scene_and_frames(patches, R, clusters, rotate_seed):
+    """The :class:`_Scene` of ``patches`` drawn at resolution ``R`` (with what its see-through
+    patches pass, :func:`_behind`) and the receivers' frames (K, 3, 3) float64, orthonormal
+    (:func:`.pixels.receiver_frames`: rows the hemi-cube's x, y and the normal; K receivers,
+    the patches or their ``clusters``)."""
+    scene = _Scene(patches, R, clusters)
+    _behind(scene, patches, clusters)
+    return scene, receiver_frames(patches.normals if clusters is None else clusters.normals, rotate_seed)
+
+
+def _draw_batches(rows_of, recv, B, n, workers, ticker):
+    """The CSR arrays (:func:`_collect_rows`: indptr (n + 1,) int64, indices (E,) int32, data
+    (E,) float32 form factors, sky (n,) float32) of the receivers ``recv`` (r,) int64, sorted,
+    of ``n``: their rows made ``B`` receivers a batch by ``rows_of`` (:func:`_batch_rows`) on
+    ``workers`` (forked processes where the platform has them), assembled in receiver order
+    whatever the count, so F is bit-identical; ``ticker`` is told the receivers done and polls
+    for cancellation."""
     ticker.tick(0, recv.size, force=True)
     batches = (recv[lo:lo + B] for lo in range(0, recv.size, B))
-    # batches in receiver order whatever the worker count: F is bit-identical
     with closing(ordered_map(rows_of, batches, workers, processes=True)) as results:
-        indptr, indices, data, sky = _collect_rows(results, n, recv.size, ticker)
-    meta = {"method": "hemicube", "resolution": R, "rotate_seed": rotate_seed}
-    if scene.passes is not None:
-        meta["passes"] = scene.passes
-    return CSR(indptr, indices, data, (n, n), meta, sky)
+        return _collect_rows(results, n, recv.size, ticker)
 
 
 def _probe(rows_of, recv, B, cancelled):

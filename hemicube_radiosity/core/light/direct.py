@@ -21,11 +21,10 @@ from ..runtime.progress import Ticker
 from ..rays import occluder, ray_offsets
 from ..hemisphere import SKY_FIRST, sky_fraction
 from ..runtime.cache import Memo, frozen
+from ..util.colour import LUMA
 from ..util.unique import unique_ints
 
-__all__ = ["DirectLight", "LUMA", "turns_emitters"]
-
-LUMA = np.array([0.2126, 0.7152, 0.0722])      # Rec. 709 luminance weights
+__all__ = ["DirectLight", "turns_emitters"]
 
 _OFFSETS = Memo(4)          # rays' start offsets per point array (:meth:`DirectLight.offsets`)
 

@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..util.colour import LUMA
 from .transmit import visibility
 
 __all__ = ["EnvironmentLight", "equirect_uv", "environment_irradiance", "MAX_MAP_WIDTH", "RAYS_PER_SKY_RAY"]
@@ -43,7 +44,6 @@ __all__ = ["EnvironmentLight", "equirect_uv", "environment_irradiance", "MAX_MAP
 PEAK = 20.0             # a pixel this many times the base's luminance is a peak (a sun)
 MAX_MAP_WIDTH = 512      # maps are averaged down to at most this width (a 4k HDRI: 8 x 8 pixels each)
 RAYS_PER_SKY_RAY = 4     # the set's directions per Sky Ray of the bake (module docstring)
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 
 def equirect_uv(d: np.ndarray) -> tuple:

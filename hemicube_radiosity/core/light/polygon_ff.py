@@ -143,7 +143,6 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
     points = np.asarray(points, dtype=np.float64)
     normals = np.asarray(normals, dtype=np.float64)
     o = outline if outline is not None else GroupOutline.of(polys, groups, poly_normals)
-    polys, groups, pn, edges, eg = o.polys, o.groups, o.normals, o.edges, o.edge_group
     P, G = len(points), len(o.count)
     F = np.zeros((P, G))
     below = np.zeros((P, G), bool)
@@ -157,39 +156,59 @@ def group_form_factors(points, normals, polys, groups, poly_normals, outline: Gr
     if live.size > GROUP_LOOP:
         _contours_flat(points, normals, o, front, F, below)
     else:
-        # a few groups (a scene's lamps): each group's edges against the points in front of it
-        # as a (points x edges) block, no index arrays; the terms summed edge after edge, as
-        # the flat path's bincount sums them (the same values, bit for bit)
-        cols = [np.ascontiguousarray(points[:, c]) for c in range(3)]
-        ncols = [np.ascontiguousarray(normals[:, c]) for c in range(3)]
-        for g in live.tolist():
-            s0, k = int(o.edge_start[g]), int(o.edge_count[g])
-            ea = [o.edge_columns[0][c][None, s0:s0 + k] for c in range(3)]
-            eb = [o.edge_columns[1][c][None, s0:s0 + k] for c in range(3)]
-            pg = np.flatnonzero(front[:, g])
-            for lo in range(0, pg.size, max(1, BLOCK_PAIRS // max(k, 1))):
-                p = pg[lo:lo + max(1, BLOCK_PAIRS // max(k, 1))]
-                x = [cols[c].take(p)[:, None] for c in range(3)]
-                n = [ncols[c].take(p)[:, None] for c in range(3)]
-                a = [ea[c] - x[c] for c in range(3)]
-                term = _edge_terms_xyz(a, [eb[c] - x[c] for c in range(3)], n)
-                total = np.zeros(p.size)
-                for j in range(k):
-                    total += term[:, j]
-                F[p, g] = np.abs(total) / (2 * np.pi)
-                # where the contour does not stand for the group: some corner at or below the
-                # horizon, or the point not in front of every polygon of the group
-                below[p, g] = (a[0] * n[0] + a[1] * n[1] + a[2] * n[2] <= 0).any(axis=1)
+        _contours_by_group(points, normals, o, front, live, F, below)
+    _not_by_outline(points, normals, o, n_front, count, below, F)
+    return F
+
+
+def _contours_by_group(points, normals, o, front, live, F, below):
+    """:func:`group_form_factors`' contour terms for a few groups (a scene's lamps): each group
+    of ``live`` (g,) int against the ``points`` (P, 3, scene units) with unit ``normals`` (P, 3)
+    in front of it (``front`` (P, G) bool) as a (points x edges) block of at most
+    :data:`BLOCK_PAIRS` pairs, no index arrays; fills ``F`` (P, G) float64, the dimensionless
+    form factor of the group's outline, and ``below`` (P, G) bool, where some outline corner is
+    at or below the point's horizon. The terms are summed edge after edge, as
+    :func:`_contours_flat`'s bincount sums them: the same values, bit for bit."""
+    cols = [np.ascontiguousarray(points[:, c]) for c in range(3)]
+    ncols = [np.ascontiguousarray(normals[:, c]) for c in range(3)]
+    for g in live.tolist():
+        s0, k = int(o.edge_start[g]), int(o.edge_count[g])
+        ea = [o.edge_columns[0][c][None, s0:s0 + k] for c in range(3)]
+        eb = [o.edge_columns[1][c][None, s0:s0 + k] for c in range(3)]
+        pg = np.flatnonzero(front[:, g])
+        for lo in range(0, pg.size, max(1, BLOCK_PAIRS // max(k, 1))):
+            p = pg[lo:lo + max(1, BLOCK_PAIRS // max(k, 1))]
+            x = [cols[c].take(p)[:, None] for c in range(3)]
+            n = [ncols[c].take(p)[:, None] for c in range(3)]
+            a = [ea[c] - x[c] for c in range(3)]
+            term = _edge_terms_xyz(a, [eb[c] - x[c] for c in range(3)], n)
+            total = np.zeros(p.size)
+            for j in range(k):
+                total += term[:, j]
+            F[p, g] = np.abs(total) / (2 * np.pi)
+            # where the contour does not stand for the group: some corner at or below the
+            # horizon, or the point not in front of every polygon of the group
+            below[p, g] = (a[0] * n[0] + a[1] * n[1] + a[2] * n[2] <= 0).any(axis=1)
+
+
+def _not_by_outline(points, normals, o, n_front, count, below, F):
+    """Set ``F`` (P, G) float64, dimensionless, anew where a group's outline does not stand for
+    it. A pair in front of every polygon of its group but with an outline corner ``below``
+    (P, G) bool the point's horizon gets the outline clipped to the horizon
+    (:func:`_clipped_contour`); a pair in front of only some of the group's polygons
+    (``n_front`` (P, G) int of ``count`` (G,)), or whose clipped crossings do not pair up, gets
+    the sum face by face (:func:`front_polygon_sum`). ``points`` (P, 3) in the scene's units,
+    unit ``normals`` (P, 3); ``o``: the :class:`.outline.GroupOutline`."""
     partial = (n_front > 0) & (n_front < count[None])
     for g in np.flatnonzero((below & ~partial & (n_front > 0)).any(axis=0)):
         p = np.flatnonzero(below[:, g] & ~partial[:, g] & (n_front[:, g] > 0))
-        F[p, g], ok = _clipped_contour(points[p], normals[p], edges[eg == g], pn[groups == g].mean(axis=0))
+        F[p, g], ok = _clipped_contour(points[p], normals[p], o.edges[o.edge_group == g],
+                                       o.normals[o.groups == g].mean(axis=0))
         partial[p[~ok], g] = True
     for g in np.flatnonzero(partial.any(axis=0)):
         p = np.flatnonzero(partial[:, g])
-        m = np.flatnonzero(groups == g)
-        F[p, g] = front_polygon_sum(points[p], normals[p], polys[m], pn[m], o.centre[m], o.size[m])
-    return F
+        m = np.flatnonzero(o.groups == g)
+        F[p, g] = front_polygon_sum(points[p], normals[p], o.polys[m], o.normals[m], o.centre[m], o.size[m])
 
 
 #: :func:`group_form_factors` takes the groups one by one (a block of points x edges each) up to

@@ -34,7 +34,7 @@ from ..rays import embree_available, embree_scene, ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.geometry import tangent_frames
 from ..util.sampling import cosine_directions
-from .direct import LUMA
+from ..util.colour import LUMA
 
 __all__ = ["F_MIN", "VARIES", "seen_direct"]
 

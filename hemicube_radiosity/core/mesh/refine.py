@@ -18,13 +18,13 @@ import numpy as np
 from ..runtime.cache import Memo, array_key, cache_key, cached, frozen, geometry_key
 from .clusters import make_clusters
 from ..light.points import grid_of
-from ..light.direct import LUMA, DirectLight
+from ..light.direct import DirectLight
 from .patches import PatchSet, poly_geometry
 from .stage import form_factor_gb
 from ..rays import embree_available, embree_scene
 from ..util.unique import unique_ints
 
-__all__ = ["LUMA", "split_patches", "abrupt", "refine", "refine_stage"]
+__all__ = ["split_patches", "abrupt", "refine", "refine_stage"]
 
 _SPLIT = Memo(8)         # (patches' geometry arrays, selection) -> the split geometry
 _REGROUP = Memo(8)       # (clusters' grouping, parents, refined geometry) -> the refined clusters

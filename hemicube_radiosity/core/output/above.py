@@ -16,11 +16,11 @@ from __future__ import annotations
 import numpy as np
 
 from ..runtime.cache import array_key, cache_key, cached
+from ..util.colour import LUMA
 from .gather import patch_parameters, surface_weights
 
 __all__ = ["above_shares"]
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: Vertices (or corners) whose hits are read at once.
 CHUNK = 4096
 

@@ -14,7 +14,7 @@ import hashlib
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from ..mesh.refine import LUMA
+from ..util.colour import LUMA
 from ..runtime.cache import Memo, cache_key, cached, frozen, geometry_key
 from ..util.geometry import bilinear
 from ..util.unique import run_positions

@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..light.emitters import vertex_frames
-from ..light.direct import LUMA
+from ..util.colour import LUMA
 from .interpolate import interpolate_located, locate
 from .abrupt import abrupt_elements
 from .sides import open_elements, seen_vertices

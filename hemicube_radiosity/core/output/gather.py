@@ -24,7 +24,7 @@ from ..runtime.parallel import ordered_map, resolve_workers, shares, started_map
 from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..hemisphere import cosine_lattice
-from ..util.sparse import CSR, nonzero_entries, summed_entries
+from ..util.sparse import CSR, nonzero_entries, product, summed_entries
 from ..util.unique import unique_ints
 from .shared import cast_shared
 from .through import Through, cast_through
@@ -36,7 +36,7 @@ from .through import Through, cast_through
 PROCESS_RAYS = 1 << 20
 
 __all__ = ["final_gather", "gather_matrix", "apply_gather", "correct_hits", "correction_matrix", "patch_parameters",
-           "product", "surface_values", "surface_weights"]
+           "surface_values", "surface_weights"]
 
 
 def patch_parameters(patches: PatchSet):
@@ -136,44 +136,58 @@ def gather_matrix(patches: PatchSet, points, normals, scene, *, rays=256, seed=0
     # varies smoothly over the surface instead of as per-vertex speckle
     local = cosine_lattice(rays, seed)
     R = len(local)
-    step = max(1, chunk_rays // R)
     if P:
         scene.intersect(points[:1], normals[:1])  # commit the scene before threads (or forks) share it
     workers = resolve_workers(workers)
-    if workers > 1:        # a few chunks a worker, so they end together (rows never span chunks:
-        step = max(1, min(step, -(-P // (4 * workers))))      # G is the same for any chunking)
-    forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
+    step, forked = _chunking(P, R, chunk_rays, workers)
     through = Through.of(patches) if P else None                # None: every patch opaque
+    eps = ray_offsets(patches, points, normals, scene=scene)[:, None]    # the rays' start offsets
+    share = share if through is None and P else None
     # forked workers write their rows and hits into shared memory, each chunk of points at its
     # own place (at most 4 entries and one hit per ray), and send back only how many (rays
     # through see-through patches make more: their rows come back as they are)
-    eps = ray_offsets(patches, points, normals, scene=scene)[:, None]    # the rays' start offsets
-    share = share if through is None and P else None
     out = _SharedRows(P, R, hits, _hit_dtype(P, len(patches)), 5 if share is None else 6) \
         if forked and through is None else None
-    starts = range(0, P, step)
+    cast, starts = _caster(patches, scene, points, normals, eps, local, hits, out, through, share, step,
+                           chunk_rays, workers)
+    return _GatheredRows(P, len(patches.verts), R, seed, hits, share, out).run(cast, starts, workers, forked,
+                                                                               background, ticker)
+
+
+def _chunking(P, R, chunk_rays, workers):
+    """How :func:`gather_matrix` cuts ``P`` points of ``R`` rays each: ``(step, forked)``, the
+    points a chunk casts (``chunk_rays`` rays' worth; with more than one of ``workers``, at most
+    a quarter of a worker's share, so the chunks end together) and whether the chunks run on
+    forked processes (from :data:`PROCESS_RAYS` rays on). Rows never span chunks: G is the same
+    for any chunking."""
+    step = max(1, chunk_rays // R)
+    if workers > 1:
+        step = max(1, min(step, -(-P // (4 * workers))))
+    forked = workers > 1 and P > step and PROCESS_RAYS is not None and P * R >= PROCESS_RAYS
+    return step, forked
+
+
+def _caster(patches, scene, points, normals, eps, local, hits, out, through, share, step, chunk_rays, workers):
+    """``(cast, starts)`` for :func:`gather_matrix`: ``cast(s)`` casts the rays ``local`` (R, 3)
+    of the chunk of ``points`` (P, 3, scene units) with unit ``normals`` (P, 3) that starts at
+    ``s``, ``eps`` (P, 1) off their surfaces, and returns its rows (:func:`_cast`'s tuple);
+    ``starts`` are the chunks' first points. Opaque patches: :func:`_cast`, ``step`` points a
+    chunk (``out``: forked workers' :class:`_SharedRows` or None); see-through patches
+    (``through``): :func:`.through.cast_through`; points of a :class:`.shared.Sharing`
+    (``share``): :func:`.shared.cast_shared`, the points in cluster order, ``chunk_rays`` rays a
+    chunk, a few chunks a worker."""
+    P, R = len(points), len(local)
     if share is not None:                  # the points cluster by cluster; put back at the end
         points, normals, eps = points[share.order], normals[share.order], eps[share.order]
         C = len(share.clusters) - 1            # chunks of chunk_rays rays, a few a worker
         starts, ends = share.starts(max(1, min(chunk_rays // R, -(-C // (4 * workers)))))
-        cast = partial(cast_shared, share, ends, surface_weights, _hit_dtype(P, len(patches)), patches,
-                       patch_parameters(patches), scene, points, normals, eps, local, hits, out)
-    elif through is None:
-        cast = partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step, hits, out)
-    else:
-        cast = partial(cast_through, through, surface_weights, _hit_dtype(P, len(patches)), patches,
-                       patch_parameters(patches), scene, points, normals, eps, local, step, hits)
-    # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
-    # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
-    results = (started_map if background and forked else ordered_map)(cast, starts, workers, processes=forked)
-    rows = _GatheredRows(P, len(patches.verts), R, seed, hits, share, out)
-    if not background:
-        return rows.collect(results, tick=ticker)
-    if not forked:                   # threads or serial: nothing would be left to overlap
-        return Background.ready(rows.collect(results, tick=ticker))
-    # the workers were forked on this thread (started_map), not beside the caller's code
-    # running on; their chunks are collected on a thread while the caller goes on
-    return Background(partial(rows.collect, results))
+        return partial(cast_shared, share, ends, surface_weights, _hit_dtype(P, len(patches)), patches,
+                       patch_parameters(patches), scene, points, normals, eps, local, hits, out), starts
+    if through is None:
+        return partial(_cast, patches, patch_parameters(patches), scene, points, normals, eps, local, step,
+                       hits, out), range(0, P, step)
+    return partial(cast_through, through, surface_weights, _hit_dtype(P, len(patches)), patches,
+                   patch_parameters(patches), scene, points, normals, eps, local, step, hits), range(0, P, step)
 
 
 @dataclass
@@ -190,6 +204,21 @@ class _GatheredRows:
     hits: bool
     share: object
     out: object
+
+    def run(self, cast, starts, workers, forked, background, ticker):
+        """What :func:`gather_matrix` returns: the chunks ``cast(s)`` for ``s`` in ``starts``
+        (on ``workers``, forked processes when ``forked``) collected; with ``background``, a
+        :class:`.background.Background` of it."""
+        # chunks in point order whatever the worker count: G is bit-identical; each chunk's rows
+        # arrive summed and compact (a dense mesh's gather is tens of millions of hits)
+        results = (started_map if background and forked else ordered_map)(cast, starts, workers, processes=forked)
+        if not background:
+            return self.collect(results, tick=ticker)
+        if not forked:                   # threads or serial: nothing would be left to overlap
+            return Background.ready(self.collect(results, tick=ticker))
+        # the workers were forked on this thread (started_map), not beside the caller's code
+        # running on; their chunks are collected on a thread while the caller goes on
+        return Background(partial(self.collect, results))
 
     def collect(self, results, stop=None, tick=None):
         """``(G, sky)`` (``(G, sky, H)`` with ``hits``) of :func:`gather_matrix` from the
@@ -357,49 +386,68 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
     R = G.meta["rays"]
     H = H[select[H[:, 1].astype(np.int64)]]
     n = V + int(extra)
-    params = patch_parameters(patches)
-    k = max(1, min(resolve_workers(workers), len(H) // CORRECTION_SHARE))
-    at = np.linspace(0, len(H), k + 1)[1:-1].astype(np.int64)          # each cut at its row's first hit
-    bounds = [0, *np.searchsorted(H[:, 0], H[at, 0]).tolist(), len(H)]
-
-    def share(i):
-        # in runs of about CORRECTION_RUN hits, cut at row boundaries: each run's temporaries
-        # (tens of bytes a hit) then come from the heap's kept pages, not freshly faulted ones
-        # (the whole share's, hundreds of megabytes, were mapped and zeroed anew)
-        h = H[bounds[i]:bounds[i + 1]]
-        cut = np.searchsorted(h[:, 0], h[np.arange(CORRECTION_RUN, len(h), CORRECTION_RUN), 0])
-        runs = [run(h[a:b]) for a, b in zip([0, *cut.tolist()], [*cut.tolist(), len(h)]) if b > a]
-        if not runs:
-            return np.zeros(0, np.int64), np.zeros(0)
-        return tuple(np.concatenate([r[j] for r in runs]) for j in (0, 1))
-
-    def run(h):
-        row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:5].astype(np.float64)
-        ids, w = surface_weights(params, patches.polys, pid, y)
-        if h.shape[1] > 5:                      # rays through see-through patches: their weights
-            w = w * h[:, 5:6].astype(np.float64)
-        rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
-        if read is not None and len(h):
-            c, r = read(y, pid)
-            if h.shape[1] > 5:
-                r = np.asarray(r, np.float64) * h[:, 5:6].astype(np.float64)
-            rows.append(np.repeat(row, c.shape[1]))
-            cols.append(V + np.asarray(c, np.int64).ravel())
-            vals.append(np.asarray(r, np.float64).ravel())
-        # the entries of weight 0 left out (a triangle's fourth corner, a hot cell's): the same sums
-        key, vals = nonzero_entries(np.concatenate(rows) * n + np.concatenate(cols), np.concatenate(vals))
-        if not len(key):
-            return np.zeros(0, np.int64), np.zeros(0)
-        key, inv = unique_ints(key, return_inverse=True, grouped=True)   # two runs of rows
-        summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
-        keep = summed != 0
-        return key[keep], summed[keep]
-    parts = shares(share, len(bounds) - 1)
+    entries = partial(_correction_entries, patch_parameters(patches), patches.polys, read, V, n, R)
+    bounds = _hit_shares(H[:, 0], workers)
+    parts = shares(lambda i: _in_runs(entries, H[bounds[i]:bounds[i + 1]]), len(bounds) - 1)
     key, summed = (np.concatenate([p[j] for p in parts]) for j in (0, 1))
     indptr = np.zeros(P + 1, np.int64)
     np.cumsum(np.bincount(key // n, minlength=P), out=indptr[1:])
     return CSR(indptr, (key % n).astype(np.int32 if n < 2 ** 31 else np.int64), summed, (P, n),
                {"rays": R})
+
+
+def _hit_shares(rows, workers):
+    """Where :func:`correction_matrix` cuts its hits into shares, one a thread: ``[0, ..., h]``
+    (k + 1 ints) for the hits' ``rows`` (h,) in ascending order (their points), k at most
+    ``workers`` (0 = every core) and at most one per :data:`CORRECTION_SHARE` hits, each cut at
+    its row's first hit (a row never spans two shares)."""
+    k = max(1, min(resolve_workers(workers), len(rows) // CORRECTION_SHARE))
+    at = np.linspace(0, len(rows), k + 1)[1:-1].astype(np.int64)
+    return [0, *np.searchsorted(rows, rows[at]).tolist(), len(rows)]
+
+
+def _in_runs(entries, h):
+    """``entries`` (:func:`_correction_entries`) of the hits ``h`` (h, 5 or 6), in runs of about
+    :data:`CORRECTION_RUN` hits cut at row boundaries, concatenated: (keys (e,) int64, values
+    (e,) float64). Each run's temporaries (tens of bytes a hit) then come from the heap's kept
+    pages, not freshly faulted ones (the whole share's, hundreds of megabytes, were mapped and
+    zeroed anew)."""
+    cut = np.searchsorted(h[:, 0], h[np.arange(CORRECTION_RUN, len(h), CORRECTION_RUN), 0])
+    runs = [entries(h[a:b]) for a, b in zip([0, *cut.tolist()], [*cut.tolist(), len(h)]) if b > a]
+    if not runs:
+        return np.zeros(0, np.int64), np.zeros(0)
+    return tuple(np.concatenate([r[j] for r in runs]) for j in (0, 1))
+
+
+def _correction_entries(params, polys, read, V, n, R, h):
+    """The entries of :func:`correction_matrix` made by the hits ``h`` (h, 5) float rows
+    ``(point, patch, x, y, z)`` (the position in the scene's units; a 6th column where rays
+    pass see-through patches: the weight the ray still carries), ``R`` rays a point: minus each
+    hit's interpolation weights (:func:`surface_weights` on the patches' ``params`` and corner
+    ids ``polys``) at its patch's corner vertices (columns below ``V``), plus the weights
+    ``read`` gives at the extra columns ``V + c``; summed per entry, divided by R, zeros left
+    out. Returns (keys (e,) int64, ascending, ``point * n + column``; values (e,) float64,
+    dimensionless)."""
+    row, pid, y = h[:, 0].astype(np.int64), h[:, 1].astype(np.int64), h[:, 2:5].astype(np.float64)
+    ids, w = surface_weights(params, polys, pid, y)
+    if h.shape[1] > 5:                      # rays through see-through patches: their weights
+        w = w * h[:, 5:6].astype(np.float64)
+    rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
+    if read is not None and len(h):
+        c, r = read(y, pid)
+        if h.shape[1] > 5:
+            r = np.asarray(r, np.float64) * h[:, 5:6].astype(np.float64)
+        rows.append(np.repeat(row, c.shape[1]))
+        cols.append(V + np.asarray(c, np.int64).ravel())
+        vals.append(np.asarray(r, np.float64).ravel())
+    # the entries of weight 0 left out (a triangle's fourth corner, a hot cell's): the same sums
+    key, vals = nonzero_entries(np.concatenate(rows) * n + np.concatenate(cols), np.concatenate(vals))
+    if not len(key):
+        return np.zeros(0, np.int64), np.zeros(0)
+    key, inv = unique_ints(key, return_inverse=True, grouped=True)   # two runs of rows
+    summed = np.bincount(inv.reshape(-1), weights=vals, minlength=key.size) / R
+    keep = summed != 0
+    return key[keep], summed[keep]
 
 
 def final_gather(patches: PatchSet, vertex_values, points, normals, scene, *, rays=256, seed=0,
@@ -420,73 +468,3 @@ def apply_gather(G, sky, vertex_values, world=None, workers=1) -> np.ndarray:
     if world is not None:
         out = out + sky[:, None] * np.asarray(world, dtype=np.float64)[None, :]
     return out
-
-
-def product(M, x, workers=1) -> np.ndarray:
-    """``M @ x`` for a CSR ``M`` and ``x`` (n,) or (n, k), float64, as :meth:`.sparse.CSR.matvec`
-    computes it (bit for bit), faster on large matrices (:func:`_rows_product`); ``workers``
-    (0 = every core) take a share of the rows each, at most one per million entries: the
-    calling thread and ``workers - 1`` threads (:func:`.parallel.shares`)."""
-    x = np.asarray(x, dtype=np.float64)
-    one = x.ndim == 1
-    xt = np.ascontiguousarray((x[:, None] if one else x).T)     # (k, n): contiguous gathers
-    out = np.zeros((M.shape[0], xt.shape[0]))
-    n = min(resolve_workers(workers), max(1, M.nnz >> 20))
-    bounds = M.memo(("product-bounds", n), lambda: [   # the threads' rows, kept on M
-        0, *np.searchsorted(M.indptr, np.linspace(0, M.nnz, n + 1)[1:-1]).tolist(), M.shape[0]])
-    shares(lambda i: _rows_product(M, xt, bounds[i], bounds[i + 1], out), n)   # the caller takes one
-    return out[:, 0] if one else out
-
-
-def _rows_product(G, xt, r0, r1, out, chunk=1 << 16) -> None:
-    """``out[r0:r1] = (G @ x)[r0:r1]`` for ``xt`` = x.T (k, V), in runs of rows of about ``chunk``
-    entries, so that the products stay in the CPU's cache (whole-matrix temporaries, hundreds of
-    megabytes on a dense mesh's G, made the product twice as slow); each row is summed as
-    :meth:`.sparse.CSR.matvec` sums it. The runs (:func:`_row_runs`) are kept on G.
-
-    A run's columns and values are read as stored (int32, float32: half the memory traffic of
-    whole-matrix intp and float64 copies) and widened once into buffers that every band reads
-    (float32 to float64 is exact: the same products). A dense mesh's G is read from memory, not the
-    caches, at every product: widened copies kept on G made the product slower, not faster."""
-    cols, data = G.indices, G.data
-    wide = data.dtype == np.float64
-    ibuf, dbuf, buf = np.empty(0, np.intp), np.empty(0), np.empty(0)
-    for s, e, rows, starts in G.memo(("row-runs", r0, r1, chunk), lambda: _row_runs(G.indptr, r0, r1, chunk)):
-        if buf.size < e - s:
-            m = max(e - s, chunk)
-            ibuf, dbuf, buf = np.empty(m, np.intp), np.empty(m), np.empty(m)
-        p = buf[:e - s]
-        if cols.dtype == np.intp:
-            idx = cols[s:e]
-        else:                           # take converts other index types on every call
-            idx = ibuf[:e - s]
-            idx[...] = cols[s:e]
-        if wide:
-            d = data[s:e]
-        else:
-            d = dbuf[:e - s]
-            d[...] = data[s:e]
-        for k in range(xt.shape[0]):
-            # 'wrap' (the columns are in range: the same values) skips take's buffered bounds
-            # check: with it the gathers were half a dense mesh's product
-            np.take(xt[k], idx, out=p, mode="wrap")
-            np.multiply(p, d, out=p)
-            out[rows, k] = np.add.reduceat(p, starts)
-
-
-def _row_runs(ip, r0, r1, chunk) -> list:
-    """The runs of :func:`_rows_product` over rows ``r0:r1`` of a CSR with row pointers ``ip``:
-    (first entry, end entry, the run's non-empty rows (a slice where all are), their first
-    entries' offsets in the run), for runs of whole rows of about ``chunk`` entries (a relight's
-    products make them once per matrix)."""
-    cuts = np.unique(np.r_[np.searchsorted(ip, np.arange(ip[r0], ip[r1], chunk), side="right") - 1, r1])
-    cuts = cuts[(cuts >= r0) & (cuts <= r1)]
-    runs = []
-    for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
-        s, e = int(ip[a]), int(ip[b])
-        if e == s:
-            continue
-        nz = np.flatnonzero(np.diff(ip[a:b + 1]))
-        rows = slice(a, b) if nz.size == b - a else a + nz
-        runs.append((s, e, rows, ip[a:b][nz] - s))
-    return runs

@@ -19,9 +19,10 @@ from ..runtime.cache import cache_key, cached, geometry_key
 from ..runtime.parallel import resolve_workers
 from ..runtime.progress import Ticker
 from ..util.geometry import bilinear
+from ..util.sparse import product
 from ..util.unique import unique_ints
 from .abrupt import AbruptGrid, abrupt_elements, shadowed_inside
-from .gather import apply_gather, correction_matrix, gather_matrix, product
+from .gather import apply_gather, correction_matrix, gather_matrix
 from .interpolate import interpolate_corners, located_corners, locate
 from .shared import corner_sharing
 from .shine import BUDGET, HOT, hot_elements, mean_light, shine

@@ -46,7 +46,8 @@ from ..runtime.parallel import ordered_map, resolve_workers
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
 from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
-from .texels import LUMA, as_cycles, by_source, from_inside
+from ..util.colour import LUMA
+from .texels import as_cycles, by_source, from_inside
 
 __all__ = ["Lightmap", "image_size", "rasterize", "flat_triangles", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",

@@ -30,12 +30,12 @@ import numpy as np
 from ..hemisphere import cosine_lattice
 from ..rays import embree_available, embree_scene
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
+from ..util.colour import LUMA
 from ..util.geometry import in_frames, tangent_frames
 from .gather import patch_parameters, surface_weights
 
 __all__ = ["lune_shares"]
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 #: Corners whose rays are cast at once.
 CHUNK = 4096
 #: Float32 steps of a point's largest coordinate its rays start behind its face: as near as

@@ -17,7 +17,7 @@ import numpy as np
 from ..light.emitters import emitter_transport, transport_product, transposed_transport
 from ..mesh.clusters import connected_components
 from ..mesh.patches import PatchSet, poly_geometry
-from ..mesh.refine import LUMA
+from ..util.colour import LUMA
 from ..rays import occluder
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker

@@ -39,9 +39,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..util.colour import LUMA
+
 __all__ = ["by_source", "as_cycles", "from_inside", "STRIDES", "AGREE", "AGREE_FLOOR", "FLAT", "MARGIN"]
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
 STRIDES = (8, 4, 2)   # texels between the anchors of the grids tried, coarse to fine
 AGREE = 0.02          # a source's light at the four anchors within this share of the largest ...
 AGREE_FLOOR = 0.002   # ... or of this share of its 99th percentile over the anchors

@@ -1,3 +1,3 @@
 # SPDX-License-Identifier: GPL-3.0-or-later
 """Helpers with no radiosity knowledge: sparse rows, k nearest neighbours, distinct rows,
-geometry and sampling."""
+geometry, sampling and the luminance weights of a colour."""

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hemicube_radiosity.core.light.environment import LUMA, PEAK, EnvironmentLight, environment_irradiance
+from hemicube_radiosity.core.light.environment import PEAK, EnvironmentLight, environment_irradiance
+from hemicube_radiosity.core.util.colour import LUMA
 
 W, H = 256, 128
 HALF_ANGLE = np.radians(12.0)   # a window's half angle

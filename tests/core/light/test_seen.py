@@ -14,6 +14,7 @@ from hemicube_radiosity.core.light import seen
 from hemicube_radiosity.core.mesh.clusters import make_clusters
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
+from hemicube_radiosity.core.util.colour import LUMA
 
 
 def _square(side=2.71):
@@ -34,7 +35,7 @@ def test_a_cluster_on_the_threshold_is_chosen_whatever_the_lights_scale():
         def at(x, normals, where, samples=None, eps=None, scale=scale):
             return np.repeat(scale * (x[:, :1] > x[:, 1:2]), 3, axis=1).astype(float)
         ctx = SimpleNamespace(patches=p, clusters=c, direct=SimpleNamespace(at=at))
-        y = (p.rho * at(seen.spread_points(p, np.arange(2)), p.normals, "")) @ seen.LUMA
+        y = (p.rho * at(seen.spread_points(p, np.arange(2)), p.normals, "")) @ LUMA
         assert np.array_equal(y > 0, lit)                          # one lit, one dark: CV exactly 1
         answers.append(bool(seen._varying(ctx, np.array([0]), np.arange(len(p)))[0]))
     assert answers == [True] * len(answers), answers

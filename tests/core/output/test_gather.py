@@ -89,8 +89,7 @@ def test_the_shared_ray_pattern_reads_a_plates_form_factor_along_a_row_under_its
 def test_product_is_matvec_bit_for_bit(dtype):
     # the relight's sparse products (G in float32, the correction matrix in float64), in runs of
     # rows and on threads, sum every row as CSR.matvec does
-    from hemicube_radiosity.core.output.gather import product
-    from hemicube_radiosity.core.util.sparse import CSR
+    from hemicube_radiosity.core.util.sparse import CSR, product
     rng = np.random.default_rng(5)
     P, V, nnz = 3000, 2000, 1 << 21
     rows = np.sort(rng.integers(0, P - 10, nnz))               # the last rows empty

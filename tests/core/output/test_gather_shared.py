@@ -8,7 +8,8 @@ from hemicube_radiosity.core.light.emitters import vertex_frames
 from hemicube_radiosity.core.mesh.patches import MeshInput
 from hemicube_radiosity.core.mesh.subdivide import build_patches
 from hemicube_radiosity.core.output import gather
-from hemicube_radiosity.core.output.gather import correct_hits, gather_matrix, product
+from hemicube_radiosity.core.output.gather import correct_hits, gather_matrix
+from hemicube_radiosity.core.util.sparse import product
 from hemicube_radiosity.core.output.shared import share_corners
 from hemicube_radiosity.core.rays import embree_available, embree_scene
 

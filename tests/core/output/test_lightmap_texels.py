@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from hemicube_radiosity.core.output import texels
+from hemicube_radiosity.core.util.colour import LUMA
 
 H, W, PITCH = 64, 96, 0.02
 
@@ -97,7 +98,7 @@ def test_interpolated_where_smooth_exact_at_every_shadow_texel():
             mixed |= pad[1 + dr:1 + dr + H, 1 + dc:1 + dc + W] != img
     assert mixed.sum() > 300 and exact[mixed.ravel(), 0].all()
     # the interpolated texels within the agreement bound of the exact light, each source apart
-    Y, Yw = value @ texels.LUMA, want @ texels.LUMA
+    Y, Yw = value @ LUMA, want @ LUMA
     err = np.abs(Y - Yw)[~exact] / np.maximum(Yw[~exact], 1e-12)
     assert err.max() <= texels.AGREE, err.max()
     # and far fewer texels lit than the island has (measured: 21% in the lamp's light, the
@@ -162,7 +163,7 @@ def test_small_islands_are_interpolated_on_cells_laid_from_their_own_first_texel
         return out
     value, exact = texels.by_source(split, covered, points, normals, faces, pitch, probed=np.array([True, False]))
     np.testing.assert_array_equal(value[exact], want[exact])
-    Y, Yw = value @ texels.LUMA, want @ texels.LUMA
+    Y, Yw = value @ LUMA, want @ LUMA
     err = np.abs(Y - Yw)[~exact] / np.maximum(Yw[~exact], 1e-12)
     assert err.max() <= texels.AGREE, err.max()
     # a texel whose 8 neighbours on its island are not all lit or all shadowed as it is: exact
