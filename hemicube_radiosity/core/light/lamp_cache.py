@@ -22,7 +22,8 @@ from ..mesh.patches import PatchSet
 from ..rays import ray_offsets
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..runtime.progress import Ticker
-from .environment import LUMA, EnvironmentLight
+from ..util.colour import LUMA
+from .environment import EnvironmentLight
 from .lamps import SUN_FIRST, UNBOUNDED, AreaLight, PointLight, SpotLight, SunLight, light_irradiance
 
 __all__ = ["lamp_irradiance", "shadow_key", "SCALE"]
