@@ -36,6 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..light.environment import RAYS_PER_SKY_RAY, EnvironmentLight
 from ..light.lamps import SunLight
 from ..output.indirect import DENSE_RAY_DIVISOR, gathers_faces
 from ..output.shine import BUDGET
@@ -122,6 +123,15 @@ PER_EXTRA_LAMP = 9e-5
 #: a sun and a sky light no area that brightly (the living room and truck town shine none).
 #: Emitting faces' are in :data:`PER_VERTEX`.
 PER_VERTEX_SHINE = 2e-6
+#: Seconds per shadow ray toward an environment map's directions (one worker), and the points
+#: the output stage lights with it per output vertex (the vertices, their corners lit on their
+#: own, the abrupt elements' grids and cells), each casting toward the half of the map's
+#: directions above its horizon (``RAYS_PER_SKY_RAY`` x Sky Rays): 1.8e-7 s a ray in the window-lit room of
+#: ``tests/blender/test_environment_window.py`` (4 points a vertex), 2.4e-7 s in
+#: bitterli_grey_white_room (8 points a vertex: 673 M rays, 163 s of the bake's 300 s of CPU;
+#: the machine busy). Two scenes, so a rough rate.
+PER_ENV_RAY = 2.1e-7
+ENV_POINTS = 6.0
 #: The other stages (patches, refinement, direct light at the patches, solve) as a share of these.
 OTHER = 0.15
 #: The time taken over the forecast, as measured (module docstring), the most for ``make demo``'s
@@ -270,6 +280,8 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
         + PER_EDGE * edges + PER_LEANING * leaning
     if not emitting and gathers and any(not isinstance(lamp, SunLight) for lamp in lamps):
         out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
+    env_rays = RAYS_PER_SKY_RAY * int(s.sky_rays) * sum(isinstance(lamp, EnvironmentLight) for lamp in lamps)
+    out += output_vertices * ENV_POINTS * 0.5 * env_rays * PER_ENV_RAY    # toward a map's directions
     out /= speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),
                     int(output_vertices), workers, float(seen), per_receiver,

@@ -247,3 +247,46 @@ def test_vertices_that_share_a_places_gather_rays_count_their_share():
     shared = forecast(ctx, 10, 1000, joined=600)
     assert np.isclose(shared.output, one.output * (400 + 600 * PER_JOINED) / 1000)
     assert shared.form_factors == one.form_factors
+
+
+def test_an_environment_map_counts_its_rays_at_the_output():
+    """An environment map's light is shadow rays toward its directions from every point the
+    output lights (core/light/environment.py): the forecast counts ENV_POINTS points a vertex,
+    each casting toward the half of its directions above its horizon. Counted, not timed: the
+    rays the bake casts toward the map, by its kernel, within 2x of the count the forecast said."""
+    from hemicube_radiosity.core.light import environment, lamps
+    from hemicube_radiosity.core.light.environment import RAYS_PER_SKY_RAY
+    from hemicube_radiosity.core.runtime.forecast import ENV_POINTS, PER_ENV_RAY, forecast
+    from types import SimpleNamespace
+    from tests.core.light.test_lamp_cache import _court, _sky
+
+    env = environment.EnvironmentLight(_sky(), rays=64)
+    cast = []
+    kernel = lamps.KERNELS[environment.EnvironmentLight]
+
+    def counted(light, x, n, *a, **k):
+        d, _ = light.directions(light.rays, seed=0)
+        cast.append(int(((np.asarray(n) @ d.T) > 0).sum()))
+        return kernel(light, x, n, *a, **k)
+    lamps.KERNELS[environment.EnvironmentLight] = counted
+    try:
+        r = bake(_court(), BakeSettings(workers=1, **SMALL), lights=[env], world=env.base())
+    finally:
+        lamps.KERNELS[environment.EnvironmentLight] = kernel
+    f = r.forecast
+    rays = RAYS_PER_SKY_RAY * r.settings.sky_rays                      # the map's directions a point
+    said = f.vertices * ENV_POINTS * 0.5 * rays
+    assert sum(cast) > f.vertices * rays / 4                          # the map lit the output
+    assert 0.5 < said / sum(cast) < 2.0, (said, sum(cast), f.vertices)
+    ctx = SimpleNamespace(settings=r.settings, patches=r.patches, clusters=r.clusters, unknowns=r.patches,
+                          lights=[env], meshes=None)
+    without = forecast(SimpleNamespace(**{**vars(ctx), "lights": []}), 10, 1000).output
+    assert np.isclose(forecast(ctx, 10, 1000).output - without,
+                      1000 * ENV_POINTS * 0.5 * rays * PER_ENV_RAY + 1000 * _shine_per_vertex())
+
+
+def _shine_per_vertex():
+    """Per vertex, what shines where a light other than a sun lights the scene (as for lamps)."""
+    from hemicube_radiosity.core.output.shine import BUDGET
+    from hemicube_radiosity.core.runtime.forecast import PER_VERTEX_SHINE
+    return BUDGET * PER_VERTEX_SHINE
