@@ -216,6 +216,39 @@ def test_a_corner_whose_sun_passes_under_a_lip_beside_it_gets_no_sun():
 
 
 
+
+def test_a_leaning_corner_whose_sun_passes_under_a_ledge_beside_it_gets_no_sun():
+    """The floor of the test above (ray offset 2.8e-4), its corners shaded with a normal leaning
+    30 deg toward -x: a crease (core/output/crease.py), lit from a point 1% into its element
+    (x = y = 5e-3) a ray offset off it along the bisector of its two normals. A ledge 1 mm up
+    from x = 5e-4 to 3e-3 over y > 0, beyond the reach of the first test (the ray offset's rise).
+    Cycles' ray from the north-east corner's bake point (7e-5 in) passes under the ledge's edge
+    and meets its underside: no sun; ours started past the ledge and read the sun at cos 75 deg
+    (the living room's bevel corner 614: 0.40 where Cycles, in the shadow of the face beside it,
+    has 0.12). The south-west corner's ray passes beside the ledge: the sun."""
+    xs = np.array([-10.0, -1.0, 0.0, 1.0, 10.0])
+    verts = [(x, y, 0.0) for y in xs for x in xs]
+    faces = [(j * 5 + i, j * 5 + i + 1, (j + 1) * 5 + i + 1, (j + 1) * 5 + i) for j in range(4) for i in range(4)]
+    floor = MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="floor")
+    lean = np.radians(30.0)
+    floor.corner_normal = np.tile([-np.sin(lean), 0.0, np.cos(lean)], (len(floor.face_indices), 1))
+    ledge = MeshInput.from_faces([(5e-4, 0.0, 1e-3), (3e-3, 0.0, 1e-3), (3e-3, 1.0, 1e-3), (5e-4, 1.0, 1e-3)],
+                                 [(0, 1, 2, 3)], rho=(RHO,) * 3, name="ledge")
+    r = bake([floor, ledge], BakeSettings(patch_size=20.0, element_size=20.0, two_sided_reflection=False,
+                                          gather_rays=16),
+             lights=[SunLight((-1.0, 0.0, -1.0), strength=SUN)])
+    E = r.elements
+    assert 1e-3 > mesh_offsets(r.patches)[0] / np.sin(np.pi / 4)   # beyond the rise's reach
+    pos, D = E.verts[E.corner_ids()], r.corner_parts()[2]
+    at = np.all(np.abs(pos) < 1e-12, axis=2) & (E.owner == 0)[:, None]
+    ne = at & np.all(E.centers[:, :2] > 0, axis=1)[:, None]
+    sw = at & np.all(E.centers[:, :2] < 0, axis=1)[:, None]
+    assert ne.sum() == 1 and sw.sum() == 1
+    lit = SUN * np.cos(np.radians(75.0)) / np.pi
+    assert D[ne].max() < 1e-3 * lit
+    np.testing.assert_allclose(D[sw], lit, rtol=1e-3)
+
+
 def test_a_corner_behind_its_own_warped_face_still_finds_the_floor_under_it():
     """One mesh: the floor and a 2 x 2 m lid facing down, rising from 5 um over the floor at y =
     -0.5 to 0.2 m at y = 1.5, warped 2 cm (one bilinear piece, not cut along Blender's triangles:
@@ -306,7 +339,7 @@ def test_a_covered_point_s_sun_ray_passes_the_backs_cycles_has_not():
     a little below the horizon: its ray passes under the plate (nothing there in Cycles) but
     crosses the back 5 mm on. A covered corner is lit from such a start (a few float32 steps off
     its point: the living room's notch, wall corner 7273: 0.03 where Cycles has 0.33); its sun is
-    the open one, rho E cos / pi, which the bake's own shadow rays (backs included) read as 0."""
+    the open one, E cos / pi (radiance arriving), which the bake's own shadow rays (backs included) read as 0."""
     from types import SimpleNamespace
 
     from hemicube_radiosity.core.light.direct import DirectLight
