@@ -61,7 +61,9 @@ and five buildings, the large lit terrain issue 32 names). Without that folder t
 **Error.** At every Cycles face corner (its world position and its face's normal) our result is read
 where ``core.output.interpolate.locate`` finds it on the object of the same name (matched by
 position and normal): the element's corner values (what the writer writes at its corners, a
-textured face's corners each their own colour) interpolated bilinearly. Left out: corners of
+textured face's corners each their own colour) interpolated bilinearly; a corner of a bent face
+that Cycles baked on another of its triangles than the one we found is read at Cycles' own bake
+point on that triangle (:func:`values_at_corners`). Left out: corners of
 zero-area faces (a point-domain Cycles bake would average their black corners in), corners Cycles
 shades on a triangle without area (:func:`flat_bake_corners`: it bakes them at another vertex with
 an undefined normal), of emitters (EMIT bake > 0), corners the reference never lights (its
@@ -101,6 +103,7 @@ for p in (ROOT, HERE, os.path.join(ROOT, "tools")):
 import dark_corners  # noqa: E402
 import speed_vs_error as sve  # noqa: E402
 from hemicube_radiosity.core.settings import QUALITY  # noqa: E402
+from hemicube_radiosity.core.util.unique import run_positions  # noqa: E402
 
 SCENES_DIR = os.path.normpath(os.path.join(ROOT, "..", "shared", "scenes"))
 CACHE_DIR = os.path.join(ROOT, "bench", "cache")
@@ -111,6 +114,7 @@ GLOSSY = 4           # the references' glossy bounces (with reflective caustics)
 FILTER_GLOSSY = 0.0  # ... without Filter Glossy: unbiased (Blender's default 1.0 lost 5.2% of
                      # godot_zdm2's light, all of it off its default surface's specular layer)
 CAND_SPP = 64
+OFF_ULPS = 16        # float32 steps off an element's plane that put Cycles' bake point off it
 RELIGHT = 1.5        # the relight after the defaults' bake: every lamp and the world this much brighter
 MEMORY_TARGET_MB = 4096
 TIMEOUT = 20 * 60          # a bake of ours
@@ -560,7 +564,8 @@ def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
             index = {n: i for i, n in enumerate(r.elements.object_names)}
             owner = np.array([index.get(names[o], -1) for o in z["owner"]])
             vals, matched = values_at_corners(r.elements, r.corner_values(), z["pos"], z["centroid"], z["normal"],
-                                              owner, z["face"] if "face" in z.files else None)
+                                              owner, z["face"] if "face" in z.files else None,
+                                              point=z["point"] if "point" in z.files else None)
         np.save(out_npz, np.where(matched[:, None], vals, np.inf))   # inf: not matched, NaN: ours is NaN
         rec["evaluate_seconds"] = time.perf_counter() - t
         rec["corners_unmatched"] = int((~matched).sum())
@@ -573,7 +578,7 @@ def ours_child(name, corners_npz, out_npz, settings_json, relit="0"):
 
 
 def values_at_corners(elements, corner_values, pos, centroid, normal, owner, face=None, nudge=1e-3,
-                      min_facing=0.9, cap=None):
+                      min_facing=0.9, cap=None, point=None):
     """Our values at Cycles' corners, matched by position and normal: (values (L, 3), matched (L,)).
     ``corner_values`` (N, 4, 3): what we write at every element corner (``BakeResult.corner_values``:
     a textured face's corners each with their own colour), interpolated bilinearly in the element.
@@ -590,7 +595,17 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     face folded over or lying on its neighbour) is located again among its own face's elements. A
     corner counts as matched when the element found faces within acos(``min_facing``) of the
     corner's face and passes within the distance moved (+1e-6 of the scene) of the point; the
-    others are left out."""
+    others are left out.
+
+    ``point`` (L, 3): where Cycles baked each corner (a POSITION bake), or None. A bent face
+    (an n-gon or warped quad: :mod:`hemicube_radiosity.core.mesh.ngons`) is Blender's loop
+    triangles, and Cycles bakes a corner on the first of them that holds it, which need not be
+    the one the nudge toward the face's centroid lands on, nor face the way the face does (the
+    living room's wall corner 7281: baked on a sliver turned up under a bevel, which we read 0.005
+    as Cycles reads 0, where the wall's own triangle beside it reads 0.39). Where ``point`` lies
+    off the element found and on another of its face, the corner is read at
+    the point of the element of its face nearest to ``point`` (:func:`_at_bake_points`), whichever
+    way that element faces."""
     from hemicube_radiosity.core.output.interpolate import interpolate_corner_values, locate
     from hemicube_radiosity.core.output.lift import BAKE_NUDGE
     from hemicube_radiosity.core.util.geometry import bilinear
@@ -614,6 +629,9 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     tol = step[ok] + 1e-6 * diag
     facing = np.einsum("ij,ij->i", elements.normals[idx], normal[ok])
     matched[ok] = (facing >= min_facing) & (np.linalg.norm(on - p[ok], axis=1) <= tol)
+    if point is not None and face is not None:
+        _at_bake_points(elements, corner_values, np.asarray(point, float), owner, np.asarray(face), ok, idx,
+                        vals, matched)
     return vals, matched
 
 
@@ -644,6 +662,84 @@ def _on_own_face(elements, p, owner, normal, face, idx, uv):
     idx, uv = idx.copy(), uv.copy()
     idx[w], uv[w] = cand[j], uv2
     return idx, uv
+
+
+def _at_bake_points(elements, corner_values, point, owner, face, ok, idx, vals, matched):
+    """In place: ``vals``, ``matched`` (L,) read again at Cycles' bake ``point`` (L, 3) for the
+    corners (of those ``ok``) whose bake point lies off the plane of the element ``idx`` (n,) they
+    were found on (farther than :data:`OFF_ULPS` float32 steps of its largest coordinate) and on
+    another element of their own face (``owner``, ``face``): under a quarter of that distance
+    from it. There they are read at the point of that element nearest to ``point`` (see
+    :func:`values_at_corners`), and matched."""
+    from dataclasses import replace
+
+    from hemicube_radiosity.core.output.interpolate import interpolate_corner_values, locate
+
+    rows = np.flatnonzero(ok)
+    x = point[rows]
+    off = np.abs(np.einsum("ij,ij->i", x - elements.centers[idx], elements.normals[idx]))
+    floor = OFF_ULPS * 2.0 ** -23 * np.maximum(np.abs(x).max(axis=1), 1.0)
+    w = np.flatnonzero(np.isfinite(off) & (off > floor))
+    if w.size == 0:
+        return
+    rows, off = rows[w], off[w]
+    stride = int(elements.source_face.max()) + 2          # one key per (object, face)
+    key_e = elements.owner.astype(np.int64) * stride + elements.source_face
+    key_p = owner[rows].astype(np.int64) * stride + face[rows]
+    order = np.argsort(key_e, kind="stable")
+    lo, hi = np.searchsorted(key_e[order], key_p, "left"), np.searchsorted(key_e[order], key_p, "right")
+    cnt = hi - lo
+    r = np.repeat(np.arange(rows.size), cnt)
+    e = order[np.repeat(lo, cnt) + run_positions(cnt)]
+    d = _to_elements(point[rows][r], elements, e)
+    best = np.full(rows.size, np.inf)
+    np.minimum.at(best, r, d)
+    pick = np.full(rows.size, -1, np.int64)
+    at = d <= best[r]
+    pick[r[at]] = e[at]
+    take = np.flatnonzero((pick >= 0) & (best < 0.25 * off))
+    if take.size == 0:
+        return
+    rows, pick = rows[take], pick[take]
+    one = replace(elements, polys=elements.polys[pick], centers=elements.centers[pick],
+                  normals=elements.normals[pick], areas=elements.areas[pick], rho=elements.rho[pick],
+                  emission=elements.emission[pick], owner=np.arange(pick.size),
+                  source_face=elements.source_face[pick])
+    _, uv = locate(one, point[rows], np.arange(pick.size))
+    vals[rows] = interpolate_corner_values(corner_values, pick, uv)
+    matched[rows] = True
+
+
+def _to_elements(x, elements, e):
+    """(k,) the distance from points ``x`` (k, 3) to the elements ``e`` (k,) (a quad as its two
+    triangles (0, 1, 2), (0, 2, 3))."""
+    c = elements.corners()[e]
+    return np.minimum(_to_triangles(x, c[:, 0], c[:, 1], c[:, 2]), _to_triangles(x, c[:, 0], c[:, 2], c[:, 3]))
+
+
+def _to_triangles(p, a, b, c):
+    """(k,) the distance from points ``p`` (k, 3) to triangles ``a``, ``b``, ``c`` (k, 3 each):
+    the nearest point of each (Ericson, *Real-Time Collision Detection* 5.1.5), on a triangle
+    without area the nearest of its corners."""
+    dot = lambda u, v: np.einsum("ij,ij->i", u, v)  # noqa: E731
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = dot(ab, ap), dot(ac, ap)
+    bp, cp = p - b, p - c
+    d3, d4, d5, d6 = dot(ab, bp), dot(ac, bp), dot(ab, cp), dot(ac, cp)
+    va, vb, vc = d3 * d6 - d5 * d4, d5 * d2 - d1 * d6, d1 * d4 - d3 * d2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = va + vb + vc
+        v, w = vb / den, vc / den
+        q = a + v[:, None] * ab + w[:, None] * ac                          # inside the face region
+        t_ab = np.clip(d1 / (d1 - d3), 0, 1)
+        t_ac = np.clip(d2 / (d2 - d6), 0, 1)
+        t_bc = np.clip((d4 - d3) / ((d4 - d3) + (d5 - d6)), 0, 1)
+    edges = [a + np.nan_to_num(t_ab)[:, None] * ab, a + np.nan_to_num(t_ac)[:, None] * ac,
+             b + np.nan_to_num(t_bc)[:, None] * (c - b)]
+    dist = np.min([np.linalg.norm(p - y, axis=1) for y in edges + [a, b, c]], axis=0)
+    inside = (va >= 0) & (vb >= 0) & (vc >= 0) & (den > 0)
+    dist[inside] = np.linalg.norm(p - q, axis=1)[inside]
+    return dist
 
 
 # ----------------------------------------------------------------------------- parent side

@@ -39,3 +39,36 @@ def test_a_corner_is_read_on_its_own_face():
     found, ok = real_scenes.values_at_corners(E, values, np.array([[0.9, 0.5, 0.0]]), np.array([[0.5, 0.5, 0.0]]),
                                               normal, owner, face=np.array([0]))
     assert ok[0] and found[0, 0] == 1.0
+
+
+def a_bent_face():
+    """One face (0) of two triangles meeting at the origin: one in z = 0 facing up, the other in
+    y = 0 facing +y (a bent n-gon as Blender's loop triangles: the living room's wall corner
+    7281, whose first triangle is a sliver turned up under a bevel)."""
+    verts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [-1, 0, 1]], float)
+    polys = np.array([[0, 1, 2, -1], [0, 3, 4, -1]])
+    c = np.array([verts[p[:3]].mean(axis=0) for p in polys])
+    n = np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0]])
+    return PatchSet(verts, polys, c, n, np.array([0.5, 0.5]), np.full((2, 3), 0.5), np.zeros((2, 3)),
+                    np.zeros(2, np.int32), np.array([0, 0], np.int32), ["obj"])
+
+
+def test_a_corner_of_a_bent_face_is_read_where_cycles_baked_it():
+    E = a_bent_face()
+    values = np.stack([np.full((4, 3), 1.0), np.full((4, 3), 2.0)])       # triangle 0 reads 1, 1 reads 2
+    pos, centroid = np.zeros((1, 3)), np.array([[0.3, 0.3, 0.0]])          # the nudge lands on triangle 0
+    normal, owner, face = np.array([[0.0, 0.0, 1.0]]), np.array([0]), np.array([0])
+    found, ok = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner, face)
+    assert ok[0] and found[0, 0] == 1.0
+    # Cycles baked it on triangle 1, a hair toward its centre: read there, though it faces +y
+    on_other = np.array([[-2e-4, 0.0, 1e-4]])
+    found, ok = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner, face, point=on_other)
+    assert ok[0] and found[0, 0] == 2.0
+    # Cycles' point on triangle 0 (to float32 rounding): as without it, bit for bit
+    on_own = np.array([[2e-4, 1e-4, 1e-7]])
+    again, ok2 = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner, face, point=on_own)
+    assert ok2[0] and again[0, 0] == 1.0
+    # a point off every element of its face (nearer none by 4x) is not moved
+    off = np.array([[2e-4, 1e-4, 5e-3]])
+    found, ok = real_scenes.values_at_corners(E, values, pos, centroid, normal, owner, face, point=off)
+    assert ok[0] and found[0, 0] == 1.0
