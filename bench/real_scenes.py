@@ -635,6 +635,14 @@ def values_at_corners(elements, corner_values, pos, centroid, normal, owner, fac
     return vals, matched
 
 
+def _face_keys(elements, owner, face):
+    """(one int64 per element, one per corner of ``owner``, ``face``): equal exactly where the
+    object and face are the same."""
+    stride = max(int(elements.source_face.max()), int(np.max(face, initial=0))) + 2
+    return (elements.owner.astype(np.int64) * stride + elements.source_face,
+            np.asarray(owner, np.int64) * stride + face)
+
+
 def _on_own_face(elements, p, owner, normal, face, idx, uv):
     """``idx``, ``uv`` with the points found on an element of another face than their own
     (``face``) located again among the elements of their own face, where it has any."""
@@ -642,9 +650,7 @@ def _on_own_face(elements, p, owner, normal, face, idx, uv):
 
     from hemicube_radiosity.core.output.interpolate import locate
 
-    stride = int(elements.source_face.max()) + 2          # one key per (object, face)
-    key_e = elements.owner.astype(np.int64) * stride + elements.source_face
-    key_p = owner.astype(np.int64) * stride + face
+    key_e, key_p = _face_keys(elements, owner, face)
     wrong = np.flatnonzero(key_e[idx] != key_p)
     if wrong.size == 0:
         return idx, uv
@@ -652,10 +658,7 @@ def _on_own_face(elements, p, owner, normal, face, idx, uv):
     cand = np.flatnonzero(np.isin(key_e, groups))
     if cand.size == 0:
         return idx, uv
-    sub = replace(elements, polys=elements.polys[cand], centers=elements.centers[cand],
-                  normals=elements.normals[cand], areas=elements.areas[cand], rho=elements.rho[cand],
-                  emission=elements.emission[cand], owner=np.searchsorted(groups, key_e[cand]),
-                  source_face=elements.source_face[cand])
+    sub = replace(elements.take(cand), owner=np.searchsorted(groups, key_e[cand]))
     has = np.isin(group_of, np.unique(sub.owner))
     w = wrong[has]
     j, uv2 = locate(sub, p[w], group_of[has], normal[w])
@@ -683,9 +686,7 @@ def _at_bake_points(elements, corner_values, point, owner, face, ok, idx, vals, 
     if w.size == 0:
         return
     rows, off = rows[w], off[w]
-    stride = int(elements.source_face.max()) + 2          # one key per (object, face)
-    key_e = elements.owner.astype(np.int64) * stride + elements.source_face
-    key_p = owner[rows].astype(np.int64) * stride + face[rows]
+    key_e, key_p = _face_keys(elements, owner[rows], face[rows])
     order = np.argsort(key_e, kind="stable")
     lo, hi = np.searchsorted(key_e[order], key_p, "left"), np.searchsorted(key_e[order], key_p, "right")
     cnt = hi - lo
@@ -701,10 +702,7 @@ def _at_bake_points(elements, corner_values, point, owner, face, ok, idx, vals, 
     if take.size == 0:
         return
     rows, pick = rows[take], pick[take]
-    one = replace(elements, polys=elements.polys[pick], centers=elements.centers[pick],
-                  normals=elements.normals[pick], areas=elements.areas[pick], rho=elements.rho[pick],
-                  emission=elements.emission[pick], owner=np.arange(pick.size),
-                  source_face=elements.source_face[pick])
+    one = replace(elements.take(pick), owner=np.arange(pick.size))
     _, uv = locate(one, point[rows], np.arange(pick.size))
     vals[rows] = interpolate_corner_values(corner_values, pick, uv)
     matched[rows] = True

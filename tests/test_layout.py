@@ -79,9 +79,8 @@ MAX_FUNCTION_LINES = 60
 
 
 def test_functions_stay_short():
-    """Every function of the package, its docstring included, fits on a screen: longer ones
-    are split into named parts (``gather_matrix``, ``correction_matrix``,
-    ``hemicube_form_factors`` and ``group_form_factors`` were, with the same results bit for bit)."""
+    """Every function of the package, its docstring included, fits on a screen: a longer one
+    is split into named parts."""
     lengths = {}
     for name, path in MODULES.items():
         for node in ast.walk(ast.parse(open(path, encoding="utf-8").read())):

@@ -109,9 +109,9 @@ def test_each_surface_of_a_window_lit_room_is_as_bright_as_in_cycles(comparison)
 def test_the_window_lit_room_relit_brighter_casts_no_ray(monkeypatch):
     """The world's Strength x 1.5 in the same session: the map's light is kept (at unit mean
     luminance, core/light/lamp_cache.py) and what shines on the floor through the window is
-    ranked to 9 digits (core/output/shine.py: in this symmetric room, groups alike but for
-    rounding swapped places at the budget's edge when scaled, and the relight cast their shadow
-    rays again). Nothing is cast again and the result is the first times 1.5."""
+    ranked to 9 digits (core/output/shine.py: this room is symmetric, so groups alike but for
+    rounding meet at the budget's edge, and their order must not follow the rounding of the
+    scaled light). Nothing is cast again and the result is the first times 1.5."""
     from hemicube_radiosity.blender.bake import BakeJob
     from hemicube_radiosity.core.light import lamp_cache
     from hemicube_radiosity.core.output import shine

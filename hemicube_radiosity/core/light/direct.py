@@ -286,7 +286,7 @@ class DirectLight:
         return self._scene
 
     def at(self, points, normals, where: str, samples=None, eps=None, facing=None, split=1,
-           part=None, sky=None, unbounded=None, emitters=True) -> np.ndarray:
+           part=None, sky=None, unbounded=None, emitters=True, lights=True, clamp=True) -> np.ndarray:
         """(P, 3) radiance arriving directly at ``points`` (P, 3) with unit ``normals`` (P, 3).
         ``where`` names the point set in the transport's cache key ('centres', 'vertices', ...).
         ``samples``: fewer shadow rays per point than the bake's, and no more in penumbrae
@@ -303,15 +303,17 @@ class DirectLight:
         :func:`..output.indirect.gathered_sky`): no sky rays are cast, and it is asked for
         last (the gather casts while the rest is found). ``unbounded`` (P, 3) or None: the
         suns' and environment maps' part (radiance, before the clamp at 0) is added to it too.
-        ``emitters`` False: the lamps' and the world's light only."""
+        ``emitters`` False: the lamps' and the world's light only; ``lights`` False: the
+        emitters' only. ``clamp`` False: the sum as it is (parts found apart are added, then
+        clamped once, as here)."""
         D = np.zeros((len(points), 3))
         if self.emitters.size and emitters:
             # the transport's sums as emitters.apply_transport's, bit for bit, several times faster
             D += transport_product(self._emitters_at(points, normals, where, samples, transposed=True, eps=eps),
                                    self.emitted(), transposed=True)
-        if self.world is not None and sky is None:
+        if self.world is not None and sky is None and lights:
             D += self.world_at(points, normals, where, eps=eps, facing=facing, split=split, part=part)
-        if self.lights:
+        if self.lights and lights:
             far = None if unbounded is None else np.zeros((len(points), 3))
             D += lamp_irradiance(self.patches, self.lights, self.cache, points=points, normals=normals,
                                  eps=self.offsets(points, normals) if eps is None else eps,
@@ -320,11 +322,16 @@ class DirectLight:
                                  seed=self.light_seed, workers=self.workers, unbounded=far) / np.pi
             if far is not None:
                 unbounded += far / np.pi
-        if self.world is not None and sky is not None:
+        if self.world is not None and sky is not None and lights:
             D += np.asarray(sky(), dtype=np.float64)[:, None] * self.world[None, :]
         # an environment map's variation about its mean is signed (its estimate, near a point
         # that sees little of the sky, can dip below what the mean gives): light is not
-        return np.maximum(D, 0.0, out=D)
+        return np.maximum(D, 0.0, out=D) if clamp else D
+
+    def over(self, patches) -> "DirectLight":
+        """This bake's lamps and world with their shadow rays through ``patches`` instead (e.g.
+        the fronts alone, :mod:`..output.covered`), and no emitting face."""
+        return replace(self, patches=patches, emitters=np.zeros(0, np.int64), groups=None, _scene=None)
 
     def lamps_at(self, points, normals, where: str, eps=None, facing=None) -> np.ndarray:
         """(P, 3) :meth:`at`'s radiance from the lamps alone: no emitting face, no world."""

@@ -50,7 +50,15 @@ def _shape_key(light) -> str:
 def _unit_map(light: EnvironmentLight) -> tuple:
     """(the map scaled to a mean luminance of 1, that scale, the key of its shape): a world
     made brighter or dimmer (its Strength) has the same unit map, to float32's precision, so
-    a relight finds its light kept. (None, 0, b"") for a dark map."""
+    a relight finds its light kept. (None, 0, b"") for a dark map. Kept on the light (the
+    bake asks for it at every point set)."""
+    memo = light.__dict__.setdefault("_memo", {})
+    if "unit" not in memo:
+        memo["unit"] = _make_unit_map(light)
+    return memo["unit"]
+
+
+def _make_unit_map(light: EnvironmentLight) -> tuple:
     scale = float(light.mean() @ LUMA)
     if not scale > 0:
         return None, 0.0, b""

@@ -264,6 +264,14 @@ class PatchSet:
             em[sel] = np.asarray(m.face_emission, float)[self.source_face[sel]]
         return self.with_materials(rho, em)
 
+    def take(self, rows) -> "PatchSet":
+        """The patches ``rows`` (R,) int of this set, over the same ``verts`` (shared); without
+        see-through faces (their masks are per patch of the whole set)."""
+        rows = np.asarray(rows, np.int64)
+        return PatchSet(self.verts, self.polys[rows], self.centers[rows], self.normals[rows], self.areas[rows],
+                        self.rho[rows], self.emission[rows], self.owner[rows], self.source_face[rows],
+                        list(self.object_names))
+
     def with_materials(self, rho=None, emission=None) -> "PatchSet":
         """A copy with new reflectivity/emission and the same geometry (arrays shared)."""
         return PatchSet(

@@ -57,13 +57,11 @@ a relight casts no ray. World units.
 """
 from __future__ import annotations
 
-from dataclasses import replace
 
 import numpy as np
 
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
-from ..light.emitters import transport_product
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.unique import unique_ints
 from .crease import INSET, below_plane, leans, strongest_sun
@@ -224,20 +222,21 @@ def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, x
     return picked
 
 
+def _front_rows(ctx, patches):
+    """(F,) the rows of ``patches`` (or elements) that are no back of an open surface
+    (:mod:`..mesh.backs`), or None where the bake has no backs."""
+    backs = [i for i, m in enumerate(ctx.meshes or ()) if getattr(m, "back_of", -1) >= 0]
+    return np.flatnonzero(~np.isin(patches.owner, backs)) if backs else None
+
+
 def _fronts(ctx, elements):
     """(rows (F,) of ``elements`` that are no back of an open surface (:mod:`..mesh.backs`),
     the Embree scene of those): Cycles has no backs, and a back lies a hair behind its face, over
     a surface the face touches."""
-    meshes = ctx.meshes or ()
-    backs = [i for i, m in enumerate(meshes) if getattr(m, "back_of", -1) >= 0]
-    if not backs:
+    rows = _front_rows(ctx, elements)
+    if rows is None:
         return np.arange(len(elements)), embree_scene(elements)
-    rows = np.flatnonzero(~np.isin(elements.owner, backs))
-    sub = replace(elements, polys=elements.polys[rows], centers=elements.centers[rows],
-                  normals=elements.normals[rows], areas=elements.areas[rows], rho=elements.rho[rows],
-                  emission=elements.emission[rows], owner=elements.owner[rows],
-                  source_face=elements.source_face[rows])
-    return rows, embree_scene(sub)
+    return rows, embree_scene(elements.take(rows))
 
 
 def _cover_along(scene, fronts, own, p, origin, direction, reach, tie):
@@ -362,19 +361,15 @@ def _front_light(ctx, start, shade, geo) -> np.ndarray:
     backs, or with see-through faces (their masks are per patch), all of it the bake's own."""
     direct = ctx.direct
     P = direct.patches
-    backs = [i for i, m in enumerate(ctx.meshes or ()) if getattr(m, "back_of", -1) >= 0]
     zero = np.zeros(len(start))
-    rows = np.flatnonzero(~np.isin(P.owner, backs)) if backs else None
+    rows = _front_rows(ctx, P)
     if rows is None or rows.size == len(P) or getattr(P, "see_through", None) is not None:
         return direct.at(start, shade, "covered", eps=zero, facing=geo)
-    sub = replace(P, polys=P.polys[rows], centers=P.centers[rows], normals=P.normals[rows], areas=P.areas[rows],
-                  rho=P.rho[rows], emission=P.emission[rows], owner=P.owner[rows], source_face=P.source_face[rows])
-    fronts = replace(direct, patches=sub, emitters=np.zeros(0, np.int64), groups=None, _scene=None)
-    D = fronts.at(start, shade, "covered-fronts", eps=zero, facing=geo, emitters=False)
-    if direct.emitters.size:               # as DirectLight.at's emitters' part
-        D += transport_product(direct._emitters_at(start, shade, "covered", transposed=True, eps=zero),
-                               direct.emitted(), transposed=True)
-    return np.maximum(D, 0.0)
+    D = direct.over(P.take(rows)).at(start, shade, "covered-fronts", eps=zero, facing=geo, emitters=False,
+                                     clamp=False)
+    if direct.emitters.size:
+        D += direct.at(start, shade, "covered", eps=zero, facing=geo, lights=False, clamp=False)
+    return np.maximum(D, 0.0, out=D)
 
 
 def start_offsets(ctx, elements, points, normals) -> np.ndarray:

@@ -276,11 +276,12 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
         rate = PER_VERTEX * rays / 128 if gathers else PER_VERTEX_EMITTERS
     else:
         rate = (PER_VERTEX_LAMPS + PER_VERTEX_HIT * (HIT if hit is None else hit)) * rays / 128
-    out = casting * rate + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - 1, 0) \
+    maps = [lamp for lamp in lamps if isinstance(lamp, EnvironmentLight)]   # counted apart, below
+    out = casting * rate + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - len(maps) - 1, 0) \
         + PER_EDGE * edges + PER_LEANING * leaning
     if not emitting and gathers and any(not isinstance(lamp, SunLight) for lamp in lamps):
         out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
-    env_rays = RAYS_PER_SKY_RAY * int(s.sky_rays) * sum(isinstance(lamp, EnvironmentLight) for lamp in lamps)
+    env_rays = RAYS_PER_SKY_RAY * int(s.sky_rays) * sum(bool(m.cast_shadows) for m in maps)
     out += output_vertices * ENV_POINTS * 0.5 * env_rays * PER_ENV_RAY    # toward a map's directions
     out /= speed
     return Forecast((1 + OTHER) * (ff + out), ff, out, len(ids), curved_pieces(ctx.patches, ctx.clusters),

@@ -14,3 +14,4 @@ import numpy as np
 __all__ = ["LUMA"]
 
 LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA.setflags(write=False)
