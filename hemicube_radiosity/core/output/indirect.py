@@ -30,15 +30,25 @@ from .corners import corner_columns
 from .sides import open_elements, seen_fraction, sided_mesh
 from .through import through_key
 
-__all__ = ["GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky", "gathers_faces",
-           "start_gather"]
+__all__ = ["DENSE_GATHER_PASSES", "GATHER_PASSES", "element_indirect", "gather_finds_world", "gathered_sky",
+           "gathers_faces", "start_gather"]
 
 
-#: Passes of :func:`_bounce_again`. Measured against Cycles (raw RMS / bias): one pass, yard
-#: 0.89% / -0.26%, Cornell 1.13% / +0.09%, room 3.17% / -0.26%; converged (8 at most), 0.84%,
-#: 1.10% and 3.18% with the room's bias at -0.55%: at the elements' level each bounce loses a
-#: little more (rays through the cracks of touching objects) than the patch solution does.
-GATHER_PASSES = 1
+#: Passes of :func:`_bounce_again` over output elements. Measured against Cycles (raw RMS /
+#: bias): one pass, yard 0.89% / -0.26%, Cornell 1.13% / +0.09%, room 3.17% / -0.26%;
+#: converged (8 at most), 0.84%, 1.10% and 3.18% with the room's bias at -0.55%: at the
+#: elements' level each bounce loses a little more (rays through the cracks of touching
+#: objects) than the patch solution does. On the real scenes (``bench/real_scenes.py``, rms
+#: against Cycles 256 spp, 1 / 2 / 3 / 8 passes) godot_zdm2 13.41% / 12.61% / 12.50% / 12.73%,
+#: where light bounced between a sunlit floor and wall at their junction is an element's, not a
+#: patch's; at 3 sauer_pandora 29.0% -> 27.1%, the living room 4.98% -> 4.94%, the terrain and
+#: the bunny a hundredth of a point better, truck town the same, at ~2% more time.
+GATHER_PASSES = 3
+#: ... and where a dense scene's faces gather (:func:`gathers_faces`): each pass reads again
+#: what the faces' gather reads through pockets it cannot resolve (a moulding 2 cm off a wall
+#: reads the wall's lit corners), so the error compounds: bitterli_wooden_staircase 27.89% at
+#: one pass, 29.23% at 3 (bitterli_grey_white_room 21.4% -> 19.9%).
+DENSE_GATHER_PASSES = 1
 
 #: The gather at a dense scene's faces (:func:`gathers_faces`) casts the Gather Rays setting
 #: over this: the staircase's 256,004 vertices with 128 rays each peaked at 4.7 GB (its hits and
@@ -122,8 +132,8 @@ def _gathered(ctx, elements, rest_v, xv, nv, rho_v, light_v=None, side=None, pen
     if mirror_v is not None:      # what glossy patches mirror: the patch solution's, interpolated
         mirror_e = mirror_v if _the_patches(ctx, elements) else _interpolated(ctx, elements, mirror_v, xv, nv)
         out += mirror_e if side is None else side.spread(mirror_e)
-    return _bounce_again(G, rho_v, out, rest_e, workers=ctx.settings.workers,
-                         spread=None if side is None else side.spread)
+    return _bounce_again(G, rho_v, out, rest_e, DENSE_GATHER_PASSES if gathers_faces(ctx) else GATHER_PASSES,
+                         workers=ctx.settings.workers, spread=None if side is None else side.spread)
 
 
 def _the_patches(ctx, elements) -> bool:
