@@ -113,10 +113,13 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     if not embree_available() or len(elements) == 0:
         return None
     sun = strongest_sun(ctx)                  # its rays pick corners: a sun turned picks others
-    key = cache_key(geometry_key(elements) + array_key(xv) + array_key(nv)
+    # the meshes' corner normals too: a leaning corner's pick follows its shading normal
+    shading = b"".join(array_key(np.asarray(m.corner_normal)) for m in ctx.meshes or ()
+                       if getattr(m, "corner_normal", None) is not None)
+    key = cache_key(geometry_key(elements) + shading + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
                     + (b"" if buried is None else np.asarray(buried, bool).tobytes())
-                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 7))
+                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 7, INSET))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None

@@ -363,3 +363,35 @@ def test_a_covered_point_s_sun_ray_passes_the_backs_cycles_has_not():
     under = np.array([[0.5, 0.5, -2 * gap]])
     up = np.array([[0.0, 0.0, 1.0]])
     assert _front_light(SimpleNamespace(direct=direct2, meshes=meshes), under, up, up).max() == 0.0
+
+
+def test_covered_corners_are_found_again_when_only_the_shading_normals_change(monkeypatch):
+    """Which corners are lit at their bake point depends on their shading normals (a leaning
+    corner's pick, above), so the cached picks are keyed on the meshes' corner normals too: a
+    relight after Shade Flat (the same geometry, other normals) finds them again, and one with
+    the same normals reads them from the cache."""
+    from hemicube_radiosity.core.output import covered
+    from hemicube_radiosity.core.runtime.cache import FormFactorCache
+
+    calls = []
+    find = covered._find
+    monkeypatch.setattr(covered, "_find", lambda *a, **k: calls.append(1) or find(*a, **k))
+    xs = np.array([-10.0, -1.0, 0.0, 1.0, 10.0])
+    verts = [(x, y, 0.0) for y in xs for x in xs]
+    faces = [(j * 5 + i, j * 5 + i + 1, (j + 1) * 5 + i + 1, (j + 1) * 5 + i) for j in range(4) for i in range(4)]
+    ledge = MeshInput.from_faces([(5e-4, 0.0, 1e-3), (3e-3, 0.0, 1e-3), (3e-3, 1.0, 1e-3), (5e-4, 1.0, 1e-3)],
+                                 [(0, 1, 2, 3)], rho=(RHO,) * 3, name="ledge")
+    cache = FormFactorCache()
+
+    def baked(lean):
+        floor = MeshInput.from_faces(verts, faces, rho=(RHO,) * 3, name="floor")
+        floor.corner_normal = np.tile([-np.sin(lean), 0.0, np.cos(lean)], (len(floor.face_indices), 1))
+        bake([floor, ledge], BakeSettings(patch_size=20.0, element_size=20.0, two_sided_reflection=False,
+                                          gather_rays=16),
+             lights=[SunLight((-1.0, 0.0, -1.0), strength=SUN)], cache=cache)
+        return len(calls)
+    first = baked(np.radians(30.0))
+    assert first >= 1
+    assert baked(0.0) > first                       # other normals: found again
+    again = len(calls)
+    assert baked(0.0) == again                      # the same: from the cache
