@@ -395,14 +395,16 @@ def _footprint_distance(keys):
     return np.maximum(np.abs(P[:, 0] - 1), np.abs(P[:, 1] - 1)) - 0.25
 
 
-@pytest.mark.parametrize("z0, near, far", [(0.0, 0.003, 0.003), (-0.1, 0.04, 0.01)])
+@pytest.mark.parametrize("z0, near, far", [(0.0, 0.003, 0.003), (-0.1, 0.04, 0.015)])
 def test_a_block_on_or_in_the_floor_lights_it_as_a_floor_with_a_hole_would(block_bakes, z0, near, far):
     """The floor around a block resting on it, or sunk 10 cm into it, against the floor with
     the block's footprint cut out, at every vertex off the footprint's outline; under the block
     the floor is dark. Measured: resting, 0.08% at worst anywhere; sunk, 3.3% at worst (2% on
-    average) in the ring of vertices beside it and 0.9% beyond 0.3 m: the block's sides are cut
+    average) in the ring of vertices beside it and 1.06% beyond 0.3 m: the block's sides are cut
     into elements from 10 cm under the floor, and the element across the floor line is dark at
-    its buried corners, so it reflects a little less onto the floor next to it."""
+    its buried corners, so it reflects a little less onto the floor next to it, and each of the
+    gather's element-level passes (core/output/indirect.py GATHER_PASSES, 3) reads that again
+    (0.9% with one pass)."""
     ref, bakes = block_bakes
     got = _floor_values(bakes[z0], 0)
     keys = [k for k in ref if _footprint_distance([k])[0] > 0.1]

@@ -26,7 +26,10 @@ vertices 0.04% higher; patch solutions unchanged), and when the sky's rays began
 quarter first where points are lit one by one (core/hemisphere.py SKY_FIRST), shared out among
 the points a patch or a cluster averages (core/light/points.py SKY_SHARE) and among 4 x 4 blocks
 of the abrupt grid (cornell_embree_lamps: its patch solution moved by at most 3.1e-4 of the
-maximum, its vertices by at most 7.7e-4, 2.5e-4 of the mean; the other cases unchanged).
+maximum, its vertices by at most 7.7e-4, 2.5e-4 of the mean; the other cases unchanged), and
+when the gather's element-level bounce took three passes instead of one (core/output/indirect.py
+GATHER_PASSES: cornell_defaults' vertices by at most 5.3e-4 of the maximum, cornell_embree_lamps'
+by 4.6e-3, 4.7e-3 of the mean; patch solutions unchanged).
 A change that is meant to alter results regenerates the file in the same commit and says why."""
 import os
 
