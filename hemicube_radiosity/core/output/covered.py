@@ -64,7 +64,7 @@ from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.unique import unique_ints
-from .crease import INSET, below_plane, leans, strongest_sun
+from .crease import INSET, below_plane, bisector, inset_points, leans, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .normals import corner_shading_normals
 
@@ -216,11 +216,9 @@ def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, x
     # shadow of the face beside it, 0.3 mm on, which the start passed)
     j = np.flatnonzero(toward & ~picked & leans(shade, geo) & (shade @ to_sun > 0.0))
     if j.size:
-        up = shade[j] + geo[j]
-        up /= np.maximum(np.linalg.norm(up, axis=1), 1e-300)[:, None]
-        x = elements.verts[v[j]] + INSET * (elements.centers[p[j]] - elements.verts[v[j]])
+        start = inset_points(elements, p[j], v[j]) + eps[j, None] * bisector(shade[j], geo[j])
         here = _sun_reaches(scene, fronts, own, p[j], origin[j], to_sun, tie[j])
-        there = _sun_reaches(scene, fronts, own, p[j], x + eps[j, None] * up, to_sun, tie[j])
+        there = _sun_reaches(scene, fronts, own, p[j], start, to_sun, tie[j])
         picked[j[here != there]] = True
     return picked
 
