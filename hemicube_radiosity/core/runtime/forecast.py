@@ -279,8 +279,11 @@ def forecast(ctx, receivers, output_vertices: int, per_receiver=None, mesh=None,
     maps = [lamp for lamp in lamps if isinstance(lamp, EnvironmentLight)]   # counted apart, below
     out = casting * rate + output_vertices * PER_EXTRA_LAMP * max(len(lamps) - len(maps) - 1, 0) \
         + PER_EDGE * edges + PER_LEANING * leaning
-    if not emitting and gathers and any(not isinstance(lamp, SunLight) for lamp in lamps):
-        out += output_vertices * BUDGET * PER_VERTEX_SHINE          # what shines, at most BUDGET groups
+    # what shines, at most BUDGET groups (not where a dense scene's faces gather: they shine
+    # nothing, ``indirect._corrections``)
+    shines = any(not isinstance(lamp, SunLight) for lamp in lamps) and not gathers_faces(ctx)
+    if not emitting and gathers and shines:
+        out += output_vertices * BUDGET * PER_VERTEX_SHINE
     env_rays = RAYS_PER_SKY_RAY * int(s.sky_rays) * sum(bool(m.cast_shadows) for m in maps)
     out += output_vertices * ENV_POINTS * 0.5 * env_rays * PER_ENV_RAY    # toward a map's directions
     out /= speed

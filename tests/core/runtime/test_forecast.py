@@ -290,3 +290,28 @@ def _shine_per_vertex():
     from hemicube_radiosity.core.output.shine import BUDGET
     from hemicube_radiosity.core.runtime.forecast import PER_VERTEX_SHINE
     return BUDGET * PER_VERTEX_SHINE
+
+
+def test_a_dense_scene_s_faces_count_nothing_that_shines():
+    """Where a dense scene's faces gather (``indirect.gathers_faces``) nothing shines (its
+    corrections run with a budget of 0 groups): a point lamp adds the budget's shine to each
+    output vertex's forecast elsewhere, nothing there."""
+    from types import SimpleNamespace
+    from hemicube_radiosity.core.light.lamps import PointLight
+    from hemicube_radiosity.core.output.indirect import gathers_faces
+    from hemicube_radiosity.core.rays import embree_available
+    from hemicube_radiosity.core.runtime.forecast import forecast
+
+    assert embree_available()                       # the faces' gather needs Embree
+    lamp = PointLight((1.0, 1.0, 1.0))
+    room = scenes.tessellate(scenes.cornell_box(light_radiance=0.0), 8)      # faces grouped
+    r = bake(room, BakeSettings(workers=1, **SMALL), lights=[lamp])
+    assert r.clusters is not None
+    added = {}
+    for dense in (False, True):
+        ctx = SimpleNamespace(settings=r.settings, patches=r.patches, clusters=r.clusters, unknowns=r.clusters,
+                              meshes=None, dense=dense, lights=[lamp])
+        assert gathers_faces(ctx) == dense
+        none = SimpleNamespace(**{**vars(ctx), "lights": []})
+        added[dense] = forecast(ctx, 10, 1000).output - forecast(none, 10, 1000).output
+    assert np.isclose(added[False], 1000 * _shine_per_vertex()) and added[True] == 0.0
