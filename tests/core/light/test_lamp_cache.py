@@ -140,3 +140,31 @@ def test_an_environment_map_made_brighter_relights_without_a_ray(monkeypatch):
     np.testing.assert_allclose(again, 1.5 * a, rtol=1e-7, atol=1e-12 * a.max())
     fresh = np.asarray(bake(_court(), s, **world(1.5)).corner_values())
     np.testing.assert_allclose(again, fresh, rtol=1e-7, atol=1e-12 * a.max())
+
+
+@needs_embree
+def test_an_environment_map_turned_or_resized_is_lit_anew(monkeypatch):
+    """The kept light of a map (lamp_cache._unit_map) is its shape's: the same map turned about
+    the vertical (the key holds the rotation: without it this fails), or the same sky drawn at
+    twice the resolution, casts its rays again and bakes as a fresh bake of that world does."""
+    from hemicube_radiosity.core.light.environment import EnvironmentLight
+
+    s = BakeSettings(patch_size=0.5, element_size=0.25, sky_rays=16)
+    px = _sky()
+    c, sn = np.cos(np.radians(90.0)), np.sin(np.radians(90.0))
+    turned = np.array([[c, -sn, 0.0], [sn, c, 0.0], [0.0, 0.0, 1.0]])
+    worlds = {"turned": EnvironmentLight(px, rotation=turned, rays=64),
+              "resized": EnvironmentLight(_sky(256, 128), rays=64)}
+    cache = FormFactorCache()
+    env = EnvironmentLight(px, rays=64)
+    first = np.asarray(bake(_court(), s, cache=cache, lights=[env], world=env.base()).corner_values())
+    calls = []
+    real = lamp_cache.light_irradiance
+    monkeypatch.setattr(lamp_cache, "light_irradiance", lambda *x, **k: calls.append(1) or real(*x, **k))
+    for name, other in worlds.items():
+        calls.clear()
+        again = np.asarray(bake(_court(), s, cache=cache, lights=[other], world=other.base()).corner_values())
+        assert calls, name                                         # its light found anew
+        assert np.abs(again - first).max() > 0.05 * first.max(), name      # the court lit otherwise
+        fresh = np.asarray(bake(_court(), s, lights=[other], world=other.base()).corner_values())
+        np.testing.assert_allclose(again, fresh, rtol=1e-7, atol=1e-12 * first.max(), err_msg=name)
