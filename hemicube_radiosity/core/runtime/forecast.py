@@ -113,9 +113,13 @@ HIT = 0.5
 PER_JOINED = 0.46
 #: Seconds per output vertex for each lamp past the first (one worker): its shadow rays at the
 #: vertices, the abrupt elements' grids and cells, the elements' insides. The rates above were
-#: fitted to one sun; sauer_pandora's six soft point lamps cast 42.8 s of rays in its 68 s output
-#: stage on 2 workers for 108,794 vertices (cProfile, an idle machine).
-PER_EXTRA_LAMP = 9e-5
+#: fitted to one sun; this one to sauer_pandora's six soft point lamps (108,794 output vertices;
+#: the bench's only scene of several lamps), by its form factors' and output stage's time on an
+#: idle machine (55.9 s at 8b2c235, 2 workers): this puts its forecast at 75 s (range 45-150 s).
+#: Counted in CPU time (``bench/forecast_parts.py sauer_pandora``, a loaded machine: 100.8 s
+#: for the output stage, 57.7 s of it the abrupt elements' corrections) it would be about 7e-5;
+#: the range is checked against wall time, which that CPU time, taken under load, overstates.
+PER_EXTRA_LAMP = 3e-5
 #: Seconds per output vertex and group that shines (:mod:`..output.shine`: a contour and
 #: shadow rays each), one worker, where lamps other than suns light the scene: their pools of
 #: light shine, as many groups as :data:`..output.shine.BUDGET` allows (sauer_pandora's six
