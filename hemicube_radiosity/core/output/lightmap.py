@@ -216,13 +216,16 @@ def texel_light(elements, parts, points, normals, owner, D, faces=None):
     return E + rho * light, light
 
 
-def located_parts(elements, parts, points, normals, owner, faces=None, workers=1):
+def located_parts(elements, parts, points, normals, owner, faces=None, workers=1, cover=None):
     """(E, rho, I) (n, 3) each: the emission, reflectivity and indirect light of ``parts``
     (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`, on
-    ``workers``)."""
+    ``workers``; with a :class:`.texel_cover.Cover` and ``faces``, those whose element does not
+    hold them found again on their own face: :meth:`.texel_cover.Cover.relocate`)."""
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     idx, uv = locate_texels(elements, points, normals, owner, faces, workers)
+    if cover is not None and faces is not None:
+        idx, uv = cover.relocate(points, normals, faces, idx, uv)
     E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
@@ -341,7 +344,8 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     ``workers``: where the texels are located (:func:`locate_texels`). ``cover``: a
     :class:`.texel_cover.Cover` of the object, or None: a texel whose point (or sub-point) lies
     under another face nearer than our rays start is lit from where Cycles' rays start, and its
-    reflected light scaled by what it sees of the open scene there (needs ``faces``)."""
+    reflected light scaled by what it sees of the open scene there; a texel its element does not
+    hold is found again on its own face (:meth:`.texel_cover.Cover.relocate`; needs ``faces``)."""
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
@@ -353,7 +357,7 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
                    texel_points(world, t, b)[0], nrm, apart(t if own is None else own, lift), pitch, probed,
                    None if inside is None else inside[covered])[0]
     E, rho, indirect = _read_parts(elements, parts, pts, nrm, owner, own, workers, covered,
-                                   None if inside is None else inside[covered], t if own is None else own)
+                                   None if inside is None else inside[covered], t if own is None else own, cover)
     if lift is not None:
         indirect = indirect * cover.keep(pts, nrm, shading, lift)[:, None]
     D = np.maximum(Ds.sum(axis=1), 0.0)
@@ -375,14 +379,14 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     return E + rho * light, light
 
 
-def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces):
+def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces, cover=None):
     """(E, rho, I) (n, 3) each at the n covered texels (:func:`located_parts`): a texel whose
     centre lies outside its triangle (an island's rim, ``inside`` (n,) False) with texels
     inside on its face (``faces`` (n,)) beside it takes their mean, as its direct light does
     (:func:`.texels.from_inside`; Cycles' margin extends an island from its texels): only the
     others are located (the living room's rim: 95,534 of its 507,328 texels)."""
     if inside is None:
-        return located_parts(elements, parts, pts, nrm, owner, own, workers)
+        return located_parts(elements, parts, pts, nrm, owner, own, workers, cover)
     got, done = np.zeros((len(pts), 3, 3)), np.zeros((len(pts), 3), bool)
     for ids in (np.flatnonzero(inside), None):
         if ids is None:
@@ -390,7 +394,7 @@ def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside,
             ids = np.flatnonzero(~done[:, 0])
         if ids.size:
             got[ids] = np.stack(located_parts(elements, parts, pts[ids], nrm[ids], owner,
-                                              None if own is None else own[ids], workers), 1)
+                                              None if own is None else own[ids], workers, cover), 1)
             done[ids] = True
     return got[:, 0], got[:, 1], got[:, 2]
 

@@ -19,7 +19,11 @@ A covered point's rays start :data:`.covered.LIFT_ULPS` float32 steps off it (at
 to the face over it: :meth:`Cover.lifts`), for its direct light (:func:`.texels.as_cycles`), and
 its light reflected more than once is scaled by the share of the open scene seen from there
 against the share seen from where its rays start otherwise (:meth:`Cover.keep`, as
-:func:`.covered.covered_light` scales a covered corner's). Geometry only; world units.
+:func:`.covered.covered_light` scales a covered corner's).
+
+The same rays find where a texel lies among its face's elements when the nearest centres
+mislead :func:`.interpolate.locate` (:meth:`Cover.relocate`: a bent face cut into slivers).
+Geometry only; world units.
 """
 from __future__ import annotations
 
@@ -30,14 +34,19 @@ import numpy as np
 from ..hemisphere import open_fraction
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
+from ..util.geometry import bilinear
 from .covered import LIFT_ULPS, OPEN_FLOOR, OWN_PASSES, TIE_ULPS
+from .interpolate import inverse_bilinear
 
-__all__ = ["Cover", "lifts_of", "apart", "OPEN_RAYS"]
+__all__ = ["Cover", "lifts_of", "apart", "OPEN_RAYS", "OFF"]
 
 #: Cosine rays per covered texel for the share of the open scene it sees (a corner casts 64:
 #: texels are many, their keep is mostly 0 under a face; the living room's Cube lightmap read
 #: 4.01% RMS against Cycles with every keep 1, 4.00% with 64 rays).
 OPEN_RAYS = 16
+#: A located texel whose element's point lies farther off it than this share of the element's
+#: size is found again (:meth:`Cover.relocate`).
+OFF = 1e-3
 
 
 @dataclass
@@ -89,7 +98,7 @@ class Cover:
         own = self._keys(np.full(len(points), self.owner), faces)
         tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(points).max(axis=1), 1.0)
         eps = ray_offsets(self.elements, owner=np.full(len(points), self.owner))
-        gap = _over(scene, keys, own, points + tie[:, None] * normals, normals, eps, tie)
+        gap = _along(scene, keys, own, points + tie[:, None] * normals, normals, eps, tie)[0]
         covered = np.isfinite(gap)
         lift = np.minimum(np.minimum(eps, 0.5 * (gap + tie)), LIFT_ULPS * tie / TIE_ULPS)
         out[covered] = lift[covered]
@@ -115,6 +124,39 @@ class Cover:
         out[c] = np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
         return out
 
+    def relocate(self, points, normals, faces, idx, uv):
+        """(idx (n,), uv (n, 2)): ``points`` (n, 3) (unit triangle ``normals``, source ``faces``
+        (n,)) located in elements ``idx`` at bilinear ``uv`` (:func:`.lightmap.locate_texels`),
+        those whose element's point at ``uv`` lies more than :data:`OFF` of its size off them
+        found again: the element of their own face that a ray along the normal meets at the
+        point (from the element's size over it). Among a bent face's slivers, 42 cm by 2 mm
+        across a bevel strip 3 cm wide (the living room's), the nearest centres are those of
+        slivers a column over, and a texel read a sliver 2 cm away across the strip: the dark
+        foot's light on the lit edge and the other way round (6,006 of its 507,328 texels)."""
+        idx, uv = np.array(idx, dtype=np.int64), np.array(uv, dtype=np.float64)
+        if not len(idx) or not embree_available():
+            return idx, uv
+        points, normals = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+        C = self.elements.corners()
+        off = np.linalg.norm(bilinear(C[idx], uv[:, :1], uv[:, 1:]) - points, axis=1)
+        size = np.sqrt(self.elements.areas[idx])
+        bad = np.flatnonzero(off > OFF * size)
+        if not bad.size:
+            return idx, uv
+        rows, scene = self._fronts()
+        keys = self._keys(self.elements.owner[rows], self.elements.source_face[rows])
+        own = self._keys(np.full(bad.size, self.owner), np.asarray(faces)[bad])
+        tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(points[bad]).max(axis=1), 1.0)
+        h, n = size[bad], normals[bad]
+        row = _along(scene, keys, own, points[bad] + h[:, None] * n, -n, 2.0 * h, tie, same=True)[1]
+        bad, row = bad[row >= 0], rows[row[row >= 0]]
+        u, v = (np.clip(w, 0.0, 1.0) for w in inverse_bilinear(C[row], points[bad]))
+        now = np.linalg.norm(bilinear(C[row], u[:, None], v[:, None]) - points[bad], axis=1)
+        better = now < off[bad]
+        idx[bad[better]] = row[better]
+        uv[bad[better]] = np.stack([u, v], 1)[better]
+        return idx, uv
+
 
 def lifts_of(cover, points, normals, faces):
     """(n,) :meth:`Cover.lifts` of the texel ``points`` (n, 3) (triangle ``normals``,
@@ -136,24 +178,26 @@ def apart(faces, lift):
     return faces
 
 
-def _over(scene, keys, own, origin, direction, reach, tie) -> np.ndarray:
-    """(n,) how far along each unit ``direction`` (n, 3) from ``origin`` (n, 3) a ray meets,
-    within ``reach`` (n,), a face of another key than its ``own`` (n,) (``keys`` (F,) per face of
-    ``scene``), going on past its own face's hits (:data:`.covered.OWN_PASSES` times, a float32
-    step ``tie`` (n,) on); inf where it meets none."""
+def _along(scene, keys, own, origin, direction, reach, tie, same=False):
+    """((n,) distance, (n,) face row or -1): how far along each unit ``direction`` (n, 3) from
+    ``origin`` (n, 3) a ray meets, within ``reach`` (n,), a face of ``scene`` whose key (``keys``
+    (F,)) is (``same``) or is not its ``own`` (n,), going on past the others' hits
+    (:data:`.covered.OWN_PASSES` times, a float32 step ``tie`` (n,) on); inf and -1 where none."""
     origin = np.array(origin, dtype=np.float64)
     left = np.array(reach, dtype=np.float64)
     dist = np.full(len(origin), np.inf)
+    row = np.full(len(origin), -1, np.int64)
     gone = np.zeros(len(origin))
     todo = np.arange(len(origin))
     for _ in range(OWN_PASSES):
         hit, t = scene.intersect(origin[todo], direction[todo], left[todo])
         hit, t = np.asarray(hit), np.asarray(t, dtype=np.float64)
         met = hit >= 0
-        other = np.zeros(len(todo), bool)
-        other[met] = keys[hit[met]] != own[todo[met]]
-        dist[todo[other]] = gone[todo[other]] + t[other]
-        again = met & ~other & (t + tie[todo] < left[todo])
+        found = np.zeros(len(todo), bool)
+        found[met] = (keys[hit[met]] == own[todo[met]]) == same
+        dist[todo[found]] = gone[todo[found]] + t[found]
+        row[todo[found]] = hit[found]
+        again = met & ~found & (t + tie[todo] < left[todo])
         todo, t = todo[again], t[again]
         if not len(todo):
             break
@@ -161,4 +205,4 @@ def _over(scene, keys, own, origin, direction, reach, tie) -> np.ndarray:
         origin[todo] += step[:, None] * direction[todo]
         left[todo] -= step
         gone[todo] += step
-    return dist
+    return dist, row
