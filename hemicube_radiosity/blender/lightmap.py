@@ -54,6 +54,7 @@ import numpy as np
 
 from ..core.formats.gltf import LIGHTING_NOTE, srgb_encode
 from ..core.output import lightmap as core_lightmap
+from ..core.output import texel_cover
 from . import textures, write
 from .read.scene import mesh_corner_normals
 
@@ -327,7 +328,8 @@ def _write_one(ob, me, src, oi, result, light, scales, settings, folder):
     lm = core_lightmap.bake_lightmap(result.elements, corners, oi, uv, world, size,
                                      flip=bool(np.linalg.det(M[:3, :3]) < 0), parts=parts, split=split,
                                      normals=_corner_normals(me, M), lighting_scale=k, probed=probed,
-                                     faces=_triangle_faces(me), workers=settings.workers)
+                                     faces=_triangle_faces(me), workers=settings.workers,
+                                     cover=None if parts is None else texel_cover.Cover.of(result, oi))
     texel_seconds = time.perf_counter() - t
     stem = bpy.path.clean_name(src.name)
     exr, png = _save_pass(src.name, folder, stem, "lightmap", lm.image)

@@ -204,7 +204,7 @@ class DirectLight:
         return np.stack(cols, axis=1) if cols else np.zeros((len(points), 0))
 
     def split_at(self, points, normals, where: str, samples=None, which=None, facing=None,
-                 low=None, split=1, part=None) -> np.ndarray:
+                 low=None, split=1, part=None, eps=None) -> np.ndarray:
         """(P, S, 3) radiance arriving directly at ``points`` from each source apart: every
         emitting object (its faces together), every lamp, the world, in that order; summed over
         the sources (and clamped at 0) it is :meth:`at`'s (to rounding). A source's column
@@ -220,7 +220,9 @@ class DirectLight:
         from above it by rays from the points, from below it by rays from ``low`` (where
         Cycles' shadow rays toward such a light start: :func:`..output.lift.lift`), as
         :mod:`..output.crease` lights a leaning corner. ``split``, ``part``: the world's rays
-        shared out among runs of points whose mean is what is read, as :meth:`at`'s."""
+        shared out among runs of points whose mean is what is read, as :meth:`at`'s. ``eps``
+        (P,) or None: how far the rays start off the points, NaN where :meth:`offsets` says (a
+        lightmap's texel under a face nearer than that: :mod:`..output.texel_cover`)."""
         x = np.asarray(points, dtype=np.float64)
         owners = np.unique(_unit_owner(self)) if self.emitters.size else np.zeros(0, np.int64)
         S = len(owners) + len(self.lights) + (self.world is not None)
@@ -228,9 +230,11 @@ class DirectLight:
         want = np.ones(S, bool) if which is None else np.asarray(which, bool)
         if not len(x) or not want.any():
             return out
-        eps = self.offsets(x, normals)
+        own = eps is not None
+        eps = self.offsets(x, normals) if eps is None else \
+            np.where(np.isnan(eps), self.offsets(x, normals), np.asarray(eps, dtype=np.float64))
         if want[:len(owners)].any():
-            T = self._emitters_at(x, normals, where, samples)
+            T = self._emitters_at(x, normals, where, samples, eps=eps if own else None)
             L, owner = self.emitted(), _unit_owner(self)
             for j, o in enumerate(owners):
                 if want[j]:
@@ -239,7 +243,8 @@ class DirectLight:
             if want[len(owners) + i]:
                 out[:, len(owners) + i] = self._lamp_split(i, x, normals, eps, samples, facing, low)
         if self.world is not None and want[-1]:
-            out[:, -1] = self.world_at(x, normals, where, facing=facing, split=split, part=part)
+            out[:, -1] = self.world_at(x, normals, where, eps=eps if own else None, facing=facing, split=split,
+                                       part=part)
         return out
 
     def _lamp_split(self, i, x, normals, eps, samples, facing, low) -> np.ndarray:

@@ -48,6 +48,7 @@ from .lift import lift
 from .uv_raster import REACH, edge_distances, flat_triangles, rasterize
 from ..util.colour import LUMA
 from .texels import as_cycles, by_source, from_inside
+from .texel_cover import apart, lifts_of
 
 __all__ = ["Lightmap", "image_size", "rasterize", "flat_triangles", "texel_points", "evaluate", "texel_light", "texel_values",
            "varying", "dilate", "bake_lightmap", "REACH", "MARGIN", "INSET", "VARIES", "FLOOR", "SUBTEXELS",
@@ -215,13 +216,16 @@ def texel_light(elements, parts, points, normals, owner, D, faces=None):
     return E + rho * light, light
 
 
-def located_parts(elements, parts, points, normals, owner, faces=None, workers=1):
+def located_parts(elements, parts, points, normals, owner, faces=None, workers=1, cover=None):
     """(E, rho, I) (n, 3) each: the emission, reflectivity and indirect light of ``parts``
     (:func:`texel_light`) interpolated at ``points`` (located by :func:`locate_texels`, on
-    ``workers``)."""
+    ``workers``; with a :class:`.texel_cover.Cover` and ``faces``, those whose element does not
+    hold them found again on their own face: :meth:`.texel_cover.Cover.relocate`)."""
     if len(points) == 0:
         return np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3))
     idx, uv = locate_texels(elements, points, normals, owner, faces, workers)
+    if cover is not None and faces is not None:
+        idx, uv = cover.relocate(points, normals, faces, idx, uv)
     E, rho, indirect = (interpolate_corner_values(parts[k], idx, uv) for k in (0, 1, 3))   # not the direct
     return E, rho, indirect
 
@@ -317,7 +321,7 @@ def _surface(covered, points, normals, pitch):
 
 
 def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, flip=False, probed=None,
-                 faces=None, inside=None, workers=1):
+                 faces=None, inside=None, workers=1, cover=None):
     """(radiosity (n, 3), light arriving (n, 3)) at the n covered texels (``tri`` (H, W) >= 0,
     in that order; ``bary`` (H, W, 3) from :func:`rasterize` of ``uv`` (T, 3, 2)), by
     :func:`texel_light` with ``split(points, normals, samples=None, which=None, facing=None, low=None, split=1,
@@ -337,18 +341,25 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
     (T, 3, 3), ``normals`` (T, 3, 3) or None and ``flip`` as for :func:`bake_lightmap`;
     ``inside`` (H, W) bool from :func:`rasterize` or None: a texel whose centre lies outside its
     triangle takes the direct light of its neighbours inside on the same face where it has any.
-    ``workers``: where the texels are located (:func:`locate_texels`)."""
+    ``workers``: where the texels are located (:func:`locate_texels`). ``cover``: a
+    :class:`.texel_cover.Cover` of the object, or None: a texel whose point (or sub-point) lies
+    under another face nearer than our rays start is lit from where Cycles' rays start, and its
+    reflected light scaled by what it sees of the open scene there; a texel its element does not
+    hold is found again on its own face (:meth:`.texel_cover.Cover.relocate`; needs ``faces``)."""
     covered = tri >= 0
     height, width = covered.shape
     t, b = tri[covered], bary[covered]
     pts, nrm, shading, low = _lit_points(world, normals, t, b, flip)
     pitch = _pitch(uv, world, width, height)[t]
     own = None if faces is None else faces[t]
-    Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed), covered,
-                   texel_points(world, t, b)[0], nrm, t if own is None else own, pitch, probed,
+    lift = lifts_of(cover, pts, nrm, own)
+    Ds = by_source(as_cycles(split, pts, nrm, shading, low, probed, lift), covered,
+                   texel_points(world, t, b)[0], nrm, apart(t if own is None else own, lift), pitch, probed,
                    None if inside is None else inside[covered])[0]
     E, rho, indirect = _read_parts(elements, parts, pts, nrm, owner, own, workers, covered,
-                                   None if inside is None else inside[covered], t if own is None else own)
+                                   None if inside is None else inside[covered], t if own is None else own, cover)
+    if lift is not None:
+        indirect = indirect * cover.keep(pts, nrm, shading, lift)[:, None]
     D = np.maximum(Ds.sum(axis=1), 0.0)
     S = Ds.shape[1]
     img = np.zeros(covered.shape + (S + 1,))
@@ -363,19 +374,19 @@ def texel_values(elements, parts, split, owner, uv, world, normals, tri, bary, f
         px = np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2) * np.array([width, height], float)
         which, sub = _sub_texels(px, t[edge], np.stack([cols[edge] + 0.5, rows[edge] + 0.5], 1))
         D[edge] = _sub_mean(split, world, normals, flip, t[edge], which, sub, Ds[edge], need[edge], D[edge],
-                            probed)
+                            probed, cover, faces)
     light = D + indirect
     return E + rho * light, light
 
 
-def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces):
+def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside, faces, cover=None):
     """(E, rho, I) (n, 3) each at the n covered texels (:func:`located_parts`): a texel whose
     centre lies outside its triangle (an island's rim, ``inside`` (n,) False) with texels
     inside on its face (``faces`` (n,)) beside it takes their mean, as its direct light does
     (:func:`.texels.from_inside`; Cycles' margin extends an island from its texels): only the
     others are located (the living room's rim: 95,534 of its 507,328 texels)."""
     if inside is None:
-        return located_parts(elements, parts, pts, nrm, owner, own, workers)
+        return located_parts(elements, parts, pts, nrm, owner, own, workers, cover)
     got, done = np.zeros((len(pts), 3, 3)), np.zeros((len(pts), 3), bool)
     for ids in (np.flatnonzero(inside), None):
         if ids is None:
@@ -383,12 +394,12 @@ def _read_parts(elements, parts, pts, nrm, owner, own, workers, covered, inside,
             ids = np.flatnonzero(~done[:, 0])
         if ids.size:
             got[ids] = np.stack(located_parts(elements, parts, pts[ids], nrm[ids], owner,
-                                              None if own is None else own[ids], workers), 1)
+                                              None if own is None else own[ids], workers, cover), 1)
             done[ids] = True
     return got[:, 0], got[:, 1], got[:, 2]
 
 
-def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=None):
+def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=None, cover=None, faces=None):
     """(m, 3) the direct light of m texels (triangles ``tri`` (m,)) averaged over their sub-texel
     points (``which`` (k,) texel, ``sub`` (k, 3) barycentric: :func:`_sub_texels`): the sources
     ``need`` (m, S) bool lit again at each point, the others the centre's ``Ds`` (m, S, 3); a
@@ -396,8 +407,10 @@ def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=
     texel's mean, so its points share the sky's pattern out (:data:`SUB_SKY`: point j of a
     texel casts rays j, j + 16, ... of the 256, :func:`..hemisphere.sky_fraction`'s ``split``):
     the texel's rays once over its square, not 16 times (a block's foot: 33,036 points in the
-    living room, 8.5 M sky rays before)."""
-    lit = as_cycles(split, *_lit_points(world, normals, tri[which], sub, flip), probed)
+    living room, 8.5 M sky rays before). ``cover``, ``faces`` (T,): as :func:`texel_values`'s."""
+    at = _lit_points(world, normals, tri[which], sub, flip)
+    lit = as_cycles(split, *at, probed,
+                    lifts_of(cover, at[0], at[1], None if faces is None else faces[tri[which]]))
     per = Ds[which].copy()                                            # (k, S, 3)
     wide = np.zeros(Ds.shape[1], bool) if probed is None else ~np.asarray(probed, bool)
     for k in range(Ds.shape[1]):
@@ -418,7 +431,7 @@ def _sub_mean(split, world, normals, flip, tri, which, sub, Ds, need, D, probed=
 
 def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None, flip=False,
                   margin=MARGIN, reach=REACH, *, parts=None, direct=None, normals=None,
-                  lighting_scale=None, split=None, probed=None, faces=None, workers=1) -> Lightmap:
+                  lighting_scale=None, split=None, probed=None, faces=None, workers=1, cover=None) -> Lightmap:
     """One object's lightmap from the bake's output elements.
 
     ``elements`` the bake's output PatchSet, ``corner_values`` (N, 4, 3) its corner values
@@ -441,7 +454,9 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
     per triangle (needs ``parts``): also the lighting-only pass, the light arriving times it (a
     material's albedo scale), in ``Lightmap.lighting``. ``faces`` (T,) int: each triangle's face in
     the object's mesh (``elements.source_face``): a texel is read on its own face's elements
-    (:func:`locate_texels`, on ``workers``: 0 every core)."""
+    (:func:`locate_texels`, on ``workers``: 0 every core). ``cover`` (with ``faces``): a
+    :class:`.texel_cover.Cover` of the object: texels under a face nearer than our rays start
+    are lit as Cycles' bake lights them there (:func:`texel_values`)."""
     faces = None if faces is None else np.asarray(faces, dtype=np.int64)
     height = int(width if height is None else height)
     width = int(width)
@@ -458,7 +473,7 @@ def bake_lightmap(elements, corner_values, owner, uv, world, width, height=None,
         image[covered] = evaluate(elements, corner_values, pts, nrm, owner, None if faces is None else faces[t])
     else:
         image[covered], light = texel_values(elements, parts, split, owner, uv, world, normals, tri, bary,
-                                             flip, probed, faces, inside, workers)
+                                             flip, probed, faces, inside, workers, cover)
         if lighting_scale is not None:
             lighting = np.zeros((height, width, 3))
             lighting[covered] = light * np.asarray(lighting_scale, dtype=np.float64)[t]

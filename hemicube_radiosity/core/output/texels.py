@@ -341,7 +341,7 @@ def _facing(faces, shading, ids):
     return None if np.array_equal(f, n) else f
 
 
-def as_cycles(split, pts, nrm, shading, low, probed):
+def as_cycles(split, pts, nrm, shading, low, probed, lift=None):
     """``split(ids, samples, which, **shared)`` (``shared``: the world's ``split`` and ``part``,
     passed on) of the texels at ``pts`` (n, 3) with face normals ``nrm``
     and shading normals ``shading`` as Cycles' bake lights them: the world only from in front of
@@ -351,12 +351,19 @@ def as_cycles(split, pts, nrm, shading, low, probed):
     texel sees a sun below its plane past the bevel's edge; and no lamp nor emitter (the
     ``probed`` (S,) sources; None: no source is left out) where the shading normal turns away
     from the face (measured on a lone quad whose normals lean 95 or 120 degrees off it: a sun
-    lights it from no direction, the world from those in front of it)."""
+    lights it from no direction, the world from those in front of it). ``lift`` (n,) or None:
+    where a face covers a texel's point, how far off it along ``nrm`` its rays start (NaN
+    elsewhere: a ray offset along the shading normal; :mod:`.texel_cover`)."""
     away = np.einsum("ij,ij->i", shading, nrm) < 0
 
     def lit(ids, samples, which=None, **shared):
         facing = _facing(nrm, shading, ids)
-        D = split(pts[ids], shading[ids], samples, which, facing,
+        x = pts[ids]
+        up = None if lift is None else lift[ids]
+        if up is not None and np.isfinite(up).any():      # covered: from Cycles' start, no offset
+            x = x + np.where(np.isfinite(up), up, 0.0)[:, None] * nrm[ids]
+            shared = dict(shared, eps=np.where(np.isfinite(up), 0.0, np.nan))
+        D = split(x, shading[ids], samples, which, facing,
                   None if low is None or facing is None else low[ids], **shared)
         off = away[ids]
         if off.any() and probed is not None:
