@@ -22,9 +22,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from hemicube_radiosity.blender import bake, write  # noqa: E402
 from hemicube_radiosity.blender import lightmap as blm  # noqa: E402
 from hemicube_radiosity.core.output import lightmap as core_lightmap  # noqa: E402
+from tests.support.lightmap_scenes import beside_cycles  # noqa: E402
 from tests.support import ROOT  # noqa: E402
 
 sys.path.insert(0, os.path.join(ROOT, "bench"))
@@ -47,20 +47,8 @@ def ground_with_a_duplicate():
 
 def test_coincident_faces_are_black_in_cycles_and_lit_in_ours(tmp_path):
     ob = ground_with_a_duplicate()
-    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(target="lightmap", lightmap_density=24.0,
-                                                                      lightmap_dir=str(tmp_path)))
-    job.run()
-    copy = job.write(bpy.context)[0]
-    rec = job.lightmaps[0]
-    size = rec["size"][0]
-    ours = cr.image_rgb(bpy.data.images["Ground.lightmap.exr"]) @ LUMA
-    me = copy.data
-    uv = np.empty(len(me.loops) * 2)
-    me.uv_layers[rec["uv_map"]].data.foreach_get("uv", uv)
-    uv = uv.reshape(-1, 2)
-    write.remove_bakes(["Ground"], unhide=True)
-    ob.data.uv_layers.new(name="LM").data.foreach_set("uv", uv.astype(np.float32).ravel())
-    cyc = cr.bake_image(ob, size, samples=16, uv_layer="LM")[0] @ LUMA
+    ours, cyc, uv, size = beside_cycles(ob, 24.0, tmp_path)
+    ours, cyc = ours @ LUMA, cyc @ LUMA
     world = blm._world_triangles(ob.data, np.array(ob.matrix_world))
     faces = blm._triangle_faces(ob.data)
     tl = np.empty(len(ob.data.loop_triangles) * 3, np.int64)

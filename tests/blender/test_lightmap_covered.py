@@ -17,9 +17,9 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tools import cycles_reference as cr  # noqa: E402
-from hemicube_radiosity.blender import bake, write  # noqa: E402
 from hemicube_radiosity.blender import lightmap as blm  # noqa: E402
 from hemicube_radiosity.core.output import lightmap as core_lightmap  # noqa: E402
+from tests.support.lightmap_scenes import beside_cycles  # noqa: E402
 
 pytestmark = [pytest.mark.blender, pytest.mark.cycles]
 LUMA = np.array([0.2126, 0.7152, 0.0722])
@@ -41,20 +41,8 @@ def ground_under_a_lid():
 
 def test_texels_under_a_lid_nearer_than_our_rays_start_are_dark_as_in_cycles(tmp_path):
     ob = ground_under_a_lid()
-    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(target="lightmap", lightmap_density=6.0,
-                                                                      lightmap_dir=str(tmp_path)))
-    job.run()
-    copy = job.write(bpy.context)[0]
-    rec = job.lightmaps[0]
-    size = rec["size"][0]
-    ours = cr.image_rgb(bpy.data.images["Ground.lightmap.exr"]) @ LUMA
-    me = copy.data
-    uv = np.empty(len(me.loops) * 2)
-    me.uv_layers[rec["uv_map"]].data.foreach_get("uv", uv)
-    uv = uv.reshape(-1, 2)
-    write.remove_bakes(["Ground"], unhide=True)
-    ob.data.uv_layers.new(name="LM").data.foreach_set("uv", uv.astype(np.float32).ravel())
-    cyc = cr.bake_image(ob, size, samples=16, uv_layer="LM")[0] @ LUMA
+    ours, cyc, uv, size = beside_cycles(ob, 6.0, tmp_path)
+    ours, cyc = ours @ LUMA, cyc @ LUMA
     world = blm._world_triangles(ob.data, np.array(ob.matrix_world))
     tl = np.empty(len(ob.data.loop_triangles) * 3, np.int64)
     ob.data.loop_triangles.foreach_get("loops", tl)

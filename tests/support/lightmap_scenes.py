@@ -44,3 +44,28 @@ def room():
     v, f = cr.grid_arrays(1, 1, 1.5, 2.5, 1.0, 2.0, LAMP_Z)
     lamp = cr.mesh_object(v, f[:, ::-1], cr.diffuse_material((0.0,) * 3, emission=10.0, name="Panel"), "Lamp")
     return r, b, lamp
+
+
+def beside_cycles(ob, density, folder, samples=16):
+    """``ob`` (one mesh object, the scene set up) baked to a lightmap by ours with defaults
+    (``lightmap_density`` texels a metre, files in ``folder``) and by Cycles through the same
+    UVs: (ours (S, S, 3), Cycles' (S, S, 3) DIFFUSE bake at ``samples``, the lightmap UVs (L, 2)
+    per loop of ``ob``, S). The baked copy is removed before Cycles bakes (it would shade ``ob``)."""
+    import bpy
+
+    from hemicube_radiosity.blender import bake, write
+
+    job = bake.BakeJob.prepare(bpy.context, [ob], bake.BakeSettings(target="lightmap", lightmap_density=density,
+                                                                      lightmap_dir=str(folder)))
+    job.run()
+    copy = job.write(bpy.context)[0]
+    rec = job.lightmaps[0]
+    size = rec["size"][0]
+    ours = cr.image_rgb(bpy.data.images[f"{ob.name}.lightmap.exr"])
+    uv = np.empty(len(copy.data.loops) * 2)
+    copy.data.uv_layers[rec["uv_map"]].data.foreach_get("uv", uv)
+    uv = uv.reshape(-1, 2)
+    write.remove_bakes([ob.name], unhide=True)
+    ob.data.uv_layers.new(name="LM").data.foreach_set("uv", uv.astype(np.float32).ravel())
+    cyc = cr.bake_image(ob, size, samples=samples, uv_layer="LM")[0]
+    return ours, cyc, uv, size

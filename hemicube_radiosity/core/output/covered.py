@@ -248,30 +248,38 @@ def _cover_along(scene, fronts, own, p, origin, direction, reach, tie):
     elements cut a bent face along other diagonals than Blender's triangle the bake point lies
     on, so its first hit may be a hair away on its own face, over the face that covers it (a
     bevel's foot a few microns over the shelf it rests on)."""
+    dist, _ = walk_along(scene, own[fronts], own[p], origin, np.asarray(direction, dtype=np.float64), reach, tie)
+    return np.isfinite(dist), dist
+
+
+def walk_along(scene, keys, own, origin, direction, reach, tie, same=False):
+    """((n,) distance, (n,) face row or -1): how far along each unit ``direction`` (n, 3) from
+    ``origin`` (n, 3) a ray meets, within ``reach`` (n,), a face of ``scene`` whose key (``keys``
+    (F,), one per row of the scene) is (``same``) or is not its ``own`` (n,), going on past the
+    others' hits (:data:`OWN_PASSES` times, a float32 step ``tie`` (n,) on); inf and -1 where none."""
     origin = np.array(origin, dtype=np.float64)
-    direction = np.asarray(direction, dtype=np.float64)
     left = np.array(reach, dtype=np.float64)
-    covers = np.zeros(len(p), bool)
-    dist = np.full(len(p), np.inf)
-    gone = np.zeros(len(p))
-    todo = np.arange(len(p))
+    dist = np.full(len(origin), np.inf)
+    row = np.full(len(origin), -1, np.int64)
+    gone = np.zeros(len(origin))
+    todo = np.arange(len(origin))
     for _ in range(OWN_PASSES):
         hit, t = scene.intersect(origin[todo], direction[todo], left[todo])
         hit, t = np.asarray(hit), np.asarray(t, dtype=np.float64)
         met = hit >= 0
-        yes = np.zeros(len(todo), bool)
-        yes[met] = own[fronts[hit[met]]] != own[p[todo[met]]]
-        covers[todo[yes]] = True
-        dist[todo[yes]] = gone[todo[yes]] + t[yes]
-        again = met & ~yes & (t + tie[todo] < left[todo])
+        found = np.zeros(len(todo), bool)
+        found[met] = (keys[hit[met]] == own[todo[met]]) == same
+        dist[todo[found]] = gone[todo[found]] + t[found]
+        row[todo[found]] = hit[found]
+        again = met & ~found & (t + tie[todo] < left[todo])
         todo, t = todo[again], t[again]
         if not len(todo):
             break
-        step = t + tie[todo]                      # past the own face's hit, a float32 step on
+        step = t + tie[todo]                      # past the other hits, a float32 step on
         origin[todo] += step[:, None] * direction[todo]
         left[todo] -= step
         gone[todo] += step
-    return covers, dist
+    return dist, row
 
 
 def _sun_reaches(scene, fronts, own, p, origin, to_sun, tie=None) -> np.ndarray:

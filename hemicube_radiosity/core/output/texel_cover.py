@@ -35,7 +35,7 @@ from ..hemisphere import open_fraction
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..util.geometry import bilinear
-from .covered import LIFT_ULPS, OPEN_FLOOR, OWN_PASSES, TIE_ULPS
+from .covered import LIFT_ULPS, OPEN_FLOOR, TIE_ULPS, walk_along
 from .interpolate import inverse_bilinear
 
 __all__ = ["Cover", "lifts_of", "apart", "OPEN_RAYS", "OFF"]
@@ -98,7 +98,7 @@ class Cover:
         own = self._keys(np.full(len(points), self.owner), faces)
         tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(points).max(axis=1), 1.0)
         eps = ray_offsets(self.elements, owner=np.full(len(points), self.owner))
-        gap = _along(scene, keys, own, points + tie[:, None] * normals, normals, eps, tie)[0]
+        gap = walk_along(scene, keys, own, points + tie[:, None] * normals, normals, eps, tie)[0]
         covered = np.isfinite(gap)
         lift = np.minimum(np.minimum(eps, 0.5 * (gap + tie)), LIFT_ULPS * tie / TIE_ULPS)
         out[covered] = lift[covered]
@@ -148,7 +148,7 @@ class Cover:
         own = self._keys(np.full(bad.size, self.owner), np.asarray(faces)[bad])
         tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(points[bad]).max(axis=1), 1.0)
         h, n = size[bad], normals[bad]
-        row = _along(scene, keys, own, points[bad] + h[:, None] * n, -n, 2.0 * h, tie, same=True)[1]
+        row = walk_along(scene, keys, own, points[bad] + h[:, None] * n, -n, 2.0 * h, tie, same=True)[1]
         bad, row = bad[row >= 0], rows[row[row >= 0]]
         u, v = (np.clip(w, 0.0, 1.0) for w in inverse_bilinear(C[row], points[bad]))
         now = np.linalg.norm(bilinear(C[row], u[:, None], v[:, None]) - points[bad], axis=1)
@@ -176,33 +176,3 @@ def apart(faces, lift):
     c = np.flatnonzero(np.isfinite(lift))
     faces[c] = int(faces.max(initial=0)) + 1 + np.arange(c.size)
     return faces
-
-
-def _along(scene, keys, own, origin, direction, reach, tie, same=False):
-    """((n,) distance, (n,) face row or -1): how far along each unit ``direction`` (n, 3) from
-    ``origin`` (n, 3) a ray meets, within ``reach`` (n,), a face of ``scene`` whose key (``keys``
-    (F,)) is (``same``) or is not its ``own`` (n,), going on past the others' hits
-    (:data:`.covered.OWN_PASSES` times, a float32 step ``tie`` (n,) on); inf and -1 where none."""
-    origin = np.array(origin, dtype=np.float64)
-    left = np.array(reach, dtype=np.float64)
-    dist = np.full(len(origin), np.inf)
-    row = np.full(len(origin), -1, np.int64)
-    gone = np.zeros(len(origin))
-    todo = np.arange(len(origin))
-    for _ in range(OWN_PASSES):
-        hit, t = scene.intersect(origin[todo], direction[todo], left[todo])
-        hit, t = np.asarray(hit), np.asarray(t, dtype=np.float64)
-        met = hit >= 0
-        found = np.zeros(len(todo), bool)
-        found[met] = (keys[hit[met]] == own[todo[met]]) == same
-        dist[todo[found]] = gone[todo[found]] + t[found]
-        row[todo[found]] = hit[found]
-        again = met & ~found & (t + tie[todo] < left[todo])
-        todo, t = todo[again], t[again]
-        if not len(todo):
-            break
-        step = t + tie[todo]
-        origin[todo] += step[:, None] * direction[todo]
-        left[todo] -= step
-        gone[todo] += step
-    return dist, row
