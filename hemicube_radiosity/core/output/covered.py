@@ -30,7 +30,8 @@ the light from below its triangle's plane by rays from Cycles' lifted start wher
 normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light
 reflected more than once scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.hemisphere.open_fraction`: rays closed within a twentieth of the patch size or on a back
-face lend nothing; in a crack they only meet its dark walls), the vertex's taken as at least
+face lend nothing; in a crack they only meet its dark walls; :mod:`.near` adds the direct light
+of the near faces' fronts those rays meet, lit in a sunlit wedge's apex), the vertex's taken as at least
 :data:`OPEN_FLOOR`: a vertex whose rays start inside a solid (a bevelled box resting on a
 shelf of the same mesh, its foot's rays starting in the shelf) gathered the light its closed
 rays read there, 0.85 of the shelf's radiance where Cycles' corner on the bevel, a hair over the
@@ -66,6 +67,7 @@ from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.unique import unique_ints
 from .crease import INSET, below_plane, bisector, inset_points, leans, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners
+from .near import face_keys, near_part
 from .normals import corner_shading_normals
 
 __all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
@@ -157,7 +159,7 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     geo = corner_normals(elements, p, c)
     eps = ray_offsets(ctx.patches, owner=elements.owner[p])
     fronts, scene = _fronts(ctx, elements)
-    own = _face_keys(elements)
+    own = face_keys(elements)
     origin = point + tie[:, None] * geo
     # the nearest surface above the point along its triangle's normal, within the ray offset
     above, t = _cover_along(scene, fronts, own, p, origin, geo, eps, tie)
@@ -294,20 +296,17 @@ def _sun_reaches(scene, fronts, own, p, origin, to_sun, tie=None) -> np.ndarray:
     return ~_cover_along(scene, fronts, own, p, origin, along, far, tie)[0]
 
 
-def _face_keys(elements) -> np.ndarray:
-    """(N,) int64 one key per (owner, source face) of the elements."""
-    stride = int(elements.source_face.max(initial=0)) + 1
-    return elements.owner.astype(np.int64) * stride + elements.source_face.astype(np.int64)
-
-
-def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, buried=None, own=True):
+def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, buried=None, own=True,
+                  arriving_v=None):
     """(light (N, 4, 3), keep (N, 4)) as :func:`.crease.corner_light`'s, with the corners of
     :func:`covered_corners` lit on their own (module docstring), but those the crease turned
     around; ``creased``: what :func:`.crease.corner_light` gave (None: every corner its vertex's
     ``light_v`` (V, 3) and all of its light reflected more than once). Returns ``creased``'s
     light and keep when no corner is covered.
     ``own`` False: as :func:`.crease.corner_light`'s, the keep shares only (each covered
-    corner's direct light its vertex's: no ray is cast for it)."""
+    corner's direct light its vertex's: no ray is cast for it). ``arriving_v`` (V, 3) or None:
+    the light reflected at least once arriving at each vertex (per rho), of which a corner keeps
+    its share; the near fronts' light seen from the vertex's start comes off it (:mod:`.near`)."""
     found = covered_corners(ctx, elements, xv, nv, opened, buried) if ctx.direct is not None else None
     if found is not None and creased is not None:
         # a corner Cycles turns around sees the lune behind its face, not what covers its front
@@ -330,19 +329,12 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
         low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])
         D += below_plane(ctx, low, shade, geo, "covered-below")
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
-
-    def shares():
-        scene = embree_scene(elements)
-        here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
-        # once per vertex (and object): a vertex's covered corners are often several, and
-        # each point's fraction is its own rays' alone
-        _, one, of = unique_ints(v * (int(elements.owner.max(initial=0)) + 1) + elements.owner[p],
-                                 return_index=True, return_inverse=True)
-        there = open_fraction(elements, xv[v[one]], nv[v[one]], scene, reach, rays=OPEN_RAYS,
-                              eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
-        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
-    k = cached(ctx.cache, key, shares)
+    k = _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach)
+    if own:       # what near fronts, lit, hand on, for what its vertex's had of it (:mod:`.near`)
+        eps = ray_offsets(ctx.patches, owner=elements.owner[p])
+        arriving = None if arriving_v is None else np.asarray(arriving_v, dtype=np.float64)[v]
+        D += near_part(ctx, elements, start, shade, xv[v] + eps[:, None] * nv[v], nv[v], reach, OPEN_RAYS, k,
+                       ~alone, arriving, face_keys(elements)[p])
     # a buried vertex's corner lit here only for being Cycles' own point (nothing over it): the
     # vertex's light reflected more than once was spread from the open side, not gathered at
     # the vertex's start that the shares compare against; kept whole
@@ -357,6 +349,27 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
         out[p, c] = value
         out[p[tri], 3] = value[tri]
     return light, keep
+
+
+def _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach) -> np.ndarray:
+    """(K,) the share of its vertex's light reflected more than once that each covered corner
+    (of element ``p`` (K,) at vertex ``v`` (K,), lit from ``start`` (K, 3), shading normal
+    ``shade``) keeps: the open scene it sees against what its vertex's start (``xv``, ``nv``)
+    sees (:func:`.hemisphere.open_fraction`, rays closed within ``reach`` lend nothing), the
+    vertex's taken as at least :data:`OPEN_FLOOR`. Geometry only, cached."""
+    key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
+
+    def shares():
+        scene = embree_scene(elements)
+        here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
+        # once per vertex (and object): a vertex's covered corners are often several, and
+        # each point's fraction is its own rays' alone
+        _, one, of = unique_ints(v * (int(elements.owner.max(initial=0)) + 1) + elements.owner[p],
+                                 return_index=True, return_inverse=True)
+        there = open_fraction(elements, xv[v[one]], nv[v[one]], scene, reach, rays=OPEN_RAYS,
+                              eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
+        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
+    return cached(ctx.cache, key, shares)
 
 
 def _front_light(ctx, start, shade, geo) -> np.ndarray:

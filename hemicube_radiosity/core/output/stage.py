@@ -216,7 +216,8 @@ def _own_corner_light(ctx, at: _AtVertices, lighting):
     arriving_v = None if lighting else _incoming(at.rest, at.rho_v)     # reflected at least once
     creased = corner_light(ctx, ctx.elements, at.xv, at.nv, at.D, at.opened, buried, read_v, own, arriving_v)
     ctx.gather_rays = ctx.gather_key = None             # its hits go with it
-    return covered_light(ctx, ctx.elements, at.xv, at.nv, at.D, creased, at.opened, buried, own)
+    return covered_light(ctx, ctx.elements, at.xv, at.nv, at.D, creased, at.opened, buried, own,
+                         at.rest if lighting else arriving_v)
 
 
 def _mirrored(ctx, sided, weights):
