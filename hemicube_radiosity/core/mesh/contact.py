@@ -371,9 +371,12 @@ class _Grids:
         ii = np.repeat(ia, cnt)
         jj = ib[np.repeat(lo_ - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())] if cnt.sum() else \
             np.zeros(0, np.int64)
-        ok = np.all((alo[ii] <= bhi[jj]) & (ahi[ii] >= blo[jj]), axis=1)
-        ii, jj, kk = ii[ok], jj[ok], np.repeat(ka, cnt)[ok]
-        g = np.floor((np.maximum(alo[ii], blo[jj]) - self.origin) / s).astype(np.int64)
+        kk = np.repeat(ka, cnt)
+        for d in range(3):      # one axis at a time, on the pairs still overlapping (the same
+            al, bl = alo[:, d].take(ii), blo[:, d].take(jj)    # pairs; a third of the time)
+            ok = (al <= bhi[:, d].take(jj)) & (ahi[:, d].take(ii) >= bl)
+            ii, jj, kk = ii[ok], jj[ok], kk[ok]
+        g = np.floor((np.maximum(alo.take(ii, axis=0), blo.take(jj, axis=0)) - self.origin) / s).astype(np.int64)
         first = self.key(g) == kk
         return np.stack([ii[first], jj[first]], 1)
 

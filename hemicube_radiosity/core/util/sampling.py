@@ -58,8 +58,15 @@ def cosine_directions(u):
 def disk_samples(u, center, normal, radius):
     """Points (N,S,3) on the disks ``center`` (N,3), unit ``normal`` (N,3) (or (1, 3): one for
     every disk, its frame made once), ``radius`` (N,) from unit-square points ``u`` (N,S,2),
-    uniform by area."""
+    uniform by area. One coordinate at a time (``center + a e1 + b e2`` summed in that order:
+    the same values, bit for bit, without the (N, S, 3) temporaries of broadcasting)."""
     e1, e2 = orthonormal_basis(normal)
     r = np.sqrt(u[..., 0]) * radius[:, None]
     phi = 2 * np.pi * u[..., 1]
-    return center[:, None] + (r * np.cos(phi))[..., None] * e1[:, None] + (r * np.sin(phi))[..., None] * e2[:, None]
+    a, b = r * np.cos(phi), r * np.sin(phi)
+    out = np.empty(a.shape + (3,))
+    for c in range(3):
+        x = center[:, c, None] + a * e1[:, c, None]
+        x += b * e2[:, c, None]
+        out[..., c] = x
+    return out
