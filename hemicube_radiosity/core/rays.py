@@ -358,10 +358,7 @@ def _see_through_scene(patches: PatchSet):
     key = patches.geometry_key() + b"see-through" + st.key()
 
     def make():
-        keep = np.flatnonzero(~st.patch_mask(patches))
-        opaque = PatchSet(patches.verts, patches.polys[keep], patches.centers[keep], patches.normals[keep],
-                          patches.areas[keep], patches.rho[keep], patches.emission[keep], patches.owner[keep],
-                          patches.source_face[keep], list(patches.object_names))
+        opaque = patches.take(~st.patch_mask(patches))
         lo, hi = patches.verts.min(axis=0), patches.verts.max(axis=0)
         return SeeThroughScene(embree_scene(_occluding(opaque)), st, float(np.linalg.norm(hi - lo)))
     return _OCCLUDING_CACHE.get(key, make)

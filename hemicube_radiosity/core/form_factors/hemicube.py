@@ -135,10 +135,7 @@ def _behind(scene, patches, clusters):
     keep = ~(t > 0) if clusters is None else ~(t > 0)[np.asarray(clusters.of, np.int64)]
     if keep.all() or not keep.any():           # (every patch see-through: they block, as before)
         return
-    sub = PatchSet(patches.verts, patches.polys[keep], patches.centers[keep], patches.normals[keep],
-                   patches.areas[keep], patches.rho[keep], patches.emission[keep], patches.owner[keep],
-                   patches.source_face[keep], list(patches.object_names))
-    behind = _Scene(sub, scene.resolution, None if clusters is None else replace(clusters, of=clusters.of[keep]),
+    behind = _Scene(patches.take(keep), scene.resolution, None if clusters is None else replace(clusters, of=clusters.of[keep]),
                     eyes=scene.eyes)
     if clusters is None:
         behind.item_of = np.flatnonzero(keep)

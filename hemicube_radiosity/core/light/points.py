@@ -122,7 +122,7 @@ def patch_average(patches: PatchSet, n, light_at, centre_only=None, weight_at=No
         rest = np.flatnonzero(~centre_only)
         if len(rest):
             if n <= 1 or rng is not None:
-                out[rest] = patch_average(rows_of(patches, rest), n, light_at, weight_at=weight_at, rng=rng,
+                out[rest] = patch_average(patches.take(rest), n, light_at, weight_at=weight_at, rng=rng,
                                           share=share)
             else:
                 out[rest] = _grid_average(grid_of(patches, rest, n), n, light_at, weight_at, share)
@@ -195,13 +195,6 @@ def _shared_centres(patches: PatchSet, lit, groups, light_at) -> np.ndarray:
     return out
 
 
-def rows_of(patches: PatchSet, rows) -> PatchSet:
-    """The patches ``rows`` (the same vertex array)."""
-    return PatchSet(patches.verts, patches.polys[rows], patches.centers[rows], patches.normals[rows],
-                    patches.areas[rows], patches.rho[rows], patches.emission[rows], patches.owner[rows],
-                    patches.source_face[rows], patches.object_names)
-
-
 _PARTS = Memo(8)                   # (N, K) or (centres, groups) -> the sky's shares (SKY_SHARE)
 _GRIDS = Memo(8, refresh=True)     # (verts, polys), (n, N, rows) -> grid: the most recently used kept
 
@@ -216,7 +209,7 @@ def grid_of(patches: PatchSet, rows, n: int):
     rk = b"" if rows is None else np.ascontiguousarray(rows, dtype=np.int64).tobytes()
 
     def make():
-        sub = patches if rows is None else rows_of(patches, rows)
+        sub = patches if rows is None else patches.take(rows)
         x, w = grid_points(sub, n)
         N, K = x.shape[:2]
         return frozen(x, x.reshape(N * K, 3), np.repeat(sub.normals, K, axis=0), w)

@@ -269,13 +269,15 @@ class PatchSet:
             em[sel] = np.asarray(m.face_emission, float)[self.source_face[sel]]
         return self.with_materials(rho, em)
 
-    def take(self, rows) -> "PatchSet":
-        """The patches ``rows`` (R,) int of this set, over the same ``verts`` (shared); without
-        see-through faces (their masks are per patch of the whole set)."""
-        rows = np.asarray(rows, np.int64)
+    def take(self, rows, see_through=False) -> "PatchSet":
+        """The patches ``rows`` of this set, (R,) int or (N,) bool, over the same ``verts``
+        (shared). ``see_through``: keep the see-through faces (read by owner and source face,
+        so they hold for any rows); else none (every face of the subset blocks)."""
+        rows = np.asarray(rows)
+        rows = np.flatnonzero(rows) if rows.dtype == bool else rows.astype(np.int64, copy=False)
         return PatchSet(self.verts, self.polys[rows], self.centers[rows], self.normals[rows], self.areas[rows],
                         self.rho[rows], self.emission[rows], self.owner[rows], self.source_face[rows],
-                        list(self.object_names))
+                        list(self.object_names), self.see_through if see_through else None)
 
     def with_materials(self, rho=None, emission=None) -> "PatchSet":
         """A copy with new reflectivity/emission and the same geometry (arrays shared)."""

@@ -97,12 +97,6 @@ def _split_geometry(patches: PatchSet, select):
     return frozen(verts, polys, centers, normals, areas, patches.owner[parent], patches.source_face[parent], parent)
 
 
-def _subset(patches: PatchSet, ids) -> PatchSet:
-    return PatchSet(patches.verts, patches.polys[ids], patches.centers[ids], patches.normals[ids],
-                    patches.areas[ids], patches.rho[ids], patches.emission[ids], patches.owner[ids],
-                    patches.source_face[ids], list(patches.object_names), patches.see_through)
-
-
 def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n=3, min_area=0.0,
            frozen=None, say=None, crossed=None) -> tuple[PatchSet, np.ndarray]:
     """Split patches where the direct light changes abruptly, up to ``levels`` times.
@@ -123,7 +117,7 @@ def refine(patches: PatchSet, light_at, levels: int, *, ratio=8.0, floor=0.05, n
         ids = np.flatnonzero(check)
         if ids.size == 0:
             break
-        sub = _subset(patches, ids)
+        sub = patches.take(ids, see_through=True)
         x, flat, nrm, w = grid_of(patches, ids, n)      # kept for the geometry: a relight's are hashed once
         K = x.shape[1]
         Y = np.asarray(light_at(flat, nrm))

@@ -63,6 +63,7 @@ import numpy as np
 
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
+from ..mesh.backs import backs_of_pieces
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
 from ..util.unique import unique_ints
 from .crease import INSET, below_plane, bisector, inset_points, leans, strongest_sun
@@ -228,8 +229,8 @@ def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, x
 def _front_rows(ctx, patches):
     """(F,) the rows of ``patches`` (or elements) that are no back of an open surface
     (:mod:`..mesh.backs`), or None where the bake has no backs."""
-    backs = [i for i, m in enumerate(ctx.meshes or ()) if getattr(m, "back_of", -1) >= 0]
-    return np.flatnonzero(~np.isin(patches.owner, backs)) if backs else None
+    back = backs_of_pieces(ctx.meshes, patches)
+    return None if back is None else np.flatnonzero(~back)
 
 
 def _fronts(ctx, elements):

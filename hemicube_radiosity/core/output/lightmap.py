@@ -37,11 +37,10 @@ row first), texel (r, c) centred at uv ((c + 0.5) / W, (r + 0.5) / H). Values ar
 from __future__ import annotations
 
 from contextlib import closing
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..mesh.patches import PatchSet
 from ..runtime.parallel import ordered_map, resolve_workers
 from .interpolate import interpolate_corner_values, locate
 from .lift import lift
@@ -145,8 +144,7 @@ def locate_texels(elements, points, normals, owner, faces=None, workers=1):
     own = np.isin(faces, key)
     idx, uv = np.zeros(len(points), np.int64), np.zeros((len(points), 2))
     if own.any():
-        sub = PatchSet(elements.verts, elements.polys[mine], elements.centers[mine], elements.normals[mine],
-                       elements.areas[mine], elements.rho[mine], elements.emission[mine], key, key)
+        sub = replace(elements.take(mine), owner=key, source_face=key)
 
         def one(ids):
             return locate(sub, points[ids], faces[ids], None if normals is None else normals[ids])

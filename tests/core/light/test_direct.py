@@ -59,10 +59,10 @@ def test_shadow_rays_block_exactly_the_covered_part_of_the_light():
 def test_grid_of_is_grid_points_kept_for_the_geometry():
     # the patch grids a relight lights again: grid_points' values, the same arrays the second time
     from hemicube_radiosity.core import builtin_scenes as scenes
-    from hemicube_radiosity.core.light.points import grid_of, grid_points, patch_average, rows_of as _rows
+    from hemicube_radiosity.core.light.points import grid_of, grid_points, patch_average
     ps = build_patches(scenes.cornell_box(), 0.25)
     rows = np.arange(3, len(ps), 2)
-    x, w = grid_points(_rows(ps, rows), 3)
+    x, w = grid_points(ps.take(rows), 3)
     got = grid_of(ps, rows, 3)
     assert np.array_equal(got[0], x) and np.array_equal(got[3], w)
     assert np.array_equal(got[1], x.reshape(-1, 3))
@@ -73,7 +73,7 @@ def test_grid_of_is_grid_points_kept_for_the_geometry():
     light = lambda p, n, where: np.column_stack([p[:, 0] ** 2, p[:, 1], n[:, 2] + p[:, 2]])  # noqa: E731
     centre = np.zeros(len(ps), bool)
     centre[::3] = True
-    xs, ws = grid_points(_rows(ps, np.flatnonzero(~centre)), 2)
+    xs, ws = grid_points(ps.take(~centre), 2)
     want = np.einsum("nk,nkc->nc", ws, light(xs.reshape(-1, 3), np.repeat(ps.normals[~centre], 4, axis=0), "")
                      .reshape(len(ws), 4, 3))
     for _ in range(2):

@@ -272,6 +272,30 @@ def test_corners_of_some_patches_are_those_of_all():
     assert np.array_equal(p.corners(ids), c[ids]) and p.corners(np.zeros(0, int)).shape == (0, 4, 3)
 
 
+def test_take_by_rows_or_mask_keeps_see_through_only_when_asked():
+    """``take(rows)`` is every per-patch field at ``rows`` over the shared vertices, the same for
+    the rows as ints and as a bool mask (in index order); see-through faces only with
+    ``see_through=True``, and then the subset's mask is the set's at those rows (the faces are
+    read by owner and source face)."""
+    from hemicube_radiosity.core.light.transmit import Transmit
+    floor = MeshInput.from_faces([[0, 0, 0], [2, 0, 0], [2, 2, 0], [0, 2, 0]], [[0, 1, 2, 3]], name="floor")
+    leaf = MeshInput.from_faces([[0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], [[0, 1, 2, 3]], name="leaf")
+    leaf.transmit = Transmit(np.array([0.5]))
+    p = build_patches([floor, leaf], 0.5)
+    mask = np.zeros(len(p), bool)
+    mask[[1, 4, len(p) - 1]] = True
+    rows = np.flatnonzero(mask)
+    a, b = p.take(rows), p.take(mask)
+    for f in ("polys", "centers", "normals", "areas", "rho", "emission", "owner", "source_face"):
+        assert np.array_equal(getattr(a, f), getattr(p, f)[rows]) and np.array_equal(getattr(b, f), getattr(p, f)[rows])
+    assert a.verts is p.verts and a.object_names == ["floor", "leaf"] and a.object_names is not p.object_names
+    assert p.see_through is not None and a.see_through is None
+    kept = p.take(mask, see_through=True)
+    assert np.array_equal(kept.see_through.patch_mask(kept), p.see_through.patch_mask(p)[rows])
+    assert kept.see_through.patch_mask(kept).tolist() == [False, False, True]
+    assert len(p.take(np.zeros(0, np.int64))) == 0 and len(p.take(np.zeros(len(p), bool))) == 0
+
+
 def _same_patches(a, b):
     return all(np.array_equal(getattr(a, f), getattr(b, f))
                for f in ("verts", "polys", "centers", "normals", "areas", "rho", "emission", "owner", "source_face"))
