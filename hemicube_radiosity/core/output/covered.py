@@ -70,7 +70,7 @@ from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .near import face_keys, near_part
 from .normals import corner_shading_normals
 
-__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
+__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "front_scene", "start_offsets"]
 
 #: Float32 steps of a point's largest coordinate within which a surface counts as coincident
 #: with it (a duplicate face), not as covering it.
@@ -236,7 +236,12 @@ def _fronts(ctx, elements):
     """(rows (F,) of ``elements`` that are no back of an open surface (:mod:`..mesh.backs`),
     the Embree scene of those): Cycles has no backs, and a back lies a hair behind its face, over
     a surface the face touches."""
-    rows = _front_rows(ctx, elements)
+    return front_scene(elements, _front_rows(ctx, elements))
+
+
+def front_scene(elements, rows):
+    """(rows (F,), the Embree scene of those rows of ``elements``): ``rows`` those that are no
+    back of an open surface, or None where there is none (every row, the whole set's scene)."""
     if rows is None:
         return np.arange(len(elements)), embree_scene(elements)
     return rows, embree_scene(elements.take(rows))

@@ -35,7 +35,7 @@ from ..hemisphere import open_fraction
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..util.geometry import bilinear
-from .covered import LIFT_ULPS, OPEN_FLOOR, TIE_ULPS, walk_along
+from .covered import LIFT_ULPS, OPEN_FLOOR, TIE_ULPS, front_scene, walk_along
 from .interpolate import inverse_bilinear
 
 __all__ = ["Cover", "lifts_of", "apart", "OPEN_RAYS", "OFF"]
@@ -74,9 +74,8 @@ class Cover:
     def _fronts(self):
         """(rows of the elements that are no back, their Embree scene), made once."""
         if "fronts" not in self._scenes:
-            rows = np.flatnonzero(~np.isin(self.elements.owner, np.asarray(self.backs, dtype=np.int64)))
-            whole = rows.size == len(self.elements)
-            self._scenes["fronts"] = rows, embree_scene(self.elements if whole else self.elements.take(rows))
+            back = np.isin(self.elements.owner, np.asarray(self.backs, dtype=np.int64))
+            self._scenes["fronts"] = front_scene(self.elements, np.flatnonzero(~back) if back.any() else None)
         return self._scenes["fronts"]
 
     def _keys(self, owner, faces):
