@@ -70,7 +70,8 @@ from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .near import face_keys, near_part
 from .normals import corner_shading_normals
 
-__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "front_scene", "start_offsets"]
+__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "front_scene", "open_share",
+           "start_offsets"]
 
 #: Float32 steps of a point's largest coordinate within which a surface counts as coincident
 #: with it (a duplicate face), not as covering it.
@@ -367,13 +368,25 @@ def _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach, group) -> np.
     key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
 
     def shares():
-        scene = embree_scene(elements)
-        here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
         one, of = group             # once per vertex start: each point's fraction is its own rays' alone
-        there = open_fraction(elements, xv[v[one]], nv[v[one]], scene, reach, rays=OPEN_RAYS,
-                              eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
-        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
+        there = (xv[v[one]], nv[v[one]], ray_offsets(ctx.patches, owner=elements.owner[p[one]]))
+        return open_share(elements, embree_scene(elements), reach, OPEN_RAYS, (start, shade), there, of)
     return cached(ctx.cache, key, shares)
+
+
+def open_share(elements, scene, reach: float, rays: int, here, there, of=None) -> np.ndarray:
+    """(K,) the share of its light reflected more than once that a point keeps whose rays start
+    ``here`` (points (K, 3), unit normals (K, 3)) and not ``there`` (points (U, 3), unit
+    normals, ray offsets (U,); its rows ``of`` (K,), None: the same K): the share of the open
+    scene seen from the one (:func:`.hemisphere.open_fraction`: ``rays`` cosine rays through
+    ``scene``, the Embree scene of ``elements``; those closed within ``reach`` lend nothing)
+    over that seen from the other, taken as at least :data:`OPEN_FLOOR`; at most 1. A covered
+    corner's (:func:`covered_light`) and a covered texel's (:meth:`.texel_cover.Cover.keep`)."""
+    x, n = here
+    f = open_fraction(elements, x, n, scene, reach, rays=rays, eps=np.zeros(len(x)))
+    y, m, eps = there
+    g = open_fraction(elements, y, m, scene, reach, rays=rays, eps=eps)
+    return np.minimum(1.0, f / np.maximum(g if of is None else g[of], OPEN_FLOOR))
 
 
 def _start_groups(vstarts, vnormals):
