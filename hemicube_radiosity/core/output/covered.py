@@ -65,13 +65,13 @@ from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
 from ..mesh.backs import backs_of_pieces
 from ..runtime.cache import array_key, cache_key, cached, geometry_key
-from ..util.unique import unique_ints
 from .crease import INSET, below_plane, bisector, inset_points, leans, strongest_sun
 from .lift import bake_points, corner_normals, lifted_starts, source_corners
 from .near import face_keys, near_part
 from .normals import corner_shading_normals
 
-__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "start_offsets"]
+__all__ = ["TIE_ULPS", "LIFT_ULPS", "covered_corners", "covered_light", "front_scene", "open_share",
+           "start_offsets"]
 
 #: Float32 steps of a point's largest coordinate within which a surface counts as coincident
 #: with it (a duplicate face), not as covering it.
@@ -237,7 +237,12 @@ def _fronts(ctx, elements):
     """(rows (F,) of ``elements`` that are no back of an open surface (:mod:`..mesh.backs`),
     the Embree scene of those): Cycles has no backs, and a back lies a hair behind its face, over
     a surface the face touches."""
-    rows = _front_rows(ctx, elements)
+    return front_scene(elements, _front_rows(ctx, elements))
+
+
+def front_scene(elements, rows):
+    """(rows (F,), the Embree scene of those rows of ``elements``): ``rows`` those that are no
+    back of an open surface, or None where there is none (every row, the whole set's scene)."""
     if rows is None:
         return np.arange(len(elements)), embree_scene(elements)
     return rows, embree_scene(elements.take(rows))
@@ -330,12 +335,13 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
         low[lean] = lifted_starts(elements, ctx.meshes, p[lean], c[lean])
         D += below_plane(ctx, low, shade, geo, "covered-below")
     reach = 0.05 * float(ctx.settings.patch_size or ctx.settings.element_size or 1.0)
-    k = _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach)
+    vstart = xv[v] + ray_offsets(ctx.patches, owner=elements.owner[p])[:, None] * nv[v]
+    group = _start_groups(vstart, nv[v])       # each vertex's start once, for both
+    k = _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach, group)
     if own:       # what near fronts, lit, hand on, for what its vertex's had of it (:mod:`.near`)
-        eps = ray_offsets(ctx.patches, owner=elements.owner[p])
         arriving = None if arriving_v is None else np.asarray(arriving_v, dtype=np.float64)[v]
-        D += near_part(ctx, elements, start, shade, xv[v] + eps[:, None] * nv[v], nv[v], reach, OPEN_RAYS, k,
-                       ~alone, arriving, face_keys(elements)[p])
+        D += near_part(ctx, elements, start, shade, vstart, nv[v], group, reach, OPEN_RAYS, k, ~alone, arriving,
+                       face_keys(elements)[p])
     # a buried vertex's corner lit here only for being Cycles' own point (nothing over it): the
     # vertex's light reflected more than once was spread from the open side, not gathered at
     # the vertex's start that the shares compare against; kept whole
@@ -352,25 +358,47 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     return light, keep
 
 
-def _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach) -> np.ndarray:
+def _open_shares(ctx, elements, p, v, start, shade, xv, nv, reach, group) -> np.ndarray:
     """(K,) the share of its vertex's light reflected more than once that each covered corner
     (of element ``p`` (K,) at vertex ``v`` (K,), lit from ``start`` (K, 3), shading normal
     ``shade``) keeps: the open scene it sees against what its vertex's start (``xv``, ``nv``)
     sees (:func:`.hemisphere.open_fraction`, rays closed within ``reach`` lend nothing), the
-    vertex's taken as at least :data:`OPEN_FLOOR`. Geometry only, cached."""
+    vertex's taken as at least :data:`OPEN_FLOOR`; ``group``: the corners by their vertex's start
+    (:func:`_start_groups`). Geometry only, cached."""
     key = cache_key(geometry_key(elements) + array_key(start) + array_key(xv), ("covered-open", reach, OPEN_FLOOR))
 
     def shares():
-        scene = embree_scene(elements)
-        here = open_fraction(elements, start, shade, scene, reach, rays=OPEN_RAYS, eps=np.zeros(len(p)))
-        # once per vertex (and object): a vertex's covered corners are often several, and
-        # each point's fraction is its own rays' alone
-        _, one, of = unique_ints(v * (int(elements.owner.max(initial=0)) + 1) + elements.owner[p],
-                                 return_index=True, return_inverse=True)
-        there = open_fraction(elements, xv[v[one]], nv[v[one]], scene, reach, rays=OPEN_RAYS,
-                              eps=ray_offsets(ctx.patches, owner=elements.owner[p[one]]))[of]
-        return np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
+        one, of = group             # once per vertex start: each point's fraction is its own rays' alone
+        there = (xv[v[one]], nv[v[one]], ray_offsets(ctx.patches, owner=elements.owner[p[one]]))
+        return open_share(elements, embree_scene(elements), reach, OPEN_RAYS, (start, shade), there, of)
     return cached(ctx.cache, key, shares)
+
+
+def open_share(elements, scene, reach: float, rays: int, here, there, of=None) -> np.ndarray:
+    """(K,) the share of its light reflected more than once that a point keeps whose rays start
+    ``here`` (points (K, 3), unit normals (K, 3)) and not ``there`` (points (U, 3), unit
+    normals, ray offsets (U,); its rows ``of`` (K,), None: the same K): the share of the open
+    scene seen from the one (:func:`.hemisphere.open_fraction`: ``rays`` cosine rays through
+    ``scene``, the Embree scene of ``elements``; those closed within ``reach`` lend nothing)
+    over that seen from the other, taken as at least :data:`OPEN_FLOOR`; at most 1. A covered
+    corner's (:func:`covered_light`) and a covered texel's (:meth:`.texel_cover.Cover.keep`)."""
+    x, n = here
+    f = open_fraction(elements, x, n, scene, reach, rays=rays, eps=np.zeros(len(x)))
+    y, m, eps = there
+    g = open_fraction(elements, y, m, scene, reach, rays=rays, eps=eps)
+    return np.minimum(1.0, f / np.maximum(g if of is None else g[of], OPEN_FLOOR))
+
+
+def _start_groups(vstarts, vnormals):
+    """(one (U,), of (K,)): covered corners grouped by where their vertex's rays start,
+    ``vstarts`` (K, 3) along ``vnormals`` (K, 3): a corner ``one`` of each start, the starts in
+    lexicographic order, and each corner's start. A vertex's covered corners are often several
+    and share its start (its rays are cast once: :func:`_open_shares`, :func:`.near.near_part`),
+    and coincident vertices share one too. By value, not by (vertex, object): the order of the
+    starts is the order their shadow rays toward a sun with a size draw random numbers in
+    (:func:`.light.lamps.light_irradiance`), so another order is another (as good) estimate."""
+    _, one, of = np.unique(np.column_stack([vstarts, vnormals]), axis=0, return_index=True, return_inverse=True)
+    return one, of.ravel()
 
 
 def _front_light(ctx, start, shade, geo) -> np.ndarray:

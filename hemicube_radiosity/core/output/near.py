@@ -100,7 +100,7 @@ def near_light(ctx, elements, scene, starts, normals, reach: float, rays: int, w
     return share[:, None] * out
 
 
-def near_part(ctx, elements, starts, normals, vstarts, vnormals, reach: float, rays: int, keep, rows,
+def near_part(ctx, elements, starts, normals, vstarts, vnormals, grouped, reach: float, rays: int, keep, rows,
               arriving=None, own=None) -> np.ndarray:
     """(K, 3) what to add to the direct light of covered corners at ``starts`` (K, 3) (unit
     ``normals``; rays within ``reach``, ``rays`` of them): their :func:`near_light`, less that
@@ -108,7 +108,8 @@ def near_part(ctx, elements, starts, normals, vstarts, vnormals, reach: float, r
     of the vertex's light reflected more than once (``arriving`` (K, 3), per rho, or None) the
     corner keeps, and at most all of that. Only at ``rows`` (K,) bool; ``own`` (K,): each
     corner's :func:`face_keys` (its own face is no near front of the corner; the vertex's
-    start, whose gather read every face, counts them all)."""
+    start, whose gather read every face, counts them all). ``grouped``: (one, of) the corners
+    grouped by vertex start (:func:`.covered._start_groups`): the rays of each are cast once."""
     out = np.zeros((len(starts), 3))
     rows = np.flatnonzero(rows)
     if not rows.size:
@@ -117,9 +118,9 @@ def near_part(ctx, elements, starts, normals, vstarts, vnormals, reach: float, r
     own = None if own is None else np.asarray(own)[rows]
     here = near_light(ctx, elements, scene, starts[rows], normals[rows], reach, rays, "covered-near", own)
     # once per vertex start (its corners share it), all its rays meet: what its gather read
-    _, one, of = np.unique(np.column_stack([vstarts[rows], vnormals[rows]]), axis=0, return_index=True,
-                           return_inverse=True)
-    there = near_light(ctx, elements, scene, vstarts[rows[one]], vnormals[rows[one]], reach, rays,
+    one, of = grouped
+    used, of = np.unique(of[rows], return_inverse=True)         # the starts of ``rows``, in its order
+    there = near_light(ctx, elements, scene, vstarts[one[used]], vnormals[one[used]], reach, rays,
                        "covered-near-vertex")[of.ravel()]
     less = keep[rows, None] * there
     if arriving is not None:

@@ -31,11 +31,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..hemisphere import open_fraction
 from ..mesh.patches import PatchSet
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..util.geometry import bilinear
-from .covered import LIFT_ULPS, OPEN_FLOOR, TIE_ULPS, walk_along
+from .covered import LIFT_ULPS, TIE_ULPS, front_scene, open_share, walk_along
 from .interpolate import inverse_bilinear
 
 __all__ = ["Cover", "lifts_of", "apart", "OPEN_RAYS", "OFF"]
@@ -74,9 +73,8 @@ class Cover:
     def _fronts(self):
         """(rows of the elements that are no back, their Embree scene), made once."""
         if "fronts" not in self._scenes:
-            rows = np.flatnonzero(~np.isin(self.elements.owner, np.asarray(self.backs, dtype=np.int64)))
-            whole = rows.size == len(self.elements)
-            self._scenes["fronts"] = rows, embree_scene(self.elements if whole else self.elements.take(rows))
+            back = np.isin(self.elements.owner, np.asarray(self.backs, dtype=np.int64))
+            self._scenes["fronts"] = front_scene(self.elements, np.flatnonzero(~back) if back.any() else None)
         return self._scenes["fronts"]
 
     def _keys(self, owner, faces):
@@ -108,7 +106,8 @@ class Cover:
         """(n,) the share of the light reflected more than once kept at ``points`` (n, 3) whose
         rays start ``lift`` (n,) off them along their triangle ``normals`` (1 where ``lift`` is
         NaN): the open share seen from there, cosine about ``shading`` (n, 3), over the share
-        seen from a ray offset off the point (at least :data:`.covered.OPEN_FLOOR`), at most 1."""
+        seen from a ray offset off the point (at least :data:`.covered.OPEN_FLOOR`), at most 1:
+        :func:`.covered.open_share`, as a covered corner keeps it."""
         lift = np.asarray(lift, dtype=np.float64)
         out = np.ones(len(lift))
         c = np.flatnonzero(np.isfinite(lift))
@@ -116,12 +115,9 @@ class Cover:
             return out
         p, n, s = (np.asarray(a, dtype=np.float64)[c] for a in (points, normals, shading))
         s = np.where((np.einsum("ij,ij->i", s, n) > 0)[:, None], s, n)
-        scene = embree_scene(self.elements)
-        here = open_fraction(self.elements, p + lift[c, None] * n, s, scene, self.reach, rays=OPEN_RAYS,
-                             eps=np.zeros(c.size))
-        there = open_fraction(self.elements, p, s, scene, self.reach, rays=OPEN_RAYS,
-                              eps=ray_offsets(self.elements, owner=np.full(c.size, self.owner)))
-        out[c] = np.minimum(1.0, here / np.maximum(there, OPEN_FLOOR))
+        there = (p, s, ray_offsets(self.elements, owner=np.full(c.size, self.owner)))
+        out[c] = open_share(self.elements, embree_scene(self.elements), self.reach, OPEN_RAYS,
+                            (p + lift[c, None] * n, s), there)
         return out
 
     def relocate(self, points, normals, faces, idx, uv):
