@@ -191,7 +191,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     x, masks = np.zeros((0, 3)), [select, hot]
     if grid is not None:
         cells = grid.hot_cells()
-        x, masks = np.concatenate([grid.values, grid.cell_mean]), masks + [grid.spiky, grid.hot]
+        x, masks = grid.readable(), masks + [grid.spiky, grid.hot]
 
     def read(y, pid):               # abrupt elements: their grid (none where it shines)
         cols, w = np.zeros((len(pid), 4), np.int64), np.zeros((len(pid), 4))
@@ -203,7 +203,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
-                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size)
+                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size, "strata")
                     + (("whole",) if faces else ()))     # the grid's cells (AbruptGrid)
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):
