@@ -27,7 +27,9 @@ it). A covered point is lit
 on its own (:func:`covered_light`) from :data:`LIFT_ULPS` float32 steps off it (at most half
 way to the face over it): its direct light found again there (cosine to its shading normal,
 the light from below its triangle's plane by rays from Cycles' lifted start where its shading
-normal leans off the triangle's, :func:`.crease.below_plane`), and its vertex's light
+normal leans off the triangle's, :func:`.crease.below_plane`; none of the scene's sun where
+a face near the bake point meets its own ray toward it, as Cycles' shadow ray starts there:
+:func:`_sun_shaded`), and its vertex's light
 reflected more than once scaled by how much of the open scene it sees against how much the vertex's start did
 (:func:`.hemisphere.open_fraction`: rays closed within a twentieth of the patch size or on a back
 face lend nothing; in a crack they only meet its dark walls; :mod:`.near` adds the direct light
@@ -61,6 +63,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..light.lamps import UNBOUNDED, SunLight
 from ..rays import embree_available, embree_scene, ray_offsets
 from ..hemisphere import open_fraction
 from ..mesh.backs import backs_of_pieces
@@ -327,7 +330,8 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     shade = geo if shade is None else np.where(has[:, None], shade, geo)
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
     v = elements.polys[p, c]
-    D = _front_light(ctx, start, shade, geo) if own else np.array(light_v, dtype=np.float64)[v]
+    D = _front_light(ctx, start, shade, geo, _sun_shaded(ctx, elements, p, c, geo, shade)) if own \
+        else np.array(light_v, dtype=np.float64)[v]
     # and the light below the triangle's plane, from Cycles' lifted start (:mod:`.crease`)
     lean = leans(shade, geo) & own
     if lean.any():
@@ -401,7 +405,43 @@ def _start_groups(vstarts, vnormals):
     return one, of.ravel()
 
 
-def _front_light(ctx, start, shade, geo) -> np.ndarray:
+def _sun_shaded(ctx, elements, p, c, geo, shade) -> np.ndarray:
+    """(K,) bool: the bake point of corner ``c`` (K,) of element ``p`` (K,) (its triangle's
+    normal ``geo`` (K, 3), shading normal ``shade``) faces the sun and its ray toward it, a
+    float32 step off it as :func:`_find`'s, meets a face (going on past the corner's own,
+    :func:`_cover_along`) within where the sun's disc casts a penumbra as wide as a ray offset
+    (further on, the shadow's edge is soft over more than the bake point and the corner's start
+    lie apart, and a single ray tells nothing: zdm2's floor corners in a ceiling's penumbra
+    11.7 m off, lit 0.46 in Cycles, read 0.21 with any hit): where Cycles' shadow ray starts there (a flat face, or a smooth one
+    the sun shines on well enough, both normals :data:`TERMINATOR` toward it: else its shadow
+    terminator offset starts it toward the smooth surface; truck town's corners whose face
+    the sun grazes, lit in Cycles past a neighbour their bake point's ray meets), the point
+    :data:`LIFT_ULPS` steps over it that the corner's direct light is found at may see past
+    the edge of what shades it (the living room's bevel corners beside a wall's edge: 5758,
+    0.41 where Cycles has 0.17). Only where the scene's one sun is its only light without
+    bounds (the suns' and maps' light comes as one part, :func:`_front_light`); else none."""
+    free = [li for li in ctx.direct.lights if isinstance(li, UNBOUNDED)]
+    if len(free) != 1 or not isinstance(free[0], SunLight) or not free[0].strength > 0:
+        return np.zeros(len(p), bool)
+    to_sun = -np.asarray(free[0].direction, dtype=np.float64)
+    point = bake_points(elements, ctx.meshes, p, c)
+    tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(point).max(axis=1), 1.0)
+    fronts, scene = _fronts(ctx, elements)
+    rise = geo @ to_sun
+    flat = np.einsum("ij,ij->i", shade, geo) >= FLAT_COS
+    high = (rise >= TERMINATOR) & (shade @ to_sun >= TERMINATOR)
+    k = np.flatnonzero((rise > 0.0) & (flat | high))
+    out = np.zeros(len(p), bool)
+    # within where the sun's disc casts a penumbra as wide as a ray offset
+    eps = ray_offsets(ctx.patches, owner=elements.owner[p[k]])
+    reach = eps / max(np.tan(0.5 * free[0].angle), 1e-300)
+    along = np.broadcast_to(to_sun, (len(k), 3))
+    out[k] = _cover_along(scene, fronts, face_keys(elements), p[k], point[k] + tie[k, None] * geo[k], along, reach,
+                          tie[k])[0]
+    return out
+
+
+def _front_light(ctx, start, shade, geo, shaded=None) -> np.ndarray:
     """(K, 3) the direct light at covered points ``start`` (K, 3) (shading normals ``shade``,
     triangles' normals ``geo``), by shadow rays that the backs of open surfaces
     (:mod:`..mesh.backs`) do not stop: a back lies a quarter of its object's ray offset behind its
@@ -409,17 +449,23 @@ def _front_light(ctx, start, shade, geo) -> np.ndarray:
     it, which Cycles has not (the living room's notch: the sun ray from the bevel triangle of wall
     corner 7273 met the back of face 197, 0.2 mm on, and read 0.03 where Cycles has 0.33). The
     emitters' light as the bake's own (an emitting open surface's back shines too); without
-    backs, or with see-through faces (their masks are per patch), all of it the bake's own."""
+    backs, or with see-through faces (their masks are per patch), all of it the bake's own.
+    ``shaded`` (K,) bool or None: points whose bake point the scene's one sun does not reach
+    (:func:`_sun_shaded`), which take none of its light."""
     direct = ctx.direct
     P = direct.patches
     zero = np.zeros(len(start))
+    far = np.zeros((len(start), 3))
     rows = _front_rows(ctx, P)
     if rows is None or rows.size == len(P) or getattr(P, "see_through", None) is not None:
-        return direct.at(start, shade, "covered", eps=zero, facing=geo)
-    D = direct.over(P.take(rows)).at(start, shade, "covered-fronts", eps=zero, facing=geo, emitters=False,
-                                     clamp=False)
-    if direct.emitters.size:
-        D += direct.at(start, shade, "covered", eps=zero, facing=geo, lights=False, clamp=False)
+        D = direct.at(start, shade, "covered", eps=zero, facing=geo, unbounded=far, clamp=False)
+    else:
+        D = direct.over(P.take(rows)).at(start, shade, "covered-fronts", eps=zero, facing=geo, emitters=False,
+                                         clamp=False, unbounded=far)
+        if direct.emitters.size:
+            D += direct.at(start, shade, "covered", eps=zero, facing=geo, lights=False, clamp=False)
+    if shaded is not None and shaded.any():
+        D[shaded] -= far[shaded]
     return np.maximum(D, 0.0, out=D)
 
 
