@@ -77,12 +77,9 @@ def import_obj(path):
     before.)"""
     bpy.ops.wm.obj_import(filepath=path, validate_meshes=False)
     for me in bpy.data.meshes:
-        drop = repeated_faces(me)
+        lv, start, total = face_loops(me)
+        drop = repeated_faces(lv, start, total)
         if drop.any():
-            lv, start, total = (np.empty(n, np.int32) for n in (len(me.loops), len(drop), len(drop)))
-            me.loops.foreach_get("vertex_index", lv)
-            me.polygons.foreach_get("loop_start", start)
-            me.polygons.foreach_get("loop_total", total)
             f = np.flatnonzero(drop)
             lv[np.repeat(start[f], total[f]) + _ranks(total[f])] = np.repeat(lv[start[f]], total[f])
             me.loops.foreach_set("vertex_index", lv)
@@ -94,17 +91,24 @@ def _ranks(counts):
     return np.arange(int(counts.sum())) - np.repeat(np.cumsum(counts) - counts, counts)
 
 
-def repeated_faces(me):
-    """(F,) bool: the faces of mesh ``me`` that use the same vertices as an earlier face (in any
-    order or winding)."""
-    nf, nl = len(me.polygons), len(me.loops)
+def face_loops(me):
+    """(vertex index per loop (L,), loop start per face (F,), loops per face (F,)) of mesh
+    ``me``, int32."""
+    lv, start, total = (np.empty(n, np.int32) for n in (len(me.loops), len(me.polygons), len(me.polygons)))
+    me.loops.foreach_get("vertex_index", lv)
+    me.polygons.foreach_get("loop_start", start)
+    me.polygons.foreach_get("loop_total", total)
+    return lv, start, total
+
+
+def repeated_faces(lv, start, pt):
+    """(F,) bool: the faces that use the same vertices as an earlier face (in any order or
+    winding), of a mesh whose loops' vertices are ``lv`` (L,) and whose faces start at loop
+    ``start`` (F,) with ``pt`` (F,) loops (:func:`face_loops`)."""
+    nf = len(pt)
     out = np.zeros(nf, bool)
     if nf < 2:
         return out
-    lv, start, pt = np.empty(nl, np.int32), np.empty(nf, np.int32), np.empty(nf, np.int32)
-    me.loops.foreach_get("vertex_index", lv)
-    me.polygons.foreach_get("loop_start", start)
-    me.polygons.foreach_get("loop_total", pt)
     first = np.concatenate([[0], np.cumsum(pt)[:-1]])
     v = lv[np.repeat(start, pt) + _ranks(pt)]                     # the corners face by face
     sv = v[np.lexsort((v, np.repeat(np.arange(nf), pt)))]        # each face's vertices, ascending

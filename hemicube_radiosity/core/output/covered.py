@@ -109,7 +109,7 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     """The element corners lit at their own bake point (module docstring), or None:
     (p (K,) element, c (K,) corner 0..3, start (K, 3) where it is lit from, geo (K, 3) the
     corner triangle's unit normal, alone (K,) bool: a corner of a buried vertex lit there only
-    for being Cycles' own point, nothing over it). ``xv``, ``nv`` (V, 3): where each vertex was
+    for being Cycles' own point, nothing over it, point (K, 3) its bake point). ``xv``, ``nv`` (V, 3): where each vertex was
     lit and its normal; ``opened`` (N,) 0 for elements the scene does not see: their corners at a
     vertex of an element it sees (a floor's under a block resting on it) are not looked at,
     they count in that vertex's mean; nor are the corners of ``buried`` (V,) bool vertices,
@@ -125,16 +125,17 @@ def covered_corners(ctx, elements, xv, nv, opened=None, buried=None):
     key = cache_key(geometry_key(elements) + shading + array_key(xv) + array_key(nv)
                     + (b"" if opened is None else array_key(np.asarray(opened, dtype=np.float64)))
                     + (b"" if buried is None else np.asarray(buried, bool).tobytes())
-                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 7, INSET))
+                    + (b"" if sun is None else array_key(np.asarray(sun, dtype=np.float64))), ("covered-corners", 8, INSET))
     code = cached(ctx.cache, key, lambda: _find(ctx, elements, xv, nv, opened, buried))
     if len(code) == 0:
         return None
     p, c = code[:, 0].astype(np.int64), code[:, 1].astype(np.int64)
-    return p, c, code[:, 2:5], code[:, 5:8], code[:, 8] > 0
+    return p, c, code[:, 2:5], code[:, 5:8], code[:, 8] > 0, code[:, 9:12]
 
 
 def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
-    """(K, 9) rows (element, corner, start (3), geo (3), alone) of :func:`covered_corners`."""
+    """(K, 12) rows (element, corner, start (3), geo (3), alone, bake point (3)) of
+    :func:`covered_corners`."""
     polys = elements.polys
     p, c = np.nonzero(polys >= 0)
     keep = np.ones(len(p), bool)
@@ -182,9 +183,9 @@ def _find(ctx, elements, xv, nv, opened, buried) -> np.ndarray:
     chosen = picked | alone
     alone &= ~picked
     if not chosen.any():
-        return np.zeros((0, 9))
+        return np.zeros((0, 12))
     start = point + np.minimum(np.minimum(eps, 0.5 * gap), LIFT_ULPS * tie / TIE_ULPS)[:, None] * geo
-    return np.column_stack([p, c, start, geo, alone])[chosen].astype(np.float64)
+    return np.column_stack([p, c, start, geo, alone, point])[chosen].astype(np.float64)
 
 
 def _sun_picks(ctx, elements, scene, fronts, own, p, c, origin, geo, eps, tie, xv, nv, to_sun):
@@ -320,17 +321,16 @@ def covered_light(ctx, elements, xv, nv, light_v, creased=None, opened=None, bur
     if found is not None and creased is not None:
         # a corner Cycles turns around sees the lune behind its face, not what covers its front
         # (:mod:`.lune`): its light is the crease's
-        p, c, start, geo, alone = found
-        front = ~creased[2][p, c]
-        found = (p[front], c[front], start[front], geo[front], alone[front]) if front.any() else None
+        front = ~creased[2][found[0], found[1]]
+        found = tuple(a[front] for a in found) if front.any() else None
     if found is None:
         return None if creased is None else creased[:2]
-    p, c, start, geo, alone = found
+    p, c, start, geo, alone, point = found
     shade, has = corner_shading_normals(elements, ctx.meshes, p, c)
     shade = geo if shade is None else np.where(has[:, None], shade, geo)
     shade = np.where((np.einsum("ij,ij->i", shade, geo) > 0)[:, None], shade, geo)
     v = elements.polys[p, c]
-    D = _front_light(ctx, start, shade, geo, _sun_shaded(ctx, elements, p, c, geo, shade)) if own \
+    D = _front_light(ctx, start, shade, geo, _sun_shaded(ctx, elements, p, point, geo, shade)) if own \
         else np.array(light_v, dtype=np.float64)[v]
     # and the light below the triangle's plane, from Cycles' lifted start (:mod:`.crease`)
     lean = leans(shade, geo) & own
@@ -405,8 +405,8 @@ def _start_groups(vstarts, vnormals):
     return one, of.ravel()
 
 
-def _sun_shaded(ctx, elements, p, c, geo, shade) -> np.ndarray:
-    """(K,) bool: the bake point of corner ``c`` (K,) of element ``p`` (K,) (its triangle's
+def _sun_shaded(ctx, elements, p, point, geo, shade) -> np.ndarray:
+    """(K,) bool: the bake point ``point`` (K, 3) of a corner of element ``p`` (K,) (its triangle's
     normal ``geo`` (K, 3), shading normal ``shade``) faces the sun and its ray toward it, a
     float32 step off it as :func:`_find`'s, meets a face (going on past the corner's own,
     :func:`_cover_along`) within where the sun's disc casts a penumbra as wide as a ray offset
@@ -424,7 +424,6 @@ def _sun_shaded(ctx, elements, p, c, geo, shade) -> np.ndarray:
     if len(free) != 1 or not isinstance(free[0], SunLight) or not free[0].strength > 0:
         return np.zeros(len(p), bool)
     to_sun = -np.asarray(free[0].direction, dtype=np.float64)
-    point = bake_points(elements, ctx.meshes, p, c)
     tie = TIE_ULPS * 2.0 ** -23 * np.maximum(np.abs(point).max(axis=1), 1.0)
     fronts, scene = _fronts(ctx, elements)
     rise = geo @ to_sun
