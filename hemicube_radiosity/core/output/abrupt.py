@@ -17,6 +17,7 @@ from ..mesh.patches import PatchSet
 from ..util.colour import LUMA
 from ..runtime.cache import Memo, cache_key, cached, frozen, geometry_key
 from ..util.geometry import bilinear
+from ..util.sampling import keyed_uniforms, place_keys
 from ..util.unique import run_positions
 from .corners import corner_columns
 from .interpolate import inverse_bilinear
@@ -100,19 +101,11 @@ def _inside_points(elements, ids, size, huge):
 
 def _place_uniforms(points, verts, count) -> np.ndarray:
     """(P, count) uniforms in [0, 1) drawn from the place of each of ``points`` (P, 3) (a hash of
-    its position within the bounding box of ``verts``, to 2^-32 of its size): the same point
-    draws the same numbers in any scene, in any order."""
+    its position within the bounding box of ``verts``, to 2^-32 of its size,
+    :func:`..util.sampling.place_keys`): the same point draws the same numbers in any scene, in
+    any order."""
     lo = verts.min(axis=0)
-    size = max(float(np.max(verts.max(axis=0) - lo)), 1e-300)
-    q = np.floor((np.asarray(points, dtype=np.float64) - lo) / size * 2.0 ** 32).astype(np.int64).astype(np.uint64)
-    with np.errstate(over="ignore"):
-        key = (q[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (q[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) \
-            ^ (q[:, 2] * np.uint64(0x165667B19E3779F9))
-        z = key[:, None] + (np.arange(1, count + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15))[None]
-        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)          # splitmix64's finaliser
-        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-        z ^= z >> np.uint64(31)
-    return (z >> np.uint64(11)).astype(np.float64) / 2.0 ** 53
+    return keyed_uniforms(place_keys(points, lo, max(float(np.max(verts.max(axis=0) - lo)), 1e-300)), count)
 
 
 def huge_elements(ctx, elements, ids) -> np.ndarray:
