@@ -162,11 +162,20 @@ def test_a_block_piercing_the_floor_darkens_nothing_around_it():
 
 
 def test_a_block_piercing_the_floor_changes_nothing_a_patch_away():
+    """A block standing on the floor, and sunk 10 cm and 15 cm into it: the floor a patch away
+    lights alike. Part of its light comes from the glow the lamp's back casts on the ceiling
+    around it, 1 cm above (shining, :mod:`hemicube_radiosity.core.output.shine`), through 4
+    shadow-ray targets a group seen alike from the whole far floor. Drawn from one stream for
+    all the groups, the targets moved when anything shining changed anywhere (sunk 15 cm, 12 more
+    elements of the block's top pass the bar for shining, the mean light it is set by taking in
+    the block's sides under the floor, open to the void below), and the far floor moved with
+    them: 0.79% on the mean, 2.0% at worst. Each group draws from where it is now: measured
+    0.03% on the mean, 0.37% at worst."""
     room = box((0, 0, 0), (2, 2, 1.5), (0.7,) * 3, inward=True, name="room")
     lamp = quad([(0.8, 0.8, 1.49), (0.8, 1.2, 1.49), (1.2, 1.2, 1.49), (1.2, 0.8, 1.49)], (0, 0, 0), (10.0,) * 3,
                 name="lamp")
     out = []
-    for z0 in (0.0, -0.1):
+    for z0 in (0.0, -0.1, -0.15):
         r = bake([room, lamp, box((0.7, 0.7, z0), (1.3, 1.3, 0.5), (0.5,) * 3, name="block")],
                  BakeSettings(patch_size=0.25, element_size=0.08))
         el = r.elements
@@ -175,7 +184,8 @@ def test_a_block_piercing_the_floor_changes_nothing_a_patch_away():
         far = np.maximum(np.abs(el.verts[v, 0] - 1), np.abs(el.verts[v, 1] - 1)) > 0.3 + 0.25
         out.append(r.vertex_radiosity[v][far].mean(axis=1))
     assert out[0].size > 300
-    np.testing.assert_allclose(out[1], out[0], rtol=0.01)
+    for sunk in out[1:]:
+        np.testing.assert_allclose(sunk, out[0], rtol=0.01)
 
 
 # --------------------------------------------------------------------------------------------

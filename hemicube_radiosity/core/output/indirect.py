@@ -203,7 +203,7 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
-                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size, "strata")
+                    ("gather-correction", gather_count(ctx), s.element_size, s.patch_size, "strata", "graded2")
                     + (("whole",) if faces else ()))     # the grid's cells (AbruptGrid)
     shone = None
     if hot.any() or (cells is not None and len(cells[0])):

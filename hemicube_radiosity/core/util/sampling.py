@@ -18,7 +18,29 @@ import numpy as np
 
 from .geometry import orthonormal_basis
 
-__all__ = ["stratified_unit_square", "jittered_grid", "cosine_directions", "disk_samples"]
+__all__ = ["stratified_unit_square", "jittered_grid", "cosine_directions", "disk_samples", "place_keys",
+           "keyed_uniforms"]
+
+
+def place_keys(points, origin, size) -> np.ndarray:
+    """(P,) uint64 keys of ``points`` (P, 3): a hash of each one's position from ``origin`` (3,),
+    to 2^-32 of ``size`` (the same point keys the same in any order)."""
+    q = np.floor((np.asarray(points, dtype=np.float64) - origin) / size * 2.0 ** 32).astype(np.int64).astype(np.uint64)
+    with np.errstate(over="ignore"):
+        return (q[:, 0] * np.uint64(0x9E3779B97F4A7C15)) ^ (q[:, 1] * np.uint64(0xC2B2AE3D27D4EB4F)) \
+            ^ (q[:, 2] * np.uint64(0x165667B19E3779F9))
+
+
+def keyed_uniforms(keys, count) -> np.ndarray:
+    """(P, count) uniforms in [0, 1), a stream of ``count`` for each of ``keys`` (P,) uint64
+    (splitmix64 from the key): a key draws the same numbers whatever else is drawn."""
+    with np.errstate(over="ignore"):
+        z = np.asarray(keys, np.uint64)[:, None] \
+            + (np.arange(1, count + 1, dtype=np.uint64) * np.uint64(0x9E3779B97F4A7C15))[None]
+        z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)          # splitmix64's finaliser
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z ^= z >> np.uint64(31)
+    return (z >> np.uint64(11)).astype(np.float64) / 2.0 ** 53
 
 
 def stratified_unit_square(rng, count, k):
