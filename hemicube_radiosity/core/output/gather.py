@@ -368,12 +368,13 @@ CORRECTION_SHARE = 1 << 15
 CORRECTION_RUN = 1 << 15
 
 
-def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, workers=1) -> CSR:
+def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, workers=1, hit_select=None) -> CSR:
     """:func:`correct_hits` as a matrix, for values that change while the hits and their choice
     do not (a relight): C (P x (V + ``extra``)), float64, such that ``C @ [vertex_values; x]``
     is what :func:`correct_hits` adds when ``exact(y, pid)`` reads ``x`` (``extra``, k) through
-    ``read(y, pid) -> (columns (h, m) into x, weights (h, m))`` (None: reads nothing, 0; it is
-    called from ``workers`` threads at once, each on its own hits).
+    ``read(y, pid, hits) -> (columns (h, m) into x, weights (h, m))`` (``hits`` their rows of
+    H; None: reads nothing, 0; it is called from ``workers`` threads at once, each on its own
+    hits). ``hit_select`` (h,) bool or None: the hits corrected, besides those on ``select``.
 
     ``workers`` (0 = every core): the hits are cut at row boundaries into shares of at least
     :data:`CORRECTION_SHARE`, each made into its rows of C on its own thread
@@ -384,7 +385,8 @@ def correction_matrix(G, H, patches: PatchSet, select, read=None, extra=0, worke
     waiting."""
     P, V = G.shape
     R = G.meta["rays"]
-    H = H[select[H[:, 1].astype(np.int64)]]
+    on = select[H[:, 1].astype(np.int64)]
+    H = H[on if hit_select is None else on | hit_select]
     n = V + int(extra)
     entries = partial(_correction_entries, patch_parameters(patches), patches.polys, read, V, n, R)
     bounds = _hit_shares(H[:, 0], workers)
@@ -434,7 +436,7 @@ def _correction_entries(params, polys, read, V, n, R, h):
         w = w * h[:, 5:6].astype(np.float64)
     rows, cols, vals = [np.repeat(row, 4)], [ids.ravel()], [-w.ravel()]
     if read is not None and len(h):
-        c, r = read(y, pid)
+        c, r = read(y, pid, h)
         if h.shape[1] > 5:
             r = np.asarray(r, np.float64) * h[:, 5:6].astype(np.float64)
         rows.append(np.repeat(row, c.shape[1]))

@@ -22,10 +22,11 @@ from ..util.geometry import bilinear
 from ..util.sparse import product
 from ..util.unique import unique_ints
 from .abrupt import AbruptGrid, abrupt_elements, shadowed_inside
-from .gather import apply_gather, correction_matrix, gather_matrix
+from .gather import apply_gather, correction_matrix, gather_matrix, patch_parameters
 from .interpolate import interpolate_corners, located_corners, locate
 from .shared import corner_sharing
 from .shine import BUDGET, HOT, hot_elements, mean_light, shine
+from .short_hits import MOST as SHORT_MOST, RATIO as SHORT_RATIO, ShortCells, short_hits
 from .corners import corner_columns
 from .sides import open_elements, seen_fraction, sided_mesh
 from .through import through_key
@@ -165,9 +166,10 @@ def _bounce_again(G, rho_v, out, rest_e, passes=GATHER_PASSES, tol=1e-4, workers
 
 
 def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
-    """What the gather of ``direct_e`` misses: the exact light of abrupt elements' grids and
-    what shines (see :func:`_gathered`); (V, 3). ``rays()``: the gather's (G, H), asked for
-    only after what shines is found (a gather started in the background casts meanwhile)."""
+    """What the gather of ``direct_e`` misses: the exact light of abrupt elements' grids, of the
+    cells short rays land in (:mod:`.short_hits`) and what shines (see :func:`_gathered`);
+    (V, 3). ``rays()``: the gather's (G, H), asked for only after what shines is found (a
+    gather started in the background casts meanwhile)."""
     out = np.zeros((len(xv), 3))
     # what is abrupt or hot is judged on the light arriving, not on what the surfaces make of it:
     # a relight that changes a colour or scales the lamps picks the same elements and finds
@@ -185,35 +187,66 @@ def _corrections(ctx, elements, rays, xv, nv, light_v, direct_e):
     # a dense scene's faces none (:func:`_open_small_faces` says why)
     hot, hot_light = hot_elements(ctx, elements, light_v, bar, ~select, opened, grid=grid,
                                   budget=0 if faces else BUDGET)
-    if not (select.any() or hot.any()):
-        return out
     cells = None
     x, masks = np.zeros((0, 3)), [select, hot]
     if grid is not None:
         cells = grid.hot_cells()
         x, masks = grid.readable(), masks + [grid.spiky, grid.hot]
-
-    def read(y, pid):               # abrupt elements: their grid (none where it shines)
-        cols, w = np.zeros((len(pid), 4), np.int64), np.zeros((len(pid), 4))
-        on = select[pid]
-        if on.any():
-            cols[on], w[on] = grid.weights(y[on], pid[on])
-        return cols, w
+    shone = None
+    if hot.any() or (cells is not None and len(cells[0])):
+        shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
+    short = _short_cells(ctx, elements, rays, xv, hot) if faces else None    # (waits for the gather's hits)
+    if not (select.any() or hot.any() or short is not None):
+        return out
+    read = _reader(elements, xv, select, grid, short, len(x))
+    if short is not None:
+        light = ctx.direct.at(short.points, short.normals, "short-hits")
+        x = np.concatenate([x, elements.rho.take(short.faces, axis=0) * light])
     # the hits' correction as a matrix: it depends on geometry and on what was chosen (on the
     # light arriving), so a relight that chooses the same reads its new light through it
     s = ctx.settings
     key = cache_key(geometry_key(elements) + through_key(elements) + b"".join(np.packbits(m).tobytes() for m in masks),
                     ("gather-correction", gather_count(ctx), s.element_size, s.patch_size, "strata", "graded2")
-                    + (("whole",) if faces else ()))     # the grid's cells (AbruptGrid)
-    shone = None
-    if hot.any() or (cells is not None and len(cells[0])):
-        shone = shine(ctx, elements, np.flatnonzero(hot), hot_light, xv, nv, cells)
-    C = cached(ctx.cache, key, lambda: correction_matrix(*rays(), elements, select | hot, read, len(x),
-                                                        workers=ctx.settings.workers))
+                    + (("whole",) if faces else ()) + (("short", SHORT_RATIO) if short is not None else ()))
+
+    def correction():
+        G, H = rays()
+        on = None if short is None else short_hits(elements, xv, H, SHORT_RATIO, exclude=hot)
+        return correction_matrix(G, H, elements, select | hot, read, len(x), workers=s.workers, hit_select=on)
+    C = cached(ctx.cache, key, correction)
     out += product(C, np.concatenate([direct_e, x]))
     if shone is not None:
         out += shone
     return out
+
+
+def _short_cells(ctx, elements, rays, xv, hot):
+    """The :class:`.short_hits.ShortCells` of the gather's hits (none on elements ``hot``, which
+    shine), cached on the geometry; None where no ray is short."""
+    key = cache_key(geometry_key(elements) + through_key(elements) + np.packbits(hot).tobytes(),
+                    ("short-cells", gather_count(ctx), SHORT_RATIO, SHORT_MOST))
+    cells = cached(ctx.cache, key, lambda: ShortCells(elements, xv, rays()[1], SHORT_RATIO, exclude=hot))
+    return cells if len(cells.keys) else None
+
+
+def _reader(elements, xv, select, grid, short, before):
+    """``read(y, pid, hits)`` for :func:`.gather.correction_matrix`: hits on abrupt elements
+    (``select``) read their ``grid`` (nothing where it shines), short hits (``short``) their
+    cell's point, column ``before`` on (after the grid's), unless they land on a grid's cell
+    that shines."""
+    params = patch_parameters(elements) if short is not None else None
+
+    def read(y, pid, hits):
+        cols, w = np.zeros((len(pid), 4), np.int64), np.zeros((len(pid), 4))
+        on = select[pid]
+        if on.any():
+            cols[on], w[on] = grid.weights(y[on], pid[on])
+        if short is not None:
+            near, at = short.columns(elements, params, xv, hits)
+            near &= ~on | (w.sum(axis=1) > 0)
+            cols[near], w[near] = (before + at[near])[:, None], (1.0, 0.0, 0.0, 0.0)
+        return cols, w
+    return read
 
 
 def _open_small_faces(ctx, elements, xv, nv, opened) -> np.ndarray:

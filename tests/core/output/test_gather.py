@@ -149,7 +149,7 @@ def test_correction_matrix_in_shares_on_threads_is_one_piece_bit_for_bit(monkeyp
     x = rng.random((extra, 3))
     calls = []
 
-    def read(y, pid):
+    def read(y, pid, hits=None):
         calls.append(len(y))
         cols = np.stack([pid % extra, (pid * 7 + 3) % extra], axis=1)
         w = np.stack([np.abs(np.sin(y.sum(1))), np.cos(y[:, 0]) ** 2], axis=1)
