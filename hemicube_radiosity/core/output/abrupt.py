@@ -342,7 +342,7 @@ class AbruptGrid:
         S = self.SPIKE
 
         def points():               # geometry, cached on the cells (a relight finds them)
-            a, b = (g.ravel()[None] for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
+            a, b = (g.ravel() for g in np.meshgrid(np.arange(S), np.arange(S), indexing="ij"))
             nu, nv = self.nu[loc][:, None], self.nv[loc][:, None]
             c = self.corners[ids[loc]][:, None]                                       # (c, 1, 4, 3)
             centre = bilinear(c, ((i + 0.5) / self.nu[loc])[:, None, None], ((j + 0.5) / self.nv[loc])[:, None, None])
@@ -350,13 +350,13 @@ class AbruptGrid:
                 .transpose(1, 0, 2)
             eu, ev = stratum_edges(i, nu[:, 0], S), stratum_edges(j, nv[:, 0], S)
             du, dv = np.diff(eu, axis=1), np.diff(ev, axis=1)
-            su = (i[:, None] + np.take_along_axis(eu, a + 0 * i[:, None], 1) + ju * du[:, a[0]]) / nu
-            sv = (j[:, None] + np.take_along_axis(ev, b + 0 * j[:, None], 1) + jv * dv[:, b[0]]) / nv
+            su = (i[:, None] + eu[:, a] + ju * du[:, a]) / nu            # stratum (a, b)'s bounds and jitter
+            sv = (j[:, None] + ev[:, b] + jv * dv[:, b]) / nv
             u, v = (self.inset + (1 - 2 * self.inset) * t for t in (su, sv))
             x = bilinear(c, u[..., None], v[..., None]).reshape(-1, 3)
             el = np.repeat(ids[loc], S * S)
             nrm = self.elements.normals[el]
-            area = du[:, a[0]] * dv[:, b[0]] * S * S                  # each stratum's share (1: even)
+            area = du[:, a] * dv[:, b] * S * S                        # each stratum's share (1: even)
             return x, el, nrm, seen_fraction(ctx, self.elements, x, nrm).reshape(loc.size, S * S), area
         key = cache_key(geometry_key(self.elements) + b"".join(np.ascontiguousarray(a, np.int64).tobytes()
                                                                 for a in (ids, self.nu, self.nv, loc, i, j)),
