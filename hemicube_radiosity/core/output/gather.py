@@ -63,21 +63,28 @@ def patch_parameters(patches: PatchSet):
     return c[:, 0], e1, e2, inv, tri
 
 
+def surface_uv(params, pid, y):
+    """(u, v) (H,) each in [0, 1]: where points ``y`` (H, 3) lie on patches ``pid`` (H,) along
+    their edges e1, e2 from the first corner (:func:`patch_parameters`), clamped; a triangle's
+    may leave it (u + v > 1). Column by column, as :func:`surface_weights` needs it."""
+    c0, e1, e2, inv, _ = params
+    rel = y - c0.take(pid, axis=0)
+    E1, E2, M = e1.take(pid, axis=0), e2.take(pid, axis=0), inv.take(pid, axis=0)
+    g0 = rel[:, 0] * E1[:, 0] + rel[:, 1] * E1[:, 1] + rel[:, 2] * E1[:, 2]
+    g1 = rel[:, 0] * E2[:, 0] + rel[:, 1] * E2[:, 1] + rel[:, 2] * E2[:, 2]
+    return (np.clip(M[:, 0, 0] * g0 + M[:, 0, 1] * g1, 0.0, 1.0),
+            np.clip(M[:, 1, 0] * g0 + M[:, 1, 1] * g1, 0.0, 1.0))
+
+
 def surface_weights(params, polys, pid, y):
     """Corner vertex ids (H, 4) and weights (H, 4) of points ``y`` (H,3) on patches ``pid`` (H,):
     bilinear in a quad, linear in a triangle (its 4th weight is 0). Column by column (a dense
     mesh's gather passes millions of hits through here): the same sums in the same order as
     the row sums and einsum it replaced, bit for bit. Rows are gathered with ``take`` (3-5x
     faster than indexing a 2-D array with an index array in NumPy 1.x: the same copy)."""
-    c0, e1, e2, inv, tri = params
-    rel = y - c0.take(pid, axis=0)
-    E1, E2, M = e1.take(pid, axis=0), e2.take(pid, axis=0), inv.take(pid, axis=0)
-    g0 = rel[:, 0] * E1[:, 0] + rel[:, 1] * E1[:, 1] + rel[:, 2] * E1[:, 2]
-    g1 = rel[:, 0] * E2[:, 0] + rel[:, 1] * E2[:, 1] + rel[:, 2] * E2[:, 2]
-    u = np.clip(M[:, 0, 0] * g0 + M[:, 0, 1] * g1, 0.0, 1.0)
-    v = np.clip(M[:, 1, 0] * g0 + M[:, 1, 1] * g1, 0.0, 1.0)
+    u, v = surface_uv(params, pid, y)
     iu, iv = 1 - u, 1 - v
-    t = tri.take(pid)
+    t = params[4].take(pid)
     # a triangle's (u, v) can leave it (u + v > 1): fold back onto its hypotenuse
     over = np.maximum(u + v - 1, 0) / 2
     w1, w2 = u - over, v - over

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..mesh.patches import PatchSet
-from .gather import patch_parameters
+from .gather import patch_parameters, surface_uv
 
 __all__ = ["RATIO", "MOST", "ShortCells", "short_hits"]
 
@@ -31,18 +31,6 @@ MOST = 1024
 #: Hits looked at at once (their corners are (n, 4, 3) float64).
 CHUNK = 1 << 18
 LEVELS = 64          # cell sizes 2^(k - 32) m, k in [0, LEVELS)
-
-
-def _uv(params, pid, y):
-    """(u, v) in [0, 1] of points ``y`` (h, 3) on elements ``pid`` (h,), as
-    :func:`.gather.surface_weights` finds them (along the element's edges e1, e2)."""
-    c0, e1, e2, inv, _ = params
-    rel = y - c0.take(pid, axis=0)
-    g0 = np.einsum("ij,ij->i", rel, e1.take(pid, axis=0))
-    g1 = np.einsum("ij,ij->i", rel, e2.take(pid, axis=0))
-    M = inv.take(pid, axis=0)
-    return (np.clip(M[:, 0, 0] * g0 + M[:, 0, 1] * g1, 0.0, 1.0),
-            np.clip(M[:, 1, 0] * g0 + M[:, 1, 1] * g1, 0.0, 1.0))
 
 
 def _keys(elements: PatchSet, params, xv, hits, ratio):
@@ -68,7 +56,7 @@ def _keys(elements: PatchSet, params, xv, hits, ratio):
     level = np.floor(np.log2(np.maximum(np.maximum(t, least), 1e-300)))
     level = np.clip(level, -32, LEVELS - 33)
     size = np.exp2(level)
-    u, v = _uv(params, pid, y)
+    u, v = surface_uv(params, pid, y)
     i = np.minimum((u * l1 / size).astype(np.int64), MOST - 1)
     j = np.minimum((v * l2 / size).astype(np.int64), MOST - 1)
     keys = ((pid * LEVELS + (level.astype(np.int64) + 32)) * MOST + i) * MOST + j
